@@ -1,0 +1,204 @@
+"""Maps from the vertices of one mesh to points on another surface, and their composition.
+
+A :class:`SurfaceMap` sends each vertex of a *source* mesh to a point of a *target* surface, given
+as a target face and barycentric weights in face-column order, or to "none" (face ``-1``): the
+vertex lies on a semantic part the target lacks. This is the one representation of ground truth in
+becos; vertex-index form (``-1`` = none) is derived from it only at the end
+(:meth:`SurfaceMap.to_vertex_indices`), so no rounding happens at intermediate shapes.
+
+Composition (:func:`compose`) follows the issue's rule: the image of a point (face f, weights w)
+of the middle surface is the w-weighted combination of the images of f's vertices, projected to
+the closest point of the target surface; if f's largest-weight vertex has no image the point has
+none, otherwise the weights are renormalised over the vertices that have one. Maps are composed
+from the target end backwards, so that only the *faces* of intermediate templates are needed (the
+BeCoS annotation folder ships those for templates whose datasets a user may not have) and every
+projection lands on the final target, whose geometry is always known.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from becos.geometry import SurfaceLocator, points_on_surface
+from becos.mesh import TriMesh
+
+NONE = -1
+"""Face (or vertex) index meaning "no counterpart"."""
+
+
+@dataclass(frozen=True, eq=False)
+class SurfaceMap:
+    """Source vertex i -> point ``weights[i]`` of target face ``face[i]``, or none (``face[i] == -1``).
+
+    Attributes:
+        face: (N,) int64 target face per source vertex, -1 where the vertex has no counterpart.
+        weights: (N, 3) float64 barycentric weights (face-column order), rows sum to 1; zero rows where none.
+        distance: (N,) float64 largest projection distance met while composing, in target units
+            (0 for maps read from files or built by identity); NaN where none.
+    """
+
+    face: np.ndarray
+    weights: np.ndarray
+    distance: np.ndarray = field(default=None)
+
+    def __post_init__(self):
+        face = np.ascontiguousarray(self.face, dtype=np.int64)
+        weights = np.ascontiguousarray(self.weights, dtype=np.float64)
+        if face.ndim != 1 or weights.shape != (len(face), 3):
+            raise ValueError(f"SurfaceMap needs face (N,) and weights (N, 3); got {face.shape} and {weights.shape}")
+        distance = self.distance
+        if distance is None:
+            distance = np.where(face >= 0, 0.0, np.nan)
+        object.__setattr__(self, "face", face)
+        object.__setattr__(self, "weights", weights)
+        object.__setattr__(self, "distance", np.ascontiguousarray(distance, dtype=np.float64))
+
+    def __len__(self) -> int:
+        return len(self.face)
+
+    @property
+    def matched(self) -> np.ndarray:
+        """(N,) bool: the source vertex has a counterpart."""
+        return self.face >= 0
+
+    @property
+    def missing_fraction(self) -> float:
+        """Share of source vertices without a counterpart."""
+        return float((~self.matched).mean()) if len(self) else 0.0
+
+    @classmethod
+    def from_vertex_indices(cls, target_vertex: np.ndarray, target_faces: np.ndarray) -> "SurfaceMap":
+        """Map each source vertex onto a target *vertex* (``-1`` = none).
+
+        The point is stored in some face incident to that vertex with weight 1 at its corner.
+        Raises ValueError if a target vertex is referenced by no face.
+        """
+        target_vertex = np.asarray(target_vertex, dtype=np.int64)
+        target_faces = np.asarray(target_faces, dtype=np.int64)
+        n_target = int(target_faces.max()) + 1 if len(target_faces) else 0
+        incident_face = np.full(max(n_target, int(target_vertex.max(initial=-1)) + 1), -1, dtype=np.int64)
+        corner = np.zeros_like(incident_face)
+        # the last write wins; any incident face will do
+        flat = target_faces.ravel()
+        incident_face[flat] = np.repeat(np.arange(len(target_faces)), 3)
+        corner[flat] = np.tile(np.arange(3), len(target_faces))
+        matched = target_vertex >= 0
+        face = np.full(len(target_vertex), NONE, dtype=np.int64)
+        face[matched] = incident_face[target_vertex[matched]]
+        if (face[matched] < 0).any():
+            bad = np.unique(target_vertex[matched][face[matched] < 0])[:5]
+            raise ValueError(f"target vertices {bad.tolist()} belong to no face; they cannot carry a surface point")
+        weights = np.zeros((len(target_vertex), 3))
+        weights[np.flatnonzero(matched), corner[target_vertex[matched]]] = 1.0
+        return cls(face, weights)
+
+    @classmethod
+    def identity(cls, mesh_faces: np.ndarray, n_vertices: int) -> "SurfaceMap":
+        """Vertex i -> vertex i of a mesh with the same vertex order (e.g. two poses of one TOSCA class)."""
+        return cls.from_vertex_indices(np.arange(n_vertices), mesh_faces)
+
+    def to_vertex_indices(self, target_faces: np.ndarray) -> np.ndarray:
+        """(N,) int64 target vertex per source vertex (-1 = none): the corner of the face holding the
+        point with the largest weight. Never the nearest vertex in 3D, which can jump between touching
+        parts (two legs)."""
+        out = np.full(len(self), NONE, dtype=np.int64)
+        matched = self.matched
+        corner = self.weights[matched].argmax(axis=1)
+        out[matched] = np.asarray(target_faces)[self.face[matched], corner]
+        return out
+
+    def positions(self, target: TriMesh) -> np.ndarray:
+        """(N, 3) positions of the image points on ``target``; NaN rows where none."""
+        out = np.full((len(self), 3), np.nan)
+        matched = self.matched
+        out[matched] = points_on_surface(target, self.face[matched], self.weights[matched])
+        return out
+
+    def subset(self, source_vertices: np.ndarray) -> "SurfaceMap":
+        """The map restricted (and re-ordered) to the given source vertices (int array)."""
+        return SurfaceMap(self.face[source_vertices], self.weights[source_vertices], self.distance[source_vertices])
+
+
+def compose(first: SurfaceMap, middle_faces: np.ndarray, second: SurfaceMap, target: TriMesh,
+            locator: SurfaceLocator | None = None) -> SurfaceMap:
+    """The map ``second ∘ first``: source -> middle surface -> target surface.
+
+    Args:
+        first: source vertices -> points on the middle surface, whose faces are ``middle_faces`` (F_m, 3).
+        middle_faces: faces of the middle mesh as ``first.face`` indexes them (only faces are needed).
+        second: middle *vertices* -> points on ``target``.
+        target: the target mesh (its geometry is needed for the projection).
+        locator: a :class:`SurfaceLocator` of ``target`` to reuse across calls (built if omitted).
+
+    Returns:
+        The composed map; ``distance`` is the larger of the inherited distance and this projection's.
+    """
+    n = len(first)
+    middle_faces = np.asarray(middle_faces, dtype=np.int64)
+    face = np.full(n, NONE, dtype=np.int64)
+    weights = np.zeros((n, 3))
+    distance = np.full(n, np.nan)
+
+    alive = np.flatnonzero(first.matched)
+    corner_vertices = middle_faces[first.face[alive]]                 # (M, 3) middle vertices
+    w = first.weights[alive]                                          # (M, 3)
+    has_image = second.face[corner_vertices] >= 0                     # (M, 3)
+    dominant_has_image = has_image[np.arange(len(alive)), w.argmax(axis=1)]
+    keep = dominant_has_image
+    alive, corner_vertices, w, has_image = alive[keep], corner_vertices[keep], w[keep], has_image[keep]
+    w = np.where(has_image, w, 0.0)
+    w /= w.sum(axis=1, keepdims=True)
+
+    image_face = second.face[corner_vertices]                         # (M, 3), -1 only where w == 0
+    image_weights = second.weights[corner_vertices]                   # (M, 3, 3)
+
+    # Exact case: all three images lie in one target face (always true for an identity map on the
+    # same connectivity); then the combination is that face with summed weights, no projection.
+    same_face = (image_face == image_face[:, :1]) | (w == 0)
+    exact = same_face.all(axis=1)
+    anchor = image_face[np.arange(len(alive)), w.argmax(axis=1)]
+    combined = np.einsum("mk,mkj->mj", w, image_weights)
+    face[alive[exact]] = anchor[exact]
+    weights[alive[exact]] = combined[exact]
+    distance[alive[exact]] = 0.0
+
+    loose = ~exact
+    if loose.any():
+        target_vertices = target.vertices[target.faces[np.where(image_face[loose] >= 0, image_face[loose], 0)]]
+        image_points = np.einsum("mkj,mkjd->mkd", image_weights[loose], target_vertices)   # (L, 3, 3)
+        points = np.einsum("mk,mkd->md", w[loose], image_points)
+        locator = locator if locator is not None else SurfaceLocator(target)
+        f, bw, d = locator.closest(points)
+        face[alive[loose]] = f
+        weights[alive[loose]] = bw
+        distance[alive[loose]] = d
+
+    inherited = np.where(np.isnan(first.distance), 0.0, first.distance)
+    distance = np.where(face >= 0, np.fmax(distance, inherited), np.nan)
+    return SurfaceMap(face, weights, distance)
+
+
+def compose_path(hops: list[SurfaceMap | None], middle_faces: list[np.ndarray], target: TriMesh) -> SurfaceMap:
+    """Compose a chain surface_0 -> surface_1 -> ... -> surface_k+1 (= target), backwards from the target.
+
+    Args:
+        hops: k+1 maps; ``hops[j]`` sends the vertices of surface j to points on surface j+1.
+            ``None`` marks an identity hop (same vertex order on both sides), which is skipped.
+        middle_faces: k arrays; ``middle_faces[j]`` holds the faces of surface j+1 exactly as
+            ``hops[j]`` indexes them (for a TOSCA pose these may differ from its template's faces
+            by winding, which is why identity hops keep each side's own faces).
+        target: the target mesh, surface k+1.
+    """
+    if len(middle_faces) != len(hops) - 1:
+        raise ValueError(f"compose_path needs {len(hops) - 1} face arrays, got {len(middle_faces)}")
+    locator = SurfaceLocator(target)
+    result: SurfaceMap | None = None
+    for j in range(len(hops) - 1, -1, -1):
+        if hops[j] is None:
+            if result is None:  # the target itself: keep its own faces (winding may differ)
+                result = SurfaceMap.identity(target.faces, target.n_vertices)
+            continue
+        result = hops[j] if result is None else compose(hops[j], middle_faces[j], result, target, locator)
+    return result
