@@ -1,0 +1,87 @@
+"""Surface maps: vertex form, composition rules, projection, on hand-built and real TOSCA meshes."""
+
+import numpy as np
+import pytest
+
+from becos.geometry import SurfaceLocator
+from becos.mesh import TriMesh
+from becos.surface_map import SurfaceMap, compose, compose_path
+
+
+def grid(n: int = 6, z: float = 0.0) -> TriMesh:
+    """An n x n vertex grid in the plane z, two triangles per cell."""
+    xs, ys = np.meshgrid(np.arange(n, dtype=float), np.arange(n, dtype=float))
+    vertices = np.stack([xs.ravel(), ys.ravel(), np.full(n * n, z)], axis=1)
+    i = np.arange(n - 1)
+    a = (i[:, None] * n + i[None, :]).ravel()
+    faces = np.concatenate([np.stack([a, a + 1, a + n + 1], 1), np.stack([a, a + n + 1, a + n], 1)])
+    return TriMesh(vertices, faces)
+
+
+def test_vertex_form_round_trip():
+    mesh = grid()
+    idx = np.array([0, 5, -1, 35, 17])
+    m = SurfaceMap.from_vertex_indices(idx, mesh.faces)
+    assert (m.to_vertex_indices(mesh.faces) == idx).all()
+    assert np.allclose(m.positions(mesh)[[0, 1, 3, 4]], mesh.vertices[idx[[0, 1, 3, 4]]])
+    assert np.isnan(m.positions(mesh)[2]).all()
+    assert m.missing_fraction == pytest.approx(0.2)
+
+
+def test_compose_with_identity_is_exact_and_needs_no_projection():
+    mesh = grid()
+    rng = np.random.default_rng(0)
+    face = rng.integers(0, mesh.n_faces, 50)
+    w = rng.dirichlet(np.ones(3), 50)
+    first = SurfaceMap(face, w)
+    second = SurfaceMap.identity(mesh.faces, mesh.n_vertices)
+    out = compose(first, mesh.faces, second, mesh)
+    assert np.allclose(out.positions(mesh), first.positions(mesh), atol=1e-12)
+    assert np.nanmax(out.distance) < 1e-12
+
+
+def test_missing_rule_dominant_vertex_decides_and_weights_renormalise():
+    mesh = grid()
+    # vertex 0 has no image; the others map to themselves
+    second = SurfaceMap.from_vertex_indices(np.where(np.arange(36) == 0, -1, np.arange(36)), mesh.faces)
+    f0 = 0  # face (0, 1, 7)
+    first = SurfaceMap(np.array([f0, f0]), np.array([[0.6, 0.3, 0.1], [0.2, 0.5, 0.3]]))
+    out = compose(first, mesh.faces, second, mesh)
+    assert out.face[0] == -1                    # dominant corner (vertex 0) has no image
+    assert out.face[1] >= 0                     # dominant corner has one: renormalise over 1 and 7
+    expected = (0.5 * mesh.vertices[1] + 0.3 * mesh.vertices[7]) / 0.8
+    assert np.allclose(out.positions(mesh)[1], expected, atol=1e-12)
+
+
+def test_projection_onto_curved_target_records_distance():
+    source = grid()
+    target = grid(z=0.0)
+    bent = target.vertices.copy()
+    bent[:, 2] = 0.05 * (bent[:, 0] - 2.5) ** 2           # a parabolic sheet
+    target = target.with_vertices(bent)
+    # each source vertex -> the target vertex two columns over: combinations leave the surface
+    idx = np.arange(36).reshape(6, 6)
+    shifted = np.clip(idx + 2 * (idx % 6 < 4), 0, 35).ravel()
+    second = SurfaceMap.from_vertex_indices(shifted, target.faces)
+    first = SurfaceMap(np.arange(source.n_faces), np.full((source.n_faces, 3), 1 / 3))
+    out = compose(first, source.faces, second, target)
+    locator = SurfaceLocator(target)
+    p = out.positions(target)
+    _, _, d = locator.closest(p)
+    assert np.abs(d).max() < 1e-9                        # the result lies on the target
+    assert np.nanmax(out.distance) > 0                   # and some points had to be projected
+
+
+def test_compose_path_skips_identity_hops_and_keeps_winding(tosca_dir, mesh_cache):
+    # michael0 and michael3 share vertices, but 1,594 face rows are reversed (reference facts, §10)
+    m0 = mesh_cache.load(tosca_dir / "michael0.off")
+    m3 = mesh_cache.load(tosca_dir / "michael3.off")
+    differ = (m0.faces != m3.faces).any(axis=1)
+    assert differ.sum() > 1000
+    rng = np.random.default_rng(1)
+    face = np.flatnonzero(differ)[:500]
+    w = rng.dirichlet(np.ones(3), len(face))
+    first = SurfaceMap(face, w)                          # points on michael0, in michael0's face order
+    out = compose_path([first, None], [m0.faces], m3)    # michael0 -> michael3 is an identity hop
+    truth = np.einsum("nk,nkd->nd", w, m3.vertices[m0.faces[face]])
+    assert np.abs(out.positions(m3) - truth).max() < 1e-9
