@@ -1,0 +1,318 @@
+"""Geodesic distances on triangle meshes, for evaluating correspondences.
+
+Two estimators of the surface geodesic distance, both in the units of the mesh's vertex coordinates:
+
+- ``"heat"``: the heat method (Crane et al. 2013) as implemented by potpourri3d
+  (``MeshHeatMethodDistanceSolver``, intrinsic-Delaunay "robust" Laplacian). The solver is factored
+  once per mesh; each source vertex then costs two sparse back-solves. Smooth, slightly below the exact
+  geodesic near the source, and close to it elsewhere.
+- ``"dijkstra"``: shortest paths along mesh edges (scipy.sparse.csgraph). Exact for the edge graph and an
+  upper bound of the surface geodesic (typically 0–15 % longer on triangle meshes, depending on how the
+  path crosses the triangulation).
+
+Surface points are given as (face, barycentric weights) in face-column order, as everywhere in becos
+(see :mod:`becos.geometry`).
+
+Costs measured on 2 cores (TOSCA michael0, 52,565 vertices): unbounded Dijkstra ~9 ms per source,
+Dijkstra bounded to a few edge lengths ~1 ms per source (scipy's per-source O(V) set-up dominates);
+on a 10k-vertex mesh both are ~5x cheaper.
+"""
+
+from __future__ import annotations
+
+import weakref
+from collections import OrderedDict
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import dijkstra
+
+from becos.mesh import TriMesh
+
+METHODS = ("heat", "dijkstra")
+
+_CHUNK_ELEMENTS = 1 << 22
+"""Largest number of float64 entries of one block of distance rows held at a time (32 MB)."""
+
+
+def edge_graph(mesh: TriMesh) -> sp.csr_matrix:
+    """(V, V) symmetric CSR matrix of Euclidean edge lengths of the mesh's unique undirected edges.
+
+    Zero-length edges (duplicate vertex positions) are given a tiny positive length so that csgraph
+    does not read them as "no edge".
+    """
+    faces = mesh.faces
+    edges = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    edges = np.unique(np.sort(edges, axis=1), axis=0)
+    length = np.linalg.norm(mesh.vertices[edges[:, 0]] - mesh.vertices[edges[:, 1]], axis=1)
+    length = np.maximum(length, 1e-300)
+    n = mesh.n_vertices
+    rows = np.concatenate([edges[:, 0], edges[:, 1]])
+    cols = np.concatenate([edges[:, 1], edges[:, 0]])
+    return sp.csr_matrix((np.concatenate([length, length]), (rows, cols)), shape=(n, n))
+
+
+def _chunks(items: np.ndarray, n_vertices: int):
+    """Split ``items`` into consecutive blocks of at most _CHUNK_ELEMENTS // n_vertices rows."""
+    size = max(1, _CHUNK_ELEMENTS // max(n_vertices, 1))
+    for start in range(0, len(items), size):
+        yield slice(start, min(start + size, len(items)))
+
+
+class GeodesicDistances:
+    """Geodesic distance fields on one mesh, from source vertices.
+
+    Rows already computed are kept (least recently used first out) up to ``cache_bytes``, so asking
+    for the same source twice in a process costs nothing; ``n_computed`` counts rows actually computed.
+
+    Args:
+        mesh: the surface; distances are in the units of ``mesh.vertices``.
+        method: ``"heat"`` (default) or ``"dijkstra"`` (see the module docstring).
+        cache_bytes: memory budget of the row cache (0 disables it).
+        heat_t_coef: time-step coefficient of the heat method (potpourri3d's ``t_coef``; 1 = mean edge
+            length squared).
+    """
+
+    def __init__(self, mesh: TriMesh, method: str = "heat", cache_bytes: int = 256 << 20,
+                 heat_t_coef: float = 1.0):
+        if method not in METHODS:
+            raise ValueError(f"unknown geodesic method {method!r}; choose one of {METHODS}")
+        self.mesh = mesh
+        self.method = method
+        self.cache_bytes = int(cache_bytes)
+        self.n_computed = 0
+        self._rows: OrderedDict[int, np.ndarray] = OrderedDict()
+        self._heat = None
+        self._graph = None
+        if method == "heat":
+            import potpourri3d as pp3d
+
+            self._heat = pp3d.MeshHeatMethodDistanceSolver(mesh.vertices, mesh.faces, t_coef=heat_t_coef)
+        else:
+            self._graph = edge_graph(mesh)
+
+    @property
+    def n_vertices(self) -> int:
+        return self.mesh.n_vertices
+
+    def _compute(self, sources: np.ndarray) -> np.ndarray:
+        """(len(sources), V) fresh distance rows (no cache)."""
+        self.n_computed += len(sources)
+        if self.method == "heat":
+            out = np.empty((len(sources), self.n_vertices))
+            for k, s in enumerate(sources):
+                row = np.asarray(self._heat.compute_distance(int(s)), dtype=np.float64)
+                # the heat method's field is shifted to be 0 at the source; clip round-off below it
+                out[k] = np.maximum(row, 0.0)
+                out[k, s] = 0.0
+            return out
+        return dijkstra(self._graph, directed=False, indices=sources)
+
+    def from_vertices(self, sources: np.ndarray) -> np.ndarray:
+        """(len(sources), V) float64 distances from each source vertex to every vertex (mesh units).
+
+        Only the rows asked for are computed (each unique source once); rows are cached.
+        """
+        sources = np.asarray(sources, dtype=np.int64).reshape(-1)
+        if len(sources) and (sources.min() < 0 or sources.max() >= self.n_vertices):
+            raise IndexError(f"source vertices must lie in [0, {self.n_vertices}); got "
+                             f"[{sources.min()}, {sources.max()}]")
+        unique, inverse = np.unique(sources, return_inverse=True)
+        out_unique = np.empty((len(unique), self.n_vertices))
+        missing = []
+        for k, s in enumerate(unique):
+            row = self._rows.get(int(s))
+            if row is None:
+                missing.append(k)
+            else:
+                self._rows.move_to_end(int(s))
+                out_unique[k] = row
+        missing = np.asarray(missing, dtype=np.int64)
+        for block in _chunks(missing, self.n_vertices):
+            ks = missing[block]
+            rows = self._compute(unique[ks])
+            out_unique[ks] = rows
+            for s, row in zip(unique[ks], rows):
+                self._remember(int(s), row)
+        return out_unique[inverse]
+
+    def _remember(self, source: int, row: np.ndarray) -> None:
+        row_bytes = row.nbytes
+        if row_bytes > self.cache_bytes:
+            return
+        self._rows[source] = row.copy()
+        while len(self._rows) * row_bytes > self.cache_bytes:
+            self._rows.popitem(last=False)
+
+    def between(self, source_vertices: np.ndarray, target_face: np.ndarray,
+                target_weights: np.ndarray) -> np.ndarray:
+        """(N,) distance from vertex ``source_vertices[i]`` to the surface point (``target_face[i]``,
+        ``target_weights[i]``), in mesh units.
+
+        The distance is the barycentric interpolation, at that point, of the per-vertex distance field
+        of source i. Heat: each unique source's field is computed once (in blocks of bounded memory,
+        cached rows reused). Dijkstra: unless every source's row is cached, searches are bounded to the
+        radius each pair needs (exact values; ~0.1 ms per near pair on a 10k-vertex mesh instead of
+        ~2 ms per unbounded row), so no rows are cached by this call.
+
+        Args:
+            source_vertices: (N,) int vertex ids.
+            target_face: (N,) int face ids (must be valid, no -1).
+            target_weights: (N, 3) barycentric weights in face-column order.
+        """
+        source_vertices = np.asarray(source_vertices, dtype=np.int64).reshape(-1)
+        target_face = np.asarray(target_face, dtype=np.int64).reshape(-1)
+        target_weights = np.asarray(target_weights, dtype=np.float64).reshape(-1, 3)
+        n = len(source_vertices)
+        if len(target_face) != n or len(target_weights) != n:
+            raise ValueError(f"between() needs equally long inputs; got {n}, {len(target_face)}, "
+                             f"{len(target_weights)}")
+        if n and (target_face.min() < 0 or target_face.max() >= self.mesh.n_faces):
+            raise IndexError(f"target faces must lie in [0, {self.mesh.n_faces}); got "
+                             f"[{target_face.min()}, {target_face.max()}]")
+        corners = self.mesh.faces[target_face]  # (N, 3)
+        unique, inverse = np.unique(source_vertices, return_inverse=True)
+        if self.method == "dijkstra" and not all(int(s) in self._rows for s in unique):
+            return self._between_bounded(source_vertices, corners, target_weights)
+        out = np.empty(n)
+        unique, inverse = np.unique(source_vertices, return_inverse=True)
+        order = np.argsort(inverse, kind="stable")
+        starts = np.searchsorted(inverse[order], np.arange(len(unique) + 1))
+        for block in _chunks(np.arange(len(unique)), self.n_vertices):
+            rows = self.from_vertices(unique[block])  # (B, V)
+            sel = order[starts[block.start]:starts[block.stop]]
+            local = inverse[sel] - block.start
+            out[sel] = np.einsum("nk,nk->n", rows[local[:, None], corners[sel]], target_weights[sel])
+        return out
+
+
+    def _between_bounded(self, sources: np.ndarray, corners: np.ndarray, weights: np.ndarray) -> np.ndarray:
+        """Dijkstra variant of :meth:`between` with searches bounded to what each pair needs (identical
+        values, far cheaper when sources are near their points): a pair is done once its three corners
+        are reached; otherwise its source is searched again with twice the radius."""
+        graph = self._graph
+        vertices = self.mesh.vertices
+        mean_edge = float(graph.data.mean()) if graph.nnz else 0.0
+        total_length = float(graph.data.sum())
+        reach = np.linalg.norm(vertices[corners] - vertices[sources][:, None, :], axis=2).max(axis=1)
+        radius = 1.5 * reach + 3.0 * mean_edge
+
+        def interpolate(d, pairs, used):
+            done = np.isfinite(d).all(axis=1) | np.isinf(used)
+            value = np.einsum("nk,nk->n", d, weights[pairs])
+            grown = 2.0 * used
+            return value, done, np.where(grown > total_length, np.inf, grown)
+
+        self.n_computed += len(np.unique(sources))
+        return _adaptive_corner_search(graph, self.n_vertices, sources, corners, radius, interpolate)
+
+
+_PER_MESH: "weakref.WeakKeyDictionary[TriMesh, dict[str, GeodesicDistances]]" = weakref.WeakKeyDictionary()
+
+
+def geodesics_for(mesh: TriMesh, method: str = "heat") -> GeodesicDistances:
+    """The process-wide :class:`GeodesicDistances` of this mesh object and method (built once).
+
+    Keyed by the mesh object's identity (held weakly), so the solver factorisation and the cached rows
+    are shared by every caller that holds the same :class:`TriMesh`, and freed with it.
+    """
+    per_method = _PER_MESH.setdefault(mesh, {})
+    if method not in per_method:
+        per_method[method] = GeodesicDistances(mesh, method)
+    return per_method[method]
+
+
+def dijkstra_to_points(mesh: TriMesh, source_vertices: np.ndarray, target_face: np.ndarray,
+                       target_weights: np.ndarray, limit: float | None = None,
+                       graph: sp.csr_matrix | None = None) -> np.ndarray:
+    """(N,) edge-graph distance from vertex ``source_vertices[i]`` to the point (``target_face[i]``,
+    ``target_weights[i]``), in mesh units.
+
+    The distance to a point is min over the face's corners c of (Dijkstra distance(source, c) +
+    Euclidean |V[c] - point|): an upper bound of the surface geodesic, exact at vertices for the edge
+    graph.
+
+    Args:
+        mesh: the surface holding sources and points.
+        source_vertices: (N,) int vertex ids.
+        target_face: (N,) int face ids; target_weights: (N, 3) barycentric weights (face-column order).
+        limit: None (default) gives the exact value for every pair, computed with bounded searches whose
+            radius starts at 1.5x the Euclidean distance (+3 mean edge lengths) and grows only for the
+            pairs that need it, so near pairs stay cheap. A number gives the exact value where it is
+            <= ``limit`` and ``inf`` elsewhere (cheapest when only small errors matter).
+        graph: the mesh's :func:`edge_graph`, if already built.
+    """
+    source_vertices = np.asarray(source_vertices, dtype=np.int64).reshape(-1)
+    target_face = np.asarray(target_face, dtype=np.int64).reshape(-1)
+    target_weights = np.asarray(target_weights, dtype=np.float64).reshape(-1, 3)
+    n = len(source_vertices)
+    if len(target_face) != n or len(target_weights) != n:
+        raise ValueError(f"dijkstra_to_points() needs equally long inputs; got {n}, {len(target_face)}, "
+                         f"{len(target_weights)}")
+    if n == 0:
+        return np.zeros(0)
+    if graph is None:
+        graph = edge_graph(mesh)
+    corners = mesh.faces[target_face]  # (N, 3)
+    points = np.einsum("nk,nkd->nd", target_weights, mesh.vertices[corners])
+    to_corner = np.linalg.norm(mesh.vertices[corners] - points[:, None, :], axis=2)  # (N, 3)
+
+    mean_edge = float(graph.data.mean()) if graph.nnz else 0.0
+    total_length = float(graph.data.sum())  # no finite distance exceeds it
+    if limit is not None:
+        radius = np.full(n, float(limit))
+    else:
+        radius = 1.5 * np.linalg.norm(mesh.vertices[source_vertices] - points, axis=1) + 3.0 * mean_edge
+
+    def nearest_corner(d, pairs, used):
+        cand = (d + to_corner[pairs]).min(axis=1)
+        # corners farther than the limit were not reached, so a candidate is exact when <= the limit
+        done = (cand <= used) | np.isinf(used) | (limit is not None)
+        # a finite candidate bounds the true distance: searching up to it is exact next round
+        grown = np.where(np.isfinite(cand), cand, 2.0 * used)
+        return cand, done, np.where(grown > total_length, np.inf, grown)
+
+    out = _adaptive_corner_search(graph, mesh.n_vertices, source_vertices, corners, radius, nearest_corner)
+    if limit is not None:
+        out[out > limit] = np.inf
+    return out
+
+
+def _adaptive_corner_search(graph: sp.csr_matrix, n_vertices: int, sources: np.ndarray, corners: np.ndarray,
+                            radius: np.ndarray, combine) -> np.ndarray:
+    """Bounded Dijkstra searches from ``sources`` (N,), read at ``corners`` (N, 3), repeated with larger
+    radii for the pairs that need it.
+
+    ``combine(d, pairs, used)`` gets the (n, 3) corner distances (inf beyond the search limit) of the
+    pairs ``pairs`` (indices into the N inputs) searched with limits ``used`` (n,), and returns
+    (value (n,), done (n,) bool, next radius (n,)). Each round searches each unique source once, up to
+    the largest radius its pending pairs need; sources are sorted by radius so that one block of searches
+    shares a similar limit (scipy takes one limit per call).
+    """
+    out = np.full(len(sources), np.inf)
+    radius = radius.astype(np.float64, copy=True)
+    todo = np.arange(len(sources))
+    while len(todo):
+        unique, inverse = np.unique(sources[todo], return_inverse=True)
+        need = np.zeros(len(unique))
+        np.maximum.at(need, inverse, radius[todo])
+        by_radius = np.argsort(need, kind="stable")
+        rank = np.empty_like(by_radius)
+        rank[by_radius] = np.arange(len(by_radius))
+        pair_rank = rank[inverse]
+        pair_order = np.argsort(pair_rank, kind="stable")
+        starts = np.searchsorted(pair_rank[pair_order], np.arange(len(unique) + 1))
+        used = np.empty(len(todo))
+        d = np.empty((len(todo), 3))
+        for block in _chunks(by_radius, n_vertices):
+            block_limit = float(need[by_radius[block]].max())
+            rows = dijkstra(graph, directed=False, indices=unique[by_radius[block]], limit=block_limit)
+            sel = pair_order[starts[block.start]:starts[block.stop]]
+            local = pair_rank[sel] - block.start
+            d[sel] = rows[local[:, None], corners[todo[sel]]]
+            used[sel] = block_limit
+        value, done, grown = combine(d, todo, used)
+        out[todo[done]] = value[done]
+        radius[todo[~done]] = grown[~done]
+        todo = todo[~done]
+    return out
