@@ -1,0 +1,531 @@
+"""The dataset registry: one YAML per dataset (``config/datasets/<name>.yaml``) and the shapes it lists.
+
+A dataset spec says where a dataset lives below a *data root* (the reference's ``data/`` folder:
+``tosca-off``, ``MPI-FAUST/training/registrations`` ...), how many shapes to expect, how to bring a
+shape into the common frame, and how a shape name maps to its category, class, template key and
+split. :meth:`DatasetSpec.list_shapes` turns a data root into :class:`ShapeEntry` rows;
+:func:`prepare_shape` loads one shape in the common frame.
+
+Common frame: y up, metres-like units, centred. For a file's (V, 3) vertices ``V`` (row vectors)::
+
+    common = (V * scale - centre) @ frame_rotation,   centre = mean(V * scale, axis=0)
+
+``frame_rotation`` is Open3D's ``get_rotation_matrix_from_xyz(radians(rot_deg))`` = Rx @ Ry @ Rz,
+applied on the right exactly as the reference does (its ``rot`` values are kept). For TOSCA
+``[90, 0, 0]`` maps the file's +z (up) to +y; four-legged TOSCA animals then face +z.
+
+YAML keys (all datasets):
+
+=====================  ============================================================================
+``name``               dataset name (``tosca``; matches the template table and the network)
+``title``              human-readable name
+``folder``             folder below the data root (reference ``folder_name``)
+``file_type``          ``off`` / ``ply`` / ``obj``
+``layout``             ``flat`` (``<folder>/<name>.<type>``), ``class_folders``
+                       (``<folder>/<class>/<stem>.<type>``, name ``<class>/<stem>``) or ``dt4d``
+                       (names ``<class>/<action><frame:03d>`` from ``info_file`` of the annotation
+                       folder's ``data/``; files ``<folder>/<class>/<action><frame:03d>.obj``)
+``file_glob``          optional glob of the files to list (flat/class_folders), default ``*.<type>``
+``expected_count``     number of used shapes (excluded ones not counted)
+``expected_per_class`` optional ``{class: count}``
+``scale``              factor applied to file coordinates
+``rotation_deg``       ``[rx, ry, rz]`` in degrees (Open3D xyz convention)
+``rotation_per_shape`` optional: per-shape rotations ``{values: {...}}`` inline, or
+                       ``{from_reference: config/smal.yaml, key: rot}`` read from the user's BeCoS
+                       annotation folder; dict keys are names with ``/`` -> ``_``; ``default`` for
+                       names without a key (the reference uses ``[0, 0, 0]``)
+``category``           ordered rules ``{match: regex, value: str}``; first ``re.search`` match
+                       (case-insensitive) wins
+``class``              ordered rules as above; ``value`` is formatted with the match groups
+                       (``{1}``) and ``{name}``
+``template_key``       format string with ``{name}`` and ``{class}`` (key of the template table)
+``split``              ``{rule: by_class | by_name, train: [...], val: [...], test: [...]}``,
+                       ``{rule: slices, order: reference_numeric, train: n, val: n, test: n}`` or
+                       ``{rule: template_table}`` (the table's split column of the shape's key)
+``excluded``           names listed with split ``excluded`` (never paired)
+``usage``              train usage count (reference ``shape_usage_counts``)
+``source``             ``url``, ``licence``, ``citation``, ``instructions`` (quoted in errors)
+=====================  ============================================================================
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+import yaml
+
+from becos.errors import BecosError, ConfigError, InputFileError
+from becos.geometry import surface_area
+from becos.mesh import MeshCache, TriMesh, read_mesh
+
+if TYPE_CHECKING:
+    from becos.annotations import AnnotationSource
+
+log = logging.getLogger(__name__)
+
+CONFIG_DIR = Path(__file__).resolve().parents[1] / "config" / "datasets"
+"""Default folder of the dataset YAMLs (override with ``config_dir`` or ``$BECOS_DATASETS_DIR``)."""
+
+CATEGORIES = ("human", "four-legged", "centaur")
+SPLITS = ("train", "val", "test")
+EXCLUDED = "excluded"
+LAYOUTS = ("flat", "class_folders", "dt4d")
+SPLIT_RULES = ("by_class", "by_name", "slices", "template_table")
+REQUIRED_KEYS = ("name", "title", "folder", "file_type", "layout", "expected_count", "scale", "rotation_deg",
+                 "category", "class", "template_key", "split", "usage", "source")
+
+
+# --- frames ----------------------------------------------------------------------------------------
+def frame_rotation_matrix(rot_deg_xyz) -> np.ndarray:
+    """(3, 3) rotation of Open3D ``get_rotation_matrix_from_xyz(radians(rot_deg_xyz))`` = Rx @ Ry @ Rz.
+
+    Apply it to (V, 3) row-vector vertices as ``V @ R`` (the reference's convention). ``[90, 0, 0]``
+    sends +z to +y.
+    """
+    a, b, c = np.radians(np.asarray(rot_deg_xyz, dtype=np.float64).reshape(3))
+    ca, sa, cb, sb, cc, sc = np.cos(a), np.sin(a), np.cos(b), np.sin(b), np.cos(c), np.sin(c)
+    rx = np.array([[1, 0, 0], [0, ca, -sa], [0, sa, ca]])
+    ry = np.array([[cb, 0, sb], [0, 1, 0], [-sb, 0, cb]])
+    rz = np.array([[cc, -sc, 0], [sc, cc, 0], [0, 0, 1]])
+    r = rx @ ry @ rz
+    r[np.abs(r) < 1e-15] = 0.0
+    return r
+
+
+def up_vector(axis: str = "y") -> np.ndarray:
+    """(3,) unit vector of an up axis name: ``x``, ``y``, ``z``, optionally signed (``-y``, ``+z``)."""
+    text = str(axis).strip().lower()
+    sign = -1.0 if text.startswith("-") else 1.0
+    letter = text.lstrip("+-")
+    if letter not in ("x", "y", "z"):
+        raise ConfigError(f"up_axis must be x, y or z (optionally with a sign), got {axis!r}")
+    out = np.zeros(3)
+    out["xyz".index(letter)] = sign
+    return out
+
+
+# --- sorting ---------------------------------------------------------------------------------------
+_FIRST_INT_DOT = re.compile(r"(\d+)\.")
+
+
+def reference_sort_key(file_name: str) -> tuple:
+    """Sort key of the reference's file listing, made deterministic.
+
+    The reference sorts files by the first integer followed by ``.`` in the file name (``tr_reg_015.ply``
+    -> 15, ``0001.isometry.4.off`` -> 1) and leaves ties in directory order. Here ties are broken by
+    the file name (plain string order), which reproduces the reference's realised splits (KIDS: val
+    ``0002.isometry.3``-``6``, test ``0002.isometry.7``-``9`` and ``0002.null.0``). Names without such an
+    integer sort after the others, by name.
+    """
+    m = _FIRST_INT_DOT.search(file_name)
+    return (0, int(m.group(1)), file_name) if m else (1, 0, file_name)
+
+
+def natural_key(text: str) -> tuple:
+    """``a2 < a10`` ordering (digit runs compared as numbers), then the raw text."""
+    parts = re.split(r"(\d+)", text)
+    return tuple((0, int(p), "") if i % 2 else (1, 0, p) for i, p in enumerate(parts)), text
+
+
+# --- entries ---------------------------------------------------------------------------------------
+@dataclass(frozen=True, eq=False)
+class ShapeEntry:
+    """One shape of a dataset.
+
+    Attributes:
+        dataset: dataset name (``tosca``).
+        name: name inside the dataset (``cat3``, ``bear3EP/Attack4009``, ``big_cats/lion3``).
+        path: the mesh file.
+        category: ``human``, ``four-legged`` or ``centaur``.
+        shape_class: class (``cat``; DT4D character; FAUST ``subject01``; SMAL ``big_cats``).
+        template_key: key of the template table (``tosca_cat``, ``faust``, ``dt4d_animal_bear3EP``).
+        split: ``train``, ``val``, ``test`` or ``excluded``.
+        scale: factor applied to file coordinates.
+        frame_rotation: (3, 3); common-frame vertices = ``(V * scale - centre) @ frame_rotation`` (rows).
+        usage: the dataset's train usage count (how many pair slots a train shape anchors).
+    """
+
+    dataset: str
+    name: str
+    path: Path
+    category: str
+    shape_class: str
+    template_key: str
+    split: str
+    scale: float
+    frame_rotation: np.ndarray = field(repr=False)
+    usage: int
+
+    @property
+    def rot_key(self) -> str:
+        """The name with ``/`` -> ``_`` (the reference's key for per-shape rotations and file names)."""
+        return self.name.replace("/", "_")
+
+
+@dataclass(frozen=True, eq=False)
+class PreparedShape:
+    """A shape in the common frame (y up): scaled, centred on the vertex mean, rotated.
+
+    Attributes:
+        entry: the shape.
+        mesh: the prepared mesh; vertices (V, 3) = ``(V_file * scale - centre) @ frame_rotation``, faces
+            as in the file.
+        centre: (3,) vertex mean of the scaled file coordinates (subtracted before rotating).
+        area: surface area of ``mesh`` (scaled units squared).
+        sqrt_area: ``sqrt(area)``.
+    """
+
+    entry: ShapeEntry
+    mesh: TriMesh
+    centre: np.ndarray
+    area: float
+    sqrt_area: float
+
+
+def prepare_shape(entry: ShapeEntry, mesh_cache: MeshCache | None = None) -> PreparedShape:
+    """Load ``entry``'s mesh (file vertex order) and bring it into the common frame."""
+    mesh = mesh_cache.load(entry.path) if mesh_cache is not None else read_mesh(entry.path)
+    scaled = mesh.vertices * float(entry.scale)
+    centre = scaled.mean(axis=0)
+    prepared = TriMesh((scaled - centre) @ np.asarray(entry.frame_rotation, dtype=np.float64), mesh.faces)
+    area = surface_area(prepared)
+    return PreparedShape(entry, prepared, centre, area, float(np.sqrt(area)))
+
+
+# --- specs -----------------------------------------------------------------------------------------
+def _config_dir(config_dir: Path | str | None) -> Path:
+    if config_dir is not None:
+        return Path(config_dir)
+    env = os.environ.get("BECOS_DATASETS_DIR")
+    return Path(env) if env else CONFIG_DIR
+
+
+def available_datasets(config_dir: Path | str | None = None) -> list[str]:
+    """Names of the dataset YAMLs in the registry folder, sorted."""
+    return sorted(p.stem for p in _config_dir(config_dir).glob("*.yaml"))
+
+
+@dataclass(frozen=True)
+class _Rule:
+    pattern: re.Pattern
+    value: str
+
+
+class DatasetSpec:
+    """A parsed dataset YAML (see the module docstring for the keys).
+
+    Attributes:
+        path: the YAML file; ``raw``: its content; plus ``name``, ``folder``, ``file_type``, ``layout``,
+        ``expected_count``, ``scale``, ``rotation_deg``, ``usage``, ``excluded``, ``split``, ``source``.
+    """
+
+    def __init__(self, raw: dict, path: Path):
+        self.path = path
+        self.raw = raw
+        missing = [k for k in REQUIRED_KEYS if k not in raw]
+        if missing:
+            self._fail(f"lacks keys {missing}", f"add them (see becos.datasets for the schema)")
+        self.name = str(raw["name"])
+        self.title = str(raw["title"])
+        self.folder = str(raw["folder"]).strip("/")
+        self.file_type = str(raw["file_type"]).lower().lstrip(".")
+        self.layout = str(raw["layout"])
+        if self.layout not in LAYOUTS:
+            self._fail(f"layout '{self.layout}' is unknown", f"use one of {LAYOUTS}")
+        self.file_glob = str(raw.get("file_glob") or f"*.{self.file_type}")
+        self.info_file = raw.get("info_file")
+        if self.layout == "dt4d" and not self.info_file:
+            self._fail("layout dt4d needs info_file", "name the annotation folder's data/info_dt4d_*.json")
+        self.expected_count = int(raw["expected_count"])
+        self.expected_per_class = {str(k): int(v) for k, v in (raw.get("expected_per_class") or {}).items()}
+        self.scale = float(raw["scale"])
+        if not self.scale > 0:
+            self._fail(f"scale must be positive, got {self.scale}", "set the dataset's unit scale")
+        rot = raw["rotation_deg"]
+        if not (isinstance(rot, (list, tuple)) and len(rot) == 3):
+            self._fail(f"rotation_deg must be [rx, ry, rz] in degrees, got {rot!r}", "give three angles")
+        self.rotation_deg = tuple(float(v) for v in rot)
+        self.rotation_per_shape = raw.get("rotation_per_shape") or None
+        self.category_rules = self._rules("category")
+        for rule in self.category_rules:
+            if rule.value not in CATEGORIES:
+                self._fail(f"category value '{rule.value}' is unknown", f"use one of {CATEGORIES}")
+        self.class_rules = self._rules("class")
+        self.template_key_format = str(raw["template_key"])
+        self.split = dict(raw["split"])
+        rule = self.split.get("rule")
+        if rule not in SPLIT_RULES:
+            self._fail(f"split rule '{rule}' is unknown", f"use one of {SPLIT_RULES}")
+        if rule == "slices" and self.split.get("order") != "reference_numeric":
+            self._fail("split rule 'slices' needs order: reference_numeric", "set split.order")
+        self.excluded = tuple(str(n) for n in (raw.get("excluded") or ()))
+        self.usage = int(raw["usage"])
+        self.source = dict(raw["source"])
+
+    def __repr__(self) -> str:
+        return f"DatasetSpec({self.name!r}, {str(self.path)!r})"
+
+    def _fail(self, problem: str, fix: str):
+        raise InputFileError(self.path, problem, fix)
+
+    def _rules(self, key: str) -> list[_Rule]:
+        value = self.raw[key]
+        items = value if isinstance(value, list) else [value]
+        rules = []
+        for item in items:
+            if not isinstance(item, dict) or "match" not in item or "value" not in item:
+                self._fail(f"'{key}' rules must be {{match: regex, value: text}} items, got {item!r}",
+                           "write each rule as a mapping with match and value")
+            try:
+                rules.append(_Rule(re.compile(str(item["match"]), re.IGNORECASE), str(item["value"])))
+            except re.error as exc:
+                self._fail(f"'{key}' pattern {item['match']!r} is not a regular expression ({exc})", "fix the regex")
+        return rules
+
+    @classmethod
+    def load(cls, name: str, config_dir: Path | None = None) -> "DatasetSpec":
+        """The spec ``<config_dir>/<name>.yaml`` (default: the repository's ``config/datasets``)."""
+        folder = _config_dir(config_dir)
+        path = folder / f"{name}.yaml"
+        if not path.is_file():
+            raise ConfigError(f"no dataset '{name}' in {folder} (available: {available_datasets(folder)}). "
+                              f"Fix: use one of those names or add {path}")
+        try:
+            raw = yaml.safe_load(path.read_text(encoding="utf-8"))
+        except yaml.YAMLError as exc:
+            raise InputFileError(path, f"is not valid YAML ({exc})", "fix the syntax") from exc
+        if not isinstance(raw, dict):
+            raise InputFileError(path, "must hold a mapping of keys", "see becos.datasets for the schema")
+        spec = cls(raw, path)
+        if spec.name != name:
+            raise InputFileError(path, f"says name '{spec.name}' but is named {name}.yaml", "make them agree")
+        return spec
+
+    # --- name rules -----------------------------------------------------------------------------
+    def _apply(self, rules: list[_Rule], name: str, what: str) -> str:
+        for rule in rules:
+            m = rule.pattern.search(name)
+            if m:
+                return rule.value.format(*([m.group(0)] + [g or "" for g in m.groups()]), name=name)
+        raise BecosError(f"{self.path}: no {what} rule matches shape name '{name}'. Fix: check the name "
+                         f"(dataset {self.name}) or add a rule")
+
+    def category_of(self, name: str) -> str:
+        """``human``, ``four-legged`` or ``centaur``."""
+        return self._apply(self.category_rules, name, "category")
+
+    def class_of(self, name: str) -> str:
+        return self._apply(self.class_rules, name, "class")
+
+    def template_key_of(self, name: str) -> str:
+        """Key of the template table (reference facts §3.2, "key per shape")."""
+        return self.template_key_format.format(name=name, **{"class": self.class_of(name)})
+
+    def split_of(self, name: str, annotations: "AnnotationSource | None" = None) -> str:
+        """Split of one shape for rules that depend on the name alone (by_class, by_name, template_table).
+
+        Slices depend on the whole listing: use :meth:`assign_splits`.
+        """
+        if name in self.excluded:
+            return EXCLUDED
+        rule = self.split["rule"]
+        if rule == "slices":
+            raise BecosError(f"{self.path}: split of '{name}' depends on the whole file list (count-based "
+                             f"slices). Fix: use DatasetSpec.assign_splits(names)")
+        if rule == "template_table":
+            if annotations is None:
+                raise ConfigError(f"{self.path}: the split of dataset {self.name} comes from the template table's "
+                                  f"split column. Fix: pass an AnnotationSource")
+            key = self.template_key_of(name)
+            split = annotations.template_row(key).split
+            if split not in SPLITS:
+                raise InputFileError(annotations.template_table_path, f"row '{key}' has split '{split}'",
+                                     "give DT4D rows train, val or test")
+            return split
+        value = self.class_of(name) if rule == "by_class" else name
+        hits = [s for s in SPLITS if value in [str(v) for v in (self.split.get(s) or ())]]
+        if len(hits) != 1:
+            raise BecosError(f"{self.path}: {'class' if rule == 'by_class' else 'shape'} '{value}' (shape '{name}') "
+                             f"is in {len(hits)} of the split lists {SPLITS}. Fix: list it in exactly one "
+                             f"(or under excluded)")
+        return hits[0]
+
+    def assign_splits(self, names: list[str], annotations: "AnnotationSource | None" = None) -> dict[str, str]:
+        """Name -> split for a whole listing.
+
+        ``slices``: the used names in :func:`reference_sort_key` order (of ``<name>.<file_type>``), the
+        first ``train`` to train, the next ``val`` to val, the next ``test`` to test; counts must add up.
+        """
+        used = [n for n in names if n not in self.excluded]
+        out = {n: EXCLUDED for n in names if n in self.excluded}
+        if self.split["rule"] != "slices":
+            out.update({n: self.split_of(n, annotations) for n in used})
+            return out
+        counts = [int(self.split[s]) for s in SPLITS]
+        if sum(counts) != len(used):
+            raise BecosError(f"{self.path}: the split slices {dict(zip(SPLITS, counts))} cover {sum(counts)} shapes "
+                             f"but {len(used)} are listed. Fix: check the dataset download is complete")
+        ordered = sorted(used, key=lambda n: reference_sort_key(f"{n}.{self.file_type}"))
+        start = 0
+        for split, n in zip(SPLITS, counts):
+            out.update({name: split for name in ordered[start:start + n]})
+            start += n
+        return out
+
+    # --- frames ---------------------------------------------------------------------------------
+    def _shape_rotations(self, annotations: "AnnotationSource | None") -> tuple[dict[str, list], list]:
+        spec = self.rotation_per_shape
+        default = list(spec.get("default", [0, 0, 0]))
+        if "values" in spec:
+            return dict(spec["values"]), default
+        ref = spec.get("from_reference")
+        if not ref:
+            self._fail("rotation_per_shape needs 'values' or 'from_reference'", "give one of them")
+        if annotations is None:
+            raise ConfigError(f"{self.path}: dataset {self.name} has one frame rotation per shape, read from the "
+                              f"BeCoS annotation folder's {ref}. Fix: pass an AnnotationSource of that folder")
+        path = Path(annotations.root) / ref
+        if not path.is_file():
+            raise InputFileError(path, f"per-shape frame rotations of dataset {self.name} not found",
+                                 f"copy the reference checkout's {ref} there, or put the dict under "
+                                 f"rotation_per_shape.values in {self.path}")
+        try:
+            values = (yaml.safe_load(path.read_text(encoding="utf-8")) or {}).get(spec.get("key", "rot"))
+        except yaml.YAMLError as exc:
+            raise InputFileError(path, f"is not valid YAML ({exc})", "restore the reference's file") from exc
+        if not isinstance(values, dict):
+            raise InputFileError(path, f"key '{spec.get('key', 'rot')}' does not hold a per-shape dict",
+                                 "restore the reference's file")
+        return values, default
+
+    def rotation_of(self, name: str, annotations: "AnnotationSource | None" = None) -> np.ndarray:
+        """(3, 3) frame rotation of a shape (per-shape dict where the dataset has one)."""
+        if not self.rotation_per_shape:
+            return frame_rotation_matrix(self.rotation_deg)
+        values, default = self._shape_rotations(annotations)
+        rot = values.get(name.replace("/", "_"))
+        if rot is None:
+            log.warning("%s: no per-shape rotation for '%s'; using %s (reference behaviour)", self.path, name, default)
+            rot = default
+        return frame_rotation_matrix(rot)
+
+    # --- listing --------------------------------------------------------------------------------
+    def download_help(self) -> str:
+        """Where to get the dataset, for error messages."""
+        s = self.source
+        parts = [f"{self.title}: {s.get('instructions', '').strip()}"]
+        if s.get("url"):
+            parts.append(f"URL: {s['url']}")
+        if s.get("licence"):
+            parts.append(f"licence: {s['licence']}")
+        if s.get("citation"):
+            parts.append(f"cite: {s['citation']}")
+        return " | ".join(parts)
+
+    def _dt4d_names(self, annotations: "AnnotationSource | None", data_root: Path) -> tuple[list[str], Path]:
+        candidates = ([Path(annotations.root) / "data" / self.info_file] if annotations is not None else []) + \
+            [data_root / self.info_file]
+        path = next((p for p in candidates if p.is_file()), None)
+        if path is None:
+            raise InputFileError(candidates[0], f"the DT4D class/frame list of {self.name} is missing",
+                                 "use the BeCoS annotation folder (it ships data/info_dt4d_*.json)")
+        try:
+            info = json.loads(path.read_text(encoding="utf-8"))
+            names = [f"{cls}/{action}{int(frame):03d}" for cls, actions in info.items()
+                     for action, frames in actions.items() for frame in frames]
+        except (ValueError, AttributeError, TypeError) as exc:
+            raise InputFileError(path, f"is not a {{class: {{action: [frame ids]}}}} JSON ({exc})",
+                                 "restore the annotation folder's file") from exc
+        return names, path
+
+    def list_names(self, data_root: str | Path, annotations: "AnnotationSource | None" = None) -> list[str]:
+        """Shape names found below ``data_root`` (excluded ones included), in natural order.
+
+        Raises:
+            InputFileError: the dataset folder is missing (message carries the download instructions),
+                or (DT4D) files listed in the info JSON are missing.
+        """
+        folder = Path(data_root) / self.folder
+        if not folder.is_dir():
+            raise InputFileError(folder, f"dataset folder of {self.name} not found",
+                                 f"download it and place it there. {self.download_help()}")
+        if self.layout == "flat":
+            names = [p.name[: -len(p.suffix)] for p in folder.glob(self.file_glob) if p.is_file()]
+        elif self.layout == "class_folders":
+            names = [f"{p.parent.name}/{p.stem}" for p in folder.glob(f"*/{self.file_glob}") if p.is_file()]
+        else:
+            names, info_path = self._dt4d_names(annotations, Path(data_root))
+            missing = [n for n in names if not (folder / f"{n}.{self.file_type}").is_file()]
+            if missing:
+                raise InputFileError(folder, f"{len(missing)} of the {len(names)} shapes listed in {info_path} are "
+                                     f"missing (e.g. {missing[0]}.{self.file_type})",
+                                     f"run the DT4D preprocessing (facts §5) on the full download. {self.download_help()}")
+        return sorted(names, key=natural_key)
+
+    def list_shapes(self, data_root: str | Path, annotations: "AnnotationSource | None" = None) -> list[ShapeEntry]:
+        """Every shape of the dataset below ``data_root`` as :class:`ShapeEntry` (natural name order).
+
+        Excluded shapes that are present are listed with split ``excluded``. Counts are checked against
+        ``expected_count`` (used shapes) and ``expected_per_class``.
+
+        Raises:
+            InputFileError: missing folder (with download instructions) or wrong counts.
+        """
+        data_root = Path(data_root)
+        folder = data_root / self.folder
+        names = self.list_names(data_root, annotations)
+        used = [n for n in names if n not in self.excluded]
+        if len(used) != self.expected_count:
+            raise InputFileError(folder, f"found {len(used)} {self.name} shapes ({self.file_glob}), expected "
+                                 f"{self.expected_count}", f"complete or re-extract the download. {self.download_help()}")
+        if self.expected_per_class:
+            counts: dict[str, int] = {}
+            for n in used:
+                counts[self.class_of(n)] = counts.get(self.class_of(n), 0) + 1
+            if counts != self.expected_per_class:
+                diff = {c: (counts.get(c, 0), self.expected_per_class.get(c, 0))
+                        for c in set(counts) | set(self.expected_per_class)
+                        if counts.get(c, 0) != self.expected_per_class.get(c, 0)}
+                raise InputFileError(folder, f"shapes per class (found, expected) differ: {diff}",
+                                     f"complete or re-extract the download. {self.download_help()}")
+        if self.split["rule"] == "by_name":
+            listed = {str(v) for s in SPLITS for v in (self.split.get(s) or ())}
+            absent = sorted(listed - set(used))
+            if absent:
+                raise InputFileError(folder, f"shapes named in the split lists are missing: {absent}",
+                                     f"complete the download. {self.download_help()}")
+        splits = self.assign_splits(names, annotations)
+        rotations = None
+        if self.rotation_per_shape:
+            rotations = self._shape_rotations(annotations)
+        fixed = frame_rotation_matrix(self.rotation_deg)
+        entries = []
+        for n in names:
+            if rotations is not None:
+                values, default = rotations
+                rot = values.get(n.replace("/", "_"))
+                if rot is None:
+                    log.warning("%s: no per-shape rotation for '%s'; using %s (reference behaviour)",
+                                self.path, n, default)
+                    rot = default
+                rotation = frame_rotation_matrix(rot)
+            else:
+                rotation = fixed.copy()
+            entries.append(ShapeEntry(
+                dataset=self.name, name=n, path=folder / f"{n}.{self.file_type}", category=self.category_of(n),
+                shape_class=self.class_of(n), template_key=self.template_key_of(n), split=splits[n],
+                scale=self.scale, frame_rotation=rotation, usage=self.usage))
+        return entries
+
+
+def load_all(config_dir: Path | str | None = None) -> dict[str, DatasetSpec]:
+    """Every registered dataset spec by name."""
+    return {name: DatasetSpec.load(name, config_dir) for name in available_datasets(config_dir)}
+

@@ -1,0 +1,352 @@
+"""The published BeCoS pair lists (``config/pairings_original_<setting>.pkl``) <-> pair manifests.
+
+Published pickle schema (reference-facts §4): a list of three lists ``[train, test, val]`` of pairs
+``(x, y)``; each shape is a dict with ``name``, ``org_dataset``, ``category``, ``file_path``,
+``scale``, ``rot``, ``partial_full_template``, ``partial_full_dataset``, ``desired_n_face_remeshed``,
+``random_rot`` ((3, 3) float64) and, in the partial-to-partial file, ``cam_pos`` ((10, 3) float64).
+
+Import (:func:`import_published`) gives a manifest in the schema of :mod:`becos.sampling` plus extra
+columns:
+
+- ``published_index``: position of the pair in its split list;
+- ``x_category``, ``y_category``: the shapes' own categories (the pair's ``category`` is the
+  non-centaur one, ``centaur`` for a centaur–centaur pair);
+- ``x_face_target``, ``y_face_target``: ``desired_n_face_remeshed``;
+- ``x_random_rot_0..8``, ``y_random_rot_0..8``: the random rotations, row-major.
+
+Published pairs have no copy index: ``copy`` = how many times the same ``(x, y)`` occurred earlier
+in the same split list, so ``pair_id`` (= ``stable_hash(setting, x, y, copy)``) is unique;
+``seed``, variants and ``chunk`` are derived as for sampled pairs.
+
+Cameras (P2P: ten tries per shape) are kept beside the manifest: :func:`save_cameras` writes one
+``.npz`` with ``pair_id`` (N,) and ``cam_pos`` (N, 2, 10, 3) float64 (x tries, y tries), no pickle.
+
+Export (:func:`write_published_pickle`) writes a manifest back in the published schema, so a
+benchmark can be shared as pair lists + code. Each dict also carries a ``becos`` sub-dict
+(pair_id, setting, category, copy, seed, variant, chunk) that the reference ignores and that makes
+manifest -> pickle -> manifest exact. Arrays are pickled as ``numpy.array(list, dtype)``, readable by
+numpy 1.x and 2.x alike.
+
+Loading uses a restricted unpickler: only numpy's array/dtype reconstruction is allowed; any other
+global in the file is refused (a pickle can otherwise run arbitrary code).
+"""
+
+from __future__ import annotations
+
+import io
+import os
+import pickle
+import re
+import tempfile
+from collections import Counter
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+import pandas as pd
+
+from becos.catalog import frame_rotation
+from becos.errors import ConfigError, InputFileError
+from becos.sampling import (MANIFEST_COLUMNS, SETTINGS, JOINER, UNDEFINED, _field, _template_row, pair_id_of,
+                            shape_key, sort_manifest)
+from becos.seeding import rng_for, stable_hash
+
+PUBLISHED_SPLITS = ("train", "test", "val")
+"""Order of the split lists inside a published pickle."""
+SHAPE_FIELDS = ("name", "org_dataset", "category", "file_path", "scale", "rot", "partial_full_template",
+                "partial_full_dataset", "desired_n_face_remeshed", "random_rot")
+N_CAMERAS = 10
+FACE_TARGET_RANGE = (18000, 20000)
+
+_NUMPY_CORE = "numpy._core" if int(np.__version__.split(".")[0]) >= 2 else "numpy.core"
+_ALLOWED = {
+    ("numpy", "ndarray"), ("numpy", "dtype"), ("numpy", "array"),
+    ("numpy.core.multiarray", "_reconstruct"), ("numpy._core.multiarray", "_reconstruct"),
+    ("numpy.core.multiarray", "scalar"), ("numpy._core.multiarray", "scalar"),
+}
+
+
+class _RestrictedUnpickler(pickle.Unpickler):
+    """Unpickler that resolves only numpy array/dtype reconstruction (plus builtin containers)."""
+
+    def find_class(self, module: str, name: str):
+        if (module, name) not in _ALLOWED:
+            raise pickle.UnpicklingError(f"global {module}.{name} is not allowed in a pair list")
+        if module.startswith("numpy.core") or module.startswith("numpy._core"):
+            module = _NUMPY_CORE + module.split("core", 1)[1]
+        return super().find_class(module, name)
+
+
+def load_published(path: str | Path) -> list[list[tuple[dict, dict]]]:
+    """The raw pair lists ``[train, test, val]`` of a published (or exported) pickle, safely."""
+    path = Path(path)
+    try:
+        data = _RestrictedUnpickler(io.BytesIO(path.read_bytes())).load()
+    except FileNotFoundError:
+        raise InputFileError(path, "file not found", "give the path of config/pairings_original_<setting>.pkl")
+    except (pickle.UnpicklingError, EOFError, AttributeError, ImportError) as exc:
+        raise InputFileError(path, f"not a readable pair list ({exc})",
+                             "use a pair-list pickle from the BeCoS repository or write_published_pickle")
+    if not (isinstance(data, list) and len(data) == 3 and all(isinstance(s, list) for s in data)):
+        raise InputFileError(path, "expected a list of 3 lists [train, test, val]",
+                             "use a pair-list pickle from the BeCoS repository or write_published_pickle")
+    return data
+
+
+def setting_from_path(path: str | Path) -> str | None:
+    """``pairings_original_full_full.pkl`` -> ``full_full`` (None if the name does not tell)."""
+    m = re.search(r"(full_full|partial_full|partial_partial)", Path(path).name)
+    return m.group(1) if m else None
+
+
+@dataclass
+class PublishedImport:
+    """Result of :func:`import_published`: the manifest, P2P cameras by pair_id (or None), counts."""
+
+    manifest: pd.DataFrame
+    cameras: dict[str, np.ndarray] | None
+    report: dict = field(default_factory=dict)
+
+
+def _pair_category(x: dict, y: dict) -> str:
+    for s in (x, y):
+        if s["category"] != JOINER:
+            return str(s["category"])
+    return JOINER
+
+
+def import_published(path: str | Path, *, setting: str | None = None, seed: int = 42, n_variants: int = 4,
+                     n_chunks: int = 64, datasets=None) -> PublishedImport:
+    """A published pair list as a manifest (schema of :mod:`becos.sampling` + extras, module doc).
+
+    Args:
+        path: the pickle.
+        setting: defaults to the setting named in the file name (or stored in exported pickles).
+        seed: global seed for the derived ``seed`` column (published pairs carry none).
+        n_variants, n_chunks: as in :func:`becos.sampling.sample_pairs`.
+        datasets: keep only pairs whose two shapes come from these datasets (e.g. ``{'tosca'}``).
+            Counted in ``report['dropped_missing_dataset']``.
+    """
+    raw = load_published(path)
+    setting = setting or setting_from_path(path)
+    if setting is None:  # exported pickles carry it
+        setting = next((p[0].get("becos", {}).get("setting") for s in raw for p in s if "becos" in p[0]), None)
+    if setting not in SETTINGS:
+        raise ConfigError(f"{path}: cannot tell the setting; pass setting= one of {SETTINGS}")
+    keep = None if datasets is None else {str(d) for d in datasets}
+    records, cameras, dropped = [], {}, Counter()
+    for split, pairs in zip(PUBLISHED_SPLITS, raw):
+        seen = Counter()
+        for index, (x, y) in enumerate(pairs):
+            xk, yk = shape_key(x["org_dataset"], x["name"]), shape_key(y["org_dataset"], y["name"])
+            copy = seen[(xk, yk)]
+            seen[(xk, yk)] += 1
+            if keep is not None and not {x["org_dataset"], y["org_dataset"]} <= keep:
+                dropped[split] += 1
+                continue
+            meta = x.get("becos")
+            if meta is not None:
+                pid, pseed, copy, chunk = meta["pair_id"], int(meta["seed"]), int(meta["copy"]), int(meta["chunk"])
+                category, xv, yv = meta["category"], int(meta["variant"]), int(y["becos"]["variant"])
+            else:
+                pid = pair_id_of(setting, xk, yk, copy)
+                pseed = stable_hash(seed, pid, bits=63)
+                chunk = stable_hash(pid) % n_chunks
+                category = _pair_category(x, y)
+                xv, yv = stable_hash(pseed, "x_variant") % n_variants, stable_hash(pseed, "y_variant") % n_variants
+            rec = {"pair_id": pid, "setting": setting, "split": split, "category": category, "copy": copy,
+                   "x_dataset": x["org_dataset"], "x_name": x["name"], "y_dataset": y["org_dataset"],
+                   "y_name": y["name"], "seed": pseed, "x_variant": xv, "y_variant": yv, "chunk": chunk,
+                   "published_index": index, "x_category": x["category"], "y_category": y["category"],
+                   "x_face_target": int(x["desired_n_face_remeshed"]),
+                   "y_face_target": int(y["desired_n_face_remeshed"])}
+            for side, s in (("x", x), ("y", y)):
+                rot = np.asarray(s["random_rot"], dtype=np.float64).reshape(9)
+                rec.update({f"{side}_random_rot_{i}": float(v) for i, v in enumerate(rot)})
+            records.append(rec)
+            if "cam_pos" in x and "cam_pos" in y:
+                cameras[pid] = np.stack([np.asarray(x["cam_pos"], np.float64), np.asarray(y["cam_pos"], np.float64)])
+    df = pd.DataFrame.from_records(records)
+    if df.empty:
+        df = pd.DataFrame(columns=list(MANIFEST_COLUMNS))
+    for c in ("copy", "seed", "x_variant", "y_variant", "chunk"):
+        df[c] = df[c].astype(np.int64)
+    if df["pair_id"].duplicated().any():
+        raise InputFileError(path, "two pairs share a pair_id", "check the file for duplicated becos metadata")
+    df = sort_manifest(df)
+    report = {"n_pairs": {s: int((df["split"] == s).sum()) for s in PUBLISHED_SPLITS},
+              "dropped_missing_dataset": dict(dropped)}
+    df.attrs["report"] = report
+    return PublishedImport(df, cameras or None, report)
+
+
+def published_shapes(manifest: pd.DataFrame) -> pd.DataFrame:
+    """The distinct shapes of a manifest (``dataset, name``), sorted."""
+    x = manifest[["x_dataset", "x_name"]].set_axis(["dataset", "name"], axis=1)
+    y = manifest[["y_dataset", "y_name"]].set_axis(["dataset", "name"], axis=1)
+    return pd.concat([x, y]).drop_duplicates().sort_values(["dataset", "name"]).reset_index(drop=True)
+
+
+# --------------------------------------------------------------------------------------------
+# cameras side file
+
+
+def save_cameras(path: str | Path, cameras: Mapping[str, np.ndarray]) -> None:
+    """Write ``{pair_id: (2, 10, 3)}`` cameras as one ``.npz`` (``pair_id``, ``cam_pos``), atomically."""
+    path = Path(path)
+    ids = sorted(cameras)
+    cam = np.stack([np.asarray(cameras[i], dtype=np.float64) for i in ids]) if ids else np.zeros((0, 2, N_CAMERAS, 3))
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp.npz")
+    os.close(fd)
+    try:
+        np.savez_compressed(tmp, pair_id=np.array(ids, dtype="U16"), cam_pos=cam)
+        os.chmod(tmp, 0o644)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def load_cameras(path: str | Path) -> dict[str, np.ndarray]:
+    """Read a cameras ``.npz`` written by :func:`save_cameras`."""
+    with np.load(path, allow_pickle=False) as data:
+        return {str(i): c for i, c in zip(data["pair_id"], data["cam_pos"])}
+
+
+# --------------------------------------------------------------------------------------------
+# export
+
+
+def rotation_to_xyz_degrees(rotation: np.ndarray) -> list:
+    """Angles ``[a, b, c]`` (degrees) with ``rotation = Rx(a) @ Ry(b) @ Rz(c)`` — the reference's
+    ``rot`` (Open3D ``get_rotation_matrix_from_xyz``). Rounded to 1e-6; whole numbers as ints."""
+    from scipy.spatial.transform import Rotation
+
+    angles = Rotation.from_matrix(np.asarray(rotation, dtype=np.float64)).as_euler("XYZ", degrees=True)
+    out = []
+    for a in np.round(angles, 6) + 0.0:
+        out.append(int(a) if float(a).is_integer() else float(a))
+    return out
+
+
+def y_rotation(theta: float) -> np.ndarray:
+    """Rotation about +y by ``theta`` radians, in the reference's row-vector convention (``V @ R``)."""
+    c, s = np.cos(theta), np.sin(theta)
+    return np.array([[c, 0.0, -s], [0.0, 1.0, 0.0], [s, 0.0, c]])
+
+
+def default_face_target(dataset: str, name: str, variant: int) -> int:
+    """A face target in [18000, 20000] keyed by shape and remesh variant (for exported pickles)."""
+    lo, hi = FACE_TARGET_RANGE
+    return lo + stable_hash("face_target", dataset, name, int(variant)) % (hi - lo + 1)
+
+
+def _default_random_rotations(pair_seed: int) -> np.ndarray:
+    rng = rng_for(pair_seed, "random_rotation")
+    return np.stack([y_rotation(t) for t in rng.uniform(0.0, 2 * np.pi, size=2)])
+
+
+def _default_cameras(pair_seed: int, regime: str = "high") -> np.ndarray:
+    """(2, 10, 3) unit camera directions: try k from ``draw_camera_pair(rng_for(pair seed, 'cameras', k))``."""
+    from becos.cameras import draw_camera_pair
+
+    out = np.empty((2, N_CAMERAS, 3))
+    for k in range(N_CAMERAS):
+        cx, cy = draw_camera_pair(rng_for(pair_seed, "cameras", k), regime)
+        out[0, k], out[1, k] = cx.position, cy.position
+    return out / np.linalg.norm(out, axis=2, keepdims=True)
+
+
+class _PortablePickler(pickle.Pickler):
+    """Pickles ndarrays as ``numpy.array(nested list, dtype)``: loadable by numpy 1.x and 2.x."""
+
+    def reducer_override(self, obj):
+        if type(obj) is np.ndarray:
+            return np.array, (obj.tolist(), obj.dtype.str)
+        return NotImplemented
+
+
+def write_published_pickle(manifest: pd.DataFrame, path: str | Path, catalog: pd.DataFrame, *,
+                           template_rows=None,
+                           face_targets: Callable[[str, str, int], int] | None = None,
+                           random_rotations: Mapping[str, np.ndarray] | None = None,
+                           cameras: Mapping[str, np.ndarray] | None = None, regime: str = "high") -> None:
+    """Write ``manifest`` as a pair list in the published pickle schema (atomic, protocol 4).
+
+    Args:
+        manifest: a manifest of one setting.
+        catalog: the catalog of its shapes (file path, scale, frame rotation, category, template key).
+        template_rows: as in :func:`becos.sampling.sample_pairs`; fills ``partial_full_template`` /
+            ``partial_full_dataset`` (``undefined`` when absent).
+        face_targets: ``(dataset, name, variant) -> int`` for ``desired_n_face_remeshed``
+            (default :func:`default_face_target` of the pair's variant).
+        random_rotations: ``{pair_id: (2, 3, 3)}`` (x, y), row-vector convention; default: a y-axis
+            rotation per shape from ``rng_for(pair seed, 'random_rotation')``.
+        cameras: ``{pair_id: (2, 10, 3)}`` for partial settings (written as ``cam_pos``); default:
+            unit directions of ``draw_camera_pair(rng_for(pair seed, 'cameras', k), regime)``.
+            Pass the rotations/cameras your records used when the pickle must describe them.
+
+    ``rot`` is written as the three angles of the catalog's frame rotation, ``file_path`` as the
+    catalog's ``file``. Shapes missing from the catalog raise ``ConfigError``.
+    """
+    settings = set(manifest["setting"])
+    if len(settings) > 1:
+        raise ConfigError(f"a pair list holds one setting; manifest has {sorted(settings)}")
+    partial = bool(settings & {"partial_full", "partial_partial"})
+    face_targets = face_targets or default_face_target
+    shapes = {shape_key(r["dataset"], r["name"]): r for r in catalog.to_dict("records")}
+    rot_cache: dict[str, list] = {}
+
+    def shape_dict(side: str, row: dict, rot: np.ndarray, cam: np.ndarray | None) -> dict:
+        key = shape_key(row[f"{side}_dataset"], row[f"{side}_name"])
+        entry = shapes.get(key)
+        if entry is None:
+            raise ConfigError(f"shape {key} of pair {row['pair_id']} is not in the catalog")
+        if key not in rot_cache:
+            rot_cache[key] = rotation_to_xyz_degrees(frame_rotation(entry))
+        trow = _template_row(template_rows, str(entry["template_key"]))
+        d = {
+            "name": str(row[f"{side}_name"]), "org_dataset": str(row[f"{side}_dataset"]),
+            "category": str(entry["category"]), "file_path": str(entry["file"]), "scale": float(entry["scale"]),
+            "rot": list(rot_cache[key]),
+            "partial_full_template": _field(trow, "partial_full_template") if trow is not None else UNDEFINED,
+            "partial_full_dataset": _field(trow, "partial_full_dataset") if trow is not None else UNDEFINED,
+            "desired_n_face_remeshed": int(face_targets(row[f"{side}_dataset"], row[f"{side}_name"],
+                                                        int(row[f"{side}_variant"]))),
+            "random_rot": np.array(rot, dtype=np.float64),
+            "becos": {"pair_id": str(row["pair_id"]), "setting": str(row["setting"]),
+                      "category": str(row["category"]), "copy": int(row["copy"]), "seed": int(row["seed"]),
+                      "variant": int(row[f"{side}_variant"]), "chunk": int(row["chunk"])},
+        }
+        if cam is not None:
+            d["cam_pos"] = np.array(cam, dtype=np.float64)
+        return d
+
+    lists: dict[str, list] = {s: [] for s in PUBLISHED_SPLITS}
+    for row in sort_manifest(manifest).to_dict("records"):
+        if row["split"] not in lists:
+            raise ConfigError(f"pair {row['pair_id']}: split {row['split']!r} has no place in a pair list")
+        pid = row["pair_id"]
+        rot = (np.asarray(random_rotations[pid]) if random_rotations is not None
+               else _default_random_rotations(int(row["seed"])))
+        cam = None
+        if partial:
+            cam = np.asarray(cameras[pid]) if cameras is not None else _default_cameras(int(row["seed"]), regime)
+        lists[row["split"]].append((shape_dict("x", row, rot[0], None if cam is None else cam[0]),
+                                    shape_dict("y", row, rot[1], None if cam is None else cam[1])))
+    buf = io.BytesIO()
+    _PortablePickler(buf, protocol=4).dump([lists[s] for s in PUBLISHED_SPLITS])
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(buf.getvalue())
+        os.chmod(tmp, 0o644)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
