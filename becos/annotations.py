@@ -116,10 +116,13 @@ def dataset_of_key(key: str) -> str:
     Raises:
         BecosError: the name starts with no known dataset.
     """
-    for ds in sorted(DATASETS, key=len, reverse=True):
+    from becos.datasets import available_datasets  # the registry may add datasets (e.g. the synthetic ones)
+
+    known = set(DATASETS) | set(available_datasets())
+    for ds in sorted(known, key=len, reverse=True):
         if key == ds or key.startswith(ds + "_"):
             return ds
-    raise BecosError(f"'{key}' does not start with a known dataset name {DATASETS}. "
+    raise BecosError(f"'{key}' does not start with a known dataset name {sorted(known)}. "
                      f"Fix: use keys/nodes of the BeCoS template table and network")
 
 

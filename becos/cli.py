@@ -47,6 +47,12 @@ def build_parser() -> argparse.ArgumentParser:
     info.add_argument("--annotations", required=True, type=Path, help="folder laid out like the BeCoS checkout")
     info.add_argument("--edges", action="store_true", help="also parse every edge file (cached after the first run)")
     info.set_defaults(func=cmd_info)
+
+    from becos.synthetic import configure_parser, run_cli
+
+    synthetic = sub.add_parser("synthetic", help="generate the built-in synthetic shape collection")
+    configure_parser(synthetic)
+    synthetic.set_defaults(func=run_cli)
     return parser
 
 
