@@ -24,8 +24,8 @@ s_centre               float64     (3,) subtracted after scaling, before the fra
 s_align_rotation       float64     (3, 3) rigid alignment onto X (identity for X), row vectors
 s_align_translation    float64     (3,) added after the alignment rotation
 s_random_rotation      float64     (3, 3) applied last (row vectors)
-s_camera               float64     (3, 3) rows: position, look-at target, up, in the cast frame
-                                   (the aligned common frame); NaN for a full shape
+s_camera               float64     (3, 3) rows: position, look-at target, up, in the shape's
+                                   common frame (before alignment); NaN for a full shape
 s_remesh_variant       int64       remesh variant index (-1 = not remeshed)
 s_overlap              float64     share of V_s with ``s_overlap_mask`` (1.0 for F2F)
 =====================  ==========  ===========================================================

@@ -1,0 +1,187 @@
+"""Pair assembly: two prepared shapes and their ground truth -> one matching instance (a PairRecord).
+
+Settings:
+
+- ``full_full`` (F2F): both shapes full.
+- ``partial_full`` (P2F): Y is one virtual scan, X (the full template of Y's class) stays full.
+- ``partial_partial`` (P2P): both scanned; camera pairs re-drawn until both overlaps lie in
+  ``[min_overlap, max_overlap]`` (:func:`becos.partiality.cast_p2p`).
+
+Frames. Inputs are full meshes in the common y-up frame at dataset scale (prepared and, usually,
+remeshed). Y is moved rigidly onto X by Procrustes on the ground-truth pairs (missing ones masked),
+then each shape gets its own random rotation, applied last: about the up axis by default, uniform
+on SO(3) with ``one_axis_rotation=False``. With ``area_normalised`` the vertices are divided by the
+full shape's sqrt-area (about the common-frame origin) before that rotation: the paper's
+"normalised" variant. Every draw comes from the pair's own seed (:func:`becos.seeding.rng_for`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from becos.mesh import TriMesh
+from becos.partiality import Partial, Scanner, align_to, cast_p2f, cast_p2p, whole
+from becos.record import SETTINGS, PairRecord
+from becos.seeding import rng_for
+from becos.surface_map import SurfaceMap
+
+_UP = {"x": np.array([1.0, 0, 0]), "y": np.array([0, 1.0, 0]), "z": np.array([0, 0, 1.0])}
+
+
+@dataclass(frozen=True)
+class PairOptions:
+    """Options of one setting (defaults = the published benchmark's)."""
+
+    setting: str = "full_full"
+    cam_pos_regime: str = "high"
+    up_axis: str = "y"
+    camera_distance: float = 1.0
+    n_cam_pos: int = 10
+    min_overlap: float = 0.1
+    max_overlap: float = 0.9
+    one_axis_rotation: bool = True
+    area_normalised: bool = False
+
+    def __post_init__(self):
+        if self.setting not in SETTINGS:
+            raise ValueError(f"setting must be one of {SETTINGS}, got {self.setting!r}")
+        if self.up_axis not in _UP:
+            raise ValueError(f"up_axis must be x, y or z, got {self.up_axis!r}")
+        if not 0.0 <= self.min_overlap <= self.max_overlap <= 1.0:
+            raise ValueError(f"need 0 <= min_overlap <= max_overlap <= 1, got {self.min_overlap}, {self.max_overlap}")
+
+
+@dataclass(frozen=True, eq=False)
+class ShapeInstance:
+    """A full shape ready to be paired.
+
+    Attributes:
+        dataset, name, category, shape_class: provenance.
+        mesh: full mesh in the common frame at dataset scale (remeshed variant or original).
+        scale: dataset scale applied to file coordinates.
+        frame_rotation: (3, 3) file -> common frame rotation (row vectors).
+        centre: (3,) subtracted after scaling, before the frame rotation.
+        remesh_variant: index of the remesh variant, -1 if not remeshed.
+    """
+
+    dataset: str
+    name: str
+    category: str
+    shape_class: str
+    mesh: TriMesh
+    scale: float = 1.0
+    frame_rotation: np.ndarray = field(default_factory=lambda: np.eye(3))
+    centre: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    remesh_variant: int = -1
+
+
+def random_rotation(rng: np.random.Generator, up_axis: str = "y", one_axis: bool = True) -> np.ndarray:
+    """(3, 3) rotation for row vectors (``V @ R``): about the up axis by an angle uniform in [0, 2π),
+    or uniform on SO(3)."""
+    if one_axis:
+        angle = rng.uniform(0.0, 2.0 * np.pi)
+        return Rotation.from_rotvec(angle * _UP[up_axis]).as_matrix().T
+    return Rotation.random(random_state=rng).as_matrix().T
+
+
+def _camera_rows(camera) -> np.ndarray:
+    if camera is None:
+        return np.full((3, 3), np.nan)
+    return np.stack([camera.position, camera.target, camera.up]).astype(np.float64)
+
+
+def _shape_arrays(shape: ShapeInstance, partial: Partial, final_vertices: np.ndarray, overlap_mask: np.ndarray,
+                  align_rotation: np.ndarray, align_translation: np.ndarray, rotation: np.ndarray,
+                  camera, area: float) -> dict[str, np.ndarray]:
+    return {
+        "vertices": final_vertices,
+        "faces": partial.mesh.faces,
+        "partial_to_full": partial.partial_to_full,
+        "full_to_partial": partial.full_to_partial,
+        "full_face_ids": partial.face_ids,
+        "overlap_mask": overlap_mask.astype(bool),
+        "annotation": np.full(partial.mesh.n_vertices, -1, dtype=np.int8),
+        "full_area": np.float64(area),
+        "full_sqrt_area": np.float64(np.sqrt(area)),
+        "dataset_scale": np.float64(shape.scale),
+        "frame_rotation": np.asarray(shape.frame_rotation, dtype=np.float64),
+        "centre": np.asarray(shape.centre, dtype=np.float64),
+        "align_rotation": align_rotation,
+        "align_translation": align_translation,
+        "random_rotation": rotation,
+        "camera": _camera_rows(camera),
+        "remesh_variant": np.int64(shape.remesh_variant),
+        "overlap": np.float64(overlap_mask.mean() if len(overlap_mask) else 0.0),
+    }
+
+
+def build_pair(x: ShapeInstance, y: ShapeInstance, gt_xy: SurfaceMap, gt_yx: SurfaceMap, *, pair_id: str,
+               seed: int, split: str, options: PairOptions,
+               scanners: tuple[Scanner | None, Scanner | None] = (None, None)) -> PairRecord:
+    """One matching instance.
+
+    Args:
+        x, y: the two full shapes (common frame).
+        gt_xy: X vertices -> points on Y's surface; gt_yx: the converse (see :mod:`becos.network`).
+        pair_id, seed: the pair's identity and seed; every random draw derives from them.
+        split: train / val / test.
+        options: the setting and its options.
+        scanners: optional reusable :class:`becos.partiality.Scanner` of x and y.
+    """
+    from becos.geometry import surface_area
+
+    if len(gt_xy) != x.mesh.n_vertices or len(gt_yx) != y.mesh.n_vertices:
+        raise ValueError(f"pair {pair_id}: ground truth lengths {len(gt_xy)}, {len(gt_yx)} do not match the "
+                         f"meshes ({x.mesh.n_vertices}, {y.mesh.n_vertices} vertices)")
+    meta = {"pair_id": pair_id, "seed": int(seed), "setting": options.setting, "split": split,
+            "area_normalised": options.area_normalised, "n_tries": 0, "accepted": True, "try_index": -1,
+            "options": {k: getattr(options, k) for k in options.__dataclass_fields__}}
+    for key, s in (("x", x), ("y", y)):
+        meta[key] = {"name": s.name, "dataset": s.dataset, "category": s.category, "class": s.shape_class}
+
+    camera_x = camera_y = None
+    if options.setting == "partial_partial":
+        scan = cast_p2p(x.mesh, y.mesh, gt_xy, gt_yx, (seed, pair_id), regime=options.cam_pos_regime,
+                        up_axis=options.up_axis, camera_distance=options.camera_distance,
+                        n_tries=options.n_cam_pos, min_overlap=options.min_overlap,
+                        max_overlap=options.max_overlap,
+                        scanners=None if None in scanners else scanners)
+        px, py, alignment = scan.partial_x, scan.partial_y, scan.alignment
+        mask_x, mask_y, map_xy, map_yx = scan.mask_x, scan.mask_y, scan.map_xy, scan.map_yx
+        camera_x, camera_y = scan.camera_x, scan.camera_y
+        meta.update(n_tries=scan.n_tries_used, accepted=bool(scan.accepted), try_index=scan.try_index)
+    elif options.setting == "partial_full":
+        scan = cast_p2f(x.mesh, y.mesh, gt_xy, gt_yx, (seed, pair_id), up_axis=options.up_axis,
+                        camera_distance=options.camera_distance, scanner=scanners[1])
+        px, py = scan.full_x, scan.partial_y
+        alignment = align_to(x.mesh, y.mesh, gt_xy)
+        mask_x, mask_y, map_xy, map_yx = scan.mask_x, scan.mask_y, scan.map_xy, scan.map_yx
+        camera_y = scan.camera_y
+        meta.update(n_tries=1, try_index=0)
+    else:
+        px, py = whole(x.mesh), whole(y.mesh)
+        alignment = align_to(x.mesh, y.mesh, gt_xy)
+        mask_x, mask_y, map_xy, map_yx = gt_xy.matched, gt_yx.matched, gt_xy, gt_yx
+
+    area_x, area_y = surface_area(x.mesh), surface_area(y.mesh)
+    rot_x = random_rotation(rng_for(seed, pair_id, "rotation", "x"), options.up_axis, options.one_axis_rotation)
+    rot_y = random_rotation(rng_for(seed, pair_id, "rotation", "y"), options.up_axis, options.one_axis_rotation)
+    norm_x = np.sqrt(area_x) if options.area_normalised else 1.0
+    norm_y = np.sqrt(area_y) if options.area_normalised else 1.0
+    final_x = (px.mesh.vertices / norm_x) @ rot_x
+    final_y = (alignment.apply(py.mesh.vertices) / norm_y) @ rot_y
+
+    arrays = {}
+    shape_x = _shape_arrays(x, px, final_x, mask_x, np.eye(3), np.zeros(3), rot_x, camera_x, area_x)
+    shape_y = _shape_arrays(y, py, final_y, mask_y, alignment.rotation.T.copy(), alignment.translation.copy(),
+                            rot_y, camera_y, area_y)
+    arrays.update({f"x_{k}": v for k, v in shape_x.items()})
+    arrays.update({f"y_{k}": v for k, v in shape_y.items()})
+    for name, m, target_faces in (("corr_01", map_xy, py.mesh.faces), ("corr_10", map_yx, px.mesh.faces)):
+        arrays[name] = m.to_vertex_indices(target_faces)
+        arrays[f"{name}_face"] = m.face
+        arrays[f"{name}_weights"] = m.weights
+    return PairRecord(arrays, meta)
