@@ -55,6 +55,73 @@ def barycentric_coordinates(points: np.ndarray, a: np.ndarray, b: np.ndarray, c:
     return weights / weights.sum(axis=1, keepdims=True)
 
 
+def face_normals(mesh: TriMesh) -> np.ndarray:
+    """(F, 3) unit face normals (right-hand rule on the face's vertex order); zero for degenerate faces."""
+    tri = mesh.vertices[mesh.faces]
+    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    length = np.linalg.norm(n, axis=1, keepdims=True)
+    return np.divide(n, length, out=np.zeros_like(n), where=length > 0)
+
+
+def oriented_face_normals(mesh: TriMesh) -> np.ndarray:
+    """(F, 3) unit face normals after orienting the faces consistently (a copy; libigl BFS per patch).
+
+    Real data has inconsistently wound faces (TOSCA michael0: 1,594 rows differ from michael3 by
+    winding); these normals agree across neighbouring faces. Each patch's global sign is arbitrary:
+    it is made outward when the patch's signed volume says so.
+    """
+    import igl
+
+    oriented, component = igl.bfs_orient(mesh.faces)
+    normals = face_normals(TriMesh(mesh.vertices, oriented))
+    tri = mesh.vertices[oriented]
+    signed = np.einsum("fd,fd->f", tri[:, 0], np.cross(tri[:, 1], tri[:, 2]))  # 6 x signed volume
+    volume = np.bincount(component, weights=signed)
+    return normals * np.where(volume[component] < 0, -1.0, 1.0)[:, None]
+
+
+def vertex_normals(mesh: TriMesh) -> np.ndarray:
+    """(V, 3) unit vertex normals: area-weighted sums of the incident face normals."""
+    tri = mesh.vertices[mesh.faces]
+    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])  # length = 2 * area
+    out = np.zeros((mesh.n_vertices, 3))
+    np.add.at(out, mesh.faces.ravel(), np.repeat(n, 3, axis=0))
+    length = np.linalg.norm(out, axis=1, keepdims=True)
+    return np.divide(out, length, out=np.zeros_like(out), where=length > 0)
+
+
+def closest_points_on_triangles(points: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """(..., 3) closest point of each point to its triangle (a, b, c); all inputs broadcast to (..., 3).
+
+    Ericson, Real-Time Collision Detection, 5.1.5, vectorised over the leading axes.
+    """
+    ab, ac, ap = b - a, c - a, points - a
+    d1, d2 = (ab * ap).sum(-1), (ac * ap).sum(-1)
+    bp = points - b
+    d3, d4 = (ab * bp).sum(-1), (ac * bp).sum(-1)
+    cp = points - c
+    d5, d6 = (ab * cp).sum(-1), (ac * cp).sum(-1)
+    va, vb, vc = d3 * d6 - d5 * d4, d5 * d2 - d1 * d6, d1 * d4 - d3 * d2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        denom = va + vb + vc
+        v_in, w_in = vb / denom, vc / denom
+        t_ab = d1 / (d1 - d3)
+        t_ac = d2 / (d2 - d6)
+        t_bc = (d4 - d3) / ((d4 - d3) + (d5 - d6))
+    result = a + v_in[..., None] * ab + w_in[..., None] * ac
+    # edge and vertex regions, checked from the most general to the most specific
+    on_bc = (va <= 0) & ((d4 - d3) >= 0) & ((d5 - d6) >= 0)
+    result = np.where(on_bc[..., None], b + t_bc[..., None] * (c - b), result)
+    on_ac = (vb <= 0) & (d2 >= 0) & (d6 <= 0)
+    result = np.where(on_ac[..., None], a + t_ac[..., None] * ac, result)
+    on_ab = (vc <= 0) & (d1 >= 0) & (d3 <= 0)
+    result = np.where(on_ab[..., None], a + t_ab[..., None] * ab, result)
+    result = np.where(((d6 >= 0) & (d5 <= d6))[..., None], c, result)
+    result = np.where(((d3 >= 0) & (d4 <= d3))[..., None], b, result)
+    result = np.where(((d1 <= 0) & (d2 <= 0))[..., None], a, result)
+    return np.where(np.isfinite(result), result, a)
+
+
 def points_on_surface(mesh: TriMesh, face: np.ndarray, weights: np.ndarray) -> np.ndarray:
     """(N, 3) positions of the surface points (``face`` (N,) int, ``weights`` (N, 3))."""
     tri = mesh.vertices[mesh.faces[face]]
@@ -65,6 +132,16 @@ class SurfaceLocator:
     """Closest-point queries on one mesh, with the AABB tree built once (libigl).
 
     Querying 10,000 points on a 100k-face mesh takes ~0.1 s including the build.
+
+    With query normals (from a consistently oriented surface, e.g. :func:`oriented_face_normals`;
+    a global sign flip is detected and undone), a point only lands on a face whose normal agrees with its own (cosine above
+    ``min_cos``): where two parts of a shape touch (a hand on a hip, a horse's legs) the plain closest
+    point can sit on the other part, a jump of a large geodesic distance; the two parts' normals are
+    opposite there, so the normal test rejects it. Rejected queries are answered by the closest
+    compatible face among the ``k`` faces with the nearest centroids (widened once), if it is at most
+    ``max_detour`` (default: the mean edge length) farther than the plain closest point -- a jump
+    across a contact is that local; farther answers mean the normal test misleads (thin or open
+    parts) -- else by the plain closest point.
     """
 
     def __init__(self, mesh: TriMesh):
@@ -73,9 +150,49 @@ class SurfaceLocator:
         self.mesh = mesh
         self._tree = igl.AABB()
         self._tree.init(mesh.vertices, mesh.faces)
+        self._normals = None
+        self._centroids = None
+        edges = mesh.vertices[mesh.faces] - mesh.vertices[np.roll(mesh.faces, 1, axis=1)]
+        self.max_detour = float(np.linalg.norm(edges, axis=2).mean())
 
-    def closest(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    @property
+    def face_normals(self) -> np.ndarray:
+        """(F, 3) unit face normals of the mesh, consistently oriented (computed once)."""
+        if self._normals is None:
+            self._normals = oriented_face_normals(self.mesh)
+        return self._normals
+
+    def _plain(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        sq_dist, face, closest = self._tree.squared_distance(self.mesh.vertices, self.mesh.faces, points)
+        return np.asarray(face, dtype=np.int64), np.asarray(closest)
+
+    def _compatible(self, points: np.ndarray, normals: np.ndarray, min_cos: float, k: int):
+        """Closest point among the k nearest-centroid faces with a compatible normal; face -1 if none."""
+        from scipy.spatial import cKDTree
+
+        if self._centroids is None:
+            self._centroids = cKDTree(self.mesh.vertices[self.mesh.faces].mean(axis=1))
+        k = min(k, self.mesh.n_faces)
+        _, cand = self._centroids.query(points, k=k)
+        cand = np.asarray(cand).reshape(len(points), k)
+        tri = self.mesh.vertices[self.mesh.faces[cand]]                      # (M, k, 3, 3)
+        closest = closest_points_on_triangles(points[:, None, :], tri[..., 0, :], tri[..., 1, :], tri[..., 2, :])
+        dist = np.linalg.norm(closest - points[:, None, :], axis=2)
+        ok = np.einsum("mkd,md->mk", self._normals[cand], normals) > min_cos
+        dist = np.where(ok, dist, np.inf)
+        best = dist.argmin(axis=1)
+        rows = np.arange(len(points))
+        face = np.where(np.isfinite(dist[rows, best]), cand[rows, best], -1)
+        return face, closest[rows, best]
+
+    def closest(self, points: np.ndarray, normals: np.ndarray | None = None,
+                min_cos: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Closest surface point of each of the (N, 3) ``points``.
+
+        Args:
+            points: (N, 3) query positions.
+            normals: optional (N, 3) unit normals of the queries (see the class docstring).
+            min_cos: the smallest accepted cosine between a query normal and a face normal.
 
         Returns:
             face: (N,) int64 face holding the closest point.
@@ -85,8 +202,23 @@ class SurfaceLocator:
         points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
         if len(points) == 0:
             return np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros(0)
-        sq_dist, face, closest = self._tree.squared_distance(self.mesh.vertices, self.mesh.faces, points)
-        face = np.asarray(face, dtype=np.int64)
+        face, closest = self._plain(points)
+        if normals is not None:
+            normals = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
+            has_normal = np.linalg.norm(normals, axis=1) > 0
+            cosine = (self.face_normals[face] * normals).sum(axis=1)
+            if np.median(cosine[has_normal]) < 0:  # the queries come from a surface oriented the other way
+                normals = -normals
+            flipped = np.flatnonzero(has_normal & ((self.face_normals[face] * normals).sum(axis=1) <= min_cos))
+            plain_distance = np.linalg.norm(closest - points, axis=1)
+            for k in (32, 256):
+                if len(flipped) == 0:
+                    break
+                f, c = self._compatible(points[flipped], normals[flipped], min_cos, k)
+                detour = np.linalg.norm(c - points[flipped], axis=1) - plain_distance[flipped]
+                found = (f >= 0) & (detour <= self.max_detour)
+                face[flipped[found]], closest[flipped[found]] = f[found], c[found]
+                flipped = flipped[(f < 0)]
         tri = self.mesh.vertices[self.mesh.faces[face]]
         weights = barycentric_coordinates(closest, tri[:, 0], tri[:, 1], tri[:, 2])
-        return face, weights, np.sqrt(np.maximum(sq_dist, 0.0))
+        return face, weights, np.linalg.norm(closest - points, axis=1)

@@ -169,8 +169,10 @@ def compose(first: SurfaceMap, middle_faces: np.ndarray, second: SurfaceMap, tar
         target_vertices = target.vertices[target.faces[np.where(image_face[loose] >= 0, image_face[loose], 0)]]
         image_points = np.einsum("mkj,mkjd->mkd", image_weights[loose], target_vertices)   # (L, 3, 3)
         points = np.einsum("mk,mkd->md", w[loose], image_points)
+        # the images' own face normals say which side of a touching contact the point belongs to
         locator = locator if locator is not None else SurfaceLocator(target)
-        f, bw, d = locator.closest(points)
+        normals = np.einsum("mk,mkd->md", w[loose], locator.face_normals[np.where(image_face[loose] >= 0, image_face[loose], 0)])
+        f, bw, d = locator.closest(points, normals)
         face[alive[loose]] = f
         weights[alive[loose]] = bw
         distance[alive[loose]] = d

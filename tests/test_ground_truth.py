@@ -1,0 +1,150 @@
+"""Ground truth through the shape network, on real TOSCA meshes and the real BeCoS annotation folder.
+
+Errors are Princeton-style: geodesic distance on the target between the predicted vertex and the true
+point, over sqrt of the target's area. Geodesics use the edge graph (an upper bound of the surface
+geodesic), so the bounds asserted here are conservative.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from becos.geodesics import dijkstra_to_points
+from becos.geometry import SurfaceLocator, oriented_face_normals, surface_area
+from becos.surface_map import SurfaceMap, compose
+
+
+@pytest.fixture(scope="session")
+def annotations(becos_code, tmp_path_factory):
+    from becos.annotations import AnnotationSource
+
+    return AnnotationSource(becos_code, cache_dir=tmp_path_factory.mktemp("edge-cache"))
+
+
+@pytest.fixture(scope="session")
+def tosca_shapes(becos_code, annotations):
+    from becos.datasets import DatasetSpec
+
+    entries = DatasetSpec.load("tosca").list_shapes(becos_code / "data", annotations)
+    return {e.name: e for e in entries}
+
+
+@pytest.fixture(scope="session")
+def network(annotations, tosca_dir, mesh_cache):
+    from becos.network import ShapeNetwork
+
+    def meshes(dataset, name):
+        path = tosca_dir / f"{name}.off"
+        return mesh_cache.load(path) if dataset == "tosca" and path.is_file() else None
+
+    return ShapeNetwork(annotations, meshes)
+
+
+@pytest.fixture(scope="session")
+def remeshed(tosca_dir, mesh_cache):
+    """Remeshes of the same-class test shapes, each with its own vertex target."""
+    from becos.remesh import remesh
+
+    targets = {"cat0": 9100, "cat3": 9900, "michael0": 9300, "michael3": 9700, "horse0": 9200, "horse5": 9800}
+    return {name: remesh(mesh_cache.load(tosca_dir / f"{name}.off"), target_vertices=t)
+            for name, t in targets.items()}
+
+
+@pytest.mark.parametrize("x_name, y_name", [("cat0", "cat3"), ("michael0", "michael3"), ("horse0", "horse5")])
+def test_same_class_remeshed_ground_truth_is_accurate(x_name, y_name, network, tosca_shapes, remeshed,
+                                                     tosca_dir, mesh_cache):
+    x, y = tosca_shapes[x_name], tosca_shapes[y_name]
+    rx, ry = remeshed[x_name], remeshed[y_name]
+    gt = network.ground_truth(x, y, x_remesh=rx, y_remesh=ry)
+    predicted = gt.to_vertex_indices(ry.mesh.faces)
+    assert len(predicted) == rx.mesh.n_vertices
+    assert (predicted >= 0).all() and predicted.max() < ry.mesh.n_vertices
+
+    # the true point: remeshed-X vertex -> its point on X (face, weights) -> the same barycentric
+    # point on Y (same vertex order; X's face triple, since winding may differ) -> Y's remeshed surface
+    ox = mesh_cache.load(tosca_dir / f"{x_name}.off")
+    oy = mesh_cache.load(tosca_dir / f"{y_name}.off")
+    to_x = rx.to_original
+    true_on_y = np.einsum("nk,nkd->nd", to_x.weights, oy.vertices[ox.faces[to_x.face]])
+    true_normals = oriented_face_normals(oy)[to_x.face]
+    true_face, true_weights, off_surface = SurfaceLocator(ry.mesh).closest(true_on_y, true_normals)
+    errors = dijkstra_to_points(ry.mesh, predicted, true_face, true_weights) / np.sqrt(surface_area(ry.mesh))
+    print(f"\n{x_name}->{y_name}: mean error {errors.mean():.5f}, max {errors.max():.5f}, "
+          f"true point off the remesh by at most {off_surface.max() / np.sqrt(surface_area(ry.mesh)):.2e}")
+    assert errors.mean() <= 0.008
+    assert errors.max() <= 0.04
+
+
+def cycle_error(network, x, y, mx, my) -> np.ndarray:
+    """X vertex -> Y surface -> X surface, distance to where it started, over sqrt(area of X)."""
+    gt_xy = network.ground_truth(x, y)
+    gt_yx = network.ground_truth(y, x)
+    back = compose(gt_xy, my.faces, gt_yx, mx)
+    matched = back.matched
+    start = np.flatnonzero(matched)
+    # geodesic from the start vertex to the returned point
+    d = dijkstra_to_points(mx, start, back.face[matched], back.weights[matched])
+    return d / np.sqrt(surface_area(mx))
+
+
+@pytest.mark.parametrize("x_name, y_name, via, missing_range", [
+    ("cat3", "horse5", ["tosca_cat0", "tosca_dog0", "tosca_horse0"], (0.0, 0.10)),
+    ("wolf1", "cat2", ["tosca_wolf0", "tosca_dog0", "tosca_cat0"], (0.0, 0.10)),
+    ("michael4", "victoria2", ["tosca_michael0", "faust_tr_reg_000", "tosca_victoria0"], (0.0, 0.10)),
+    ("centaur1", "horse7", ["tosca_centaur0", "tosca_horse0"], (0.55, 0.70)),
+])
+def test_cross_class_paths(x_name, y_name, via, missing_range, network, tosca_shapes, tosca_dir, mesh_cache):
+    x, y = tosca_shapes[x_name], tosca_shapes[y_name]
+    nodes = [s.node for s in network.surface_path(x, y) if s.node is not None]
+    assert nodes == via
+    mx = mesh_cache.load(tosca_dir / f"{x_name}.off")
+    my = mesh_cache.load(tosca_dir / f"{y_name}.off")
+    gt = network.ground_truth(x, y)
+    idx = gt.to_vertex_indices(my.faces)
+    assert len(gt) == mx.n_vertices
+    assert idx.max() < my.n_vertices and idx.min() >= -1
+    assert ((idx == -1) == ~gt.matched).all()
+    lo, hi = missing_range
+    assert lo <= gt.missing_fraction <= hi, gt.missing_fraction
+    scale = np.sqrt(surface_area(my))
+    projection = np.nanmax(gt.distance) / scale
+    errors = cycle_error(network, x, y, mx, my)
+    print(f"\n{x_name}->{y_name} via {'->'.join(via)}: missing {gt.missing_fraction:.3f}, largest projection "
+          f"{projection:.4f} (x sqrt area), cycle error mean {errors.mean():.4f} median {np.median(errors):.4f} "
+          f"over {len(errors)} vertices")
+    assert projection < 0.1
+    assert np.median(errors) < 0.05
+
+
+def test_centaur_missing_part_is_the_human_torso(network, tosca_shapes, tosca_dir, mesh_cache):
+    """The centaur's vertices without a horse counterpart are its upper (human) body: high up."""
+    x, y = tosca_shapes["centaur0"], tosca_shapes["horse0"]
+    gt = network.ground_truth(x, y)
+    mx = mesh_cache.load(tosca_dir / "centaur0.off")
+    up = mx.vertices[:, 2]  # TOSCA files are z-up
+    assert up[~gt.matched].mean() > up[gt.matched].mean()
+    assert 0.55 < gt.missing_fraction < 0.70  # reference facts: about 63 % of the centaur is missing
+
+
+def test_identity_path_is_exact(network, tosca_shapes, tosca_dir, mesh_cache):
+    gt = network.ground_truth(tosca_shapes["cat1"], tosca_shapes["cat4"])
+    faces = mesh_cache.load(tosca_dir / "cat4.off").faces
+    assert (gt.to_vertex_indices(faces) == np.arange(len(gt))).all()
+
+
+def test_wrong_vertex_count_in_a_class_is_an_error(network, tosca_shapes, tmp_path, tosca_dir):
+    from becos.errors import BecosError
+    from becos.network import ShapeNetwork
+
+    def meshes(dataset, name):
+        from becos.mesh import read_mesh, TriMesh
+        mesh = read_mesh(tosca_dir / f"{name}.off")
+        if name == "cat3":  # a shape whose file lost its last vertex
+            keep = (mesh.faces < mesh.n_vertices - 1).all(axis=1)
+            return TriMesh(mesh.vertices[:-1], mesh.faces[keep])
+        return mesh
+
+    broken = ShapeNetwork(network.annotations, meshes)
+    with pytest.raises(BecosError, match="cat3.*share one triangulation"):
+        broken.ground_truth(tosca_shapes["cat3"], tosca_shapes["cat1"])
