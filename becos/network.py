@@ -12,19 +12,23 @@ from the vertices of one surface to points on the next:
   sharing a triangulation.
 - remeshed X -> X: :attr:`becos.remesh.Remeshed.to_original`; Y -> remeshed Y: ``from_original``.
 
-The hops are composed backwards from the target (:func:`becos.surface_map.compose_path`), so an
-intermediate template needs only its faces (from the dataset when present, else the annotation
-folder's default faces).
+The template-to-template part is composed once per pair of classes and cached (projected onto the
+last template, whose mesh is in Y's dataset); the shape and remesh hops are then composed onto the
+target per pair. Compositions run backwards from their target
+(:func:`becos.surface_map.compose_path`), so an intermediate template needs only its faces (from
+the dataset when present, else the annotation folder's default faces).
 """
 
 from __future__ import annotations
 
+from collections import OrderedDict
 from dataclasses import dataclass
 from typing import Callable, Protocol
 
 import numpy as np
 
 from becos.errors import BecosError, InputFileError
+from becos.geometry import SurfaceLocator
 from becos.mesh import TriMesh
 from becos.surface_map import SurfaceMap, compose_path
 
@@ -64,6 +68,8 @@ class ShapeNetwork:
         self.annotations = annotations
         self._meshes = meshes
         self._faces_cache: dict[tuple[str, str], np.ndarray] = {}
+        self._chains: dict[tuple[str, ...], SurfaceMap] = {}
+        self._locators: OrderedDict[int, tuple[TriMesh, SurfaceLocator]] = OrderedDict()
 
     # --- paths ----------------------------------------------------------------------------------
     def template_node(self, shape: ShapeLike) -> str:
@@ -141,6 +147,33 @@ class ShapeNetwork:
         return edge
 
     # --- ground truth ---------------------------------------------------------------------------
+    def locator(self, mesh: TriMesh) -> SurfaceLocator:
+        """A closest-point structure of ``mesh``, kept for the last few meshes used as targets."""
+        key = id(mesh)
+        if key in self._locators:
+            self._locators.move_to_end(key)
+            return self._locators[key][1]
+        locator = SurfaceLocator(mesh)
+        self._locators[key] = (mesh, locator)  # holding the mesh keeps its id from being reused
+        while len(self._locators) > 8:
+            self._locators.popitem(last=False)
+        return locator
+
+    def template_chain(self, templates: list[Surface]) -> SurfaceMap | None:
+        """Template ``templates[0]`` vertices -> points on ``templates[-1]``, composed along the network
+        path and cached: every pair between the same two classes shares it. None when the last
+        template's mesh is not available (then the caller composes onto its own target)."""
+        key = tuple(t.node for t in templates)
+        if key not in self._chains:
+            last = templates[-1]
+            mesh = self._meshes(last.dataset, last.name)
+            if mesh is None:
+                return None
+            hops = [self.hop(a, b) for a, b in zip(templates, templates[1:])]
+            middle = [self.faces_of(t) for t in templates[1:-1]]
+            self._chains[key] = compose_path(hops, middle, mesh, self.locator(mesh))
+        return self._chains[key]
+
     def ground_truth(self, x: ShapeLike, y: ShapeLike, *, x_remesh=None, y_remesh=None,
                      y_mesh: TriMesh | None = None) -> SurfaceMap:
         """Dense ground truth from X's vertices to points on Y's surface.
@@ -157,30 +190,38 @@ class ShapeNetwork:
             SurfaceMap of length V_X (or V_remeshed_X); face -1 where X's point has no counterpart on Y.
         """
         surfaces = self.surface_path(x, y)
-        hops: list[SurfaceMap | None] = []
-        middle: list[np.ndarray] = []
+        nodes = [i for i, s in enumerate(surfaces) if s.node is not None]
+        first, last = nodes[0], nodes[-1]
+        steps: list[tuple[SurfaceMap | None, Surface | None]] = []  # (hop, the surface it lands on)
         if x_remesh is not None:
-            hops.append(x_remesh.to_original)
-            middle.append(self.faces_of(surfaces[0]))
-        for i in range(len(surfaces) - 1):
-            hops.append(self.hop(surfaces[i], surfaces[i + 1]))
-            middle.append(self.faces_of(surfaces[i + 1]))
+            steps.append((x_remesh.to_original, surfaces[0]))
+        for a, b in zip(surfaces[:first], surfaces[1:first + 1]):      # X -> its template (identity)
+            steps.append((self.hop(a, b), b))
+        chain = self.template_chain(surfaces[first:last + 1]) if last > first else None
+        if chain is not None:
+            steps.append((chain, surfaces[last]))
+        else:
+            for a, b in zip(surfaces[first:last], surfaces[first + 1:last + 1]):
+                steps.append((self.hop(a, b), b))
+        for a, b in zip(surfaces[last:], surfaces[last + 1:]):        # Y's template -> Y (identity)
+            steps.append((self.hop(a, b), b))
         if y_remesh is not None:
-            hops.append(y_remesh.from_original)
+            steps.append((y_remesh.from_original, None))
             target = y_remesh.mesh
         else:
-            middle = middle[:-1]  # the last surface is the target itself
             target = self._meshes(y.dataset, y.name)
             if target is None:
                 raise BecosError(f"shape {y.dataset}/{y.name} is not available. Fix: enable/download "
                                  f"dataset '{y.dataset}'")
-        if y_remesh is None and not hops:
+        if not steps:
             return SurfaceMap.identity(target.faces, target.n_vertices)
         if y_mesh is not None:
             if y_mesh.n_vertices != target.n_vertices or y_mesh.n_faces != target.n_faces:
                 raise ValueError("y_mesh must have the connectivity of the target surface")
             target = y_mesh
-        return compose_path(hops, middle, target)
+        hops = [hop for hop, _ in steps]
+        middle = [self.faces_of(surface) for _, surface in steps[:-1]]
+        return compose_path(hops, middle, target, self.locator(target))
 
     def vertex_ground_truth(self, x: ShapeLike, y: ShapeLike, **kwargs) -> tuple[SurfaceMap, np.ndarray]:
         """:meth:`ground_truth` and its vertex-index form (int64, -1 = none) on the target's faces."""

@@ -182,7 +182,8 @@ def compose(first: SurfaceMap, middle_faces: np.ndarray, second: SurfaceMap, tar
     return SurfaceMap(face, weights, distance)
 
 
-def compose_path(hops: list[SurfaceMap | None], middle_faces: list[np.ndarray], target: TriMesh) -> SurfaceMap:
+def compose_path(hops: list[SurfaceMap | None], middle_faces: list[np.ndarray], target: TriMesh,
+                 locator: SurfaceLocator | None = None) -> SurfaceMap:
     """Compose a chain surface_0 -> surface_1 -> ... -> surface_k+1 (= target), backwards from the target.
 
     Args:
@@ -192,10 +193,11 @@ def compose_path(hops: list[SurfaceMap | None], middle_faces: list[np.ndarray], 
             ``hops[j]`` indexes them (for a TOSCA pose these may differ from its template's faces
             by winding, which is why identity hops keep each side's own faces).
         target: the target mesh, surface k+1.
+        locator: a :class:`SurfaceLocator` of ``target`` to reuse (built if omitted).
     """
     if len(middle_faces) != len(hops) - 1:
         raise ValueError(f"compose_path needs {len(hops) - 1} face arrays, got {len(middle_faces)}")
-    locator = SurfaceLocator(target)
+    locator = locator if locator is not None else SurfaceLocator(target)
     result: SurfaceMap | None = None
     for j in range(len(hops) - 1, -1, -1):
         if hops[j] is None:
