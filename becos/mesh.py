@@ -87,7 +87,29 @@ def read_mesh(path: str | Path) -> TriMesh:
         raise InputFileError(path, f"could not be parsed as a mesh ({type(exc).__name__}: {exc})",
                              "the file is truncated or corrupt: re-download or re-extract it") from exc
     check_mesh_arrays(path, vertices, faces)
+    if path.suffix.lower() == ".off":
+        _check_off_header(path, len(vertices), len(faces))
     return TriMesh(vertices, faces)
+
+
+def _check_off_header(path: Path, n_vertices: int, n_faces: int) -> None:
+    """A truncated OFF can still parse (face lines read as vertices): compare with the header's counts."""
+    with open(path, "rb") as fh:
+        words: list[bytes] = []
+        for line in fh:
+            words += line.split(b"#")[0].split()
+            if (len(words) >= 3 and words[0].upper().endswith(b"OFF")) or len(words) >= 4:
+                break
+    counts = words[1:3] if words and words[0].upper().endswith(b"OFF") else words[0:2]
+    try:
+        header_vertices, header_faces = (int(c) for c in counts)
+    except ValueError:
+        raise InputFileError(path, "the OFF header has no vertex and face counts",
+                             "the file is corrupt: re-download or re-extract it") from None
+    if (header_vertices, header_faces) != (n_vertices, n_faces):
+        raise InputFileError(path, f"the OFF header announces {header_vertices} vertices and {header_faces} faces "
+                             f"but {n_vertices} and {n_faces} were read (truncated or corrupt file)",
+                             "re-download or re-extract the file")
 
 
 def atomic_save_npz(path: str | Path, **arrays: np.ndarray) -> None:
