@@ -31,7 +31,6 @@ import glob
 import hashlib
 import logging
 import os
-import tempfile
 from collections import OrderedDict
 from dataclasses import dataclass
 from pathlib import Path
@@ -39,6 +38,7 @@ from pathlib import Path
 import networkx as nx
 import numpy as np
 
+from becos.atomic import save_npz
 from becos.errors import BecosError, InputFileError
 from becos.surface_map import SurfaceMap
 
@@ -150,18 +150,6 @@ def _writable_dir(path: Path) -> bool:
     return os.access(path, os.W_OK | os.X_OK)
 
 
-def _atomic_savez(path: Path, **arrays: np.ndarray) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp.npz")
-    os.close(fd)
-    try:
-        np.savez(tmp, **arrays)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
 def parse_edge_file(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
     """Parse an edge text file and validate it; no repair of the weights.
 
@@ -216,14 +204,6 @@ def parse_edge_file(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
         bad = int(np.flatnonzero((weights < 0).any(axis=1))[0])
         raise InputFileError(path, f"line {bad + 1}: negative barycentric weight {weights[bad].tolist()}", fix)
     return face, weights
-
-
-@dataclass(frozen=True)
-class _EdgeData:
-    """A processed edge file: the map and what was repaired."""
-
-    surface_map: SurfaceMap
-    report: dict
 
 
 _REPORT_KEYS = ("rows", "matched", "missing", "zero_weight_rows", "renormalised_rows", "max_face")
@@ -495,8 +475,9 @@ class AnnotationSource:
             loaded = _process_edge(*parse_edge_file(path))
             face, weights, report = loaded
             try:
-                _atomic_savez(cached, face=face.astype(np.int32), weights=weights,  # float64: a cached load must equal a fresh parse
-                              report=np.array([report[k] for k in _REPORT_KEYS], dtype=np.int64))
+                # weights stay float64: a cached load must equal a fresh parse
+                save_npz(cached, face=face.astype(np.int32), weights=weights,
+                         report=np.array([report[k] for k in _REPORT_KEYS], dtype=np.int64))
             except OSError as exc:
                 log.warning("could not write the edge cache %s (%s); parsing each time", cached, exc)
         face, weights, report = loaded

@@ -26,14 +26,14 @@ then the raw name, so listing order and file-system order never leak into the ta
 
 from __future__ import annotations
 
-import os
 import re
-import tempfile
 from pathlib import Path
 from typing import Iterable
 
 import numpy as np
 import pandas as pd
+
+from becos.atomic import write_text
 
 ROTATION_COLUMNS = tuple(f"frame_rotation_{i}" for i in range(9))
 COLUMNS = ("dataset", "name", "category", "class", "split", "file", "template_key", "scale",
@@ -109,18 +109,8 @@ def _validate(df: pd.DataFrame) -> None:
 
 
 def atomic_write_text(path: str | Path, text: str) -> None:
-    """Write ``text`` to ``path`` via a temporary file in the same folder and ``os.replace``."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline="") as fh:
-            fh.write(text)
-        os.chmod(tmp, 0o644)  # mkstemp creates 0600; a table is meant to be shared
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    """Write ``text`` to ``path`` atomically (see :mod:`becos.atomic`)."""
+    write_text(path, text)
 
 
 def write_catalog(df: pd.DataFrame, path: str | Path) -> None:

@@ -231,7 +231,7 @@ class DatasetSpec:
         self.raw = raw
         missing = [k for k in REQUIRED_KEYS if k not in raw]
         if missing:
-            self._fail(f"lacks keys {missing}", f"add them (see becos.datasets for the schema)")
+            self._fail(f"lacks keys {missing}", "add them (see becos.datasets for the schema)")
         self.name = str(raw["name"])
         self.title = str(raw["title"])
         self.folder = str(raw["folder"]).strip("/")

@@ -7,13 +7,12 @@ trimesh ``process=False, maintain_order=True`` and never merged, re-ordered or r
 from __future__ import annotations
 
 import hashlib
-import os
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from becos.atomic import save_npz as atomic_save_npz
 from becos.errors import InputFileError
 
 MESH_SUFFIXES = (".off", ".ply", ".obj")
@@ -110,20 +109,6 @@ def _check_off_header(path: Path, n_vertices: int, n_faces: int) -> None:
         raise InputFileError(path, f"the OFF header announces {header_vertices} vertices and {header_faces} faces "
                              f"but {n_vertices} and {n_faces} were read (truncated or corrupt file)",
                              "re-download or re-extract the file")
-
-
-def atomic_save_npz(path: str | Path, **arrays: np.ndarray) -> None:
-    """Write arrays to ``path`` (.npz) through a temporary file in the same folder, then rename."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp.npz")
-    os.close(fd)
-    try:
-        np.savez(tmp, **arrays)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
 
 
 class MeshCache:

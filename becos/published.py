@@ -34,10 +34,8 @@ global in the file is refused (a pickle can otherwise run arbitrary code).
 from __future__ import annotations
 
 import io
-import os
 import pickle
 import re
-import tempfile
 from collections import Counter
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -46,6 +44,8 @@ from typing import Callable
 
 import numpy as np
 import pandas as pd
+
+from becos.atomic import save_npz, write_bytes
 
 from becos.catalog import frame_rotation
 from becos.errors import ConfigError, InputFileError
@@ -198,16 +198,7 @@ def save_cameras(path: str | Path, cameras: Mapping[str, np.ndarray]) -> None:
     path = Path(path)
     ids = sorted(cameras)
     cam = np.stack([np.asarray(cameras[i], dtype=np.float64) for i in ids]) if ids else np.zeros((0, 2, N_CAMERAS, 3))
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp.npz")
-    os.close(fd)
-    try:
-        np.savez_compressed(tmp, pair_id=np.array(ids, dtype="U16"), cam_pos=cam)
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    save_npz(path, compressed=True, pair_id=np.array(ids, dtype="U16"), cam_pos=cam)
 
 
 def load_cameras(path: str | Path) -> dict[str, np.ndarray]:
@@ -339,14 +330,4 @@ def write_published_pickle(manifest: pd.DataFrame, path: str | Path, catalog: pd
                                     shape_dict("y", row, rot[1], None if cam is None else cam[1])))
     buf = io.BytesIO()
     _PortablePickler(buf, protocol=4).dump([lists[s] for s in PUBLISHED_SPLITS])
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(buf.getvalue())
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    write_bytes(path, buf.getvalue())

@@ -44,12 +44,12 @@ accepted, area_normalised, and per shape name, dataset, category, class.
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+
+from becos.atomic import save_npz
 
 SCHEMA_VERSION = 1
 SHAPE_KEYS = ("vertices", "faces", "partial_to_full", "full_to_partial", "full_face_ids", "overlap_mask",
@@ -82,16 +82,7 @@ class PairRecord:
 
     def save(self, path: str | Path) -> None:
         """Write one .npz (arrays + ``meta`` as JSON), atomically."""
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp.npz")
-        os.close(fd)
-        try:
-            np.savez(tmp, __meta__=np.array(json.dumps(self.meta, sort_keys=True)), **self.arrays)
-            os.replace(tmp, path)
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
+        save_npz(path, __meta__=np.array(json.dumps(self.meta, sort_keys=True)), **self.arrays)
 
     @classmethod
     def load(cls, path: str | Path) -> "PairRecord":

@@ -47,8 +47,6 @@ from __future__ import annotations
 
 import hashlib
 import logging
-import os
-import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -57,7 +55,8 @@ import numpy as np
 
 from becos.errors import InputFileError
 from becos.geometry import SurfaceLocator, face_areas, points_on_surface
-from becos.mesh import TriMesh, atomic_save_npz
+from becos.atomic import save_npz as atomic_save_npz, write_bytes
+from becos.mesh import TriMesh
 from becos.seeding import rng_for, stable_hash
 from becos.surface_map import SurfaceMap
 
@@ -509,13 +508,4 @@ def write_ply(path: Path, mesh: TriMesh) -> None:
     face_rec = np.empty(mesh.n_faces, dtype=[("n", "u1"), ("i", "<i4", (3,))])
     face_rec["n"] = 3
     face_rec["i"] = mesh.faces
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(header)
-            fh.write(np.ascontiguousarray(mesh.vertices, dtype="<f8").tobytes())
-            fh.write(face_rec.tobytes())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    write_bytes(path, header + np.ascontiguousarray(mesh.vertices, dtype="<f8").tobytes() + face_rec.tobytes())

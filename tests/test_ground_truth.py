@@ -12,7 +12,7 @@ import pytest
 
 from becos.geodesics import dijkstra_to_points
 from becos.geometry import SurfaceLocator, oriented_face_normals, surface_area
-from becos.surface_map import SurfaceMap, compose
+from becos.surface_map import compose
 
 
 @pytest.fixture(scope="session")
