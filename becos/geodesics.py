@@ -59,6 +59,17 @@ def _chunks(items: np.ndarray, n_vertices: int):
         yield slice(start, min(start + size, len(items)))
 
 
+def _point_queries(source_vertices, target_face, target_weights) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Vertex -> surface-point queries as (N,) int64, (N,) int64, (N, 3) float64; equal lengths checked."""
+    source_vertices = np.asarray(source_vertices, dtype=np.int64).reshape(-1)
+    target_face = np.asarray(target_face, dtype=np.int64).reshape(-1)
+    target_weights = np.asarray(target_weights, dtype=np.float64).reshape(-1, 3)
+    if not len(source_vertices) == len(target_face) == len(target_weights):
+        raise ValueError(f"vertex -> point queries need equally long inputs; got {len(source_vertices)}, "
+                         f"{len(target_face)}, {len(target_weights)}")
+    return source_vertices, target_face, target_weights
+
+
 class GeodesicDistances:
     """Geodesic distance fields on one mesh, from source vertices.
 
@@ -160,13 +171,8 @@ class GeodesicDistances:
             target_face: (N,) int face ids (must be valid, no -1).
             target_weights: (N, 3) barycentric weights in face-column order.
         """
-        source_vertices = np.asarray(source_vertices, dtype=np.int64).reshape(-1)
-        target_face = np.asarray(target_face, dtype=np.int64).reshape(-1)
-        target_weights = np.asarray(target_weights, dtype=np.float64).reshape(-1, 3)
+        source_vertices, target_face, target_weights = _point_queries(source_vertices, target_face, target_weights)
         n = len(source_vertices)
-        if len(target_face) != n or len(target_weights) != n:
-            raise ValueError(f"between() needs equally long inputs; got {n}, {len(target_face)}, "
-                             f"{len(target_weights)}")
         if n and (target_face.min() < 0 or target_face.max() >= self.mesh.n_faces):
             raise IndexError(f"target faces must lie in [0, {self.mesh.n_faces}); got "
                              f"[{target_face.min()}, {target_face.max()}]")
@@ -242,13 +248,8 @@ def dijkstra_to_points(mesh: TriMesh, source_vertices: np.ndarray, target_face: 
             <= ``limit`` and ``inf`` elsewhere (cheapest when only small errors matter).
         graph: the mesh's :func:`edge_graph`, if already built.
     """
-    source_vertices = np.asarray(source_vertices, dtype=np.int64).reshape(-1)
-    target_face = np.asarray(target_face, dtype=np.int64).reshape(-1)
-    target_weights = np.asarray(target_weights, dtype=np.float64).reshape(-1, 3)
+    source_vertices, target_face, target_weights = _point_queries(source_vertices, target_face, target_weights)
     n = len(source_vertices)
-    if len(target_face) != n or len(target_weights) != n:
-        raise ValueError(f"dijkstra_to_points() needs equally long inputs; got {n}, {len(target_face)}, "
-                         f"{len(target_weights)}")
     if n == 0:
         return np.zeros(0)
     if graph is None:

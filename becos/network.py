@@ -222,10 +222,3 @@ class ShapeNetwork:
         hops = [hop for hop, _ in steps]
         middle = [self.faces_of(surface) for _, surface in steps[:-1]]
         return compose_path(hops, middle, target, self.locator(target))
-
-    def vertex_ground_truth(self, x: ShapeLike, y: ShapeLike, **kwargs) -> tuple[SurfaceMap, np.ndarray]:
-        """:meth:`ground_truth` and its vertex-index form (int64, -1 = none) on the target's faces."""
-        gt = self.ground_truth(x, y, **kwargs)
-        target_faces = (kwargs.get("y_remesh").mesh.faces if kwargs.get("y_remesh") is not None
-                        else self._meshes(y.dataset, y.name).faces)
-        return gt, gt.to_vertex_indices(target_faces)

@@ -116,10 +116,6 @@ class SurfaceMap:
         out[matched] = points_on_surface(target, self.face[matched], self.weights[matched])
         return out
 
-    def subset(self, source_vertices: np.ndarray) -> "SurfaceMap":
-        """The map restricted (and re-ordered) to the given source vertices (int array)."""
-        return SurfaceMap(self.face[source_vertices], self.weights[source_vertices], self.distance[source_vertices])
-
 
 def compose(first: SurfaceMap, middle_faces: np.ndarray, second: SurfaceMap, target: TriMesh,
             locator: SurfaceLocator | None = None) -> SurfaceMap:

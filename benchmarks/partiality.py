@@ -58,25 +58,10 @@ def y_up(mesh: TriMesh) -> TriMesh:
 
 
 def remeshed(mesh: TriMesh) -> tuple[TriMesh, SurfaceMap, SurfaceMap, str]:
-    try:
-        from becos.remesh import remesh
-    except ImportError:
-        remesh = None
-    if remesh is not None:
-        r = remesh(mesh, target_vertices=TARGET_VERTICES)
-        return r.mesh, r.to_original, r.from_original, "becos.remesh"
-    import pymeshlab
+    from becos.remesh import remesh
 
-    from becos.geometry import SurfaceLocator
-
-    ms = pymeshlab.MeshSet()
-    ms.add_mesh(pymeshlab.Mesh(mesh.vertices, mesh.faces))
-    ms.meshing_decimation_quadric_edge_collapse(targetfacenum=2 * TARGET_VERTICES, preservenormal=True,
-                                                preservetopology=True, optimalplacement=False)
-    m = ms.current_mesh()
-    r = TriMesh(m.vertex_matrix(), m.face_matrix())
-    return (r, SurfaceMap(*SurfaceLocator(mesh).closest(r.vertices)),
-            SurfaceMap(*SurfaceLocator(r).closest(mesh.vertices)), "pymeshlab decimation")
+    r = remesh(mesh, target_vertices=TARGET_VERTICES)
+    return r.mesh, r.to_original, r.from_original, "becos.remesh"
 
 
 def load_pairs(folder: Path) -> tuple[list, str]:

@@ -30,26 +30,10 @@ def y_up(mesh: TriMesh) -> TriMesh:
 
 def remeshed(mesh: TriMesh) -> tuple[TriMesh, SurfaceMap, SurfaceMap]:
     """(remeshed mesh, remeshed -> original map, original -> remeshed map)."""
-    try:
-        from becos.remesh import remesh
-    except ImportError:
-        remesh = None
-    if remesh is not None:
-        r = remesh(mesh, target_vertices=TARGET_VERTICES)
-        return r.mesh, r.to_original, r.from_original
-    import pymeshlab
+    from becos.remesh import remesh
 
-    from becos.geometry import SurfaceLocator
-
-    ms = pymeshlab.MeshSet()
-    ms.add_mesh(pymeshlab.Mesh(mesh.vertices, mesh.faces))
-    ms.meshing_decimation_quadric_edge_collapse(targetfacenum=2 * TARGET_VERTICES, preservenormal=True,
-                                                preservetopology=True, optimalplacement=False)
-    m = ms.current_mesh()
-    r = TriMesh(m.vertex_matrix(), m.face_matrix())
-    to_original = SurfaceMap(*SurfaceLocator(mesh).closest(r.vertices))
-    from_original = SurfaceMap(*SurfaceLocator(r).closest(mesh.vertices))
-    return r, to_original, from_original
+    r = remesh(mesh, target_vertices=TARGET_VERTICES)
+    return r.mesh, r.to_original, r.from_original
 
 
 def remeshed_pair(tosca_dir, mesh_cache, a: str, b: str):
