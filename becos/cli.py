@@ -7,6 +7,7 @@ print the message (file, problem, fix) and exit with status 2 instead of a trace
 from __future__ import annotations
 
 import argparse
+import importlib
 import json
 import sys
 from pathlib import Path
@@ -39,6 +40,26 @@ def cmd_info(args: argparse.Namespace) -> int:
     return 0
 
 
+SUBCOMMANDS: tuple[tuple[str, str, str], ...] = (
+    # (name, module exposing configure_parser(parser) and run_cli(args) -> int, help)
+    ("synthetic", "becos.synthetic", "generate the built-in synthetic shape collection"),
+    ("check", "becos.check", "check that the enabled datasets and the annotation folder are present"),
+    ("fetch-annotations", "becos.check", "download the annotation folder from a pinned archive"),
+    ("catalog", "becos.workflow", "write the shape catalog of a workflow config"),
+    ("manifest", "becos.workflow", "write the pair manifest of one setting"),
+    ("remesh", "becos.workflow", "remesh one shape variant"),
+    ("ground-truth", "becos.workflow", "compute the ground truth of one chunk of pairs"),
+    ("pairs", "becos.workflow", "build the pair records of one chunk of pairs"),
+    ("export-zarr", "becos.store", "collect a setting's pair records into one Zarr store"),
+    ("validate", "becos.validate", "check a benchmark store; non-zero exit with a list of problems"),
+    ("export-released", "becos.export", "write a store in the released BeCoS folder layout"),
+    ("export-psmal", "becos.export", "write a store as PSMAL-style shapes/*.off + maps/*.vts"),
+    ("report", "becos.report", "counts, overlap histogram and renders of a store"),
+    ("evaluate", "becos.evaluate", "score predictions against a benchmark store"),
+    ("baseline", "becos.baselines", "run a baseline matcher on a benchmark store"),
+)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="becos", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True)
@@ -48,12 +69,30 @@ def build_parser() -> argparse.ArgumentParser:
     info.add_argument("--edges", action="store_true", help="also parse every edge file (cached after the first run)")
     info.set_defaults(func=cmd_info)
 
-    from becos.synthetic import configure_parser, run_cli
-
-    synthetic = sub.add_parser("synthetic", help="generate the built-in synthetic shape collection")
-    configure_parser(synthetic)
-    synthetic.set_defaults(func=run_cli)
+    for name, module_name, help_text in SUBCOMMANDS:
+        try:
+            module = importlib.import_module(module_name)
+        except ModuleNotFoundError as exc:
+            if exc.name != module_name:
+                raise
+            continue  # not built yet
+        configure = getattr(module, "configure_parser", None)
+        if configure is None:
+            continue
+        command = sub.add_parser(name, help=help_text)
+        if _takes_name(configure):
+            configure(command, name)
+        else:
+            configure(command)
+        command.set_defaults(func=module.run_cli)
     return parser
+
+
+def _takes_name(function) -> bool:
+    """Whether ``configure_parser`` takes the sub-command name (modules serving several commands)."""
+    import inspect
+
+    return len(inspect.signature(function).parameters) >= 2
 
 
 def main(argv: list[str] | None = None) -> int:
