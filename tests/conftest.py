@@ -32,3 +32,61 @@ def mesh_cache(tmp_path_factory):
     from becos.mesh import MeshCache
 
     return MeshCache(tmp_path_factory.mktemp("mesh-cache"))
+
+
+@pytest.fixture(scope="session")
+def tosca_pair_inputs(becos_code, tosca_dir, mesh_cache, tmp_path_factory):
+    """Remeshed cat0 (9,200 vertices) and cat3 (9,800) with network ground truth both ways.
+
+    Returns ``(x, y, gt_xy, gt_yx)``: two :class:`becos.pairs.ShapeInstance` and two
+    :class:`becos.surface_map.SurfaceMap`.
+    """
+    from becos.annotations import AnnotationSource
+    from becos.datasets import DatasetSpec, prepare_shape
+    from becos.network import ShapeNetwork
+    from becos.pairs import ShapeInstance
+    from becos.remesh import remesh
+
+    annotations = AnnotationSource(becos_code, cache_dir=tmp_path_factory.mktemp("edges"))
+    entries = {e.name: e for e in DatasetSpec.load("tosca").list_shapes(becos_code / "data", annotations)}
+
+    def meshes(dataset, name):
+        path = tosca_dir / f"{name}.off"
+        return mesh_cache.load(path) if dataset == "tosca" and path.is_file() else None
+
+    network = ShapeNetwork(annotations, meshes)
+    shapes, remeshes = {}, {}
+    for name, target in (("cat0", 9200), ("cat3", 9800)):
+        entry = entries[name]
+        prepared = prepare_shape(entry, mesh_cache)
+        remeshes[name] = remesh(prepared.mesh, target_vertices=target)
+        shapes[name] = ShapeInstance(entry.dataset, entry.name, entry.category, entry.shape_class,
+                                     remeshes[name].mesh, entry.scale, entry.frame_rotation, prepared.centre, 0)
+    x, y = entries["cat0"], entries["cat3"]
+    gt_xy = network.ground_truth(x, y, x_remesh=remeshes["cat0"], y_remesh=remeshes["cat3"])
+    gt_yx = network.ground_truth(y, x, x_remesh=remeshes["cat3"], y_remesh=remeshes["cat0"])
+    return shapes["cat0"], shapes["cat3"], gt_xy, gt_yx
+
+
+@pytest.fixture(scope="session")
+def pair_record_files(tosca_pair_inputs, tmp_path_factory) -> dict[str, list[Path]]:
+    """Saved pair records (cat0 -> cat3), two per setting with different seeds and splits.
+
+    ``{setting: [path, path]}``; files are ``<pair_id>.npz`` in one folder per setting.
+    """
+    from becos.pairs import PairOptions, build_pair
+
+    x, y, gt_xy, gt_yx = tosca_pair_inputs
+    out = {}
+    for setting in ("full_full", "partial_full", "partial_partial"):
+        folder = tmp_path_factory.mktemp(setting)
+        paths = []
+        for i, split in enumerate(("train", "test")):
+            pair_id = f"{setting[:1]}{setting.split('_')[1][:1]}{i:014d}"
+            record = build_pair(x, y, gt_xy, gt_yx, pair_id=pair_id, seed=100 + i, split=split,
+                                options=PairOptions(setting=setting))
+            path = folder / f"{pair_id}.npz"
+            record.save(path)
+            paths.append(path)
+        out[setting] = paths
+    return out

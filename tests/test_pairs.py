@@ -11,31 +11,8 @@ from becos.visibility import largest_component
 
 
 @pytest.fixture(scope="module")
-def pair_inputs(becos_code, tosca_dir, mesh_cache, tmp_path_factory):
-    from becos.annotations import AnnotationSource
-    from becos.datasets import DatasetSpec, prepare_shape
-    from becos.network import ShapeNetwork
-    from becos.remesh import remesh
-
-    annotations = AnnotationSource(becos_code, cache_dir=tmp_path_factory.mktemp("edges"))
-    entries = {e.name: e for e in DatasetSpec.load("tosca").list_shapes(becos_code / "data", annotations)}
-
-    def meshes(dataset, name):
-        path = tosca_dir / f"{name}.off"
-        return mesh_cache.load(path) if dataset == "tosca" and path.is_file() else None
-
-    network = ShapeNetwork(annotations, meshes)
-    shapes, remeshes = {}, {}
-    for name, target in (("cat0", 9200), ("cat3", 9800)):
-        entry = entries[name]
-        prepared = prepare_shape(entry, mesh_cache)
-        remeshes[name] = remesh(prepared.mesh, target_vertices=target)
-        shapes[name] = ShapeInstance(entry.dataset, entry.name, entry.category, entry.shape_class,
-                                     remeshes[name].mesh, entry.scale, entry.frame_rotation, prepared.centre, 0)
-    x, y = entries["cat0"], entries["cat3"]
-    gt_xy = network.ground_truth(x, y, x_remesh=remeshes["cat0"], y_remesh=remeshes["cat3"])
-    gt_yx = network.ground_truth(y, x, x_remesh=remeshes["cat3"], y_remesh=remeshes["cat0"])
-    return shapes["cat0"], shapes["cat3"], gt_xy, gt_yx
+def pair_inputs(tosca_pair_inputs):
+    return tosca_pair_inputs
 
 
 @pytest.mark.parametrize("setting", ["full_full", "partial_full", "partial_partial"])
