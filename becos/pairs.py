@@ -95,10 +95,13 @@ def _camera_rows(camera) -> np.ndarray:
 
 def _shape_arrays(shape: ShapeInstance, partial: Partial, final_vertices: np.ndarray, overlap_mask: np.ndarray,
                   align_rotation: np.ndarray, align_translation: np.ndarray, rotation: np.ndarray,
-                  camera, area: float) -> dict[str, np.ndarray]:
+                  camera, area: float, final_full_vertices: np.ndarray) -> dict[str, np.ndarray]:
+    is_full = partial.mesh.n_faces == shape.mesh.n_faces
     return {
         "vertices": final_vertices,
         "faces": partial.mesh.faces,
+        "full_vertices": np.zeros((0, 3)) if is_full else final_full_vertices,
+        "full_faces": np.zeros((0, 3), dtype=np.int64) if is_full else np.asarray(shape.mesh.faces, dtype=np.int64),
         "partial_to_full": partial.partial_to_full,
         "full_to_partial": partial.full_to_partial,
         "full_face_ids": partial.face_ids,
@@ -173,11 +176,13 @@ def build_pair(x: ShapeInstance, y: ShapeInstance, gt_xy: SurfaceMap, gt_yx: Sur
     norm_y = np.sqrt(area_y) if options.area_normalised else 1.0
     final_x = (px.mesh.vertices / norm_x) @ rot_x
     final_y = (alignment.apply(py.mesh.vertices) / norm_y) @ rot_y
+    full_x = (x.mesh.vertices / norm_x) @ rot_x
+    full_y = (alignment.apply(y.mesh.vertices) / norm_y) @ rot_y
 
     arrays = {}
-    shape_x = _shape_arrays(x, px, final_x, mask_x, np.eye(3), np.zeros(3), rot_x, camera_x, area_x)
+    shape_x = _shape_arrays(x, px, final_x, mask_x, np.eye(3), np.zeros(3), rot_x, camera_x, area_x, full_x)
     shape_y = _shape_arrays(y, py, final_y, mask_y, alignment.rotation.T.copy(), alignment.translation.copy(),
-                            rot_y, camera_y, area_y)
+                            rot_y, camera_y, area_y, full_y)
     arrays.update({f"x_{k}": v for k, v in shape_x.items()})
     arrays.update({f"y_{k}": v for k, v in shape_y.items()})
     for name, m, target_faces in (("corr_01", map_xy, py.mesh.faces), ("corr_10", map_yx, px.mesh.faces)):

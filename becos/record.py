@@ -11,6 +11,10 @@ key                    dtype       meaning
 s_vertices             float64     (V_s, 3) in the final frame (after the random rotation), at
                                    dataset scale unless ``area_normalised``
 s_faces                int64       (F_s, 3)
+s_full_vertices        float64     (V_full, 3) the full (remeshed) shape in the same final frame, for
+                                   errors measured on the full shape; (0, 3) when the shape is full
+                                   (then it is ``s_vertices``)
+s_full_faces           int64       (F_full, 3) its faces; (0, 3) when the shape is full
 s_partial_to_full      int64       (V_s,) vertex of the full (remeshed) shape; arange when full
 s_full_to_partial      int64       (V_full,) -1 where the full vertex was not kept
 s_full_face_ids        int64       (F_s,) face of the full (remeshed) shape of each face
@@ -52,7 +56,8 @@ import numpy as np
 from becos.atomic import save_npz
 
 SCHEMA_VERSION = 1
-SHAPE_KEYS = ("vertices", "faces", "partial_to_full", "full_to_partial", "full_face_ids", "overlap_mask",
+SHAPE_KEYS = ("vertices", "faces", "full_vertices", "full_faces", "partial_to_full", "full_to_partial",
+              "full_face_ids", "overlap_mask",
               "annotation", "full_area", "full_sqrt_area", "dataset_scale", "frame_rotation", "centre",
               "align_rotation", "align_translation", "random_rotation", "camera", "remesh_variant", "overlap")
 PAIR_KEYS = ("corr_01", "corr_01_face", "corr_01_weights", "corr_10", "corr_10_face", "corr_10_weights")
@@ -90,3 +95,11 @@ class PairRecord:
             meta = json.loads(str(data["__meta__"]))
             arrays = {k: data[k] for k in data.files if k != "__meta__"}
         return cls(arrays, meta)
+
+
+def full_shape(record: PairRecord, side: str) -> tuple[np.ndarray, np.ndarray]:
+    """The full shape of ``side`` (``'x'`` or ``'y'``) in the record's final frame: (V, 3), (F, 3)."""
+    full_v, full_f = record[f"{side}_full_vertices"], record[f"{side}_full_faces"]
+    if len(full_f) == 0:
+        return record[f"{side}_vertices"], record[f"{side}_faces"]
+    return full_v, full_f

@@ -69,3 +69,18 @@ def test_same_seed_same_record_and_other_id_other_cameras(pair_inputs):
         assert np.array_equal(a[key], b[key], equal_nan=True), key
     assert not np.allclose(a["x_camera"], c["x_camera"])
     assert not np.allclose(a["x_random_rotation"], c["x_random_rotation"])
+
+
+def test_full_shape_travels_with_a_partial_record(pair_inputs):
+    from becos.record import full_shape
+
+    x, y, gt_xy, gt_yx = pair_inputs
+    record = build_pair(x, y, gt_xy, gt_yx, pair_id="full-shape", seed=3, split="test",
+                        options=PairOptions(setting="partial_partial"))
+    for side, shape in (("x", x), ("y", y)):
+        full_v, full_f = full_shape(record, side)
+        assert full_v.shape == shape.mesh.vertices.shape and np.array_equal(full_f, shape.mesh.faces)
+        # the partial's vertices are exactly the kept full vertices, in the same final frame
+        assert np.array_equal(full_v[record[f"{side}_partial_to_full"]], record[f"{side}_vertices"])
+    f2f = build_pair(x, y, gt_xy, gt_yx, pair_id="f2f", seed=3, split="test", options=PairOptions())
+    assert f2f["x_full_faces"].shape == (0, 3) and full_shape(f2f, "x")[0] is f2f["x_vertices"]
