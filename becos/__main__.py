@@ -1,0 +1,7 @@
+"""``python -m becos``: the command line (see :mod:`becos.cli`)."""
+
+import sys
+
+from becos.cli import main
+
+sys.exit(main())

@@ -1,0 +1,723 @@
+"""The workflow's stages as library functions: config -> plan -> the work of one job.
+
+Snakemake (``Snakefile``, ``workflow/rules/*.smk``) only names files; every job runs one ``becos``
+sub-command, which calls one function of this module (or of :mod:`becos.store`, :mod:`becos.export`,
+:mod:`becos.validate`, :mod:`becos.report`).
+
+Files under ``results`` (config key ``results``)::
+
+    config.json                         the resolved configuration (defaults filled in)
+    checks/datasets.json                what the dataset check found
+    catalog.csv                         every shape of the enabled datasets (becos.catalog)
+    remeshed/<dataset>/<name>/<v>.npz   one remesh variant: mesh + maps to/from the original (.ply beside)
+    <setting>/manifest.csv              the pairs of a setting (becos.sampling)
+    <setting>/ground_truth/chunk_<k>.json  index of the chunk's ground-truth files <pair_id>.npz
+    <setting>/pairs/chunk_<k>.json      index of the chunk's pair records <pair_id>.npz (becos.record)
+    <setting>/benchmark.zarr            the store (becos.store), validated into validation.json
+    cache/                              parsed meshes and edge files (safe to delete)
+
+Incremental rebuilds. A pair belongs to chunk ``hash(pair_id) % n_chunks`` forever, so growth adds
+pairs to chunks and never moves one. A chunk job reruns when its rows or its stage's options change
+(Snakemake ``params`` hold their digests); inside it, a pair's file is rewritten only when the pair's
+*input key* changed: the digest of its manifest row, the stage options and the digests of the files
+it reads (remesh variants, ground truth). So enabling another dataset recomputes only the new or
+re-partnered pairs, and changing ``min_overlap`` recomputes records but no remesh and no ground truth.
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import sys
+import time
+from copy import deepcopy
+from dataclasses import dataclass, field
+from functools import cached_property
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from becos.atomic import write_text
+from becos.errors import ConfigError
+
+SETTINGS = ("full_full", "partial_full", "partial_partial")
+SCHEMA_PATH = Path(__file__).resolve().parents[1] / "config" / "schema.yaml"
+GROUND_TRUTH_VERSION = 1
+"""Bumped when the ground-truth computation changes, so cached files are recomputed."""
+RECORD_VERSION = 1
+"""Bumped when pair assembly changes, so cached records are rebuilt."""
+
+STAGE_KEYS: dict[str, tuple[str, ...]] = {
+    "catalog": ("data_dir", "annotations", "datasets", "shapes", "template_file"),
+    "manifest": ("data_dir", "annotations", "datasets", "shapes", "template_file", "combinations", "seed", "usage_scale",
+                 "caps", "remesh", "remesh_variants", "n_chunks", "original_settings"),
+    "remesh": ("seed", "remesh"),
+    "ground_truth": ("annotations", "template_file", "remesh"),
+    "pairs": ("one_axis_rotation", "up_axis", "area_normalised", "propagate_annotations", "annotations",
+              "template_file"),
+}
+"""The config keys each stage depends on: a change to one of them reruns that stage (and only it)."""
+SETTING_KEYS: dict[str, tuple[str, ...]] = {
+    "full_full": (),
+    "partial_full": ("camera_distance",),
+    "partial_partial": ("camera_distance", "cam_pos_regime", "n_cam_pos", "min_overlap", "max_overlap"),
+}
+"""Extra keys the ``pairs`` stage depends on, per setting."""
+
+
+# --------------------------------------------------------------------------------------------------
+# configuration
+
+def _schema() -> dict:
+    import yaml
+
+    return yaml.safe_load(SCHEMA_PATH.read_text())
+
+
+def _fill_defaults(schema: dict, instance):
+    """Fill ``default`` values of object properties, recursively (like Snakemake's ``validate``)."""
+    if not isinstance(instance, dict) or schema.get("type") != "object":
+        return instance
+    for key, sub in schema.get("properties", {}).items():
+        if key not in instance and "default" in sub:
+            instance[key] = deepcopy(sub["default"])
+        if key in instance:
+            _fill_defaults(sub, instance[key])
+    return instance
+
+
+def resolve_config(raw: dict) -> dict:
+    """Validate ``raw`` against ``config/schema.yaml``, fill defaults, check what a schema cannot.
+
+    Raises:
+        ConfigError: listing every problem (unknown key, wrong type, reversed overlap range, ...).
+    """
+    import jsonschema
+
+    config = _fill_defaults(_schema(), deepcopy(dict(raw)))
+    validator = jsonschema.Draft202012Validator(_schema())
+    errors = sorted(validator.iter_errors(config), key=lambda e: list(e.path))
+    if errors:
+        lines = [f"  {'/'.join(map(str, e.path)) or '(top level)'}: {e.message}" for e in errors]
+        raise ConfigError("invalid configuration:\n" + "\n".join(lines) + "\n(see config/README.md)")
+    check_config(config)
+    return config
+
+
+def check_config(config: dict) -> None:
+    """Checks across keys, run right after the schema (so a bad config fails before any job)."""
+    from becos.datasets import available_datasets
+
+    problems = []
+    if config.get("min_overlap", 0.1) > config.get("max_overlap", 0.9):
+        problems.append(f"min_overlap ({config['min_overlap']}) > max_overlap ({config['max_overlap']}): "
+                        "the overlap range is reversed")
+    known = set(available_datasets())
+    unknown = [d for d in config["datasets"] if d not in known]
+    if unknown:
+        problems.append(f"datasets {unknown} are not in the registry (config/datasets/*.yaml: {sorted(known)})")
+    if config.get("original_settings") and "partial_full" in settings_of(config):
+        problems.append("original_settings: the reference publishes no partial_full pair list; "
+                        "use setting full_full / partial_partial or original_settings: false")
+    synthetic = config.get("synthetic") or {}
+    if synthetic.get("enabled"):
+        out = Path(synthetic.get("out", "resources/synthetic"))
+        for key, expected in (("data_dir", out / "data"), ("annotations", out / "annotations")):
+            if Path(config[key]) != expected:
+                problems.append(f"{key} is {config[key]!r} but the synthetic collection is generated into "
+                                f"{str(expected)!r}: set {key}: {expected} (or synthetic.enabled: false)")
+    if problems:
+        raise ConfigError("invalid configuration:\n" + "\n".join(f"  {p}" for p in problems))
+
+
+def settings_of(config: dict) -> list[str]:
+    """The configured settings as a list, in the canonical order."""
+    value = config.get("setting", list(SETTINGS))
+    wanted = {value} if isinstance(value, str) else set(value)
+    return [s for s in SETTINGS if s in wanted]
+
+
+def digest(value) -> str:
+    """16 hex digits of SHA-256 of a JSON-able value (sorted keys): stable across runs and machines."""
+    text = json.dumps(value, sort_keys=True, default=str, separators=(",", ":"))
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def stage_options(config: dict, stage: str, setting: str | None = None) -> dict:
+    """The part of ``config`` that ``stage`` (of ``setting``) depends on (:data:`STAGE_KEYS`,
+    :data:`SETTING_KEYS`)."""
+    keys = STAGE_KEYS[stage] + (SETTING_KEYS[setting] if stage == "pairs" and setting else ())
+    return {k: config.get(k) for k in keys}
+
+
+def load_config(path: str | Path) -> dict:
+    """Read a config (JSON or YAML) and resolve it (:func:`resolve_config`)."""
+    import yaml
+
+    path = Path(path)
+    if not path.is_file():
+        raise ConfigError(f"{path}: config file not found")
+    return resolve_config(yaml.safe_load(path.read_text()) or {})
+
+
+# --------------------------------------------------------------------------------------------------
+# layout
+
+@dataclass(frozen=True)
+class Layout:
+    """Where every artefact of a run lives (relative to the working directory unless absolute)."""
+
+    results: Path
+
+    @classmethod
+    def of(cls, config: dict) -> "Layout":
+        return cls(Path(config.get("results", "results")))
+
+    @property
+    def config(self) -> Path:
+        return self.results / "config.json"
+
+    @property
+    def checks(self) -> Path:
+        return self.results / "checks" / "datasets.json"
+
+    @property
+    def catalog(self) -> Path:
+        return self.results / "catalog.csv"
+
+    @property
+    def cache(self) -> Path:
+        return self.results / "cache"
+
+    def manifest(self, setting: str) -> Path:
+        return self.results / setting / "manifest.csv"
+
+    def remeshed(self, dataset: str, name: str, token: str) -> Path:
+        return self.results / "remeshed" / dataset / name / f"{token}.npz"
+
+    def ground_truth_index(self, setting: str, chunk: int) -> Path:
+        return self.results / setting / "ground_truth" / f"chunk_{chunk:04d}.json"
+
+    def ground_truth(self, setting: str, pair_id: str) -> Path:
+        return self.results / setting / "ground_truth" / f"{pair_id}.npz"
+
+    def pairs_index(self, setting: str, chunk: int) -> Path:
+        return self.results / setting / "pairs" / f"chunk_{chunk:04d}.json"
+
+    def record(self, setting: str, pair_id: str) -> Path:
+        return self.results / setting / "pairs" / f"{pair_id}.npz"
+
+
+def remesh_token(row, side: str, remesh: bool) -> str:
+    """The remesh file a pair side uses: ``v<k>`` (variant k), ``f<n>`` (published face target n) or
+    ``original`` (no remeshing)."""
+    if not remesh:
+        return "original"
+    target = row.get(f"{side}_face_target") if hasattr(row, "get") else None
+    if target is not None and not pd.isna(target) and int(target) > 0:
+        return f"f{int(target)}"
+    return f"v{int(row[f'{side}_variant'])}"
+
+
+# --------------------------------------------------------------------------------------------------
+# the plan: everything Snakemake needs to know to build the job graph
+
+def annotation_source(config: dict):
+    from becos.annotations import AnnotationSource
+
+    return AnnotationSource(config["annotations"], cache_dir=Layout.of(config).cache / "annotations",
+                            template_table=config.get("template_file", "templates_all.csv"))
+
+
+def build_catalog(config: dict, annotations=None) -> pd.DataFrame:
+    """The catalog of every enabled dataset's shapes (:mod:`becos.catalog`)."""
+    from becos.catalog import catalog_table
+    from becos.datasets import DatasetSpec
+
+    annotations = annotations or annotation_source(config)
+    entries = []
+    for name in config["datasets"]:
+        entries.extend(DatasetSpec.load(name).list_shapes(config["data_dir"], annotations))
+    patterns = config.get("shapes")
+    if patterns:
+        from fnmatch import fnmatchcase
+
+        entries = [e for e in entries if any(fnmatchcase(f"{e.dataset}/{e.name}", p) for p in patterns)]
+        if not entries:
+            raise ConfigError(f"shapes: no shape of datasets {config['datasets']} matches {patterns}")
+    return catalog_table(entries)
+
+
+def build_manifest(config: dict, setting: str, catalog: pd.DataFrame, annotations=None) -> pd.DataFrame:
+    """The pair manifest of ``setting`` (:mod:`becos.sampling`, or the published lists)."""
+    from becos.sampling import sample_pairs
+
+    if config.get("original_settings"):
+        from becos.published import import_published
+
+        path = Path(config["annotations"]) / "config" / f"pairings_original_{setting}.pkl"
+        imported = import_published(path, setting=setting, seed=config["seed"],
+                                    n_variants=config["remesh_variants"], n_chunks=config["n_chunks"],
+                                    datasets=config["datasets"])
+        return imported.manifest
+    annotations = annotations or annotation_source(config)
+    caps = {k: v for k, v in (config.get("caps") or {}).items() if v is not None}
+    return sample_pairs(catalog, setting, seed=config["seed"], combinations=config["combinations"],
+                        template_rows=annotations, n_variants=config["remesh_variants"],
+                        n_chunks=config["n_chunks"], caps=caps or None, usage_scale=config["usage_scale"])
+
+
+@dataclass
+class Plan:
+    """The catalog and manifests of a config, and the jobs they imply.
+
+    Computed in the Snakemake process (after the dataset check) and again, identically, by the jobs
+    that write the catalog and manifests.
+    """
+
+    config: dict
+    catalog: pd.DataFrame
+    manifests: dict[str, pd.DataFrame]
+    layout: Layout = field(init=False)
+
+    def __post_init__(self):
+        self.layout = Layout.of(self.config)
+
+    @classmethod
+    def build(cls, config: dict) -> "Plan":
+        annotations = annotation_source(config)
+        catalog = build_catalog(config, annotations)
+        manifests = {s: build_manifest(config, s, catalog, annotations) for s in settings_of(config)}
+        return cls(config, catalog, manifests)
+
+    @cached_property
+    def files(self) -> dict[tuple[str, str], str]:
+        return {(d, n): f for d, n, f in zip(self.catalog["dataset"], self.catalog["name"], self.catalog["file"])}
+
+    def _side_files(self, rows: pd.DataFrame) -> list[tuple[str, str, str]]:
+        remesh = bool(self.config.get("remesh", True))
+        out = set()
+        for row in rows.to_dict("records"):
+            for side in ("x", "y"):
+                out.add((row[f"{side}_dataset"], row[f"{side}_name"], remesh_token(row, side, remesh)))
+        return sorted(out)
+
+    @cached_property
+    def remesh_jobs(self) -> list[tuple[str, str, str]]:
+        """Every (dataset, name, token) some pair uses, remeshing only (not ``original``)."""
+        if not self.config.get("remesh", True):
+            return []
+        jobs = set()
+        for manifest in self.manifests.values():
+            jobs.update(self._side_files(manifest))
+        return sorted(jobs)
+
+    def chunks(self, setting: str) -> list[int]:
+        return sorted(int(c) for c in self.manifests[setting]["chunk"].unique())
+
+    def chunk_rows(self, setting: str, chunk: int) -> pd.DataFrame:
+        m = self.manifests[setting]
+        return m[m["chunk"] == int(chunk)]
+
+    def chunk_inputs(self, setting: str, chunk: int) -> list[str]:
+        """Remesh files the chunk reads (none without remeshing)."""
+        if not self.config.get("remesh", True):
+            return []
+        rows = self.chunk_rows(setting, chunk)
+        return [str(self.layout.remeshed(*key)) for key in self._side_files(rows)]
+
+    @cached_property
+    def _catalog_rows(self) -> dict[tuple[str, str], dict]:
+        return {(r["dataset"], r["name"]): r for r in self.catalog.to_dict("records")}
+
+    def shape_digest(self, dataset: str, name: str) -> str:
+        """Digest of a shape's catalog row (file, scale, frame rotation, template, split ...)."""
+        return digest(self._catalog_rows[(dataset, name)])
+
+    def chunk_digest(self, setting: str, chunk: int, stage: str) -> str:
+        """Digest of everything a chunk job of ``stage`` reads besides its input files' contents."""
+        rows = self.chunk_rows(setting, chunk)
+        shapes = sorted({(d, n) for side in ("x", "y") for d, n in zip(rows[f"{side}_dataset"], rows[f"{side}_name"])})
+        return digest({"rows": rows.to_dict("records"), "options": stage_options(self.config, stage, setting),
+                       "shapes": [self.shape_digest(d, n) for d, n in shapes],
+                       "version": GROUND_TRUTH_VERSION if stage == "ground_truth" else RECORD_VERSION})
+
+    def remesh_target(self, dataset: str, name: str, token: str) -> dict:
+        """Arguments of :func:`becos.remesh.remesh` for a token."""
+        from becos.remesh import variant_target_vertices
+
+        if token.startswith("f"):
+            return {"target_faces": int(token[1:])}
+        return {"target_vertices": int(variant_target_vertices(self.config["seed"], dataset, name, int(token[1:])))}
+
+
+# --------------------------------------------------------------------------------------------------
+# shapes as the jobs see them
+
+def _entry(row) -> "object":
+    from becos.catalog import frame_rotation
+    from becos.datasets import ShapeEntry
+
+    return ShapeEntry(dataset=row["dataset"], name=row["name"], path=Path(row["file"]), category=row["category"],
+                      shape_class=row["class"], template_key=row["template_key"], split=row["split"],
+                      scale=float(row["scale"]), frame_rotation=frame_rotation(row), usage=int(row["usage"]))
+
+
+class ShapeStore:
+    """The shapes of one job: catalog entries, parsed meshes, prepared meshes and remesh variants.
+
+    Everything is loaded once per job and kept (a chunk job reuses shapes across its pairs).
+    """
+
+    def __init__(self, config: dict, catalog: pd.DataFrame):
+        from becos.mesh import MeshCache
+
+        self.config = config
+        self.layout = Layout.of(config)
+        self.entries = {(r["dataset"], r["name"]): _entry(r) for r in catalog.to_dict("records")}
+        self.mesh_cache = MeshCache(self.layout.cache / "meshes")
+        self._prepared: dict = {}
+        self._remeshed: dict = {}
+        self._digests: dict[Path, str] = {}
+        self._network = None
+
+    def entry(self, dataset: str, name: str):
+        try:
+            return self.entries[(dataset, name)]
+        except KeyError:
+            raise ConfigError(f"shape {dataset}/{name} is not in the catalog; was the dataset disabled? "
+                              f"Re-run the workflow so the catalog and manifests are rebuilt") from None
+
+    def mesh(self, dataset: str, name: str):
+        """The original mesh of a catalogued shape, or None (the network then uses default faces)."""
+        entry = self.entries.get((dataset, name))
+        return None if entry is None else self.mesh_cache.load(entry.path)
+
+    def prepared(self, dataset: str, name: str):
+        from becos.datasets import prepare_shape
+
+        key = (dataset, name)
+        if key not in self._prepared:
+            self._prepared[key] = prepare_shape(self.entry(dataset, name), self.mesh_cache)
+        return self._prepared[key]
+
+    def remeshed(self, dataset: str, name: str, token: str):
+        """The remesh variant (:class:`becos.remesh.Remeshed`), or None for ``original``."""
+        from becos.remesh import load_remeshed
+
+        if token == "original":
+            return None
+        key = (dataset, name, token)
+        if key not in self._remeshed:
+            self._remeshed[key] = load_remeshed(self.layout.remeshed(dataset, name, token))
+        return self._remeshed[key]
+
+    def file_digest(self, path: Path) -> str:
+        path = Path(path)
+        if path not in self._digests:
+            self._digests[path] = hashlib.sha256(path.read_bytes()).hexdigest()[:16]
+        return self._digests[path]
+
+    def source_digest(self, dataset: str, name: str, token: str) -> str:
+        """Digest of the file a pair side is built from (remesh variant, or the original mesh)."""
+        if token == "original":
+            return self.file_digest(self.entry(dataset, name).path)
+        return self.file_digest(self.layout.remeshed(dataset, name, token))
+
+    @property
+    def network(self):
+        from becos.network import ShapeNetwork
+
+        if self._network is None:
+            self._network = ShapeNetwork(annotation_source(self.config), self.mesh)
+        return self._network
+
+    def instance(self, dataset: str, name: str, token: str):
+        """A :class:`becos.pairs.ShapeInstance` (common frame, dataset scale; remeshed unless ``original``)."""
+        from becos.pairs import ShapeInstance
+
+        entry, prepared = self.entry(dataset, name), self.prepared(dataset, name)
+        remeshed = self.remeshed(dataset, name, token)
+        mesh = prepared.mesh if remeshed is None else remeshed.mesh
+        variant = int(token[1:]) if token.startswith("v") else -1
+        return ShapeInstance(entry.dataset, entry.name, entry.category, entry.shape_class, mesh, entry.scale,
+                             entry.frame_rotation, prepared.centre, variant)
+
+
+# --------------------------------------------------------------------------------------------------
+# stage functions (one per job kind)
+
+def _log(message: str) -> None:
+    print(message, file=sys.stderr, flush=True)
+
+
+def write_catalog_stage(config: dict, out: Path) -> pd.DataFrame:
+    from becos.catalog import write_catalog
+
+    catalog = build_catalog(config)
+    write_catalog(catalog, out)
+    counts = catalog.groupby(["dataset", "split"]).size().to_dict()
+    _log(f"catalog: {len(catalog)} shapes -> {out}; per dataset/split: {counts}")
+    return catalog
+
+
+def write_manifest_stage(config: dict, setting: str, catalog_path: Path, out: Path) -> pd.DataFrame:
+    from becos.catalog import read_catalog
+    from becos.sampling import write_manifest
+
+    manifest = build_manifest(config, setting, read_catalog(catalog_path))
+    write_manifest(manifest, out)
+    report = manifest.attrs.get("report", {})
+    _log(f"manifest {setting}: {len(manifest)} pairs -> {out}; {json.dumps(report, sort_keys=True)}")
+    return manifest
+
+
+def remesh_stage(config: dict, dataset: str, name: str, token: str, out: Path, ply: Path | None = None) -> None:
+    """Remesh one shape variant (prepared, common-frame mesh) and write the maps (+ a PLY to look at)."""
+    from becos.catalog import read_catalog
+    from becos.remesh import remesh, save_remeshed, write_ply
+
+    layout = Layout.of(config)
+    catalog = read_catalog(layout.catalog)
+    shapes = ShapeStore(config, catalog[(catalog["dataset"] == dataset) & (catalog["name"] == name)])
+    plan_target = Plan(config, catalog, {}).remesh_target(dataset, name, token)
+    prepared = shapes.prepared(dataset, name)
+    start = time.perf_counter()
+    result = remesh(prepared.mesh, **plan_target)
+    save_remeshed(Path(out), result)
+    if ply is not None:
+        write_ply(Path(ply), result.mesh)
+    _log(f"remesh {dataset}/{name} {token}: {prepared.mesh.n_vertices} -> {result.mesh.n_vertices} vertices "
+         f"({plan_target}) in {time.perf_counter() - start:.1f} s")
+
+
+def _stored_key(path: Path, member: str) -> str | None:
+    """The input key stored in an .npz (None if absent or unreadable)."""
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            value = str(data[member]) if member in data.files else None
+    except Exception:
+        return None
+    if value is not None and member == "__meta__":
+        return json.loads(value).get("input_key")
+    return value
+
+
+def _chunk_rows(config: dict, setting: str, chunk: int) -> pd.DataFrame:
+    from becos.sampling import read_manifest
+
+    manifest = read_manifest(Layout.of(config).manifest(setting))
+    rows = manifest[manifest["chunk"] == int(chunk)]
+    # shapes in order, so consecutive pairs share loaded meshes and scanners
+    return rows.sort_values(["x_dataset", "x_name", "y_dataset", "y_name", "pair_id"])
+
+
+def _write_index(path: Path, setting: str, chunk: int, entries: list[dict], started: float) -> None:
+    computed = sum(e["computed"] for e in entries)
+    index = {"setting": setting, "chunk": int(chunk), "n_pairs": len(entries), "computed": computed,
+             "reused": len(entries) - computed, "seconds": round(time.perf_counter() - started, 3),
+             "pairs": sorted(entries, key=lambda e: e["pair_id"])}
+    write_text(path, json.dumps(index, indent=1) + "\n")
+
+
+def ground_truth_stage(config: dict, setting: str, chunk: int, out_index: Path) -> dict:
+    """Ground truth both ways for every pair of a chunk; files already up to date are kept."""
+    from becos.atomic import save_npz
+    from becos.catalog import read_catalog
+
+    started = time.perf_counter()
+    layout = Layout.of(config)
+    remesh = bool(config.get("remesh", True))
+    shapes = ShapeStore(config, read_catalog(layout.catalog))
+    rows = _chunk_rows(config, setting, chunk)
+    entries = []
+    for i, row in enumerate(rows.to_dict("records")):
+        tx, ty = remesh_token(row, "x", remesh), remesh_token(row, "y", remesh)
+        key = digest({"version": GROUND_TRUTH_VERSION, "x": [row["x_dataset"], row["x_name"], tx],
+                      "y": [row["y_dataset"], row["y_name"], ty],
+                      "sources": [shapes.source_digest(row["x_dataset"], row["x_name"], tx),
+                                  shapes.source_digest(row["y_dataset"], row["y_name"], ty)],
+                      "options": stage_options(config, "ground_truth")})
+        path = layout.ground_truth(setting, row["pair_id"])
+        computed = _stored_key(path, "input_key") != key
+        if computed:
+            x, y = shapes.entry(row["x_dataset"], row["x_name"]), shapes.entry(row["y_dataset"], row["y_name"])
+            rx, ry = shapes.remeshed(x.dataset, x.name, tx), shapes.remeshed(y.dataset, y.name, ty)
+            gt_xy = shapes.network.ground_truth(x, y, x_remesh=rx, y_remesh=ry)
+            gt_yx = shapes.network.ground_truth(y, x, x_remesh=ry, y_remesh=rx)
+            save_npz(path, input_key=np.array(key), xy_face=gt_xy.face, xy_weights=gt_xy.weights,
+                     xy_distance=gt_xy.distance, yx_face=gt_yx.face, yx_weights=gt_yx.weights,
+                     yx_distance=gt_yx.distance)
+        entries.append({"pair_id": row["pair_id"], "path": str(path), "input_key": key, "computed": computed,
+                        "digest": shapes.file_digest(path)})
+        if (i + 1) % 10 == 0 or i + 1 == len(rows):
+            _log(f"ground truth {setting} chunk {chunk}: {i + 1}/{len(rows)} pairs "
+                 f"({sum(e['computed'] for e in entries)} computed) {time.perf_counter() - started:.1f} s")
+    _write_index(Path(out_index), setting, chunk, entries, started)
+    return {"n": len(entries), "computed": sum(e["computed"] for e in entries)}
+
+
+def load_ground_truth(path: Path):
+    """``(gt_xy, gt_yx)`` :class:`becos.surface_map.SurfaceMap` from a ground-truth file."""
+    from becos.surface_map import SurfaceMap
+
+    with np.load(path, allow_pickle=False) as d:
+        return (SurfaceMap(d["xy_face"], d["xy_weights"], d["xy_distance"]),
+                SurfaceMap(d["yx_face"], d["yx_weights"], d["yx_distance"]))
+
+
+def pair_options(config: dict, setting: str):
+    from becos.pairs import PairOptions
+
+    return PairOptions(setting=setting, cam_pos_regime=config["cam_pos_regime"], up_axis=config["up_axis"],
+                       camera_distance=float(config["camera_distance"]), n_cam_pos=int(config["n_cam_pos"]),
+                       min_overlap=float(config["min_overlap"]), max_overlap=float(config["max_overlap"]),
+                       one_axis_rotation=bool(config["one_axis_rotation"]),
+                       area_normalised=bool(config["area_normalised"]))
+
+
+def pairs_stage(config: dict, setting: str, chunk: int, gt_index: Path, out_index: Path) -> dict:
+    """Pair records (partiality, alignment, rotation, annotations) for every pair of a chunk."""
+    from becos.catalog import read_catalog
+    from becos.pairs import build_pair
+    from becos.partiality import Scanner
+
+    started = time.perf_counter()
+    layout = Layout.of(config)
+    remesh = bool(config.get("remesh", True))
+    shapes = ShapeStore(config, read_catalog(layout.catalog))
+    options = pair_options(config, setting)
+    gt_files = {e["pair_id"]: e for e in json.loads(Path(gt_index).read_text())["pairs"]}
+    rows = _chunk_rows(config, setting, chunk)
+    scanners: dict = {}
+    labels = _labeller(config, shapes) if config.get("propagate_annotations", True) else None
+    entries = []
+    for i, row in enumerate(rows.to_dict("records")):
+        tx, ty = remesh_token(row, "x", remesh), remesh_token(row, "y", remesh)
+        gt = gt_files.get(row["pair_id"])
+        if gt is None:
+            raise ConfigError(f"{gt_index}: no ground truth for pair {row['pair_id']}; re-run the workflow "
+                              "(the ground-truth index is older than the manifest)")
+        key = digest({"version": RECORD_VERSION, "row": {k: row[k] for k in sorted(row)},
+                      "options": stage_options(config, "pairs", setting), "ground_truth": gt["digest"],
+                      "sources": [shapes.source_digest(row["x_dataset"], row["x_name"], tx),
+                                  shapes.source_digest(row["y_dataset"], row["y_name"], ty)]})
+        path = layout.record(setting, row["pair_id"])
+        computed = _stored_key(path, "__meta__") != key
+        if computed:
+            x = shapes.instance(row["x_dataset"], row["x_name"], tx)
+            y = shapes.instance(row["y_dataset"], row["y_name"], ty)
+            gt_xy, gt_yx = load_ground_truth(Path(gt["path"]))
+            for s, t in ((x, tx), (y, ty)):
+                if setting != "full_full" and (s.dataset, s.name, t) not in scanners:
+                    if len(scanners) > 16:
+                        scanners.pop(next(iter(scanners)))
+                    scanners[(s.dataset, s.name, t)] = Scanner(s.mesh)
+            pair_scanners = (scanners.get((x.dataset, x.name, tx)), scanners.get((y.dataset, y.name, ty)))
+            record = build_pair(x, y, gt_xy, gt_yx, pair_id=row["pair_id"], seed=int(row["seed"]),
+                                split=row["split"], options=options, scanners=pair_scanners)
+            if labels is not None:
+                for side, s, t in (("x", x, tx), ("y", y, ty)):
+                    full = labels(s.dataset, s.name, t)
+                    if full is not None:
+                        record.arrays[f"{side}_annotation"] = full[record[f"{side}_partial_to_full"]]
+            record.meta.update(input_key=key, category=row["category"], copy=int(row["copy"]),
+                               chunk=int(row["chunk"]), x_token=tx, y_token=ty)
+            record.save(path)
+        entries.append({"pair_id": row["pair_id"], "path": str(path), "input_key": key, "computed": computed,
+                        "split": row["split"]})
+        if (i + 1) % 10 == 0 or i + 1 == len(rows):
+            _log(f"pairs {setting} chunk {chunk}: {i + 1}/{len(rows)} "
+                 f"({sum(e['computed'] for e in entries)} built) {time.perf_counter() - started:.1f} s")
+    _write_index(Path(out_index), setting, chunk, entries, started)
+    return {"n": len(entries), "computed": sum(e["computed"] for e in entries)}
+
+
+def _labeller(config: dict, shapes: ShapeStore):
+    """``labels(dataset, name, token) -> (V,) int8 or None``: propagated left/right labels of a full shape."""
+    try:
+        from becos.propagation import labels_for_instance
+    except ImportError:
+        return None
+    cache: dict = {}
+
+    def labels(dataset: str, name: str, token: str):
+        key = (dataset, name, token)
+        if key not in cache:
+            cache[key] = labels_for_instance(shapes.network, shapes.entry(dataset, name),
+                                             remesh=shapes.remeshed(dataset, name, token))
+        return cache[key]
+
+    return labels
+
+
+def store_metadata(config: dict, setting: str) -> dict:
+    """Metadata for a setting's store: config and its digest, datasets with licence and citation."""
+    from becos.datasets import DatasetSpec
+
+    datasets = {}
+    for name in config["datasets"]:
+        spec = DatasetSpec.load(name)
+        datasets[name] = {"title": spec.title, **{k: spec.source.get(k) for k in ("url", "licence", "citation")}}
+    return {"setting": setting, "config": config, "config_hash": digest(config),
+            "datasets": datasets, "generator": "becos workflow"}
+
+
+def export_pairings_stage(config: dict, setting: str, out: Path) -> None:
+    """The manifest in the published pickle schema (share a benchmark as pair lists + code)."""
+    from becos.catalog import read_catalog
+    from becos.published import write_published_pickle
+    from becos.sampling import read_manifest
+
+    layout = Layout.of(config)
+    write_published_pickle(read_manifest(layout.manifest(setting)), out, read_catalog(layout.catalog))
+
+
+# --------------------------------------------------------------------------------------------------
+# command line
+
+def configure_parser(parser: argparse.ArgumentParser, name: str) -> None:
+    if name != "write-config":
+        parser.add_argument("--config", required=True, type=Path, help="resolved config (results/config.json) or YAML")
+    else:
+        parser.add_argument("--json", required=True, help="the configuration as a JSON string")
+    if name in ("manifest", "ground-truth", "pairs", "metadata", "export-pairings"):
+        parser.add_argument("--setting", required=True, choices=SETTINGS)
+    if name in ("ground-truth", "pairs"):
+        parser.add_argument("--chunk", required=True, type=int)
+    if name == "pairs":
+        parser.add_argument("--ground-truth", required=True, type=Path, help="the chunk's ground-truth index")
+    if name == "manifest":
+        parser.add_argument("--catalog", required=True, type=Path)
+    if name == "remesh":
+        parser.add_argument("--dataset", required=True)
+        parser.add_argument("--name", required=True)
+        parser.add_argument("--token", required=True, help="v<k> (variant k) or f<n> (target faces n)")
+        parser.add_argument("--ply", type=Path, help="also write the remeshed mesh as PLY")
+    parser.add_argument("--out", required=True, type=Path)
+
+
+def run_cli(args: argparse.Namespace) -> int:
+    if args.command == "write-config":
+        config = resolve_config(json.loads(args.json))
+        write_text(args.out, json.dumps(config, indent=1, sort_keys=True) + "\n")
+        return 0
+    config = load_config(args.config)
+    if args.command == "catalog":
+        write_catalog_stage(config, args.out)
+    elif args.command == "manifest":
+        write_manifest_stage(config, args.setting, args.catalog, args.out)
+    elif args.command == "remesh":
+        remesh_stage(config, args.dataset, args.name, args.token, args.out, args.ply)
+    elif args.command == "ground-truth":
+        ground_truth_stage(config, args.setting, args.chunk, args.out)
+    elif args.command == "pairs":
+        pairs_stage(config, args.setting, args.chunk, args.ground_truth, args.out)
+    elif args.command == "metadata":
+        write_text(args.out, json.dumps(store_metadata(config, args.setting), indent=1, sort_keys=True,
+                                        default=str) + "\n")
+    elif args.command == "export-pairings":
+        export_pairings_stage(config, args.setting, args.out)
+    return 0

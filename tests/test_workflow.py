@@ -1,0 +1,164 @@
+"""The Snakemake workflow end to end on a tiny TOSCA configuration (real Snakemake, real data).
+
+The session fixture ``tiny_tosca_run`` builds all three settings once (8 TOSCA shapes, at most 6
+pairs per setting) and every test here reads its results. The incremental-rebuild test makes its own
+run (four-legged first, then humans and centaurs).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+REPO = Path(__file__).resolve().parents[1]
+SNAKEMAKE = [sys.executable, "-m", "snakemake", "-s", str(REPO / "Snakefile")]
+SETTINGS = ("full_full", "partial_full", "partial_partial")
+TINY_SHAPES = ["tosca/cat0", "tosca/cat1", "tosca/dog0", "tosca/dog1", "tosca/horse0", "tosca/horse5",
+               "tosca/wolf0", "tosca/centaur0"]
+
+
+def snakemake(workdir: Path, *args: str, check: bool = True) -> subprocess.CompletedProcess:
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    result = subprocess.run([*SNAKEMAKE, "-d", str(workdir), "--configfile", str(workdir / "config.yaml"), *args],
+                            capture_output=True, text=True, env=env)
+    if check and result.returncode != 0:
+        logs = "\n".join(f"--- {p}\n{p.read_text()[-3000:]}" for p in sorted((workdir / "logs").rglob("*.log"))
+                         if "Error" in p.read_text() or "Traceback" in p.read_text())
+        raise AssertionError(f"snakemake {' '.join(args)} failed:\n{result.stdout[-4000:]}\n{result.stderr[-6000:]}\n{logs}")
+    return result
+
+
+def write_config(workdir: Path, becos_code: Path, **overrides) -> Path:
+    config = {
+        "synthetic": {"enabled": False},
+        "data_dir": str(becos_code / "data"),
+        "annotations": str(becos_code),
+        "datasets": ["tosca"],
+        "template_file": "templates_tosca_demo.csv",
+        "remesh_variants": 1,
+        "store_vis": False,
+    }
+    config.update(overrides)
+    workdir.mkdir(parents=True, exist_ok=True)
+    (workdir / "config.yaml").write_text(yaml.safe_dump(config, sort_keys=False))
+    return workdir
+
+
+def jobs_planned(dry_run_output: str) -> dict[str, int]:
+    """Job counts per rule from the 'Job stats' table of a dry run."""
+    counts = {}
+    for line in dry_run_output.splitlines():
+        m = re.fullmatch(r"([a-z_]+)\s+(\d+)", line.strip())
+        if m and m.group(1) != "total":
+            counts[m.group(1)] = int(m.group(2))
+    return counts
+
+
+@pytest.fixture(scope="session")
+def tiny_tosca_run(becos_code, tmp_path_factory) -> Path:
+    workdir = write_config(tmp_path_factory.mktemp("tiny-tosca"), becos_code, shapes=TINY_SHAPES,
+                           caps={"train": 4, "val": 1, "test": 1}, store_vis=True, n_renders=2)
+    snakemake(workdir, "--cores", "2")
+    return workdir
+
+
+def test_every_setting_is_built_and_validated(tiny_tosca_run):
+    from becos.store import open_benchmark
+
+    for setting in SETTINGS:
+        base = tiny_tosca_run / "results" / setting
+        validation = json.loads((base / "validation.json").read_text())
+        assert validation.get("ok", not validation.get("problems")), validation
+        bench = open_benchmark(base / "benchmark.zarr")
+        manifest = (base / "manifest.csv").read_text().splitlines()[1:]
+        assert 1 <= len(bench) == len(manifest) <= 6
+        assert set(bench.table["pair_id"]) == {line.split(",")[0] for line in manifest}
+        names = set(bench.table["x_name"]) | set(bench.table["y_name"])
+        assert names <= {s.split("/")[1] for s in TINY_SHAPES}
+        assert (base / "released").is_dir() and (base / f"pairings_{setting}.pkl").is_file()
+        assert (base / "report").is_dir()
+
+
+def test_store_round_trips_the_pair_records(tiny_tosca_run):
+    from becos.record import PairRecord
+    from becos.store import open_benchmark
+
+    for setting in SETTINGS:
+        base = tiny_tosca_run / "results" / setting
+        bench = open_benchmark(base / "benchmark.zarr")
+        for pair_id in bench.table["pair_id"]:
+            stored = bench.record(pair_id)
+            original = PairRecord.load(base / "pairs" / f"{pair_id}.npz")
+            assert stored.meta == original.meta
+            assert set(stored.arrays) == set(original.arrays)
+            for key, value in original.arrays.items():
+                assert stored[key].dtype == value.dtype and stored[key].shape == value.shape, key
+                assert np.array_equal(stored[key], value, equal_nan=value.dtype.kind == "f"), key
+
+
+def test_rerun_of_a_finished_run_does_nothing(tiny_tosca_run):
+    result = snakemake(tiny_tosca_run, "-n")
+    assert "Nothing to be done" in result.stdout + result.stderr, result.stdout[-2000:]
+
+
+def test_a_bad_config_fails_before_any_job(becos_code, tmp_path):
+    cases = {
+        "unknown key": {"min_overlapp": 0.2},
+        "wrong type": {"n_cam_pos": "ten"},
+        "reversed overlap range": {"min_overlap": 0.8, "max_overlap": 0.2},
+    }
+    for what, override in cases.items():
+        workdir = write_config(tmp_path / what.replace(" ", "-"), becos_code, **override)
+        result = snakemake(workdir, "--cores", "1", check=False)
+        text = result.stdout + result.stderr
+        assert result.returncode != 0, what
+        key = next(iter(override))
+        assert key in text, (what, text[-1500:])
+        assert not (workdir / "results").exists() and not (workdir / "logs").exists(), what
+
+
+def test_pairs_chunks_are_fixed_by_the_pair_id(tiny_tosca_run):
+    from becos.sampling import read_manifest
+    from becos.seeding import stable_hash
+
+    manifest = read_manifest(tiny_tosca_run / "results" / "partial_partial" / "manifest.csv")
+    assert all(stable_hash(p) % 64 == c for p, c in zip(manifest["pair_id"], manifest["chunk"]))
+    indices = sorted((tiny_tosca_run / "results" / "partial_partial" / "pairs").glob("chunk_*.json"))
+    assert len(indices) == manifest["chunk"].nunique()  # one job per non-empty chunk, not per pair
+
+
+def test_incremental_rebuild(becos_code, tmp_path):
+    """Four-legged only, then humans and centaurs; then only min_overlap changes."""
+    shapes = ["tosca/cat0", "tosca/dog0", "tosca/horse0", "tosca/wolf0", "tosca/michael0", "tosca/david0",
+              "tosca/centaur0"]
+    common = dict(shapes=shapes, setting="partial_partial", usage_scale=0.02,
+                  exports={"released": False, "published_pickle": False, "report": False})
+    workdir = write_config(tmp_path / "run", becos_code, combinations="four-legged", **common)
+    snakemake(workdir, "--cores", "2")
+    pairs_dir = workdir / "results" / "partial_partial" / "pairs"
+    before = {p.name: (p.stat().st_mtime_ns, p.read_bytes()) for p in pairs_dir.glob("*.npz")}
+    remeshed_before = {str(p.relative_to(workdir)) for p in (workdir / "results" / "remeshed").rglob("*.npz")}
+    assert before and remeshed_before
+
+    write_config(workdir, becos_code, combinations="all", **common)
+    dry = snakemake(workdir, "-n", "--cores", "2").stdout
+    planned_remesh = set(re.findall(r"output: (results/remeshed/\S+\.npz)", dry))
+    assert planned_remesh and not planned_remesh & remeshed_before  # new shapes only
+    snakemake(workdir, "--cores", "2")
+    after = {p.name: (p.stat().st_mtime_ns, p.read_bytes()) for p in pairs_dir.glob("*.npz")}
+    changed = [n for n in before if after.get(n) != before[n]]
+    assert len(after) > len(before)
+    assert len(changed) <= 0.1 * len(before), changed
+
+    write_config(workdir, becos_code, combinations="all", min_overlap=0.15, **common)
+    planned = jobs_planned(snakemake(workdir, "-n", "--cores", "2").stdout)
+    assert planned.get("pairs", 0) >= 1
+    assert "remesh" not in planned and "ground_truth" not in planned, planned

@@ -1,0 +1,72 @@
+# Stage 1-2: the input data (built-in collection or downloads), the dataset check, the catalog.
+
+
+rule resolved_config:
+    output:
+        LAYOUT.config,
+    params:
+        config=json.dumps(config, sort_keys=True),
+    log:
+        "logs/resolved_config.log",
+    shell:
+        "becos write-config --json {params.config:q} --out {output} > {log} 2>&1"
+
+
+if config["synthetic"]["enabled"]:
+
+    rule synthetic_collection:
+        output:
+            directory(config["synthetic"]["out"]),
+        params:
+            seed=config["synthetic"]["seed"],
+            poses=config["synthetic"]["poses"],
+        log:
+            "logs/synthetic_collection.log",
+        shell:
+            "becos synthetic {output} --seed {params.seed} --poses {params.poses} > {log} 2>&1"
+
+
+if config["annotations_archive"]:
+
+    rule fetch_annotations:
+        output:
+            directory(config["annotations"]),
+        params:
+            url=config["annotations_archive"]["url"],
+            sha256=config["annotations_archive"]["sha256"],
+        log:
+            "logs/fetch_annotations.log",
+        shell:
+            "becos fetch-annotations --url {params.url:q} --sha256 {params.sha256} --dest {output} > {log} 2>&1"
+
+
+checkpoint check_datasets:
+    input:
+        generated_inputs,
+    output:
+        LAYOUT.checks,
+    params:
+        datasets=" ".join(config["datasets"]),
+        data_dir=config["data_dir"],
+        annotations=config["annotations"],
+        template_file=config["template_file"],
+    log:
+        "logs/check_datasets.log",
+    shell:
+        "becos check --datasets {params.datasets} --data-dir {params.data_dir:q}"
+        " --annotations {params.annotations:q} --template-table {params.template_file:q}"
+        " --out {output} > {log} 2>&1"
+
+
+rule catalog:
+    input:
+        checks=LAYOUT.checks,
+        config=ancient(LAYOUT.config),
+    output:
+        LAYOUT.catalog,
+    params:
+        options=bw.digest(bw.stage_options(config, "catalog")),
+    log:
+        "logs/catalog.log",
+    shell:
+        "becos catalog --config {input.config} --out {output} > {log} 2>&1"

@@ -1,0 +1,94 @@
+# Stage 5-7: the Zarr store per setting, its validation, the other export formats, the report.
+
+
+rule store_metadata:
+    input:
+        config=ancient(LAYOUT.config),
+    output:
+        f"{RESULTS}/{{setting}}/metadata.json",
+    params:
+        config=bw.digest(config),
+    log:
+        "logs/store_metadata/{setting}.log",
+    shell:
+        "becos metadata --config {input.config} --setting {wildcards.setting} --out {output} > {log} 2>&1"
+
+
+rule zarr_store:
+    input:
+        pairs=lambda w: chunk_files(w.setting, "pairs"),
+        metadata=f"{RESULTS}/{{setting}}/metadata.json",
+    output:
+        directory(f"{RESULTS}/{{setting}}/benchmark.zarr"),
+    resources:
+        mem_mb=8000,
+        runtime=60,
+    log:
+        "logs/zarr_store/{setting}.log",
+    shell:
+        "becos export-zarr --setting {wildcards.setting} --out {output} --metadata {input.metadata}"
+        " {input.pairs} > {log} 2>&1"
+
+
+rule validate_store:
+    input:
+        f"{RESULTS}/{{setting}}/benchmark.zarr",
+    output:
+        f"{RESULTS}/{{setting}}/validation.json",
+    log:
+        "logs/validate_store/{setting}.log",
+    shell:
+        "becos validate {input} --json {output} > {log} 2>&1"
+
+
+rule released_layout:
+    input:
+        store=f"{RESULTS}/{{setting}}/benchmark.zarr",
+        validation=f"{RESULTS}/{{setting}}/validation.json",
+    output:
+        directory(f"{RESULTS}/{{setting}}/released"),
+    log:
+        "logs/released_layout/{setting}.log",
+    shell:
+        "becos export-released {input.store} {output} > {log} 2>&1"
+
+
+rule psmal_layout:
+    input:
+        store=f"{RESULTS}/{{setting}}/benchmark.zarr",
+        validation=f"{RESULTS}/{{setting}}/validation.json",
+    output:
+        directory(f"{RESULTS}/{{setting}}/psmal"),
+    params:
+        geodesics="--geodesics" if EXPORTS["geodesics"] else "",
+    log:
+        "logs/psmal_layout/{setting}.log",
+    shell:
+        "becos export-psmal {input.store} {output} {params.geodesics} > {log} 2>&1"
+
+
+rule published_pairings:
+    input:
+        manifest=f"{RESULTS}/{{setting}}/manifest.csv",
+        catalog=LAYOUT.catalog,
+        config=ancient(LAYOUT.config),
+    output:
+        f"{RESULTS}/{{setting}}/pairings_{{setting}}.pkl",
+    log:
+        "logs/published_pairings/{setting}.log",
+    shell:
+        "becos export-pairings --config {input.config} --setting {wildcards.setting} --out {output} > {log} 2>&1"
+
+
+rule report:
+    input:
+        store=f"{RESULTS}/{{setting}}/benchmark.zarr",
+        validation=f"{RESULTS}/{{setting}}/validation.json",
+    output:
+        directory(f"{RESULTS}/{{setting}}/report"),
+    params:
+        renders=config["n_renders"] if config["store_vis"] else 0,
+    log:
+        "logs/report/{setting}.log",
+    shell:
+        "becos report {input.store} {output} --renders {params.renders} > {log} 2>&1"
