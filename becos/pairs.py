@@ -123,7 +123,8 @@ def _shape_arrays(shape: ShapeInstance, partial: Partial, final_vertices: np.nda
 
 def build_pair(x: ShapeInstance, y: ShapeInstance, gt_xy: SurfaceMap, gt_yx: SurfaceMap, *, pair_id: str,
                seed: int, split: str, options: PairOptions,
-               scanners: tuple[Scanner | None, Scanner | None] = (None, None)) -> PairRecord:
+               scanners: tuple[Scanner | None, Scanner | None] = (None, None),
+               rotations: tuple[np.ndarray, np.ndarray] | None = None) -> PairRecord:
     """One matching instance.
 
     Args:
@@ -133,6 +134,8 @@ def build_pair(x: ShapeInstance, y: ShapeInstance, gt_xy: SurfaceMap, gt_yx: Sur
         split: train / val / test.
         options: the setting and its options.
         scanners: optional reusable :class:`becos.partiality.Scanner` of x and y.
+        rotations: optional fixed (3, 3) random rotations of x and y (row vectors, applied last), e.g.
+            the published pair lists' ``random_rot``; by default drawn from the pair's seed.
     """
     from becos.geometry import surface_area
 
@@ -170,8 +173,11 @@ def build_pair(x: ShapeInstance, y: ShapeInstance, gt_xy: SurfaceMap, gt_yx: Sur
         mask_x, mask_y, map_xy, map_yx = gt_xy.matched, gt_yx.matched, gt_xy, gt_yx
 
     area_x, area_y = surface_area(x.mesh), surface_area(y.mesh)
-    rot_x = random_rotation(rng_for(seed, pair_id, "rotation", "x"), options.up_axis, options.one_axis_rotation)
-    rot_y = random_rotation(rng_for(seed, pair_id, "rotation", "y"), options.up_axis, options.one_axis_rotation)
+    if rotations is not None:
+        rot_x, rot_y = (np.asarray(r, dtype=np.float64).reshape(3, 3) for r in rotations)
+    else:
+        rot_x = random_rotation(rng_for(seed, pair_id, "rotation", "x"), options.up_axis, options.one_axis_rotation)
+        rot_y = random_rotation(rng_for(seed, pair_id, "rotation", "y"), options.up_axis, options.one_axis_rotation)
     norm_x = np.sqrt(area_x) if options.area_normalised else 1.0
     norm_y = np.sqrt(area_y) if options.area_normalised else 1.0
     final_x = (px.mesh.vertices / norm_x) @ rot_x

@@ -261,12 +261,34 @@ def build_manifest(config: dict, setting: str, catalog: pd.DataFrame, annotation
         imported = import_published(path, setting=setting, seed=config["seed"],
                                     n_variants=config["remesh_variants"], n_chunks=config["n_chunks"],
                                     datasets=config["datasets"])
-        return imported.manifest
+        return _restrict_published(imported.manifest, catalog, config, setting)
     annotations = annotations or annotation_source(config)
     caps = {k: v for k, v in (config.get("caps") or {}).items() if v is not None}
     return sample_pairs(catalog, setting, seed=config["seed"], combinations=config["combinations"],
                         template_rows=annotations, n_variants=config["remesh_variants"],
                         n_chunks=config["n_chunks"], caps=caps or None, usage_scale=config["usage_scale"])
+
+
+def _restrict_published(manifest: pd.DataFrame, catalog: pd.DataFrame, config: dict, setting: str) -> pd.DataFrame:
+    """Published pairs whose two shapes are in the catalog (``shapes`` filter), then the per-split caps
+    (pairs ranked by a keyed hash of their id, as for sampled pairs)."""
+    from becos.sampling import sort_manifest
+    from becos.seeding import stable_hash
+
+    known = set(zip(catalog["dataset"], catalog["name"]))
+    keep = [(xd, xn) in known and (yd, yn) in known for xd, xn, yd, yn in
+            zip(manifest["x_dataset"], manifest["x_name"], manifest["y_dataset"], manifest["y_name"])]
+    out = manifest[np.asarray(keep, dtype=bool)]
+    for split, cap in (config.get("caps") or {}).items():
+        rows = out[out["split"] == split]
+        if cap is not None and len(rows) > cap:
+            rank = sorted(rows["pair_id"], key=lambda p: stable_hash(config["seed"], setting, "cap", p))
+            out = out[(out["split"] != split) | out["pair_id"].isin(rank[:cap])]
+    report = dict(manifest.attrs.get("report", {}))
+    report["n_pairs"] = {s: int((out["split"] == s).sum()) for s in ("train", "val", "test")}
+    out = sort_manifest(out)
+    out.attrs["report"] = report
+    return out
 
 
 @dataclass
@@ -617,7 +639,8 @@ def pairs_stage(config: dict, setting: str, chunk: int, gt_index: Path, out_inde
                     scanners[(s.dataset, s.name, t)] = Scanner(s.mesh)
             pair_scanners = (scanners.get((x.dataset, x.name, tx)), scanners.get((y.dataset, y.name, ty)))
             record = build_pair(x, y, gt_xy, gt_yx, pair_id=row["pair_id"], seed=int(row["seed"]),
-                                split=row["split"], options=options, scanners=pair_scanners)
+                                split=row["split"], options=options, scanners=pair_scanners,
+                                rotations=_published_rotations(row))
             if labels is not None:
                 for side, s, t in (("x", x, tx), ("y", y, ty)):
                     full = labels(s.dataset, s.name, t)
@@ -633,6 +656,14 @@ def pairs_stage(config: dict, setting: str, chunk: int, gt_index: Path, out_inde
                  f"({sum(e['computed'] for e in entries)} built) {time.perf_counter() - started:.1f} s")
     _write_index(Path(out_index), setting, chunk, entries, started)
     return {"n": len(entries), "computed": sum(e["computed"] for e in entries)}
+
+
+def _published_rotations(row: dict):
+    """The published lists' random rotations of a pair (``original_settings``), else None."""
+    if "x_random_rot_0" not in row or pd.isna(row["x_random_rot_0"]):
+        return None
+    return tuple(np.array([row[f"{side}_random_rot_{i}"] for i in range(9)], dtype=np.float64).reshape(3, 3)
+                 for side in ("x", "y"))
 
 
 def _labeller(config: dict, shapes: ShapeStore):

@@ -162,3 +162,22 @@ def test_incremental_rebuild(becos_code, tmp_path):
     planned = jobs_planned(snakemake(workdir, "-n", "--cores", "2").stdout)
     assert planned.get("pairs", 0) >= 1
     assert "remesh" not in planned and "ground_truth" not in planned, planned
+
+
+def test_original_settings_plan_uses_the_published_pairs(becos_code, tmp_path):
+    from becos import workflow as bw
+
+    config = bw.resolve_config(yaml.safe_load(write_config(
+        tmp_path, becos_code, original_settings=True, setting="partial_partial",
+        caps={"train": 3, "val": 1, "test": 1}).joinpath("config.yaml").read_text()))
+    config["results"] = str(tmp_path / "results")
+    plan = bw.Plan.build(config)
+    manifest = plan.manifests["partial_partial"]
+    counts = manifest["split"].value_counts().to_dict()
+    assert counts["train"] == 3 and counts.get("val", 0) <= 1 and counts.get("test", 0) <= 1
+    assert set(manifest["x_dataset"]) == set(manifest["y_dataset"]) == {"tosca"}
+    # published face targets become remesh tokens; published rotations travel with the pair
+    assert plan.remesh_jobs and all(re.fullmatch(r"f\d+", t) for _, _, t in plan.remesh_jobs)
+    rotations = bw._published_rotations(manifest.iloc[0].to_dict())
+    for r in rotations:
+        assert np.allclose(r @ r.T, np.eye(3), atol=1e-6)
