@@ -1,0 +1,626 @@
+"""Exports of a benchmark in layouts that existing matching code already reads.
+
+Three writers, each taking an iterable of :class:`~becos.record.PairRecord` (a store's
+``Benchmark.records()``, or records loaded from ``.npz`` files), streaming them one at a time:
+
+- :func:`write_released` -- the folder layout of the released BeCoS benchmark (the reference
+  generator's output): ``<out>/<split>/<i>/`` with two OFF meshes, ``corres_*.npy`` and one info
+  pickle per shape, as read by DeepShapeMatchingKit's ``BeCoSDataset`` and similar loaders.
+- :func:`write_psmal` -- PSMAL (partial SMAL) style: ``<out>/<split>/shapes/<shape id>.off`` and
+  ``<out>/<split>/maps/<A>_<B>.vts`` in both directions.
+- :func:`write_geodesics` -- optional (V, V) float32 geodesic distance matrices, per shape, between
+  its kept vertices, measured on its FULL shape (``<out>/<split>/geodesics/<shape id>.npy``).
+
+The layouts, every file and key, which loader reads what, and where becos differs from the reference
+(the swapped P2P masks) are documented in ``docs/released-layout.md``; this module follows it.
+
+Numbering: pairs are numbered 0..N-1 per split in ascending ``pair_id`` order, whatever order the
+records come in. Each export is written into a temporary folder beside ``out`` and renamed into
+place at the end, so a reader never sees half an export (geodesics: per ``<split>/geodesics``).
+
+Units and frames: vertices are written exactly as stored in the record (its final frame, dataset
+scale unless the record is area-normalised), as shortest round-trip decimal strings, so that parsing
+the text gives back the same float64 values.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import datetime
+import io
+import json
+import os
+import pickle
+import re
+import shutil
+import sys
+import tempfile
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterable, Iterator, Mapping
+
+import numpy as np
+
+from becos.errors import BecosError
+from becos.record import SETTINGS, PairRecord, full_shape
+
+LAYOUT_VERSION = 1
+"""Version of the layouts written here (recorded in ``logs/config.yaml``)."""
+
+PICKLE_PROTOCOL = 4
+IDS_FILE = "ids.csv"
+LOGS_DIR = "logs"
+SIDES = (("x", 0), ("y", 1))
+_STAGING = ".staging"
+_PROGRESS_EVERY = 200
+_GEODESIC_BLOCK_ELEMENTS = 1 << 22
+"""Largest number of float64 distances held at once while filling a geodesic matrix (32 MB)."""
+_SPLIT_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]*")
+
+
+class ExportError(BecosError):
+    """An export cannot be written as asked (existing output, inconsistent or duplicate records)."""
+
+
+# --------------------------------------------------------------------------------------------------
+# file formats
+
+
+def off_text(vertices: np.ndarray, faces: np.ndarray) -> str:
+    """OFF text: ``OFF``, ``nV nF 0``, one ``x y z`` line per vertex, one ``3 i j k`` line per face.
+
+    Args:
+        vertices: (V, 3) float positions, written as shortest round-trip decimal strings (numpy's
+            float64 ``str``), so ``float(token)`` gives back the exact float64 value.
+        faces: (F, 3) int 0-based vertex indices.
+    """
+    v = np.asarray(vertices, dtype=np.float64)
+    f = np.asarray(faces, dtype=np.int64)
+    if v.ndim != 2 or v.shape[1] != 3 or f.ndim != 2 or f.shape[1] != 3:
+        raise ValueError(f"OFF needs (V, 3) vertices and (F, 3) faces; got {v.shape} and {f.shape}")
+    if not np.isfinite(v).all():
+        raise ValueError("OFF vertices must be finite")
+    return f"OFF\n{len(v)} {len(f)} 0\n" + _rows_text(v.astype(str)) + _rows_text(f.astype(str), lead="3 ")
+
+
+def _rows_text(cells: np.ndarray, lead: str = "") -> str:
+    """(N, C) strings -> N lines ``<lead>c0 c1 ... c(C-1)``, each ending in a newline (one join over
+    an interleaved token array; no per-row Python code)."""
+    n, c = cells.shape
+    if n == 0:
+        return ""
+    offset = 1 if lead else 0
+    tokens = np.empty((n, offset + 2 * c), dtype=object)
+    if lead:
+        tokens[:, 0] = lead
+    tokens[:, offset::2] = cells
+    tokens[:, offset + 1::2] = [" "] * (c - 1) + ["\n"]
+    return "".join(tokens.ravel().tolist())
+
+
+def vts_text(indices: np.ndarray) -> str:
+    """One integer per line (PSMAL ``.vts``): 0-based target vertex index, -1 = no counterpart."""
+    return _rows_text(np.asarray(indices, dtype=np.int64).reshape(-1, 1).astype(str))
+
+
+class _PortablePickler(pickle.Pickler):
+    """Pickles arrays as ``numpy.ndarray(shape, dtype_str, bytearray)``.
+
+    numpy 2 pickles arrays through ``numpy._core.multiarray._reconstruct``, a module numpy 1.x does
+    not have (numpy/numpy#28340); ``numpy.ndarray`` and ``builtins.bytearray`` exist in both, so these
+    pickles load under numpy 1.x and 2.x alike (as writable arrays).
+    """
+
+    def reducer_override(self, obj):
+        if isinstance(obj, np.ndarray):
+            if obj.dtype.hasobject or obj.dtype.fields is not None:
+                raise TypeError(f"info pickles hold plain numeric arrays only, not dtype {obj.dtype}")
+            return np.ndarray, (tuple(int(n) for n in obj.shape), obj.dtype.str, bytearray(obj.tobytes()))
+        if isinstance(obj, np.generic):
+            raise TypeError(f"numpy scalar {obj!r} in an info pickle: convert it to a Python number first")
+        return NotImplemented
+
+
+def info_pickle_bytes(info: Mapping) -> bytes:
+    """A dict of builtins (str, float, int, bool, None) and numpy arrays as a protocol-4 pickle that
+    numpy 1.x and 2.x both read (see :class:`_PortablePickler`)."""
+    buffer = io.BytesIO()
+    _PortablePickler(buffer, protocol=PICKLE_PROTOCOL).dump(dict(info))
+    return buffer.getvalue()
+
+
+def released_stem(name: str) -> str:
+    """A shape name as it appears in released file names: ``/`` -> ``_`` (``bear3EP/Attack4009`` ->
+    ``bear3EP_Attack4009``), as in the reference."""
+    return name.replace("/", "_")
+
+
+def psmal_shape_id(index: int, side: int, dataset: str, name: str) -> str:
+    """``<pair index>_<side>_<dataset>_<name>``: exactly four ``_``-separated fields, because PSMAL
+    loaders split a map file name ``<A>_<B>.vts`` on ``_`` into fields 0-3 (A) and 4-7 (B); ``_``,
+    ``/``, ``\\`` and white space inside dataset and name become ``-`` (``tr_reg_000`` ->
+    ``tr-reg-000``). The pair index makes ids unique inside a split."""
+    return "_".join([str(int(index)), str(int(side)), _id_field(dataset), _id_field(name)])
+
+
+def _id_field(text: str) -> str:
+    return re.sub(r"[_/\\\s]", "-", str(text)) or "-"
+
+
+# --------------------------------------------------------------------------------------------------
+# record -> released info dictionaries
+
+
+def _f64(a) -> np.ndarray:
+    return np.array(a, dtype=np.float64)
+
+
+def released_infos(record: PairRecord) -> tuple[dict, dict]:
+    """The two info dictionaries (shape 0 = X, shape 1 = Y) of the released layout.
+
+    Keys (see ``docs/released-layout.md`` for the full table):
+
+    - always: ``name``, ``org_dataset``, ``scale_per_dataset``, ``surface_area`` (sqrt-area of the
+      remeshed full shape at dataset scale), ``surface_area_after_scaling`` (sqrt-area of the full
+      shape in the units of the written vertices: ``surface_area``, or 1.0 for an area-normalised
+      record), ``random_rotation`` (3, 3), ``align_rotation`` / ``align_translation`` (None for X;
+      (3, 3), (3,) for Y, row vectors: ``v @ R + t``), ``pair_id``, ``area_normalised``.
+    - every scanned (partial) shape: ``partial2full`` (V,) int64, ``cam_pos`` (3,) camera position,
+      ``camera`` (3, 3) rows position / look-at target / up (the record's ``s_camera``: the shape's
+      common frame, before alignment and random rotation).
+    - P2P and P2F, both shapes: ``overlap_mask`` (V,) bool over the shape's OWN vertices and
+      ``overlap_percentage`` its mean (the reference swaps these between the two files).
+    - P2P: ``found_faces_mask_yx`` in X's info = Y's mask, ``found_faces_mask`` in Y's info = X's
+      mask (the released convention, which DeepShapeMatchingKit swaps back); P2F: X's info
+      ``found_faces_mask`` = X's own mask over full X.
+    """
+    setting = record.meta["setting"]
+    normalised = bool(record.meta.get("area_normalised", False))
+    infos = {}
+    for s, _ in SIDES:
+        meta = record.meta[s]
+        sqrt_area = float(record[f"{s}_full_sqrt_area"])
+        infos[s] = {
+            "name": str(meta["name"]),
+            "org_dataset": str(meta["dataset"]),
+            "scale_per_dataset": float(record[f"{s}_dataset_scale"]),
+            "surface_area": sqrt_area,
+            "surface_area_after_scaling": 1.0 if normalised else sqrt_area,
+            "random_rotation": _f64(record[f"{s}_random_rotation"]),
+            "align_rotation": None if s == "x" else _f64(record["y_align_rotation"]),
+            "align_translation": None if s == "x" else _f64(record["y_align_translation"]),
+            "pair_id": str(record.pair_id),
+            "area_normalised": normalised,
+        }
+    scanned = {"partial_partial": ("x", "y"), "partial_full": ("y",), "full_full": ()}[setting]
+    for s in scanned:
+        camera = _f64(record[f"{s}_camera"])
+        infos[s]["partial2full"] = np.array(record[f"{s}_partial_to_full"], dtype=np.int64)
+        infos[s]["cam_pos"] = camera[0].copy()
+        infos[s]["camera"] = camera
+    if setting != "full_full":
+        for s, _ in SIDES:
+            infos[s]["overlap_mask"] = np.array(record[f"{s}_overlap_mask"], dtype=bool)
+            infos[s]["overlap_percentage"] = float(record[f"{s}_overlap"])
+    if setting == "partial_partial":
+        infos["x"]["found_faces_mask_yx"] = np.array(record["y_overlap_mask"], dtype=bool)
+        infos["y"]["found_faces_mask"] = np.array(record["x_overlap_mask"], dtype=bool)
+    elif setting == "partial_full":
+        infos["x"]["found_faces_mask"] = np.array(record["x_overlap_mask"], dtype=bool)
+    return infos["x"], infos["y"]
+
+
+def _check_record(record: PairRecord, setting: str | None) -> None:
+    pid = record.meta.get("pair_id", "?")
+    if setting is not None and record.meta.get("setting") != setting:
+        raise ExportError(f"pair {pid}: its setting {record.meta.get('setting')!r} differs from the export's "
+                          f"setting {setting!r}. Fix: export each setting's store on its own")
+    split = str(record.meta.get("split", ""))
+    if not _SPLIT_NAME.fullmatch(split) or split == LOGS_DIR or split.isdigit():
+        raise ExportError(f"pair {pid}: split {split!r} cannot be a folder name. Fix: use splits such as "
+                          f"train, val, test")
+    for s, o, corr in (("x", "y", "corr_01"), ("y", "x", "corr_10")):
+        n, n_other = len(record[f"{s}_vertices"]), len(record[f"{o}_vertices"])
+        c = record[corr]
+        if len(c) != n or (len(c) and (c.min() < -1 or c.max() >= n_other)):
+            raise ExportError(f"pair {pid}: {corr} has {len(c)} entries in [{c.min() if len(c) else 0}, "
+                              f"{c.max() if len(c) else 0}] for {n} -> {n_other} vertices. Fix: rebuild the "
+                              f"pair record")
+
+
+# --------------------------------------------------------------------------------------------------
+# atomic output folders and per-split numbering
+
+
+def _is_empty_dir(path: Path) -> bool:
+    return path.is_dir() and not any(path.iterdir())
+
+
+def _check_target(out: Path, overwrite: bool) -> None:
+    if out.exists() and not out.is_dir():
+        raise ExportError(f"{out}: exists and is not a folder. Fix: choose another output path")
+    if out.is_dir() and not overwrite and not _is_empty_dir(out):
+        raise ExportError(f"{out}: folder exists and is not empty. Fix: choose a new output path or pass "
+                          f"overwrite=True (--force) to replace it")
+
+
+@contextmanager
+def _staged_dir(out: Path, overwrite: bool) -> Iterator[Path]:
+    """Yield a temporary folder beside ``out``; on success it replaces ``out``, else it is removed."""
+    _check_target(out, overwrite)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(dir=out.parent, prefix=f".{out.name}.tmp-"))
+    try:
+        yield tmp
+        os.chmod(tmp, 0o755)  # mkdtemp creates 0700; exports are meant to be shared
+        _replace_dir(tmp, out, overwrite)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+
+
+def _replace_dir(tmp: Path, out: Path, overwrite: bool) -> None:
+    if out.is_dir() and _is_empty_dir(out):
+        out.rmdir()
+    if out.exists():
+        _check_target(out, overwrite)  # appeared meanwhile
+        old = Path(tempfile.mkdtemp(dir=out.parent, prefix=f".{out.name}.old-"))
+        os.replace(out, old / out.name)
+        os.replace(tmp, out)
+        shutil.rmtree(old, ignore_errors=True)
+    else:
+        os.replace(tmp, out)
+
+
+@dataclass(frozen=True)
+class _Entry:
+    split: str
+    pair_id: str
+    folder: Path
+    x_name: str
+    y_name: str
+    x_dataset: str
+    y_dataset: str
+
+
+class _Staging:
+    """Per-pair scratch folders (numbered in arrival order) and their final per-split numbering."""
+
+    def __init__(self, root: Path, label: str, progress: bool):
+        self.root = root / _STAGING
+        self.entries: list[_Entry] = []
+        self.label = label
+        self.progress = progress
+
+    def add(self, record: PairRecord) -> Path:
+        folder = self.root / str(len(self.entries))
+        folder.mkdir(parents=True)
+        m = record.meta
+        self.entries.append(_Entry(str(m["split"]), str(m["pair_id"]), folder, str(m["x"]["name"]),
+                                   str(m["y"]["name"]), str(m["x"]["dataset"]), str(m["y"]["dataset"])))
+        if self.progress and len(self.entries) % _PROGRESS_EVERY == 0:
+            print(f"{self.label}: {len(self.entries)} pairs", file=sys.stderr, flush=True)
+        return folder
+
+    def by_split(self) -> dict[str, list[_Entry]]:
+        """{split: entries in ascending pair_id order} (splits in first-seen order); duplicates raise."""
+        out: dict[str, list[_Entry]] = {}
+        for e in self.entries:
+            out.setdefault(e.split, []).append(e)
+        for split, entries in out.items():
+            entries.sort(key=lambda e: e.pair_id)
+            ids = [e.pair_id for e in entries]
+            dup = sorted({a for a, b in zip(ids, ids[1:]) if a == b})
+            if dup:
+                raise ExportError(f"split {split}: pair ids {dup[:5]} occur more than once. Fix: pass each pair "
+                                  f"once")
+        return out
+
+    def finish(self) -> None:
+        if self.progress:
+            print(f"{self.label}: {len(self.entries)} pairs done", file=sys.stderr, flush=True)
+        shutil.rmtree(self.root, ignore_errors=True)
+
+
+def _write_ids(path: Path, header: list[str], rows: list[list]) -> None:
+    buffer = io.StringIO()
+    writer = csv.writer(buffer, lineterminator="\n")
+    writer.writerow(header)
+    writer.writerows(rows)
+    path.write_text(buffer.getvalue(), encoding="utf-8")
+
+
+def _plain(value):
+    """JSON round trip (numpy values and paths as strings) so YAML gets only builtins."""
+    return json.loads(json.dumps(value, default=lambda o: o.item() if isinstance(o, np.generic) else str(o)))
+
+
+def _write_log(root: Path, writer: str, layout: str, counts: dict[str, int], setting: str | None,
+               metadata: Mapping | None) -> None:
+    import yaml
+
+    from becos import __version__
+
+    log = {
+        "written_by": f"becos {__version__} ({writer})",
+        "layout": f"{layout} version {LAYOUT_VERSION}, described in docs/released-layout.md of becos",
+        "created": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+        "setting": setting,
+        "pairs": counts,
+        "source_metadata": _plain(dict(metadata)) if metadata else None,
+    }
+    (root / LOGS_DIR).mkdir(exist_ok=True)
+    (root / LOGS_DIR / "config.yaml").write_text(yaml.safe_dump(log, sort_keys=False, allow_unicode=True),
+                                                 encoding="utf-8")
+
+
+def _write_annotation_files(folder: Path, record: PairRecord) -> bool:
+    labels = {s: np.asarray(record[f"{s}_annotation"], dtype=np.int8) for s, _ in SIDES}
+    if not any((a >= 0).any() for a in labels.values()):
+        return False
+    for s, k in SIDES:
+        np.save(folder / f"{k}_annotation.npy", labels[s])
+    return True
+
+
+# --------------------------------------------------------------------------------------------------
+# writers
+
+
+def write_released(records: Iterable[PairRecord], out_dir: str | Path, *, setting: str,
+                   metadata: Mapping | None = None, overwrite: bool = False, progress: bool = False) -> Path:
+    """Write the records in the released BeCoS folder layout (``docs/released-layout.md``).
+
+    ``<out>/<split>/<i>/`` per pair (``i`` = 0..N-1 in ascending pair_id order within the split) with
+    ``0_<x>.off``, ``1_<y>.off``, ``corres_01.npy`` (not for P2F), ``corres_10.npy``,
+    ``0_<x>_info.pkl``, ``1_<y>_info.pkl`` and, when any vertex carries a label,
+    ``0_annotation.npy`` / ``1_annotation.npy``; ``<out>/ids.csv`` (split, index, pair_id, x, y) and
+    ``<out>/logs/config.yaml`` (what wrote it, counts, the source's metadata).
+
+    Name ``out`` after the setting (``.../partial_partial``): DeepShapeMatchingKit's loader infers the
+    setting from its data_root path.
+
+    Args:
+        records: pair records of ONE setting, in any order (streamed; memory stays one pair).
+        out_dir: output folder; must not exist or be empty unless ``overwrite``.
+        setting: full_full, partial_full or partial_partial; every record must have it.
+        metadata: the source's metadata (e.g. ``Benchmark.metadata``), copied into the log.
+        overwrite: replace an existing ``out_dir`` (only once the new export is complete).
+        progress: print a line to stderr every 200 pairs.
+
+    Returns:
+        ``out_dir`` as a Path.
+    """
+    if setting not in SETTINGS:
+        raise ExportError(f"setting must be one of {SETTINGS}, got {setting!r}")
+    out = Path(out_dir)
+    with _staged_dir(out, overwrite) as tmp:
+        staging = _Staging(tmp, "export-released", progress)
+        for record in records:
+            _check_record(record, setting)
+            _write_released_pair(staging.add(record), record, setting)
+        rows, counts = [], {}
+        for split, entries in staging.by_split().items():
+            (tmp / split).mkdir()
+            for i, e in enumerate(entries):
+                os.replace(e.folder, tmp / split / str(i))
+                rows.append([split, i, e.pair_id, e.x_name, e.y_name])
+            counts[split] = len(entries)
+        staging.finish()
+        _write_ids(tmp / IDS_FILE, ["split", "index", "pair_id", "x", "y"], rows)
+        _write_log(tmp, "becos.export.write_released", "becos released BeCoS layout", counts, setting, metadata)
+    return out
+
+
+def _write_released_pair(folder: Path, record: PairRecord, setting: str) -> None:
+    infos = released_infos(record)
+    for (s, k), info in zip(SIDES, infos):
+        stem = f"{k}_{released_stem(info['name'])}"
+        (folder / f"{stem}.off").write_text(off_text(record[f"{s}_vertices"], record[f"{s}_faces"]),
+                                            encoding="utf-8")
+        (folder / f"{stem}_info.pkl").write_bytes(info_pickle_bytes(info))
+    if setting != "partial_full":
+        np.save(folder / "corres_01.npy", np.asarray(record["corr_01"], dtype=np.int64))
+    np.save(folder / "corres_10.npy", np.asarray(record["corr_10"], dtype=np.int64))
+    _write_annotation_files(folder, record)
+
+
+def write_psmal(records: Iterable[PairRecord], out_dir: str | Path, *, metadata: Mapping | None = None,
+                overwrite: bool = False, progress: bool = False) -> Path:
+    """Write the records PSMAL style (``docs/released-layout.md``, section PSMAL).
+
+    Per split: ``<out>/<split>/shapes/<id>.off`` for both shapes of every pair and
+    ``<out>/<split>/maps/<A>_<B>.vts`` in both directions: one line per vertex of A, the 0-based
+    vertex of B or -1 (as PSMAL's own maps, which its loaders read without subtracting 1). Shape ids
+    are :func:`psmal_shape_id` ``(pair index, 0|1, dataset, name)``; ``<out>/ids.csv`` maps
+    (split, index) to pair_id, names and ids; ``<out>/logs/config.yaml`` as in :func:`write_released`.
+
+    Args: as :func:`write_released` (records of any setting; numbering per split by pair_id).
+    """
+    out = Path(out_dir)
+    with _staged_dir(out, overwrite) as tmp:
+        staging = _Staging(tmp, "export-psmal", progress)
+        settings = set()
+        for record in records:
+            _check_record(record, None)
+            settings.add(record.meta["setting"])
+            folder = staging.add(record)
+            for s, k in SIDES:
+                (folder / f"{k}.off").write_text(off_text(record[f"{s}_vertices"], record[f"{s}_faces"]),
+                                                 encoding="utf-8")
+            (folder / "01.vts").write_text(vts_text(record["corr_01"]), encoding="utf-8")
+            (folder / "10.vts").write_text(vts_text(record["corr_10"]), encoding="utf-8")
+        rows, counts = [], {}
+        for split, entries in staging.by_split().items():
+            shapes, maps = tmp / split / "shapes", tmp / split / "maps"
+            shapes.mkdir(parents=True)
+            maps.mkdir()
+            for i, e in enumerate(entries):
+                a = psmal_shape_id(i, 0, e.x_dataset, e.x_name)
+                b = psmal_shape_id(i, 1, e.y_dataset, e.y_name)
+                os.replace(e.folder / "0.off", shapes / f"{a}.off")
+                os.replace(e.folder / "1.off", shapes / f"{b}.off")
+                os.replace(e.folder / "01.vts", maps / f"{a}_{b}.vts")
+                os.replace(e.folder / "10.vts", maps / f"{b}_{a}.vts")
+                rows.append([split, i, e.pair_id, e.x_name, e.y_name, a, b])
+            counts[split] = len(entries)
+        staging.finish()
+        _write_ids(tmp / IDS_FILE, ["split", "index", "pair_id", "x", "y", "x_id", "y_id"], rows)
+        setting = settings.pop() if len(settings) == 1 else None
+        _write_log(tmp, "becos.export.write_psmal", "becos PSMAL-style layout", counts, setting, metadata)
+    return out
+
+
+def geodesic_matrix(record: PairRecord, side: str, method: str = "heat", out: np.ndarray | None = None) -> np.ndarray:
+    """(V, V) float32 geodesic distances between the vertices of shape ``side`` (``'x'`` or ``'y'``),
+    measured on its FULL (remeshed) shape, in the units of the record's vertices.
+
+    Entry [i, j] is the distance on the full surface between full vertices ``partial_to_full[i]`` and
+    ``partial_to_full[j]`` (for a full shape simply i and j), so a cut does not lengthen paths.
+    Symmetrised as (D + D.T) / 2 (the heat method is slightly asymmetric), zero diagonal; ``dijkstra``
+    gives ``inf`` between disconnected components. Rows are computed in blocks of bounded memory.
+
+    Args:
+        record: the pair.
+        side: ``'x'`` (shape 0) or ``'y'`` (shape 1).
+        method: ``'heat'`` or ``'dijkstra'`` (:class:`becos.geodesics.GeodesicDistances`).
+        out: optional preallocated (V, V) float32 array (e.g. a ``np.lib.format.open_memmap``).
+    """
+    from becos.geodesics import GeodesicDistances
+    from becos.mesh import TriMesh
+
+    full_vertices, full_faces = full_shape(record, side)
+    p2f = np.asarray(record[f"{side}_partial_to_full"], dtype=np.int64)
+    n = len(p2f)
+    if out is None:
+        out = np.empty((n, n), dtype=np.float32)
+    elif out.shape != (n, n):
+        raise ValueError(f"out must have shape {(n, n)}, got {out.shape}")
+    solver = GeodesicDistances(TriMesh(full_vertices, full_faces), method, cache_bytes=0)
+    block = max(1, _GEODESIC_BLOCK_ELEMENTS // max(len(full_vertices), 1))
+    for start in range(0, n, block):
+        rows = solver.from_vertices(p2f[start:start + block])
+        out[start:start + block] = rows[:, p2f]
+    _symmetrise(out, block)
+    return out
+
+
+def _symmetrise(d: np.ndarray, block: int) -> None:
+    """In place d <- (d + d.T) / 2, one pair of (block x block) tiles at a time."""
+    n = len(d)
+    for i in range(0, n, block):
+        for j in range(i, n, block):
+            upper = d[i:i + block, j:j + block].astype(np.float64)
+            lower = d[j:j + block, i:i + block].astype(np.float64)
+            mean = 0.5 * (upper + lower.T)
+            d[i:i + block, j:j + block] = mean
+            d[j:j + block, i:i + block] = mean.T
+
+
+def write_geodesics(records: Iterable[PairRecord], out_dir: str | Path, method: str = "heat", *,
+                    overwrite: bool = False, progress: bool = False) -> Path:
+    """Write ``<out>/<split>/geodesics/<shape id>.npy``: :func:`geodesic_matrix` of both shapes of
+    every pair, with the shape ids of :func:`write_psmal` (pass the same records).
+
+    Expensive (heat: a few ms per kept vertex; a 10k-vertex shape takes about a minute on 2 cores and
+    400 MB on disk), so it only runs when asked. ``out_dir`` may already hold a PSMAL export; each
+    ``<split>/geodesics`` folder appears whole (built aside, renamed in). Existing geodesics folders
+    are an error unless ``overwrite``.
+    """
+    out = Path(out_dir)
+    if out.exists() and not out.is_dir():
+        raise ExportError(f"{out}: exists and is not a folder. Fix: choose another output path")
+    existing = sorted(p for p in out.glob("*/geodesics") if p.exists()) if out.is_dir() else []
+    if existing and not overwrite:
+        raise ExportError(f"{existing[0]}: geodesic matrices exist already. Fix: pass overwrite=True (--force) "
+                          f"or write into a new folder")
+    out.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(dir=out, prefix=".geodesics.tmp-"))
+    try:
+        staging = _Staging(tmp, f"geodesics ({method})", progress)
+        for record in records:
+            _check_record(record, None)
+            folder = staging.add(record)
+            for s, k in SIDES:
+                n = len(record[f"{s}_partial_to_full"])
+                matrix = np.lib.format.open_memmap(folder / f"{k}.npy", mode="w+", dtype=np.float32, shape=(n, n))
+                geodesic_matrix(record, s, method, out=matrix)
+                matrix.flush()
+                del matrix
+        built = {}
+        for split, entries in staging.by_split().items():
+            target = tmp / split / "geodesics"
+            target.mkdir(parents=True)
+            for i, e in enumerate(entries):
+                os.replace(e.folder / "0.npy", target / f"{psmal_shape_id(i, 0, e.x_dataset, e.x_name)}.npy")
+                os.replace(e.folder / "1.npy", target / f"{psmal_shape_id(i, 1, e.y_dataset, e.y_name)}.npy")
+            built[split] = target
+        staging.finish()
+        for split, target in built.items():
+            final = out / split / "geodesics"
+            final.parent.mkdir(exist_ok=True)
+            if final.exists():
+                if not overwrite:
+                    raise ExportError(f"{final}: appeared while writing. Fix: rerun with overwrite=True (--force)")
+                old = Path(tempfile.mkdtemp(dir=out, prefix=".geodesics.old-"))
+                os.replace(final, old / "geodesics")
+                os.replace(target, final)
+                shutil.rmtree(old, ignore_errors=True)
+            else:
+                os.replace(target, final)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return out
+
+
+# --------------------------------------------------------------------------------------------------
+# command line
+
+
+def configure_parser(parser: argparse.ArgumentParser, name: str) -> argparse.ArgumentParser:
+    """Arguments of ``becos export-released STORE OUT`` and ``becos export-psmal STORE OUT [--geodesics]``."""
+    from becos.geodesics import METHODS
+
+    parser.add_argument("store", type=Path, help="benchmark store written by `becos export-zarr`")
+    if name == "export-released":
+        parser.add_argument("out", type=Path, help="output folder, best named after the setting "
+                                                   "(e.g. BeCoS/partial_partial): some loaders read the setting "
+                                                   "from the path")
+    else:
+        parser.add_argument("out", type=Path, help="output folder (<out>/<split>/shapes, maps)")
+        parser.add_argument("--geodesics", action="store_true",
+                            help="also write (V, V) float32 geodesic matrices per shape (slow: ~1 min and "
+                                 "400 MB per 10k-vertex shape)")
+        parser.add_argument("--geodesic-method", choices=METHODS, default="heat",
+                            help="geodesic estimator (default: heat)")
+    parser.add_argument("--force", action="store_true", help="replace OUT if it exists")
+    parser.set_defaults(export_kind=name)
+    return parser
+
+
+def run_cli(args: argparse.Namespace) -> int:
+    from becos.store import open_benchmark
+
+    bench = open_benchmark(args.store)
+    out = Path(args.out)
+    if args.export_kind == "export-released":
+        if bench.setting not in out.resolve().parts:
+            print(f"becos export-released: note: DeepShapeMatchingKit's BeCoSDataset reads the setting from "
+                  f"its data_root path; name the folder after it (e.g. {out / bench.setting})",
+                  file=sys.stderr)
+        write_released(bench.records(), out, setting=bench.setting, metadata=bench.metadata,
+                       overwrite=args.force, progress=True)
+    else:
+        write_psmal(bench.records(), out, metadata=bench.metadata, overwrite=args.force, progress=True)
+        if args.geodesics:
+            write_geodesics(bench.records(), out, args.geodesic_method, overwrite=args.force, progress=True)
+    with open(out / IDS_FILE, encoding="utf-8", newline="") as fh:
+        splits = [row["split"] for row in csv.DictReader(fh)]
+    result = {"out": str(out.resolve()), "setting": bench.setting,
+              "pairs": {s: splits.count(s) for s in dict.fromkeys(splits)}}
+    if args.export_kind == "export-psmal":
+        result["geodesics"] = args.geodesic_method if args.geodesics else None
+    print(json.dumps(result))
+    return 0

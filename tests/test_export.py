@@ -1,0 +1,404 @@
+"""Exports (released BeCoS folders, PSMAL maps, geodesic matrices) of real TOSCA pair records, read
+back by a small loader written from docs/released-layout.md alone (OFF text, .npy, pickles)."""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import pickle
+import random
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from becos.export import ExportError, write_geodesics, write_psmal, write_released
+from becos.record import PairRecord
+
+SETTINGS = ("full_full", "partial_full", "partial_partial")
+
+
+# --------------------------------------------------------------------------------------------------
+# records: the fixture's two pairs per setting plus two copies in "train" whose ids sort before and
+# after the fixture's, one of them with annotation labels
+
+
+def _copy(record: PairRecord, pair_id: str, split: str, **arrays) -> PairRecord:
+    meta = json.loads(json.dumps(record.meta))
+    meta.update(pair_id=pair_id, split=split)
+    return PairRecord({**record.arrays, **arrays}, meta)
+
+
+@pytest.fixture(scope="module")
+def records(pair_record_files) -> dict[str, list[PairRecord]]:
+    out = {}
+    for setting, paths in pair_record_files.items():
+        base = [PairRecord.load(p) for p in paths]
+        labels = (np.arange(len(base[0]["x_vertices"])) % 3 - 1).astype(np.int8)  # -1, 0, 1, -1, ...
+        extra = [_copy(base[1], "a" + base[1].pair_id, "train"),
+                 _copy(base[0], "z" + base[0].pair_id, "train", x_annotation=labels)]
+        out[setting] = base + extra
+    return out
+
+
+def _shuffled(items: list, seed: int = 0) -> list:
+    items = list(items)
+    random.Random(seed).shuffle(items)
+    return items
+
+
+# --------------------------------------------------------------------------------------------------
+# the loader, from docs/released-layout.md only
+
+
+class _PortableUnpickler(pickle.Unpickler):
+    """Accepts only what the doc promises: builtins and numpy.ndarray(shape, dtype, bytearray)."""
+
+    def find_class(self, module, name):
+        if (module, name) in {("numpy", "ndarray"), ("builtins", "bytearray")}:
+            return super().find_class(module, name)
+        raise pickle.UnpicklingError(f"info pickle references {module}.{name}")
+
+
+def read_info(path: Path) -> dict:
+    data = path.read_bytes()
+    assert data[:2] == b"\x80\x04", "protocol 4"
+    return _PortableUnpickler(io.BytesIO(data)).load()
+
+
+def read_off(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    lines = path.read_text(encoding="utf-8").split("\n")
+    assert lines[0] == "OFF"
+    nv, nf, ne = (int(t) for t in lines[1].split())
+    assert ne == 0
+    v = np.array([float(t) for t in " ".join(lines[2:2 + nv]).split()], dtype=np.float64).reshape(nv, 3)
+    f = np.array([int(t) for t in " ".join(lines[2 + nv:2 + nv + nf]).split()], dtype=np.int64).reshape(nf, 4)
+    assert (f[:, 0] == 3).all() and lines[2 + nv + nf:] == [""]
+    return v, f[:, 1:]
+
+
+def read_ids(out: Path) -> list[dict]:
+    with open(out / "ids.csv", encoding="utf-8", newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
+def load_released(out: Path) -> dict[tuple[str, int], dict]:
+    """{(split, index): pair} of a released export."""
+    pairs = {}
+    for row in read_ids(out):
+        folder = out / row["split"] / row["index"]
+        pair = {"row": row}
+        for k in (0, 1):
+            (off,) = folder.glob(f"{k}_*.off")
+            pair[f"off{k}"] = read_off(off)
+            pair[f"info{k}"] = read_info(off.with_name(off.stem + "_info.pkl"))
+            pair[f"file{k}"] = off.name
+            ann = folder / f"{k}_annotation.npy"
+            pair[f"ann{k}"] = np.load(ann, allow_pickle=False) if ann.exists() else None
+        for name in ("corres_01", "corres_10"):
+            path = folder / f"{name}.npy"
+            pair[name] = np.load(path, allow_pickle=False) if path.exists() else None
+        pairs[(row["split"], int(row["index"]))] = pair
+    return pairs
+
+
+def _check_numbering(out: Path, rows: list[dict], records: list[PairRecord], allowed: set[str]) -> None:
+    by_split: dict[str, list[str]] = {}
+    for r in records:
+        by_split.setdefault(r.meta["split"], []).append(r.pair_id)
+    assert {row["split"] for row in rows} == set(by_split)
+    assert sorted(p.name for p in out.iterdir()) == sorted(["ids.csv", "logs", *by_split])
+    for split, ids in by_split.items():
+        split_rows = [row for row in rows if row["split"] == split]
+        assert [int(row["index"]) for row in split_rows] == list(range(len(ids)))
+        assert [row["pair_id"] for row in split_rows] == sorted(ids)
+        # split folders hold nothing but their own entries (some loaders list them as pair folders)
+        assert {p.name for p in (out / split).iterdir()} == (allowed or {str(i) for i in range(len(ids))})
+
+
+# --------------------------------------------------------------------------------------------------
+# released layout
+
+
+@pytest.mark.parametrize("setting", SETTINGS)
+def test_released_round_trip(setting, records, tmp_path):
+    recs = records[setting]
+    out = write_released(_shuffled(recs), tmp_path / "BeCoS" / setting, setting=setting)
+    assert out == tmp_path / "BeCoS" / setting
+    assert [p.name for p in (tmp_path / "BeCoS").iterdir()] == [setting]  # no temp folder left
+    rows = read_ids(out)
+    _check_numbering(out, rows, recs, set())
+    log = (out / "logs" / "config.yaml").read_text()
+    assert "becos.export.write_released" in log and f"setting: {setting}" in log
+
+    by_id = {r.pair_id: r for r in recs}
+    for (split, index), pair in load_released(out).items():
+        r = by_id[pair["row"]["pair_id"]]
+        assert r.meta["split"] == split
+        assert pair["row"]["x"] == r.meta["x"]["name"] and pair["row"]["y"] == r.meta["y"]["name"]
+        assert pair["file0"] == f"0_{r.meta['x']['name']}.off" and pair["file1"] == f"1_{r.meta['y']['name']}.off"
+        for k, s in ((0, "x"), (1, "y")):
+            v, f = pair[f"off{k}"]
+            assert v.dtype == np.float64 and np.array_equal(v, r[f"{s}_vertices"])  # exact
+            assert np.array_equal(f, r[f"{s}_faces"])
+        assert pair["corres_10"].dtype == np.int64 and np.array_equal(pair["corres_10"], r["corr_10"])
+        if setting == "partial_full":
+            assert pair["corres_01"] is None
+        else:
+            assert pair["corres_01"].dtype == np.int64 and np.array_equal(pair["corres_01"], r["corr_01"])
+
+        i0, i1 = pair["info0"], pair["info1"]
+        for info, s in ((i0, "x"), (i1, "y")):
+            assert info["name"] == r.meta[s]["name"] and info["org_dataset"] == r.meta[s]["dataset"]
+            assert info["scale_per_dataset"] == r[f"{s}_dataset_scale"]
+            assert info["surface_area"] == info["surface_area_after_scaling"] == r[f"{s}_full_sqrt_area"]
+            assert type(info["surface_area"]) is float and info["pair_id"] == r.pair_id
+            assert np.array_equal(info["random_rotation"], r[f"{s}_random_rotation"])
+            assert info["random_rotation"].flags.writeable
+        assert i0["align_rotation"] is None and i0["align_translation"] is None
+        assert np.array_equal(i1["align_rotation"], r["y_align_rotation"])
+        assert np.array_equal(i1["align_translation"], r["y_align_translation"])
+
+        scanned = {"full_full": (), "partial_full": ("y",), "partial_partial": ("x", "y")}[setting]
+        for info, s in ((i0, "x"), (i1, "y")):
+            if s in scanned:
+                assert info["partial2full"].dtype == np.int64
+                assert np.array_equal(info["partial2full"], r[f"{s}_partial_to_full"])
+                assert np.array_equal(info["cam_pos"], r[f"{s}_camera"][0]) and info["cam_pos"].shape == (3,)
+            else:
+                assert "partial2full" not in info and "cam_pos" not in info
+            if setting == "full_full":
+                assert not {"overlap_mask", "found_faces_mask", "found_faces_mask_yx"} & set(info)
+            else:  # each shape's OWN mask under the reference's key (the reference swaps them in P2P)
+                assert info["overlap_mask"].dtype == bool and np.array_equal(info["overlap_mask"], r[f"{s}_overlap_mask"])
+                assert len(info["overlap_mask"]) == len(r[f"{s}_vertices"])
+                assert info["overlap_percentage"] == pytest.approx(info["overlap_mask"].mean())
+        if setting == "partial_partial":  # released placement: the other shape's mask
+            assert np.array_equal(i0["found_faces_mask_yx"], r["y_overlap_mask"]) and "found_faces_mask" not in i0
+            assert np.array_equal(i1["found_faces_mask"], r["x_overlap_mask"]) and "found_faces_mask_yx" not in i1
+        if setting == "partial_full":
+            assert np.array_equal(i0["found_faces_mask"], r["x_overlap_mask"])
+            assert len(i0["found_faces_mask"]) == len(r["x_vertices"]) == len(r["x_partial_to_full"])
+
+        labelled = pair["row"]["pair_id"].startswith("z")
+        assert (pair["ann0"] is not None) == labelled and (pair["ann1"] is not None) == labelled
+        if labelled:
+            assert pair["ann0"].dtype == np.int8 and np.array_equal(pair["ann0"], r["x_annotation"])
+            assert np.array_equal(pair["ann1"], np.full(len(r["y_vertices"]), -1, np.int8))
+
+
+def _dsmk_masks(info_x: dict, info_y: dict, setting: str, n_x: int, n_y: int) -> tuple[np.ndarray, np.ndarray]:
+    """The partiality-mask lines of DeepShapeMatchingKit's BeCoSDataset.__getitem__ (numpy port)."""
+    if setting == "partial_partial":
+        if "found_faces_mask_yx" in info_x:
+            mask_x, mask_y = info_x["found_faces_mask_yx"].astype(int), info_y["found_faces_mask"].astype(int)
+        else:
+            mask_x, mask_y = info_x["found_faces_mask"].astype(int), info_y["found_faces_mask_yx"].astype(int)
+        return mask_y, mask_x  # "somehow the mask live on the other side, we need to swap them"
+    if setting == "partial_full":
+        return info_x["found_faces_mask"].astype(int), np.ones(n_y)
+    return np.ones(n_x), np.ones(n_y)
+
+
+@pytest.mark.parametrize("setting", SETTINGS)
+def test_released_layout_reads_like_deepshapematchingkit(setting, records, tmp_path):
+    """Replays DeepShapeMatchingKit's BeCoSDataset file logic: pairs (0, 1) with corres_10 and, for F2F and
+    P2P, (1, 0) with corres_01; masks via its key dance must give each shape its own mask."""
+    import trimesh
+
+    r = records[setting][0]
+    out = write_released([r], tmp_path / "BeCoS" / setting / "x", setting=setting)
+    data_root = out / r.meta["split"]
+    folders = [p for p in data_root.glob("*") if p.name.isdigit()]
+    highest = max(int(p.name) for p in folders)
+    assert highest == 0
+    folder = data_root / "0"
+    off0, off1 = sorted(folder.glob("0_*.off"))[0], sorted(folder.glob("1_*.off"))[0]
+    directions = [(off0, off1, "corres_10.npy", "x", "y")]
+    if setting in ("partial_partial", "full_full"):
+        directions.append((off1, off0, "corres_01.npy", "y", "x"))
+    for off_x, off_y, corr_file, sx, sy in directions:
+        info_x = pickle.loads(Path(str(off_x).replace(".off", "_info.pkl")).read_bytes())
+        info_y = pickle.loads(Path(str(off_y).replace(".off", "_info.pkl")).read_bytes())
+        mesh_x = trimesh.load(off_x, process=False, maintain_order=True)
+        mesh_y = trimesh.load(off_y, process=False, maintain_order=True)
+        assert np.array_equal(mesh_x.vertices, r[f"{sx}_vertices"]) and np.array_equal(mesh_x.faces, r[f"{sx}_faces"])
+        corr = np.load(folder / corr_file)
+        valid = corr != -1
+        assert len(corr) == len(mesh_y.vertices) and corr[valid].max() < len(mesh_x.vertices)
+        assert np.array_equal(valid, r[f"{sy}_overlap_mask"])  # corr_y = arange(len(corr))[valid]
+        # "normalized" scale: vertices / surface_area_after_scaling -> the FULL shape has unit area
+        unit = np.sqrt(mesh_x.area_faces.sum()) / info_x["surface_area_after_scaling"]
+        if len(mesh_x.vertices) == len(r[f"{sx}_partial_to_full"]) and not len(r[f"{sx}_full_faces"]):
+            assert unit == pytest.approx(1.0, rel=1e-9)
+        else:
+            assert 0.2 < unit < 1.0
+        mask_x, mask_y = _dsmk_masks(info_x, info_y, setting, len(mesh_x.vertices), len(mesh_y.vertices))
+        assert len(mask_x) == len(mesh_x.vertices) and len(mask_y) == len(mesh_y.vertices)
+        if setting != "full_full":
+            assert np.array_equal(mask_x.astype(bool), r[f"{sx}_overlap_mask"])
+        if setting == "partial_partial":
+            assert np.array_equal(mask_y.astype(bool), r[f"{sy}_overlap_mask"])
+
+
+def test_released_refuses_and_replaces_existing_output(records, tmp_path):
+    recs = records["full_full"]
+    out = tmp_path / "full_full"
+    out.mkdir()
+    (out / "keep.txt").write_text("old")
+    with pytest.raises(ExportError, match="not empty"):
+        write_released(recs, out, setting="full_full")
+    assert (out / "keep.txt").exists()
+    write_released(recs[:1], out, setting="full_full", overwrite=True)
+    assert not (out / "keep.txt").exists() and len(read_ids(out)) == 1
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["full_full"]  # no temp or old folders left
+    with pytest.raises(ExportError, match="setting 'partial_full'"):
+        write_released(records["partial_full"], tmp_path / "mixed", setting="full_full")
+    with pytest.raises(ExportError, match="more than once"):
+        write_released([recs[0], recs[0]], tmp_path / "dup", setting="full_full")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["full_full"]
+
+
+# --------------------------------------------------------------------------------------------------
+# PSMAL layout
+
+
+def read_vts(path: Path) -> np.ndarray:
+    text = path.read_text(encoding="utf-8")
+    assert text.endswith("\n")
+    return np.array([int(t) for t in text.split("\n")[:-1]], dtype=np.int64)
+
+
+@pytest.mark.parametrize("setting", SETTINGS)
+def test_psmal_round_trip(setting, records, tmp_path):
+    recs = records[setting]
+    out = write_psmal(_shuffled(recs, 1), tmp_path / "psmal")
+    rows = read_ids(out)
+    _check_numbering(out, rows, recs, {"shapes", "maps"})
+    by_id = {r.pair_id: r for r in recs}
+    for row in rows:
+        r = by_id[row["pair_id"]]
+        root = out / row["split"]
+        a, b = row["x_id"], row["y_id"]
+        assert a.split("_")[:2] == [row["index"], "0"] and b.split("_")[:2] == [row["index"], "1"]
+        for shape_id, s in ((a, "x"), (b, "y")):
+            assert len(shape_id.split("_")) == 4
+            v, f = read_off(root / "shapes" / f"{shape_id}.off")
+            assert np.array_equal(v, r[f"{s}_vertices"]) and np.array_equal(f, r[f"{s}_faces"])
+        assert np.array_equal(read_vts(root / "maps" / f"{a}_{b}.vts"), r["corr_01"])
+        assert np.array_equal(read_vts(root / "maps" / f"{b}_{a}.vts"), r["corr_10"])
+    # PSMAL loaders: every map is one pair, shapes = first four and next four "_" fields of its name
+    for split in {row["split"] for row in rows}:
+        maps = sorted((out / split / "maps").glob("*.vts"))
+        n = sum(row["split"] == split for row in rows)
+        assert len(maps) == 2 * n and len(list((out / split / "shapes").glob("*.off"))) == 2 * n
+        for m in maps:
+            parts = m.name[:-4].split("_")
+            assert len(parts) == 8
+            first, second = "_".join(parts[:4]), "_".join(parts[4:8])
+            corr = np.loadtxt(m, dtype=np.int32)  # as the loaders read it (0-based, -1 = none)
+            n_first = len(read_off(out / split / "shapes" / f"{first}.off")[0])
+            n_second = len(read_off(out / split / "shapes" / f"{second}.off")[0])
+            assert len(corr) == n_first and corr.min() >= -1 and corr.max() < n_second
+
+
+# --------------------------------------------------------------------------------------------------
+# geodesics (small pair: two scanned spheres) and the command line
+
+
+@pytest.fixture(scope="module")
+def small_record() -> PairRecord:
+    import trimesh
+
+    from becos.mesh import TriMesh
+    from becos.pairs import PairOptions, ShapeInstance, build_pair
+    from becos.surface_map import SurfaceMap
+
+    sphere = trimesh.creation.icosphere(subdivisions=3)
+    v, f = np.asarray(sphere.vertices) * 0.5, np.asarray(sphere.faces)
+    x = ShapeInstance("synthetic", "ball", "blob", "ball", TriMesh(v, f))
+    y = ShapeInstance("synthetic", "egg_1", "blob", "egg", TriMesh(v * [1.2, 1.0, 0.9], f))
+    gt = SurfaceMap.identity(f, len(v))
+    record = build_pair(x, y, gt, gt, pair_id="small", seed=3, split="test",
+                        options=PairOptions(setting="partial_partial"))
+    assert len(record["x_vertices"]) < len(v) and len(record["y_vertices"]) < len(v)
+    return record
+
+
+def _edge_dijkstra(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    from scipy.sparse.csgraph import dijkstra
+
+    from becos.geodesics import edge_graph
+    from becos.mesh import TriMesh
+
+    return dijkstra(edge_graph(TriMesh(vertices, faces)), directed=False)
+
+
+def test_geodesics_on_full_shape(small_record, tmp_path):
+    r = small_record
+    out = write_psmal([r], tmp_path / "psmal")
+    write_geodesics([r], out, "dijkstra")
+    with pytest.raises(ExportError, match="exist already"):
+        write_geodesics([r], out, "heat")
+    write_geodesics([r], out, "heat", overwrite=True)
+    (row,) = read_ids(out)
+    assert sorted(p.name for p in out.iterdir()) == ["ids.csv", "logs", "test"]
+    assert {p.name for p in (out / "test").iterdir()} == {"shapes", "maps", "geodesics"}
+    heat = {s: np.load(out / "test" / "geodesics" / f"{row[f'{s}_id']}.npy") for s in ("x", "y")}
+    dijkstra_out = tmp_path / "dijkstra"
+    write_geodesics([r], dijkstra_out, "dijkstra")
+    edge = {s: np.load(dijkstra_out / "test" / "geodesics" / f"{row[f'{s}_id']}.npy") for s in ("x", "y")}
+    for s in ("x", "y"):
+        d, e = heat[s], edge[s]
+        n = len(r[f"{s}_vertices"])
+        assert d.dtype == np.float32 and d.shape == (n, n) and e.shape == (n, n)
+        assert np.array_equal(d, d.T) and not np.diag(d).any()
+        full = _edge_dijkstra(r[f"{s}_full_vertices"], r[f"{s}_full_faces"])
+        p2f = r[f"{s}_partial_to_full"]
+        assert np.allclose(e, full[np.ix_(p2f, p2f)], rtol=1e-6)  # measured on the FULL shape
+        on_cut = _edge_dijkstra(r[f"{s}_vertices"], r[f"{s}_faces"])
+        assert (e <= on_cut * (1 + 1e-6)).all()  # a cut can only lengthen paths
+        vertices = r[f"{s}_vertices"]
+        euclid = np.linalg.norm(vertices[:, None] - vertices[None], axis=2)
+        far = euclid > 0.1
+        assert (d[far] >= 0.85 * euclid[far]).all()  # heat is approximate on this coarse mesh
+        assert 1.0 < np.median(e[far] / d[far]) < 1.2  # edge paths are a little longer than surface geodesics
+    # X is a sphere of radius 0.5 about the origin: exact geodesics are great-circle arcs
+    unit = r["x_vertices"] / np.linalg.norm(r["x_vertices"], axis=1, keepdims=True)
+    arc = 0.5 * np.arccos(np.clip(unit @ unit.T, -1.0, 1.0))
+    far = arc > 0.1
+    ratio = heat["x"][far] / arc[far]
+    assert abs(np.median(ratio) - 1.0) < 0.03 and np.abs(ratio - 1.0).max() < 0.1
+    assert 1.0 < np.median(edge["x"][far] / arc[far]) < 1.15
+
+
+def test_cli_exports_a_store(records, pair_record_files, small_record, tmp_path, capsys):
+    store = pytest.importorskip("becos.store")
+    from becos.cli import main
+
+    setting = "partial_partial"
+    store_path = store.write_store(pair_record_files[setting], tmp_path / "pp.zarr", setting=setting,
+                                   progress=False)
+    out = tmp_path / "BeCoS" / setting
+    assert main(["export-released", str(store_path), str(out)]) == 0
+    result = json.loads(capsys.readouterr().out)
+    assert result["pairs"] == {"train": 1, "test": 1} and result["setting"] == setting
+    direct = write_released([PairRecord.load(p) for p in pair_record_files[setting]], tmp_path / "direct",
+                            setting=setting)
+    files = sorted(p.relative_to(direct) for p in direct.rglob("*") if p.is_file() and p.parent.name != "logs")
+    assert files == sorted(p.relative_to(out) for p in out.rglob("*") if p.is_file() and p.parent.name != "logs")
+    assert all((direct / f).read_bytes() == (out / f).read_bytes() for f in files)
+    assert main(["export-released", str(store_path), str(out)]) == 2  # exists: refused with a message
+    assert "Fix:" in capsys.readouterr().err
+    assert main(["export-released", str(store_path), str(out), "--force"]) == 0
+
+    small_npz = tmp_path / "small.npz"
+    small_record.save(small_npz)
+    small_store = store.write_store([small_npz], tmp_path / "small.zarr", setting=setting, progress=False)
+    capsys.readouterr()
+    assert main(["export-psmal", str(small_store), str(tmp_path / "psmal"), "--geodesics"]) == 0
+    assert json.loads(capsys.readouterr().out)["geodesics"] == "heat"
+    (row,) = read_ids(tmp_path / "psmal")
+    d = np.load(tmp_path / "psmal" / "test" / "geodesics" / f"{row['y_id']}.npy")
+    assert d.shape == (len(small_record["y_vertices"]),) * 2
