@@ -1,0 +1,854 @@
+"""The benchmark store: one Zarr (format 3) store per setting holding every pair record of that setting.
+
+Layout (one global table of pairs in *store order*: split train, val, test, then other splits
+alphabetically; inside a split by ``pair_id``; row ``i`` of every array below is pair ``i``)::
+
+    <store>/zarr.json               root group; attributes = metadata (see below)
+    <store>/arrays/<key>            one array per record key (``x_vertices``, ``corr_01`` ...):
+                                    "ragged" keys are the pairs' arrays concatenated along axis 0,
+                                    "stacked" keys (scalars, (3,), (3, 3)) are stacked as (N, ...)
+    <store>/offsets/<group>         int64 (N + 1,): rows of pair i of every ragged key of the group
+                                    are ``offsets[i]:offsets[i + 1]``
+    <store>/pairs/meta_json         uint8: every pair's ``meta`` as UTF-8 JSON, concatenated
+    <store>/pairs/meta_offsets      int64 (N + 1,): byte ranges of ``meta_json``
+    <store>/pairs/table_json        uint8: the pairs table (``Benchmark.table``) as UTF-8 JSON
+                                    ``{"columns": [...], "rows": [[...], ...]}``
+
+Offset groups (per side ``s`` in x, y; ``o`` the other side, ``corr_so`` = ``corr_01`` for x):
+
+=====================  ======================================================================
+``s_vertex``           s_vertices, s_partial_to_full, s_overlap_mask, s_annotation, corr_so,
+                       corr_so_face, corr_so_weights  (V_s rows)
+``s_face``             s_faces, s_full_face_ids  (F_s rows)
+``s_full_vertex``      s_full_vertices  (V_full rows, 0 for a full shape)
+``s_full_to_partial``  s_full_to_partial  (V_full rows, also for a full shape)
+``s_full_face``        s_full_faces  (F_full rows, 0 for a full shape)
+=====================  ======================================================================
+
+A key whose lengths disagree with its group's gets an offsets array of its own (named after the
+key); keys outside the schema are stored as well (stacked when every pair has the same shape,
+else ragged with their own offsets), so any :class:`~becos.record.PairRecord` round-trips exactly:
+same keys, dtypes, shapes and values (NaN included) and the same ``meta``. The layout actually
+used is recorded in the root attribute ``becos_store.layout`` (key -> group, or null = stacked).
+
+Files: arrays are sharded (``SHARD_BYTES`` per shard file, inner chunks of ``CHUNK_BYTES``,
+Blosc zstd with byte shuffle, chunk files named ``c.<i>.<j>``), so a store holds about two files
+per array (``zarr.json`` + one shard) until an array outgrows a shard: ~115 files for a few pairs,
+149 for 1,000 pairs of 10k-vertex shapes (2.9 GB of arrays, 0.6 GB on disk; written in ~12 s,
+``benchmarks/store.py``) instead of one file per pair and key — while
+reading one pair still decodes only the inner chunks it touches.
+
+Root attributes (``Benchmark.metadata``): the caller's metadata (``config_hash``, ``config``,
+``datasets`` with licence and citation ...) plus ``schema_version`` (:data:`becos.record.SCHEMA_VERSION`),
+``setting``, ``n_pairs``, ``splits`` (pairs per split), ``created`` (ISO 8601, UTC) and
+``versions`` (python, becos, numpy, zarr, trimesh, pymeshlab, embreex, snakemake where installed);
+``becos_store`` holds the store format and layout.
+
+Writing (:func:`write_store`) streams: one pass over the .npz headers and metas (shapes, dtypes,
+order), then one pass over the records, buffering at most one shard per array, into a hidden
+temporary folder beside ``out`` that replaces ``out`` when complete. Command line::
+
+    becos export-zarr --setting partial_partial --out results/partial_partial/benchmark.zarr \\
+        [--metadata metadata.json] results/partial_partial/pairs/chunk_*.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import ast
+import json
+import math
+import os
+import re
+import shutil
+import struct
+import sys
+import tempfile
+import time
+import zipfile
+from dataclasses import dataclass
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Iterable, Iterator, Mapping
+
+import numpy as np
+
+from becos.errors import BecosError, InputFileError
+from becos.record import PAIR_KEYS, SCHEMA_VERSION, SETTINGS, SHAPE_KEYS, PairRecord
+
+STORE_FORMAT = 1
+SPLIT_ORDER = ("train", "val", "test")
+CHUNK_BYTES = 1 << 20
+"""Uncompressed bytes per inner chunk (the unit a partial read decodes)."""
+SHARD_BYTES = 64 << 20
+"""Uncompressed bytes per shard file (also the most :func:`write_store` buffers per array)."""
+CHUNK_KEYS = {"name": "default", "separator": "."}
+"""Chunk files named ``c.0.0`` inside each array's folder (no nested folders per dimension)."""
+READ_BLOCK_BYTES = 64 << 20
+"""Uncompressed bytes read at once by :meth:`Benchmark.blocks` / :meth:`Benchmark.records`."""
+VERSION_PACKAGES = ("becos", "numpy", "zarr", "trimesh", "pymeshlab", "embreex", "snakemake")
+TABLE_COLUMNS = ("index", "pair_id", "split", "category", "seed", "x_dataset", "x_name", "x_class", "x_category",
+                 "y_dataset", "y_name", "y_class", "y_category", "x_n_vertices", "y_n_vertices", "x_overlap",
+                 "y_overlap", "n_tries", "accepted")
+TABLE_DTYPES = {"index": "int64", "seed": "int64", "x_n_vertices": "int64", "y_n_vertices": "int64",
+                "x_overlap": "float64", "y_overlap": "float64", "n_tries": "int64", "accepted": "bool"}
+
+
+def _schema_groups() -> dict[str, str]:
+    """Record key -> offsets group for the ragged keys of the record schema (module docstring)."""
+    groups = {}
+    for s, corr in (("x", "corr_01"), ("y", "corr_10")):
+        for key in ("vertices", "partial_to_full", "overlap_mask", "annotation"):
+            groups[f"{s}_{key}"] = f"{s}_vertex"
+        for key in (corr, f"{corr}_face", f"{corr}_weights"):
+            groups[key] = f"{s}_vertex"
+        groups[f"{s}_faces"] = groups[f"{s}_full_face_ids"] = f"{s}_face"
+        groups[f"{s}_full_vertices"] = f"{s}_full_vertex"
+        groups[f"{s}_full_to_partial"] = f"{s}_full_to_partial"
+        groups[f"{s}_full_faces"] = f"{s}_full_face"
+    return groups
+
+
+SCHEMA_GROUPS = _schema_groups()
+RECORD_KEYS = tuple(f"{s}_{k}" for s in ("x", "y") for k in SHAPE_KEYS) + PAIR_KEYS
+
+
+# --------------------------------------------------------------------------------------------------
+# reading record files
+
+
+@dataclass
+class _RecordInfo:
+    path: Path
+    meta: dict
+    shapes: dict[str, tuple[tuple[int, ...], np.dtype]]
+
+
+_LOCAL_HEADER = struct.Struct("<4sHHHHHIIIHH")
+_NPY_HEADER = re.compile(r"""^\{'descr': '([^']+)', 'fortran_order': (True|False), 'shape': \(([0-9, ]*)\), \}\s*$""")
+
+
+def _npy_header(fh) -> tuple[tuple[int, ...], np.dtype, bool]:
+    """(shape, dtype, fortran_order) of the .npy stream at ``fh``'s position; leaves it at the data."""
+    version = np.lib.format.read_magic(fh)
+    size = struct.unpack("<H" if version == (1, 0) else "<I", fh.read(2 if version == (1, 0) else 4))[0]
+    text = fh.read(size).decode("latin1" if version < (3, 0) else "utf-8")
+    m = _NPY_HEADER.match(text)
+    if m is not None:                      # numpy's own layout: parse without ast (10x faster)
+        shape = tuple(int(v) for v in m.group(3).replace(" ", "").split(",") if v)
+        dtype, fortran = np.dtype(m.group(1)), m.group(2) == "True"
+    else:
+        header = ast.literal_eval(text)
+        shape = tuple(header["shape"])
+        dtype, fortran = np.lib.format.descr_to_dtype(header["descr"]), bool(header["fortran_order"])
+    if dtype.hasobject:
+        raise ValueError("holds Python objects (pickles), which becos never writes")
+    return shape, dtype, fortran
+
+
+def _read_npz(path: Path, load: bool) -> tuple[dict, dict[str, tuple[tuple[int, ...], np.dtype]], dict]:
+    """``(meta, {key: (shape, dtype)}, {key: array})`` of a record .npz (arrays only when ``load``).
+
+    Uncompressed members (``np.savez``, what :meth:`PairRecord.save` writes) are read straight from
+    the file at their offset: no zip CRC pass, one copy; compressed ones through the zip stream.
+    """
+    shapes, arrays, meta = {}, {}, None
+    with open(path, "rb") as fh, zipfile.ZipFile(fh) as z:
+        for info in z.infolist():
+            if not info.filename.endswith(".npy"):
+                continue
+            key = info.filename[:-4]
+            stored = info.compress_type == zipfile.ZIP_STORED
+            if stored:
+                fh.seek(info.header_offset)
+                local = _LOCAL_HEADER.unpack(fh.read(_LOCAL_HEADER.size))
+                if local[0] != b"PK\x03\x04":
+                    raise ValueError(f"bad zip member header of {info.filename}")
+                fh.seek(info.header_offset + _LOCAL_HEADER.size + local[9] + local[10])
+                src = fh
+            else:
+                src = z.open(info)
+            try:
+                shape, dtype, fortran = _npy_header(src)
+                if key != "__meta__":
+                    shapes[key] = (shape, dtype)
+                if key != "__meta__" and not load:
+                    continue
+                count = math.prod(shape)
+                if stored:
+                    data = np.fromfile(fh, dtype=dtype, count=count)
+                else:
+                    data = np.frombuffer(src.read(count * dtype.itemsize), dtype=dtype).copy()
+                if len(data) != count:
+                    raise ValueError(f"member {info.filename} is truncated")
+                data = data.reshape(shape, order="F" if fortran else "C")
+            finally:
+                if not stored:
+                    src.close()
+            if key == "__meta__":
+                meta = json.loads(str(data))
+            else:
+                arrays[key] = data
+    return meta, shapes, arrays
+
+
+def _scan_record(path: Path) -> _RecordInfo:
+    """Meta and the (shape, dtype) of every array of a record .npz, reading only the .npy headers."""
+    fix = "give pair records written by becos (PairRecord.save, the workflow's pairs stage)"
+    if not path.is_file():
+        raise InputFileError(path, "pair record not found", "check the path (index paths are relative to the "
+                                                              "current directory) or re-run the pairs stage")
+    try:
+        meta, shapes, _ = _read_npz(path, load=False)
+    except (zipfile.BadZipFile, ValueError, OSError, KeyError, SyntaxError, struct.error, TypeError) as exc:
+        raise InputFileError(path, f"is not a readable pair record .npz ({exc})", fix) from exc
+    if meta is None:
+        raise InputFileError(path, "holds no __meta__ entry, so it is not a pair record", fix)
+    missing = [k for k in RECORD_KEYS if k not in shapes]
+    if missing:
+        raise InputFileError(path, f"lacks the record keys {missing}", fix)
+    if not isinstance(meta.get("pair_id"), str) or not meta["pair_id"]:
+        raise InputFileError(path, "its meta has no pair_id", fix)
+    if meta.get("schema_version", SCHEMA_VERSION) != SCHEMA_VERSION:
+        raise InputFileError(path, f"has record schema version {meta.get('schema_version')}, this becos writes "
+                                   f"stores of version {SCHEMA_VERSION}", "rebuild the pair records with this becos")
+    return _RecordInfo(path, meta, shapes)
+
+
+def read_record_index(path: str | Path) -> list[Path]:
+    """Record paths listed by an index file.
+
+    Accepted: the workflow's chunk index (JSON ``{"setting", "chunk", "pairs": [{"pair_id", "path"}, ...]}``),
+    a JSON list of paths or of such entries, or text with one path per line (blank lines and ``#``
+    comments skipped). Relative paths are taken from the current directory, or else from the index
+    file's folder when only that exists.
+    """
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputFileError(path, f"cannot be read as a record index ({exc})",
+                             "give record .npz files or a chunk index written by `becos pairs`") from exc
+    stripped = text.lstrip()
+    if stripped.startswith(("{", "[")):
+        try:
+            data = json.loads(text)
+        except json.JSONDecodeError as exc:
+            raise InputFileError(path, f"is not valid JSON ({exc})", "fix or regenerate the index") from exc
+        entries = data.get("pairs") if isinstance(data, dict) else data
+        if not isinstance(entries, list):
+            raise InputFileError(path, "is JSON without a 'pairs' list", "give a chunk index written by `becos pairs`")
+        raw = []
+        for entry in entries:
+            value = entry.get("path") if isinstance(entry, dict) else entry
+            if not isinstance(value, str):
+                raise InputFileError(path, f"entry {entry!r} names no record path",
+                                     "each entry needs a 'path' (or be a path string)")
+            raw.append(value)
+    else:
+        raw = [line.strip() for line in text.splitlines() if line.strip() and not line.strip().startswith("#")]
+    out = []
+    for value in raw:
+        p = Path(value)
+        if not p.is_absolute() and not p.exists() and (path.parent / p).exists():
+            p = path.parent / p
+        out.append(p)
+    return out
+
+
+def index_setting(path: str | Path) -> str | None:
+    """The ``setting`` a JSON chunk index declares, else None."""
+    try:
+        data = json.loads(Path(path).read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+        return None
+    return data.get("setting") if isinstance(data, dict) else None
+
+
+# --------------------------------------------------------------------------------------------------
+# writing
+
+
+def _split_rank(split: str) -> tuple[int, str]:
+    return (SPLIT_ORDER.index(split), "") if split in SPLIT_ORDER else (len(SPLIT_ORDER), str(split))
+
+
+def _plan_layout(infos: list[_RecordInfo]) -> tuple[dict[str, str | None], dict[str, np.ndarray]]:
+    """Key -> group (None = stacked) and group -> per-pair lengths (N,) int64."""
+    first = infos[0]
+    keys = list(first.shapes)
+    for info in infos[1:]:
+        if set(info.shapes) != set(keys):
+            diff = sorted(set(info.shapes) ^ set(keys))
+            raise InputFileError(info.path, f"has a different set of arrays than {first.path} (differing: {diff})",
+                                 "export records built by one becos version and setting together")
+    layout: dict[str, str | None] = {}
+    lengths: dict[str, np.ndarray] = {}
+    order = [k for k in SCHEMA_GROUPS if k in first.shapes] + sorted(k for k in keys if k not in SCHEMA_GROUPS)
+    for key in order:
+        shapes = [info.shapes[key][0] for info in infos]
+        dtypes = {info.shapes[key][1] for info in infos}
+        if len(dtypes) > 1:
+            bad = next(info for info in infos if info.shapes[key][1] != first.shapes[key][1])
+            raise InputFileError(bad.path, f"'{key}' has dtype {bad.shapes[key][1]} but {first.path} has "
+                                           f"{first.shapes[key][1]}", "rebuild the records with one becos version")
+        same_shape = all(s == shapes[0] for s in shapes)
+        if key not in SCHEMA_GROUPS and same_shape:
+            layout[key] = None
+            continue
+        if len(shapes[0]) == 0 or any(s[1:] != shapes[0][1:] for s in shapes):
+            bad = next((info for info in infos if info.shapes[key][0][1:] != shapes[0][1:]), first)
+            raise InputFileError(bad.path, f"'{key}' has shape {bad.shapes[key][0]}, which cannot be concatenated "
+                                           f"with {first.path}'s {shapes[0]}", "rebuild the records with one becos version")
+        n = np.array([s[0] for s in shapes], dtype=np.int64)
+        group = SCHEMA_GROUPS.get(key, key)
+        if group in lengths and not np.array_equal(lengths[group], n):
+            group = key                      # disagrees with its group: offsets of its own
+        lengths.setdefault(group, n)
+        layout[key] = group
+    return layout, lengths
+
+
+def _chunking(n_rows: int, row_shape: tuple[int, ...], itemsize: int) -> tuple[tuple, tuple | None]:
+    """(chunks, shards or None) along axis 0 for an array of ``n_rows`` rows of ``row_shape``."""
+    row_bytes = max(1, math.prod(row_shape)) * itemsize
+    chunk_rows = int(min(max(1, CHUNK_BYTES // row_bytes), max(1, n_rows)))
+    n_chunks = max(1, math.ceil(n_rows / chunk_rows))
+    per_shard = int(min(max(1, SHARD_BYTES // (chunk_rows * row_bytes)), n_chunks))
+    chunks = (chunk_rows, *row_shape)
+    if per_shard <= 1 and n_chunks == 1:
+        return chunks, None
+    return chunks, (chunk_rows * per_shard, *row_shape)
+
+
+class _Writer:
+    """Writes array regions in one background thread (compression overlaps reading the next records);
+    at most ``max_pending`` bytes wait in the queue."""
+
+    def __init__(self, max_pending: int = 2 * SHARD_BYTES):
+        from concurrent.futures import ThreadPoolExecutor
+
+        self.pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="becos-store")
+        self.pending: list = []
+        self.max_pending = max_pending
+
+    def submit(self, array, start: int, data: np.ndarray) -> None:
+        def job():
+            array[start:start + len(data)] = data
+
+        self.pending.append((self.pool.submit(job), data.nbytes))
+        while sum(n for _, n in self.pending) > self.max_pending:
+            self.pending.pop(0)[0].result()
+        still = []
+        for future, nbytes in self.pending:
+            if future.done():
+                future.result()              # re-raises a failed write now
+            else:
+                still.append((future, nbytes))
+        self.pending = still
+
+    def finish(self, failed: bool = False) -> None:
+        """Wait for every write (re-raising the first failure); after ``failed``, drop queued ones."""
+        try:
+            if not failed:
+                for future, _ in self.pending:
+                    future.result()
+        finally:
+            self.pool.shutdown(wait=True, cancel_futures=True)
+            self.pending = []
+
+
+class _Sink:
+    """Buffers rows of one array and hands them to the writer a whole number of shards at a time."""
+
+    def __init__(self, array, shard_rows: int, writer: _Writer):
+        self.array, self.shard_rows, self.writer = array, max(1, shard_rows), writer
+        self.parts: list[np.ndarray] = []
+        self.buffered = 0
+        self.pos = 0
+
+    def add(self, rows: np.ndarray) -> None:
+        if len(rows):
+            self.parts.append(rows)
+            self.buffered += len(rows)
+        if self.buffered >= self.shard_rows:
+            self._write(final=False)
+
+    def _write(self, final: bool) -> None:
+        if not self.buffered:
+            return
+        data = self.parts[0] if len(self.parts) == 1 else np.concatenate(self.parts)
+        n = len(data) if final else (len(data) // self.shard_rows) * self.shard_rows
+        self.writer.submit(self.array, self.pos, data[:n])
+        self.pos += n
+        rest = data[n:]
+        self.parts = [rest] if len(rest) else []
+        self.buffered = len(rest)
+
+    def close(self) -> None:
+        self._write(final=True)
+        if self.pos != self.array.shape[0]:
+            raise RuntimeError(f"store array {self.array.name}: wrote {self.pos} of {self.array.shape[0]} rows")
+
+
+def _versions() -> dict[str, str]:
+    from importlib import metadata as importlib_metadata
+
+    out = {"python": sys.version.split()[0]}
+    for name in VERSION_PACKAGES:
+        try:
+            out[name] = importlib_metadata.version(name)
+        except importlib_metadata.PackageNotFoundError:
+            continue
+    return out
+
+
+def _pair_category(meta: dict) -> str:
+    """The pair's category pool: meta ``category`` (workflow records), else derived from the shapes."""
+    if meta.get("category"):
+        return str(meta["category"])
+    cx, cy = (meta.get(s, {}).get("category", "") for s in ("x", "y"))
+    if meta.get("setting") == "partial_full":
+        return cy
+    if cx == cy or cy == "centaur":
+        return cx
+    return cy if cx == "centaur" else f"{cx}_{cy}"
+
+
+def table_row(index: int, meta: dict, x_n_vertices: int, y_n_vertices: int, x_overlap: float,
+              y_overlap: float) -> list:
+    """One row of the pairs table (:data:`TABLE_COLUMNS`) from a pair's meta and sizes."""
+    x, y = meta.get("x", {}), meta.get("y", {})
+    return [int(index), meta["pair_id"], meta.get("split", ""), _pair_category(meta), int(meta.get("seed", -1)),
+            x.get("dataset", ""), x.get("name", ""), x.get("class", ""), x.get("category", ""),
+            y.get("dataset", ""), y.get("name", ""), y.get("class", ""), y.get("category", ""),
+            int(x_n_vertices), int(y_n_vertices), float(x_overlap), float(y_overlap),
+            int(meta.get("n_tries", 0)), bool(meta.get("accepted", True))]
+
+
+def _json_bytes(value) -> np.ndarray:
+    return np.frombuffer(json.dumps(value, sort_keys=True, allow_nan=True).encode("utf-8"), dtype=np.uint8)
+
+
+def _bytes_array(group, name: str, data: np.ndarray) -> None:
+    chunks, shards = _chunking(len(data), (), 1)
+    array = group.create_array(name, shape=data.shape, dtype=np.uint8, chunks=chunks, shards=shards,
+                               compressors=_compressors(), fill_value=0, chunk_key_encoding=CHUNK_KEYS)
+    if len(data):
+        array[:] = data
+
+
+def _compressors():
+    """Blosc zstd level 1 with byte shuffle: about 2x faster to write than plain zstd and smaller
+    (shuffled small integers and masks compress well; float coordinates little either way)."""
+    from zarr.codecs import BloscCodec
+
+    return [BloscCodec(cname="zstd", clevel=1, shuffle="shuffle")]
+
+
+def write_pairs(root, metas: list[dict], table_rows: list[list]) -> None:
+    """(Re)write the ``pairs`` group (metas and table) of an open, writable store group."""
+    pairs = root.require_group("pairs")
+    blobs = [json.dumps(m, sort_keys=True, allow_nan=True).encode("utf-8") for m in metas]
+    offsets = np.zeros(len(blobs) + 1, dtype=np.int64)
+    offsets[1:] = np.cumsum([len(b) for b in blobs])
+    for name in ("meta_json", "meta_offsets", "table_json"):
+        if name in pairs:
+            del pairs[name]
+    _bytes_array(pairs, "meta_json", np.frombuffer(b"".join(blobs), dtype=np.uint8))
+    pairs.create_array("meta_offsets", data=offsets, chunks=(max(1, len(offsets)),), compressors=_compressors(),
+                       chunk_key_encoding=CHUNK_KEYS)
+    _bytes_array(pairs, "table_json", _json_bytes({"columns": list(TABLE_COLUMNS), "rows": table_rows}))
+
+
+def _progress(message: str) -> None:
+    print(f"export-zarr: {message}", file=sys.stderr, flush=True)
+
+
+def _add_record(info: _RecordInfo, sinks: dict, layout: dict, metas: list, rows: list, index: int) -> None:
+    try:
+        meta, _, arrays = _read_npz(info.path, load=True)
+    except (zipfile.BadZipFile, ValueError, OSError, KeyError, SyntaxError, struct.error, TypeError) as exc:
+        raise InputFileError(info.path, f"is not a readable pair record .npz ({exc})",
+                             "re-run the pairs stage for this pair") from exc
+    record = PairRecord(arrays, meta)
+    for key, sink in sinks.items():
+        value = record.arrays[key]
+        if value.shape != info.shapes[key][0] or value.dtype != info.shapes[key][1]:
+            raise InputFileError(info.path, "changed while the store was written",
+                                 "re-run export-zarr once the pairs stage is done")
+        sink.add(value[None] if layout[key] is None else value)
+    metas.append(record.meta)
+    rows.append(table_row(index, record.meta, len(record["x_vertices"]), len(record["y_vertices"]),
+                          record["x_overlap"], record["y_overlap"]))
+
+
+def write_store(record_paths: Iterable[str | Path], out: str | Path, *, setting: str,
+                metadata: Mapping | None = None, progress: bool = True) -> Path:
+    """One Zarr v3 store per setting: every PairRecord concatenated per key (+ offsets), a pairs table,
+    metadata. Written to a temp dir then renamed (atomic).
+
+    Args:
+        record_paths: pair record .npz files (:meth:`becos.record.PairRecord.save`), any order; each
+            pair_id once, every record of ``setting`` and of this schema version.
+        out: the store folder (``*.zarr``); an existing store there is replaced.
+        setting: full_full | partial_full | partial_partial.
+        metadata: JSON-able extra root attributes (``config_hash``, ``config``, ``datasets`` ...);
+            a ``setting`` in it must equal ``setting``.
+        progress: print progress to stderr (about every 10 % for 50 records or more).
+
+    Returns:
+        ``out`` as a Path. Raises :class:`InputFileError` naming the offending record file.
+    """
+    import zarr
+
+    out = Path(out)
+    if setting not in SETTINGS:
+        raise BecosError(f"setting must be one of {SETTINGS}, got {setting!r}")
+    metadata = json.loads(json.dumps(dict(metadata or {}), default=str))
+    if metadata.get("setting", setting) != setting:
+        raise BecosError(f"the store metadata says setting {metadata['setting']!r} but --setting is {setting!r}. "
+                         "Fix: pass the metadata file of the same setting")
+    started = time.perf_counter()
+    paths = [Path(p) for p in record_paths]
+    if not paths:
+        raise BecosError(f"{out}: no pair records given. Fix: pass record .npz files or chunk index files")
+    infos = []
+    seen: dict[str, Path] = {}
+    for path in paths:
+        info = _scan_record(path)
+        pid = info.meta["pair_id"]
+        if pid in seen:
+            raise InputFileError(path, f"pair {pid} is also in {seen[pid]}", "give each record once")
+        seen[pid] = path
+        if info.meta.get("setting", setting) != setting:
+            raise InputFileError(path, f"is a {info.meta.get('setting')} record, not {setting}",
+                                 f"export only the records of {setting} into this store")
+        infos.append(info)
+    infos.sort(key=lambda i: (_split_rank(i.meta.get("split", "")), i.meta["pair_id"]))
+    layout, lengths = _plan_layout(infos)
+    n = len(infos)
+    if progress and n >= 50:
+        _progress(f"{n} records scanned in {time.perf_counter() - started:.1f} s")
+
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(dir=out.parent, prefix=f".{out.name}.", suffix=".tmp"))
+    try:
+        root = zarr.open_group(str(tmp), mode="w", zarr_format=3)
+        arrays, offsets_group = root.create_group("arrays"), root.create_group("offsets")
+        for group, n_rows in lengths.items():
+            offsets = np.zeros(n + 1, dtype=np.int64)
+            offsets[1:] = np.cumsum(n_rows)
+            offsets_group.create_array(group, data=offsets, chunks=(n + 1,), compressors=_compressors(),
+                                       chunk_key_encoding=CHUNK_KEYS)
+        sinks = {}
+        writer = _Writer()
+        first = infos[0].shapes
+        for key, group in layout.items():
+            shape, dtype = first[key]
+            total = n if group is None else int(lengths[group].sum())
+            row_shape = shape if group is None else shape[1:]
+            chunks, shards = _chunking(total, row_shape, dtype.itemsize)
+            array = arrays.create_array(key, shape=(total, *row_shape), dtype=dtype, chunks=chunks, shards=shards,
+                                        compressors=_compressors(), fill_value=np.zeros((), dtype).item(),
+                                        chunk_key_encoding=CHUNK_KEYS)
+            sinks[key] = _Sink(array, (shards or chunks)[0], writer)
+        metas, rows = [], []
+        step = max(1, math.ceil(n / 10))
+        try:
+            for i, info in enumerate(infos):
+                _add_record(info, sinks, layout, metas, rows, i)
+                if progress and n >= 50 and ((i + 1) % step == 0 or i + 1 == n):
+                    _progress(f"{i + 1}/{n} records read ({time.perf_counter() - started:.1f} s)")
+            for sink in sinks.values():
+                sink.close()
+        except BaseException:
+            writer.finish(failed=True)
+            raise
+        writer.finish()
+        write_pairs(root, metas, rows)
+        splits: dict[str, int] = {}
+        for m in metas:
+            splits[m.get("split", "")] = splits.get(m.get("split", ""), 0) + 1
+        attrs = dict(metadata)
+        attrs.update(schema_version=SCHEMA_VERSION, setting=setting, n_pairs=n, splits=splits,
+                     created=datetime.now(timezone.utc).isoformat(timespec="seconds"), versions=_versions(),
+                     becos_store={"format": STORE_FORMAT, "layout": layout})
+        root.attrs.update(attrs)
+        os.chmod(tmp, 0o755)
+        _replace_dir(tmp, out)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    if progress:
+        _progress(f"{n} pairs -> {out} ({time.perf_counter() - started:.1f} s)")
+    return out
+
+
+def _replace_dir(tmp: Path, out: Path) -> None:
+    """Move the finished ``tmp`` folder to ``out``; an old ``out`` is moved aside first, then deleted."""
+    old = None
+    if out.exists() or out.is_symlink():
+        old = Path(tempfile.mkdtemp(dir=out.parent, prefix=f".{out.name}.", suffix=".old"))
+        os.replace(out, old / "store")
+    os.replace(tmp, out)
+    if old is not None:
+        shutil.rmtree(old, ignore_errors=True)
+
+
+# --------------------------------------------------------------------------------------------------
+# reading
+
+
+@dataclass
+class Block:
+    """Consecutive pairs ``start:stop`` of a store read at once.
+
+    Attributes:
+        start, stop: store rows.
+        arrays: key -> the block's rows of that key (ragged keys concatenated over the block's
+            pairs, stacked keys (stop - start, ...)).
+        offsets: group -> (stop - start + 1,) int64 offsets into ``arrays`` (starting at 0).
+        layout: key -> group, None for stacked keys.
+        metas: the pairs' meta dicts.
+    """
+
+    start: int
+    stop: int
+    arrays: dict[str, np.ndarray]
+    offsets: dict[str, np.ndarray]
+    layout: dict[str, str | None]
+    metas: list[dict]
+
+    def __len__(self) -> int:
+        return self.stop - self.start
+
+    def counts(self, group: str) -> np.ndarray:
+        """(n,) rows per pair of a ragged group."""
+        return np.diff(self.offsets[group])
+
+    def record(self, i: int) -> PairRecord:
+        """The ``i``-th pair of the block (0-based within the block), arrays copied."""
+        arrays = {}
+        for key, group in self.layout.items():
+            data = self.arrays[key]
+            if group is None:
+                arrays[key] = data[i, ...].copy()
+            else:
+                o = self.offsets[group]
+                arrays[key] = data[o[i]:o[i + 1]].copy()
+        return PairRecord(arrays, self.metas[i])
+
+
+class Benchmark:
+    """A benchmark store opened for reading (:func:`open_benchmark`).
+
+    Attributes:
+        path: the store folder.
+        setting: full_full | partial_full | partial_partial.
+        metadata: root attributes (schema_version, setting, config_hash, config, versions, datasets,
+            created ...), without the internal ``becos_store`` layout.
+        table: pandas DataFrame, one row per pair in store order (:data:`TABLE_COLUMNS`).
+    """
+
+    def __init__(self, path: str | Path):
+        import pandas as pd
+        import zarr
+
+        self.path = Path(path)
+        fix = "give a store written by `becos export-zarr` (a folder with zarr.json)"
+        if not (self.path / "zarr.json").is_file():
+            raise InputFileError(self.path, "is not a Zarr v3 store", fix)
+        try:
+            root = zarr.open_group(str(self.path), mode="r", zarr_format=3)
+            attrs = dict(root.attrs)
+        except Exception as exc:  # zarr raises several types for unreadable metadata
+            raise InputFileError(self.path, f"cannot be opened as a Zarr store ({exc})", fix) from exc
+        info = attrs.get("becos_store")
+        if not isinstance(info, dict) or info.get("format") != STORE_FORMAT:
+            raise InputFileError(self.path, f"is not a becos benchmark store of format {STORE_FORMAT}", fix)
+        if attrs.get("schema_version") != SCHEMA_VERSION:
+            raise InputFileError(self.path, f"holds record schema {attrs.get('schema_version')}, this becos reads "
+                                            f"{SCHEMA_VERSION}", "re-export the store with this becos version")
+        self._root = root
+        self.metadata = {k: v for k, v in attrs.items() if k != "becos_store"}
+        self.setting = attrs["setting"]
+        self.layout: dict[str, str | None] = dict(info["layout"])
+        self._arrays = {key: root[f"arrays/{key}"] for key in self.layout}
+        groups = sorted({g for g in self.layout.values() if g is not None})
+        self.offsets = {g: np.asarray(root[f"offsets/{g}"][:]) for g in groups}
+        self._meta_offsets = np.asarray(root["pairs/meta_offsets"][:])
+        self._meta_json = root["pairs/meta_json"]
+        table = json.loads(bytes(np.asarray(root["pairs/table_json"][:])).decode("utf-8"))
+        frame = pd.DataFrame(table["rows"], columns=table["columns"])
+        self.table = frame.astype({k: v for k, v in TABLE_DTYPES.items() if k in frame.columns})
+        self._row_of = {pid: i for i, pid in enumerate(self.table["pair_id"])}
+        n = len(self.table)
+        for name, o in [*self.offsets.items(), ("meta_offsets", self._meta_offsets)]:
+            if len(o) != n + 1:
+                raise InputFileError(self.path, f"offsets '{name}' have {len(o)} entries for {n} pairs",
+                                     "re-export the store (it is damaged)")
+
+    def __repr__(self) -> str:
+        return f"Benchmark({str(self.path)!r}, setting={self.setting!r}, pairs={len(self)})"
+
+    def __len__(self) -> int:
+        return len(self.table)
+
+    def __iter__(self) -> Iterator[PairRecord]:
+        return self.records()
+
+    def splits(self) -> list[str]:
+        """Splits present, in store order (train, val, test first)."""
+        return sorted(set(self.table["split"]), key=_split_rank)
+
+    def row(self, key: int | str) -> int:
+        """Store row of a row index or pair_id (KeyError/IndexError if absent)."""
+        if isinstance(key, str):
+            if key not in self._row_of:
+                raise KeyError(f"{self.path}: no pair {key!r}")
+            return self._row_of[key]
+        i = int(key)
+        if not -len(self) <= i < len(self):
+            raise IndexError(f"{self.path}: row {i} out of range for {len(self)} pairs")
+        return i % len(self)
+
+    def record(self, key: int | str) -> PairRecord:
+        """The pair at a row index or with a pair_id: exact round trip of every array and the meta."""
+        i = self.row(key)
+        return self.read_block(i, i + 1).record(0)
+
+    def records(self, split: str | None = None) -> Iterator[PairRecord]:
+        """Every pair (or those of one split) in table order, read a block at a time."""
+        for block in self.blocks(split):
+            for i in range(len(block)):
+                yield block.record(i)
+
+    def array(self, key: str):
+        """The zarr array of one key (ragged: all pairs' rows concatenated; stacked: (N, ...))."""
+        return self._arrays[key]
+
+    def concatenated(self, key: str) -> tuple[np.ndarray, np.ndarray | None]:
+        """All pairs' rows of one key at once: ``(data, offsets)`` for ragged keys ((N + 1,) offsets),
+        ``(stacked (N, ...), None)`` for stacked keys."""
+        group = self.layout[key]
+        return np.asarray(self._arrays[key][:]), (None if group is None else self.offsets[group])
+
+    def pair_bytes(self) -> np.ndarray:
+        """(N,) uncompressed bytes of each pair's arrays."""
+        total = np.zeros(len(self), dtype=np.int64)
+        for key, group in self.layout.items():
+            a = self._arrays[key]
+            row_bytes = math.prod(a.shape[1:]) * a.dtype.itemsize
+            total += row_bytes if group is None else np.diff(self.offsets[group]) * row_bytes
+        return total
+
+    def blocks(self, split: str | None = None, max_bytes: int = READ_BLOCK_BYTES) -> Iterator[Block]:
+        """Consecutive pairs (of one split, or all) in blocks of about ``max_bytes`` of arrays."""
+        rows = np.arange(len(self)) if split is None else np.flatnonzero(self.table["split"].to_numpy() == split)
+        if not len(rows):
+            return
+        size = self.pair_bytes()
+        runs = np.split(rows, np.flatnonzero(np.diff(rows) != 1) + 1)
+        for run in runs:
+            start = int(run[0])
+            acc = 0
+            for i in run:
+                if acc and acc + size[i] > max_bytes:
+                    yield self.read_block(start, int(i))
+                    start, acc = int(i), 0
+                acc += int(size[i])
+            yield self.read_block(start, int(run[-1]) + 1)
+
+    def read_block(self, start: int, stop: int) -> Block:
+        """Pairs ``start:stop`` (store rows) as one :class:`Block`."""
+        import asyncio
+
+        from zarr.core.sync import sync
+
+        keys = list(self.layout)
+        ranges = []
+        for key in keys:
+            group = self.layout[key]
+            a, b = (start, stop) if group is None else (self.offsets[group][start], self.offsets[group][stop])
+            ranges.append((self._arrays[key], int(a), int(b)))
+        mo = self._meta_offsets
+        ranges.append((self._meta_json, int(mo[start]), int(mo[stop])))
+
+        async def read_all():   # every array's slice concurrently: one round trip, not one per key
+            return await asyncio.gather(*(array.async_array.getitem(slice(a, b)) for array, a, b in ranges))
+
+        values = sync(read_all())
+        arrays = {key: np.asarray(v) for key, v in zip(keys, values)}
+        offsets = {g: o[start:stop + 1] - o[start] for g, o in self.offsets.items()}
+        blob = bytes(np.asarray(values[-1]))
+        local = mo[start:stop + 1] - mo[start]
+        metas = [json.loads(blob[local[i]:local[i + 1]].decode("utf-8")) for i in range(stop - start)]
+        return Block(start, stop, arrays, offsets, self.layout, metas)
+
+    def read_metas(self) -> list[dict]:
+        """Every pair's meta, in store order."""
+        blob = bytes(np.asarray(self._meta_json[:]))
+        mo = self._meta_offsets
+        return [json.loads(blob[mo[i]:mo[i + 1]].decode("utf-8")) for i in range(len(self))]
+
+
+def open_benchmark(path: str | Path) -> Benchmark:
+    """Open a store written by :func:`write_store` (read-only)."""
+    return Benchmark(path)
+
+
+def count_files(path: str | Path) -> int:
+    """Number of files below a store folder."""
+    return sum(len(files) for _, _, files in os.walk(path))
+
+
+# --------------------------------------------------------------------------------------------------
+# command line
+
+
+def configure_parser(parser: argparse.ArgumentParser, name: str = "export-zarr") -> None:
+    parser.add_argument("--setting", required=True, choices=SETTINGS)
+    parser.add_argument("--out", required=True, type=Path, help="store folder to write (replaced if present)")
+    parser.add_argument("--metadata", type=Path, help="JSON file of extra root attributes (config, config_hash, "
+                                                      "datasets ...), e.g. becos.workflow.store_metadata")
+    parser.add_argument("inputs", nargs="+", type=Path,
+                        help="pair record .npz files and/or index files (a chunk index JSON of `becos pairs`, "
+                             "or text with one record path per line)")
+
+
+def expand_inputs(inputs: Iterable[str | Path], setting: str | None = None) -> list[Path]:
+    """Record paths from a mix of record .npz files and index files (:func:`read_record_index`)."""
+    out = []
+    for path in map(Path, inputs):
+        if path.suffix == ".npz":
+            out.append(path)
+            continue
+        if not path.is_file():
+            raise InputFileError(path, "not found", "pass existing record .npz files or index files")
+        declared = index_setting(path)
+        if setting is not None and declared is not None and declared != setting:
+            raise InputFileError(path, f"is an index of {declared} records, not {setting}",
+                                 "pass the indexes of the setting being exported")
+        out.extend(read_record_index(path))
+    return out
+
+
+def run_cli(args: argparse.Namespace) -> int:
+    metadata = None
+    if args.metadata is not None:
+        try:
+            metadata = json.loads(Path(args.metadata).read_text(encoding="utf-8"))
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+            raise InputFileError(args.metadata, f"cannot be read as JSON ({exc})",
+                                 "give the metadata JSON written by `becos metadata`") from exc
+        if not isinstance(metadata, dict):
+            raise InputFileError(args.metadata, "is not a JSON object", "give a {key: value} JSON file")
+    paths = expand_inputs(args.inputs, args.setting)
+    started = time.perf_counter()
+    write_store(paths, args.out, setting=args.setting, metadata=metadata)
+    bench = open_benchmark(args.out)
+    print(json.dumps({"store": str(args.out), "setting": bench.setting, "n_pairs": len(bench),
+                      "splits": bench.metadata.get("splits"), "n_files": count_files(args.out),
+                      "seconds": round(time.perf_counter() - started, 2)}))
+    return 0

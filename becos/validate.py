@@ -1,0 +1,516 @@
+"""Validation of a benchmark store (:mod:`becos.store`): every invariant a consumer relies on.
+
+:func:`validate_store` returns human-readable problems (empty = valid); each starts with the name
+of the check that failed, then says what is wrong, in how many pairs, with example pair ids::
+
+    index_range: corr_01 outside [-1, V_y) in 1 pair(s), e.g. pp00000000000001 (1 value(s))
+
+Checks (vectorised over blocks of pairs read with :meth:`becos.store.Benchmark.blocks`):
+
+================  ==================================================================================
+``schema``        keys, dtypes, trailing shapes and offset groups as in :mod:`becos.record` /
+                  :mod:`becos.store`
+``metadata``      root attributes: schema version, setting, pair count
+``meta``          per pair: setting equals the store's, split is train/val/test
+``table``         the pairs table agrees with the metas and arrays (ids, splits, sizes, overlaps)
+``pair_id``       pair ids unique
+``index_range``   faces, corr_01/corr_10 (+ ``_face``), partial_to_full, full_to_partial,
+                  full_face_ids, full_faces index inside their targets (-1 only where allowed)
+``unmatched``     corr_01 >= 0 and corr_01_face >= 0 exactly where x_overlap_mask (same for Y);
+                  weight rows of unmatched vertices are all 0 (or all NaN)
+``weights``       weights of matched vertices finite, >= 0, summing to 1
+``corr_face``     corr_01 is the largest-weight corner of corr_01_face (same for corr_10)
+``overlap``       s_overlap equals the mask's mean; partial_partial pairs whose meta says
+                  ``accepted`` have both overlaps in [min_overlap, max_overlap] of meta ``options``
+``index_maps``    partial_to_full strictly increasing, full_to_partial its inverse (-1 elsewhere)
+``full_shape``    a full shape keeps every face and vertex (identity maps)
+``setting``       full_full: both shapes full; partial_full: X full
+``face_map``      partial shapes: partial_to_full[faces] == full_faces[full_face_ids]
+``vertex_map``    partial shapes: vertices == full_vertices[partial_to_full] (to 1e-9 relative)
+``connectivity``  partial shapes: one edge-connected component, every vertex on a face
+``rotation``      frame, alignment and random rotations orthonormal with det +1
+``alignment``     X's alignment is the identity (rotation I, translation 0)
+``camera``        NaN for full shapes, finite for partial ones
+``scalars``       full_area > 0, full_sqrt_area**2 == full_area, dataset_scale > 0
+``finite``        vertex coordinates, centres and translations finite
+``split_classes`` no (dataset, class) in two splits — for datasets whose split rule holds classes
+                  out (``by_class``, ``template_table`` or unknown; not ``slices``/``by_name``,
+                  whose splits share classes by design); the X side of partial_full pairs (the
+                  class template) is exempt
+``centaur``       centaur shapes only in train
+================  ==================================================================================
+
+Command line: ``becos validate STORE [--json OUT]`` prints a JSON summary; with problems it lists
+them on stderr and exits with status 1.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from becos.errors import BecosError
+from becos.record import SCHEMA_VERSION, SETTINGS
+
+SPLITS = ("train", "val", "test")
+WEIGHT_TOL = 1e-6
+ROTATION_TOL = 1e-6
+MAX_EXAMPLES = 3
+
+_SIDE_DTYPES = {
+    "vertices": ("float64", (3,)), "faces": ("int64", (3,)), "full_vertices": ("float64", (3,)),
+    "full_faces": ("int64", (3,)), "partial_to_full": ("int64", ()), "full_to_partial": ("int64", ()),
+    "full_face_ids": ("int64", ()), "overlap_mask": ("bool", ()), "annotation": ("int8", ()),
+    "full_area": ("float64", ()), "full_sqrt_area": ("float64", ()), "dataset_scale": ("float64", ()),
+    "frame_rotation": ("float64", (3, 3)), "centre": ("float64", (3,)), "align_rotation": ("float64", (3, 3)),
+    "align_translation": ("float64", (3,)), "random_rotation": ("float64", (3, 3)),
+    "camera": ("float64", (3, 3)), "remesh_variant": ("int64", ()), "overlap": ("float64", ()),
+}
+_PAIR_DTYPES = {"": ("int64", ()), "_face": ("int64", ()), "_weights": ("float64", (3,))}
+
+
+def expected_schema() -> dict[str, tuple[str, tuple[int, ...]]]:
+    """Record key -> (dtype name, trailing shape) as stored: ragged keys without their leading length,
+    stacked keys with their full per-pair shape."""
+    out = {f"{s}_{k}": v for s in ("x", "y") for k, v in _SIDE_DTYPES.items()}
+    out.update({f"{c}{k}": v for c in ("corr_01", "corr_10") for k, v in _PAIR_DTYPES.items()})
+    return out
+
+
+@dataclass
+class _Problems:
+    """Accumulates problems by (check, what) across blocks: pair count and example ids."""
+
+    items: dict = field(default_factory=dict)
+
+    def add(self, check: str, what: str, pair_ids, detail: str = "", values: int = 0) -> None:
+        """Record ``pair_ids`` failing ``check``; ``values`` counts bad values (summed over calls)."""
+        pair_ids = [str(p) for p in pair_ids]
+        if not pair_ids:
+            return
+        entry = self.items.setdefault((check, what), {"n": 0, "examples": [], "detail": detail, "values": 0})
+        entry["n"] += len(pair_ids)
+        entry["values"] += int(values)
+        entry["examples"].extend(pair_ids[:MAX_EXAMPLES - len(entry["examples"])])
+
+    def messages(self) -> list[str]:
+        out = []
+        for (check, what), e in self.items.items():
+            notes = ([f"{e['values']} value(s)"] if e["values"] else []) + ([e["detail"]] if e["detail"] else [])
+            notes_text = f" ({'; '.join(notes)})" if notes else ""
+            out.append(f"{check}: {what} in {e['n']} pair(s), e.g. {', '.join(e['examples'])}{notes_text}")
+        return out
+
+
+@dataclass
+class ValidationReport:
+    """Result of :func:`validate`: ``problems`` (empty = valid) and a summary."""
+
+    path: Path
+    problems: list[str]
+    n_pairs: int = 0
+    setting: str = ""
+    splits: dict = field(default_factory=dict)
+    seconds: float = 0.0
+
+    @property
+    def valid(self) -> bool:
+        return not self.problems
+
+    def summary(self) -> dict:
+        return {"store": str(self.path), "valid": self.valid, "setting": self.setting, "n_pairs": self.n_pairs,
+                "splits": self.splits, "n_problems": len(self.problems), "seconds": round(self.seconds, 2)}
+
+
+# --------------------------------------------------------------------------------------------------
+# per-block checks
+
+
+class _BlockChecker:
+    """The row-wise checks of one :class:`becos.store.Block`."""
+
+    def __init__(self, block, setting: str, ids: np.ndarray, problems: _Problems):
+        self.b, self.setting, self.ids, self.p = block, setting, ids, problems
+        self.a = block.arrays
+        self.n = len(block)
+        self.cnt = {g: block.counts(g) for g in block.offsets}
+        self.start = {g: o[:-1] for g, o in block.offsets.items()}
+        self.pair_of = {g: np.repeat(np.arange(self.n), c) for g, c in self.cnt.items()}
+
+    # helpers ------------------------------------------------------------------------------------
+    def rep(self, values: np.ndarray, group: str) -> np.ndarray:
+        """Per-pair values repeated for every row of a group."""
+        return np.repeat(values, self.cnt[group])
+
+    def pairs_with(self, bad_rows: np.ndarray, group: str) -> np.ndarray:
+        """Pair indices (in block) with any bad row of a group."""
+        bad_rows = np.asarray(bad_rows, dtype=bool)
+        if bad_rows.ndim > 1:
+            bad_rows = bad_rows.any(axis=tuple(range(1, bad_rows.ndim)))
+        return np.unique(self.pair_of[group][bad_rows])
+
+    def report(self, check: str, what: str, pairs: np.ndarray, values: int = 0) -> None:
+        """Pairs given as block indices or a (n,) bool mask."""
+        pairs = np.asarray(pairs)
+        if pairs.dtype == bool:
+            pairs = np.flatnonzero(pairs)
+        if len(pairs):
+            self.p.add(check, what, self.ids[pairs], values=values)
+
+    def in_range(self, key: str, group: str, lo: int, hi_per_pair: np.ndarray, hi_name: str) -> None:
+        values = self.a[key]
+        hi = self.rep(hi_per_pair, group)
+        if values.ndim > 1:
+            hi = hi[:, None]
+        bad = (values < lo) | (values >= hi)
+        if bad.any():
+            pairs = self.pairs_with(bad, group)
+            self.report("index_range", f"{key} outside [{lo}, {hi_name})", pairs, int(bad.sum()))
+
+    # checks -------------------------------------------------------------------------------------
+    def run(self) -> None:
+        for s, o, corr in (("x", "y", "corr_01"), ("y", "x", "corr_10")):
+            self.side(s, o, corr)
+        self.stacked()
+
+    def side(self, s: str, o: str, corr: str) -> None:
+        a, cnt = self.a, self.cnt
+        gv, gf, go_v, go_f = f"{s}_vertex", f"{s}_face", f"{o}_vertex", f"{o}_face"
+        gfv, gftp, gff = f"{s}_full_vertex", f"{s}_full_to_partial", f"{s}_full_face"
+        V, F, Vo, Fo = cnt[gv], cnt[gf], cnt[go_v], cnt[go_f]
+        partial = cnt[gff] > 0
+        v_full = np.where(partial, cnt[gfv], cnt[gftp])
+        f_full = np.where(partial, cnt[gff], F)
+
+        # index ranges
+        self.in_range(f"{s}_faces", gf, 0, V, f"V_{s}")
+        self.in_range(corr, gv, -1, Vo, f"V_{o}")
+        self.in_range(f"{corr}_face", gv, -1, Fo, f"F_{o}")
+        self.in_range(f"{s}_partial_to_full", gv, 0, v_full, f"V_full_{s}")
+        self.in_range(f"{s}_full_to_partial", gftp, -1, V, f"V_{s}")
+        self.in_range(f"{s}_full_face_ids", gf, 0, f_full, f"F_full_{s}")
+        self.in_range(f"{s}_full_faces", gff, 0, cnt[gfv], f"V_full_{s}")
+
+        # -1 consistency, weights, vertex form vs barycentric form
+        mask = a[f"{s}_overlap_mask"]
+        c, face, w = a[corr], a[f"{corr}_face"], a[f"{corr}_weights"]
+        matched, fmatched = c >= 0, face >= 0
+        self.report("unmatched", f"{corr} >= 0 differs from {s}_overlap_mask", self.pairs_with(matched != mask, gv))
+        self.report("unmatched", f"{corr}_face >= 0 differs from {s}_overlap_mask",
+                    self.pairs_with(fmatched != mask, gv))
+        unmatched_w = w[~fmatched]
+        bad = ~((unmatched_w == 0).all(axis=1) | np.isnan(unmatched_w).all(axis=1))
+        self.report("unmatched", f"{corr}_weights not all 0 (or NaN) where {corr}_face is -1",
+                    np.unique(self.pair_of[gv][~fmatched][bad]))
+        wm = w[fmatched]
+        bad = (~np.isfinite(wm).all(axis=1)) | (wm < -WEIGHT_TOL).any(axis=1) | (np.abs(wm.sum(axis=1) - 1) > WEIGHT_TOL)
+        self.report("weights", f"{corr}_weights negative, non-finite or not summing to 1",
+                    np.unique(self.pair_of[gv][fmatched][bad]))
+        face_ok = fmatched & (face < self.rep(Fo, gv)) & matched
+        if face_ok.any():
+            rows = np.flatnonzero(face_ok)
+            gface = face[rows] + self.rep(self.start[go_f], gv)[rows]
+            corner = np.nan_to_num(w[rows], nan=-1.0).argmax(axis=1)
+            expected = a[f"{o}_faces"][gface, corner]
+            self.report("corr_face", f"{corr} is not the largest-weight corner of {corr}_face",
+                        np.unique(self.pair_of[gv][rows[expected != c[rows]]]))
+
+        # overlap values
+        share = np.bincount(self.pair_of[gv], weights=mask, minlength=self.n) / np.maximum(V, 1)
+        stored = a[f"{s}_overlap"]
+        self.report("overlap", f"{s}_overlap differs from the mean of {s}_overlap_mask",
+                    np.abs(stored - share) > 1e-9)
+        if self.setting == "partial_partial":
+            lo = np.array([m.get("options", {}).get("min_overlap", -np.inf) for m in self.b.metas], dtype=float)
+            hi = np.array([m.get("options", {}).get("max_overlap", np.inf) for m in self.b.metas], dtype=float)
+            accepted = np.array([bool(m.get("accepted", False)) for m in self.b.metas])
+            self.report("overlap", f"{s}_overlap outside [min_overlap, max_overlap] of an accepted pair",
+                        accepted & ((stored < lo - 1e-12) | (stored > hi + 1e-12)))
+
+        # index maps
+        ptf, ftp = a[f"{s}_partial_to_full"], a[f"{s}_full_to_partial"]
+        pair = self.pair_of[gv]
+        if len(ptf) > 1:
+            same = pair[1:] == pair[:-1]
+            self.report("index_maps", f"{s}_partial_to_full not strictly increasing",
+                        np.unique(pair[1:][same & (np.diff(ptf) <= 0)]))
+        ok = (ptf >= 0) & (ptf < self.rep(cnt[gftp], gv))
+        local = np.arange(len(ptf)) - self.rep(self.start[gv], gv)
+        inverse = np.full(len(ptf), -2, dtype=np.int64)
+        inverse[ok] = ftp[ptf[ok] + self.rep(self.start[gftp], gv)[ok]]
+        self.report("index_maps", f"{s}_full_to_partial[{s}_partial_to_full] is not the identity",
+                    np.unique(pair[inverse != local]))
+        kept = np.bincount(self.pair_of[gftp], weights=ftp >= 0, minlength=self.n)
+        self.report("index_maps", f"{s}_full_to_partial keeps a different number of vertices than V_{s}", kept != V)
+        self.report("index_maps", f"len({s}_full_to_partial) != len({s}_full_vertices) for a partial shape",
+                    partial & (cnt[gftp] != cnt[gfv]))
+
+        # full shapes and the setting
+        full = ~partial
+        full_rows_v, full_rows_f = self.rep(full, gv), self.rep(full, gf)
+        local_f = np.arange(len(a[f"{s}_full_face_ids"])) - self.rep(self.start[gf], gf)
+        bad_pairs = np.union1d(self.pairs_with(full_rows_v & (ptf != local), gv),
+                               self.pairs_with(full_rows_f & (a[f"{s}_full_face_ids"] != local_f), gf))
+        bad_pairs = np.union1d(bad_pairs, np.flatnonzero(full & ((cnt[gftp] != V) | (cnt[gfv] != 0))))
+        self.report("full_shape", f"full {s} shape does not keep every face and vertex (identity maps)", bad_pairs)
+        must_be_full = self.setting == "full_full" or (self.setting == "partial_full" and s == "x")
+        if must_be_full:
+            self.report("setting", f"{s} is partial in a {self.setting} store", partial)
+        camera = a[f"{s}_camera"].reshape(self.n, -1)
+        self.report("camera", f"{s}_camera not NaN for a full shape", full & ~np.isnan(camera).all(axis=1))
+        self.report("camera", f"{s}_camera not finite for a partial shape", partial & ~np.isfinite(camera).all(axis=1))
+
+        if partial.any():
+            self.partial_side(s, partial)
+
+    def partial_side(self, s: str, partial: np.ndarray) -> None:
+        a, cnt = self.a, self.cnt
+        gv, gf, gfv, gff = f"{s}_vertex", f"{s}_face", f"{s}_full_vertex", f"{s}_full_face"
+        faces, ptf, ids = a[f"{s}_faces"], a[f"{s}_partial_to_full"], a[f"{s}_full_face_ids"]
+        rows_f = self.rep(partial, gf)
+        V = cnt[gv]
+        # faces through the vertex map == the full faces they came from
+        ok = rows_f & (faces >= 0).all(axis=1) & (faces < self.rep(V, gf)[:, None]).all(axis=1) \
+            & (ids >= 0) & (ids < self.rep(cnt[gff], gf))
+        rows = np.flatnonzero(ok)
+        gvert = faces[rows] + self.rep(self.start[gv], gf)[rows, None]
+        mapped = ptf[gvert]
+        full_faces = a[f"{s}_full_faces"][ids[rows] + self.rep(self.start[gff], gf)[rows]]
+        self.report("face_map", f"{s}_partial_to_full[{s}_faces] != {s}_full_faces[{s}_full_face_ids]",
+                    np.unique(self.pair_of[gf][rows[(mapped != full_faces).any(axis=1)]]))
+        rows_v = np.flatnonzero(self.rep(partial, gv) & (ptf >= 0) & (ptf < self.rep(cnt[gfv], gv)))
+        verts = a[f"{s}_vertices"][rows_v]
+        full_v = a[f"{s}_full_vertices"][ptf[rows_v] + self.rep(self.start[gfv], gv)[rows_v]]
+        scale = 1.0 + np.abs(full_v).max(axis=1)
+        bad = ~(np.abs(verts - full_v).max(axis=1) <= 1e-9 * scale)
+        self.report("vertex_map", f"{s}_vertices != {s}_full_vertices[{s}_partial_to_full]",
+                    np.unique(self.pair_of[gv][rows_v[bad]]))
+
+        # one edge-connected component, no vertex off the faces
+        from scipy.sparse import coo_matrix
+        from scipy.sparse.csgraph import connected_components
+
+        frows = np.flatnonzero(rows_f & (faces >= 0).all(axis=1) & (faces < self.rep(V, gf)[:, None]).all(axis=1))
+        if not len(frows):
+            return
+        gfaces = faces[frows] + self.rep(self.start[gv], gf)[frows, None]      # block-wide vertex ids
+        n_v = int(len(ptf))
+        edges = np.sort(np.concatenate([gfaces[:, [0, 1]], gfaces[:, [1, 2]], gfaces[:, [2, 0]]]), axis=1)
+        edge_key = edges[:, 0] * n_v + edges[:, 1]
+        edge_face = np.tile(np.arange(len(frows)), 3)
+        order = np.argsort(edge_key, kind="stable")
+        k, f = edge_key[order], edge_face[order]
+        same = k[1:] == k[:-1]
+        graph = coo_matrix((np.ones(int(same.sum())), (f[:-1][same], f[1:][same])), shape=(len(frows), len(frows)))
+        _, labels = connected_components(graph, directed=False)
+        face_pair = self.pair_of[gf][frows]
+        _, first = np.unique(labels, return_index=True)          # faces of two pairs never connect
+        components = np.bincount(face_pair[first], minlength=self.n)
+        self.report("connectivity", f"partial {s} shape is not one edge-connected component",
+                    partial & (components > 1))
+        used = np.zeros(n_v, dtype=bool)
+        used[gfaces.ravel()] = True
+        unused = self.rep(partial, gv) & ~used
+        self.report("connectivity", f"partial {s} shape has vertices on no face", self.pairs_with(unused, gv))
+
+    def stacked(self) -> None:
+        a = self.a
+        for s in ("x", "y"):
+            for key in ("frame_rotation", "align_rotation", "random_rotation"):
+                r = a[f"{s}_{key}"]
+                gram = np.einsum("nij,nkj->nik", r, r) - np.eye(3)
+                det = np.linalg.det(r)
+                bad = ~((np.abs(gram).max(axis=(1, 2)) <= ROTATION_TOL) & (np.abs(det - 1) <= ROTATION_TOL))
+                self.report("rotation", f"{s}_{key} not orthonormal with det +1", bad)
+            area, sqrt_area, scale = a[f"{s}_full_area"], a[f"{s}_full_sqrt_area"], a[f"{s}_dataset_scale"]
+            bad = ~((area > 0) & np.isfinite(area) & (np.abs(sqrt_area ** 2 - area) <= 1e-9 * np.abs(area))
+                    & (scale > 0) & np.isfinite(scale))
+            self.report("scalars", f"{s}_full_area / {s}_full_sqrt_area / {s}_dataset_scale inconsistent", bad)
+            for key, group in ((f"{s}_vertices", f"{s}_vertex"), (f"{s}_full_vertices", f"{s}_full_vertex")):
+                self.report("finite", f"{key} not finite", self.pairs_with(~np.isfinite(a[key]), group))
+            bad = ~(np.isfinite(a[f"{s}_centre"]).all(axis=1) & np.isfinite(a[f"{s}_align_translation"]).all(axis=1))
+            self.report("finite", f"{s}_centre or {s}_align_translation not finite", bad)
+        bad = (np.abs(a["x_align_rotation"] - np.eye(3)).max(axis=(1, 2)) > 0) | (np.abs(a["x_align_translation"]).max(axis=1) > 0)
+        self.report("alignment", "x_align_rotation / x_align_translation not the identity", bad)
+
+
+# --------------------------------------------------------------------------------------------------
+# store-wide checks
+
+
+def _check_schema(bench, problems: list[str]) -> bool:
+    """Keys, dtypes, shapes and groups; False if the row-wise checks cannot run."""
+    from becos.store import SCHEMA_GROUPS
+
+    ok = True
+    expected = expected_schema()
+    missing = sorted(set(expected) - set(bench.layout))
+    if missing:
+        problems.append(f"schema: the store lacks the record keys {missing}")
+        ok = False
+    for key, (dtype, trailing) in expected.items():
+        if key not in bench.layout:
+            continue
+        array = bench.array(key)
+        group = bench.layout[key]
+        want_group = SCHEMA_GROUPS.get(key)
+        if group != want_group:
+            problems.append(f"schema: {key} is stored in offset group {group}, expected {want_group} "
+                            "(its lengths disagree with the other arrays of that group)")
+            ok = False
+        if str(array.dtype) != dtype:
+            problems.append(f"schema: {key} has dtype {array.dtype}, expected {dtype}")
+            ok = False
+        if tuple(array.shape[1:]) != trailing:
+            problems.append(f"schema: {key} has rows of shape {tuple(array.shape[1:])}, expected {trailing}")
+            ok = False
+        if group is not None and array.shape[0] != bench.offsets[group][-1]:
+            problems.append(f"schema: {key} has {array.shape[0]} rows but offsets '{group}' end at "
+                            f"{bench.offsets[group][-1]}")
+            ok = False
+        if group is None and array.shape[0] != len(bench):
+            problems.append(f"schema: {key} has {array.shape[0]} rows for {len(bench)} pairs")
+            ok = False
+    for group, o in bench.offsets.items():
+        if o[0] != 0 or (np.diff(o) < 0).any():
+            problems.append(f"schema: offsets '{group}' do not start at 0 or decrease")
+            ok = False
+    return ok
+
+
+def _split_rule(dataset: str, cache: dict) -> str | None:
+    if dataset not in cache:
+        from becos.datasets import DatasetSpec
+
+        try:
+            cache[dataset] = DatasetSpec.load(dataset).split.get("rule")
+        except BecosError:
+            cache[dataset] = None
+    return cache[dataset]
+
+
+def _check_splits(table, setting: str, problems: _Problems) -> None:
+    """Class-disjoint splits (``split_classes``) and centaurs in train only (``centaur``)."""
+    import pandas as pd
+
+    sides = ["y"] if setting == "partial_full" else ["x", "y"]
+    parts = [pd.DataFrame({"dataset": table[f"{s}_dataset"], "class": table[f"{s}_class"],
+                           "category": table[f"{s}_category"], "split": table["split"],
+                           "pair_id": table["pair_id"]}) for s in sides]
+    rows = pd.concat(parts, ignore_index=True)
+    rules: dict = {}
+    for (dataset, shape_class), group in rows.groupby(["dataset", "class"], sort=True):
+        splits = sorted(set(group["split"]), key=lambda v: SPLITS.index(v) if v in SPLITS else len(SPLITS))
+        if len(splits) < 2 or _split_rule(dataset, rules) in ("slices", "by_name"):
+            continue
+        examples = [group.loc[group["split"] == sp, "pair_id"].iloc[0] for sp in splits]
+        problems.add("split_classes", f"class {dataset}/{shape_class} in splits {'+'.join(splits)}",
+                     sorted(set(group["pair_id"])), ", ".join(f"{sp}: {e}" for sp, e in zip(splits, examples)))
+    centaurs = rows[(rows["category"] == "centaur") & (rows["split"] != "train")]
+    problems.add("centaur", "centaur shape outside train", sorted(set(centaurs["pair_id"])))
+
+
+def validate(path: str | Path, progress: bool = False) -> ValidationReport:
+    """Run every check on a store; see the module docstring."""
+    from becos.errors import InputFileError
+    from becos.store import open_benchmark
+
+    started = time.perf_counter()
+    path = Path(path)
+    try:
+        bench = open_benchmark(path)
+    except InputFileError as exc:
+        return ValidationReport(path, [f"store: {exc}"], seconds=time.perf_counter() - started)
+    problems: list[str] = []
+    found = _Problems()
+    table = bench.table
+    n = len(bench)
+    meta = bench.metadata
+    if meta.get("schema_version") != SCHEMA_VERSION:
+        problems.append(f"metadata: schema_version {meta.get('schema_version')}, expected {SCHEMA_VERSION}")
+    if bench.setting not in SETTINGS:
+        problems.append(f"metadata: setting {bench.setting!r} is not one of {SETTINGS}")
+    if meta.get("n_pairs", n) != n:
+        problems.append(f"metadata: n_pairs says {meta.get('n_pairs')} but the table has {n} rows")
+    if list(table["index"]) != list(range(n)):
+        problems.append("table: the index column is not 0..N-1")
+
+    ids = table["pair_id"].to_numpy().astype(str)
+    if _check_schema(bench, problems):
+        reported = 0
+        for block in bench.blocks():
+            block_ids = ids[block.start:block.stop]
+            _BlockChecker(block, bench.setting, block_ids, found).run()
+            _check_metas(block, bench.setting, table, found)
+            if progress and (10 * block.stop // n > reported or block.stop == n):   # about every 10 %
+                reported = 10 * block.stop // n
+                print(f"validate: {block.stop}/{n} pairs checked ({time.perf_counter() - started:.1f} s)",
+                      file=sys.stderr, flush=True)
+    else:
+        for block in bench.blocks():
+            _check_metas(block, bench.setting, table, found)
+
+    values, counts = np.unique(ids, return_counts=True)
+    dup = values[counts > 1]
+    if len(dup):
+        found.add("pair_id", "duplicate pair id", dup, f"{int(counts[counts > 1].sum())} rows share {len(dup)} id(s)")
+    _check_splits(table, bench.setting, found)
+    problems.extend(found.messages())
+    splits = {str(k): int(v) for k, v in table["split"].value_counts().items()}
+    return ValidationReport(path, problems, n, bench.setting, splits, time.perf_counter() - started)
+
+
+def _check_metas(block, setting: str, table, found: _Problems) -> None:
+    rows = table.iloc[block.start:block.stop]
+    ids = rows["pair_id"].to_numpy().astype(str)
+    metas = block.metas
+    bad = np.array([m.get("setting", setting) != setting for m in metas])
+    found.add("meta", f"meta setting differs from the store's ({setting})", ids[bad])
+    bad = np.array([m.get("split") not in SPLITS for m in metas])
+    found.add("meta", "meta split is not train/val/test", ids[bad])
+    meta_ids = np.array([str(m.get("pair_id")) for m in metas])
+    found.add("table", "table pair_id differs from meta pair_id", ids[meta_ids != ids])
+    meta_split = np.array([str(m.get("split")) for m in metas])
+    found.add("table", "table split differs from meta split", ids[meta_split != rows["split"].to_numpy().astype(str)])
+    for s in ("x", "y"):
+        group = f"{s}_vertex"
+        if group in block.offsets:
+            found.add("table", f"table {s}_n_vertices differs from the arrays",
+                      ids[block.counts(group) != rows[f"{s}_n_vertices"].to_numpy()])
+        if f"{s}_overlap" in block.arrays:
+            stored = block.arrays[f"{s}_overlap"]
+            found.add("table", f"table {s}_overlap differs from the arrays",
+                      ids[np.abs(stored - rows[f"{s}_overlap"].to_numpy()) > 1e-12])
+
+
+def validate_store(path: str | Path) -> list[str]:
+    """Human-readable problems of a benchmark store; empty = valid (checks: module docstring)."""
+    return validate(path).problems
+
+
+# --------------------------------------------------------------------------------------------------
+# command line
+
+
+def configure_parser(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("store", type=Path, help="benchmark store written by `becos export-zarr`")
+    parser.add_argument("--json", type=Path, help="also write the summary and the problems to this JSON file")
+
+
+def run_cli(args: argparse.Namespace) -> int:
+    from becos.atomic import write_text
+
+    report = validate(args.store, progress=True)
+    summary = report.summary()
+    if args.json is not None:
+        write_text(args.json, json.dumps({**summary, "problems": report.problems}, indent=1) + "\n")
+    print(json.dumps(summary))
+    for problem in report.problems:
+        print(f"becos validate: {problem}", file=sys.stderr)
+    return 0 if report.valid else 1

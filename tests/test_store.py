@@ -1,0 +1,169 @@
+"""The Zarr benchmark store: exact round trip of real pair records, layout, CLI and input errors."""
+
+from __future__ import annotations
+
+import json
+import os
+
+import numpy as np
+import pytest
+
+from becos.cli import main
+from becos.errors import InputFileError
+from becos.record import SCHEMA_VERSION, PairRecord
+from becos.store import count_files, expand_inputs, open_benchmark, write_store
+
+MAX_FILES = 150   # ~2 files per array (zarr.json + one shard) + groups, whatever the pair count
+
+
+def assert_same_record(got: PairRecord, want: PairRecord) -> None:
+    assert got.meta == want.meta
+    assert set(got.arrays) == set(want.arrays)
+    for key, expected in want.arrays.items():
+        value = got.arrays[key]
+        assert value.dtype == expected.dtype, key
+        assert value.shape == expected.shape, key
+        assert np.array_equal(value, expected, equal_nan=expected.dtype.kind == "f"), key
+
+
+@pytest.fixture(scope="module")
+def stores(pair_record_files, tmp_path_factory):
+    """{setting: store path} written from the fixture records (train and test pair each)."""
+    folder = tmp_path_factory.mktemp("stores")
+    metadata = {"config_hash": "0123abcd", "config": {"seed": 42, "datasets": ["tosca"]},
+                "datasets": {"tosca": {"licence": "free for research use"}}}
+    return {setting: write_store(paths, folder / f"{setting}.zarr", setting=setting, metadata=metadata,
+                                 progress=False)
+            for setting, paths in pair_record_files.items()}
+
+
+def test_round_trip_is_exact(stores, pair_record_files):
+    for setting, path in stores.items():
+        bench = open_benchmark(path)
+        records = [PairRecord.load(p) for p in pair_record_files[setting]]
+        assert len(bench) == len(records) == 2
+        assert bench.setting == setting
+        # store order: train before test, whatever the input order
+        assert list(bench.table["split"]) == ["train", "test"]
+        assert bench.splits() == ["train", "test"]
+        for record in records:
+            assert_same_record(bench.record(record.pair_id), record)
+        row = int(np.flatnonzero(bench.table["pair_id"] == records[1].pair_id)[0])
+        assert_same_record(bench.record(row), records[1])
+        by_id = {r.pair_id: r for r in records}
+        streamed = list(bench.records())
+        assert [r.pair_id for r in streamed] == list(bench.table["pair_id"])
+        for got in streamed:
+            assert_same_record(got, by_id[got.pair_id])
+        assert [r.pair_id for r in bench.records("test")] == [r.pair_id for r in records if r.meta["split"] == "test"]
+        assert list(bench.records("val")) == []
+
+
+def test_blocks_split_pairs_but_keep_records_exact(stores, pair_record_files):
+    bench = open_benchmark(stores["partial_partial"])
+    blocks = list(bench.blocks(max_bytes=1))            # one pair per block
+    assert [(b.start, b.stop) for b in blocks] == [(0, 1), (1, 2)]
+    by_id = {r.pair_id: r for r in map(PairRecord.load, pair_record_files["partial_partial"])}
+    for block in blocks:
+        assert_same_record(block.record(0), by_id[block.metas[0]["pair_id"]])
+    data, offsets = bench.concatenated("corr_01")
+    assert offsets.tolist() == [0, *np.cumsum(bench.table["x_n_vertices"]).tolist()]
+    assert len(data) == offsets[-1]
+
+
+def test_layout_table_and_metadata(stores, pair_record_files):
+    bench = open_benchmark(stores["partial_full"])
+    records = {r.pair_id: r for r in map(PairRecord.load, pair_record_files["partial_full"])}
+    assert bench.layout["x_vertices"] == bench.layout["corr_01"] == "x_vertex"
+    assert bench.layout["y_faces"] == bench.layout["y_full_face_ids"] == "y_face"
+    assert bench.layout["y_random_rotation"] is None            # stacked (N, 3, 3)
+    assert bench.array("y_random_rotation").shape == (2, 3, 3)
+    assert bench.array("x_vertices").shape[0] == sum(len(r["x_vertices"]) for r in records.values())
+    table = bench.table
+    assert list(table.columns) == ["index", "pair_id", "split", "category", "seed", "x_dataset", "x_name", "x_class",
+                                   "x_category", "y_dataset", "y_name", "y_class", "y_category", "x_n_vertices",
+                                   "y_n_vertices", "x_overlap", "y_overlap", "n_tries", "accepted"]
+    for row in table.itertuples():
+        record = records[row.pair_id]
+        assert row.index == row.Index
+        assert (row.x_name, row.y_name, row.x_class, row.y_dataset) == ("cat0", "cat3", "cat", "tosca")
+        assert row.seed == record.meta["seed"] and row.split == record.meta["split"]
+        assert row.y_n_vertices == len(record["y_vertices"]) and row.y_overlap == float(record["y_overlap"])
+        assert row.category == "four-legged"
+    assert table["seed"].dtype == np.int64 and table["accepted"].dtype == bool
+    meta = bench.metadata
+    assert meta["schema_version"] == SCHEMA_VERSION and meta["setting"] == "partial_full"
+    assert meta["config_hash"] == "0123abcd" and meta["config"]["seed"] == 42
+    assert meta["datasets"]["tosca"]["licence"] == "free for research use"
+    assert {"becos", "numpy", "zarr", "trimesh"} <= set(meta["versions"])
+    assert meta["n_pairs"] == 2 and meta["splits"] == {"train": 1, "test": 1}
+    assert "created" in meta and "becos_store" not in meta
+
+
+def test_few_files(stores):
+    for path in stores.values():
+        n = count_files(path)
+        assert 40 < n <= MAX_FILES, n     # one zarr.json per array at least; never one file per pair and key
+
+
+def test_cli_reads_chunk_index_and_replaces_store(pair_record_files, tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    paths = pair_record_files["partial_partial"]
+    (tmp_path / "records").mkdir()
+    entries = []
+    for p in paths:        # the workflow writes paths relative to the working directory
+        os.symlink(p, tmp_path / "records" / p.name)
+        entries.append({"pair_id": p.stem, "path": f"records/{p.name}", "computed": True})
+    (tmp_path / "chunk_0000.json").write_text(json.dumps({"setting": "partial_partial", "chunk": 0, "pairs": entries}))
+    (tmp_path / "meta.json").write_text(json.dumps({"config_hash": "feed", "setting": "partial_partial"}))
+    args = ["export-zarr", "--setting", "partial_partial", "--out", "out/bench.zarr", "--metadata", "meta.json",
+            "chunk_0000.json"]
+    assert main(args) == 0
+    first = json.loads(capsys.readouterr().out)
+    assert first["n_pairs"] == 2 and first["n_files"] <= MAX_FILES
+    # a second export replaces the first; a text index with one path per line works too
+    (tmp_path / "list.txt").write_text(f"# records\n{paths[0]}\n\n")
+    assert main(args[:-1] + ["list.txt"]) == 0
+    bench = open_benchmark(tmp_path / "out" / "bench.zarr")
+    assert list(bench.table["pair_id"]) == [paths[0].stem]
+    assert bench.metadata["config_hash"] == "feed"
+    assert sorted(os.listdir(tmp_path / "out")) == ["bench.zarr"]        # no temporary folders left
+    assert expand_inputs(["chunk_0000.json"]) == [p.relative_to(tmp_path) for p in
+                                                  [tmp_path / "records" / q.name for q in paths]]
+
+
+def test_bad_inputs_name_the_file(pair_record_files, tmp_path, capsys):
+    pp, ff = pair_record_files["partial_partial"], pair_record_files["full_full"]
+    with pytest.raises(InputFileError, match=ff[0].name + ".*not partial_partial"):
+        write_store([pp[0], ff[0]], tmp_path / "a.zarr", setting="partial_partial", progress=False)
+    with pytest.raises(InputFileError, match="also in"):
+        write_store([pp[0], pp[0]], tmp_path / "a.zarr", setting="partial_partial", progress=False)
+    broken = tmp_path / "broken.npz"
+    broken.write_bytes(b"not a zip file")
+    with pytest.raises(InputFileError, match="broken.npz.*not a readable pair record"):
+        write_store([pp[0], broken], tmp_path / "a.zarr", setting="partial_partial", progress=False)
+    assert not (tmp_path / "a.zarr").exists()
+    index = tmp_path / "chunk.json"
+    index.write_text(json.dumps({"setting": "full_full", "pairs": [{"path": str(ff[0])}]}))
+    assert main(["export-zarr", "--setting", "partial_partial", "--out", str(tmp_path / "b.zarr"), str(index)]) == 2
+    assert "chunk.json" in capsys.readouterr().err
+    with pytest.raises(InputFileError, match="not a Zarr v3 store"):
+        open_benchmark(tmp_path)
+
+
+def test_compressed_and_fortran_records_round_trip(pair_record_files, tmp_path):
+    """Records saved with savez_compressed (read through numpy) and Fortran-ordered arrays."""
+    from becos.atomic import save_npz
+
+    record = PairRecord.load(pair_record_files["partial_full"][0])
+    arrays = dict(record.arrays, y_vertices=np.asfortranarray(record["y_vertices"]))
+    compressed = tmp_path / "compressed.npz"
+    save_npz(compressed, compressed=True, __meta__=np.array(json.dumps(record.meta)), **arrays)
+    plain = PairRecord.load(pair_record_files["partial_full"][1])
+    plain.arrays["x_faces"] = np.asfortranarray(plain["x_faces"])
+    plain.save(tmp_path / "fortran.npz")
+    path = write_store([compressed, tmp_path / "fortran.npz"], tmp_path / "s.zarr", setting="partial_full",
+                       progress=False)
+    bench = open_benchmark(path)
+    assert_same_record(bench.record(record.pair_id), record)
+    assert_same_record(bench.record(plain.pair_id), plain)
