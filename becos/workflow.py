@@ -54,6 +54,7 @@ STAGE_KEYS: dict[str, tuple[str, ...]] = {
     "manifest": ("data_dir", "annotations", "datasets", "shapes", "template_file", "combinations", "seed", "usage_scale",
                  "caps", "remesh", "remesh_variants", "n_chunks", "original_settings"),
     "remesh": ("seed", "remesh"),
+    "export": (),
     "ground_truth": ("annotations", "template_file", "remesh"),
     "pairs": ("one_axis_rotation", "up_axis", "area_normalised", "propagate_annotations", "annotations",
               "template_file"),
@@ -150,6 +151,16 @@ def stage_options(config: dict, stage: str, setting: str | None = None) -> dict:
     :data:`SETTING_KEYS`)."""
     keys = STAGE_KEYS[stage] + (SETTING_KEYS[setting] if stage == "pairs" and setting else ())
     return {k: config.get(k) for k in keys}
+
+
+def job_options(config: dict, stage: str, setting: str | None = None) -> str:
+    """The JSON a job of ``stage`` receives (its :func:`stage_options` + ``results``).
+
+    Rules pass it as a parameter, so Snakemake reruns a job exactly when one of these values changes.
+    """
+    options = stage_options(config, stage, setting)
+    options["results"] = config.get("results", "results")
+    return json.dumps(options, sort_keys=True)
 
 
 def load_config(path: str | Path) -> dict:
@@ -354,6 +365,10 @@ class Plan:
     def _catalog_rows(self) -> dict[tuple[str, str], dict]:
         return {(r["dataset"], r["name"]): r for r in self.catalog.to_dict("records")}
 
+    def shape_json(self, dataset: str, name: str) -> str:
+        """A shape's catalog row as JSON (the remesh job's description of its shape)."""
+        return json.dumps(self._catalog_rows[(dataset, name)], sort_keys=True)
+
     def shape_digest(self, dataset: str, name: str) -> str:
         """Digest of a shape's catalog row (file, scale, frame rotation, template, split ...)."""
         return digest(self._catalog_rows[(dataset, name)])
@@ -496,23 +511,24 @@ def write_manifest_stage(config: dict, setting: str, catalog_path: Path, out: Pa
     return manifest
 
 
-def remesh_stage(config: dict, dataset: str, name: str, token: str, out: Path, ply: Path | None = None) -> None:
-    """Remesh one shape variant (prepared, common-frame mesh) and write the maps (+ a PLY to look at)."""
-    from becos.catalog import read_catalog
+def remesh_stage(config: dict, shape_row: dict, token: str, out: Path, ply: Path | None = None) -> None:
+    """Remesh one shape variant (prepared, common-frame mesh) and write the maps (+ a PLY to look at).
+
+    ``shape_row`` is the shape's catalog row (:mod:`becos.catalog` columns).
+    """
     from becos.remesh import remesh, save_remeshed, write_ply
 
-    layout = Layout.of(config)
-    catalog = read_catalog(layout.catalog)
-    shapes = ShapeStore(config, catalog[(catalog["dataset"] == dataset) & (catalog["name"] == name)])
-    plan_target = Plan(config, catalog, {}).remesh_target(dataset, name, token)
+    dataset, name = shape_row["dataset"], shape_row["name"]
+    shapes = ShapeStore(config, pd.DataFrame([shape_row]))
+    target = Plan(config, pd.DataFrame([shape_row]), {}).remesh_target(dataset, name, token)
     prepared = shapes.prepared(dataset, name)
     start = time.perf_counter()
-    result = remesh(prepared.mesh, **plan_target)
+    result = remesh(prepared.mesh, **target)
     save_remeshed(Path(out), result)
     if ply is not None:
         write_ply(Path(ply), result.mesh)
     _log(f"remesh {dataset}/{name} {token}: {prepared.mesh.n_vertices} -> {result.mesh.n_vertices} vertices "
-         f"({plan_target}) in {time.perf_counter() - start:.1f} s")
+         f"({target}) in {time.perf_counter() - start:.1f} s")
 
 
 def _stored_key(path: Path, member: str) -> str | None:
@@ -593,11 +609,8 @@ def load_ground_truth(path: Path):
 def pair_options(config: dict, setting: str):
     from becos.pairs import PairOptions
 
-    return PairOptions(setting=setting, cam_pos_regime=config["cam_pos_regime"], up_axis=config["up_axis"],
-                       camera_distance=float(config["camera_distance"]), n_cam_pos=int(config["n_cam_pos"]),
-                       min_overlap=float(config["min_overlap"]), max_overlap=float(config["max_overlap"]),
-                       one_axis_rotation=bool(config["one_axis_rotation"]),
-                       area_normalised=bool(config["area_normalised"]))
+    fields = {k: config[k] for k in PairOptions.__dataclass_fields__ if k in config and k != "setting"}
+    return PairOptions(setting=setting, **fields)  # keys a setting does not use keep their defaults
 
 
 def pairs_stage(config: dict, setting: str, chunk: int, gt_index: Path, out_index: Path) -> dict:
@@ -710,10 +723,9 @@ def export_pairings_stage(config: dict, setting: str, out: Path) -> None:
 # command line
 
 def configure_parser(parser: argparse.ArgumentParser, name: str) -> None:
-    if name != "write-config":
-        parser.add_argument("--config", required=True, type=Path, help="resolved config (results/config.json) or YAML")
-    else:
-        parser.add_argument("--json", required=True, help="the configuration as a JSON string")
+    parser.add_argument("--options", required=True,
+                        help="JSON: the job's options (becos.workflow.job_options), or the whole config for write-config "
+                             "and metadata")
     if name in ("manifest", "ground-truth", "pairs", "metadata", "export-pairings"):
         parser.add_argument("--setting", required=True, choices=SETTINGS)
     if name in ("ground-truth", "pairs"):
@@ -723,25 +735,23 @@ def configure_parser(parser: argparse.ArgumentParser, name: str) -> None:
     if name == "manifest":
         parser.add_argument("--catalog", required=True, type=Path)
     if name == "remesh":
-        parser.add_argument("--dataset", required=True)
-        parser.add_argument("--name", required=True)
+        parser.add_argument("--shape", required=True, help="JSON: the shape's catalog row")
         parser.add_argument("--token", required=True, help="v<k> (variant k) or f<n> (target faces n)")
         parser.add_argument("--ply", type=Path, help="also write the remeshed mesh as PLY")
     parser.add_argument("--out", required=True, type=Path)
 
 
 def run_cli(args: argparse.Namespace) -> int:
+    config = json.loads(args.options)
     if args.command == "write-config":
-        config = resolve_config(json.loads(args.json))
-        write_text(args.out, json.dumps(config, indent=1, sort_keys=True) + "\n")
+        write_text(args.out, json.dumps(resolve_config(config), indent=1, sort_keys=True) + "\n")
         return 0
-    config = load_config(args.config)
     if args.command == "catalog":
         write_catalog_stage(config, args.out)
     elif args.command == "manifest":
         write_manifest_stage(config, args.setting, args.catalog, args.out)
     elif args.command == "remesh":
-        remesh_stage(config, args.dataset, args.name, args.token, args.out, args.ply)
+        remesh_stage(config, json.loads(args.shape), args.token, args.out, args.ply)
     elif args.command == "ground-truth":
         ground_truth_stage(config, args.setting, args.chunk, args.out)
     elif args.command == "pairs":

@@ -137,9 +137,10 @@ def test_pairs_chunks_are_fixed_by_the_pair_id(tiny_tosca_run):
 
 def test_incremental_rebuild(becos_code, tmp_path):
     """Four-legged only, then humans and centaurs; then only min_overlap changes."""
-    shapes = ["tosca/cat0", "tosca/dog0", "tosca/horse0", "tosca/wolf0", "tosca/michael0", "tosca/david0",
-              "tosca/centaur0"]
-    common = dict(shapes=shapes, setting="partial_partial", usage_scale=0.02,
+    shapes = ["tosca/cat0", "tosca/cat1", "tosca/dog0", "tosca/dog1", "tosca/horse0", "tosca/horse5", "tosca/wolf0",
+              "tosca/wolf1", "tosca/michael0", "tosca/michael1", "tosca/david0", "tosca/david1", "tosca/centaur0",
+              "tosca/centaur1"]
+    common = dict(shapes=shapes, setting="partial_partial", usage_scale=0.05,
                   exports={"released": False, "published_pickle": False, "report": False})
     workdir = write_config(tmp_path / "run", becos_code, combinations="four-legged", **common)
     snakemake(workdir, "--cores", "2")
@@ -157,11 +158,14 @@ def test_incremental_rebuild(becos_code, tmp_path):
     changed = [n for n in before if after.get(n) != before[n]]
     assert len(after) > len(before)
     assert len(changed) <= 0.1 * len(before), changed
+    print(f"\nincremental: {len(before)} pairs -> {len(after)}; existing pair files changed: {len(changed)}; "
+          f"remesh jobs planned: {sorted(planned_remesh)} (already remeshed: {sorted(remeshed_before)})")
 
     write_config(workdir, becos_code, combinations="all", min_overlap=0.15, **common)
     planned = jobs_planned(snakemake(workdir, "-n", "--cores", "2").stdout)
     assert planned.get("pairs", 0) >= 1
     assert "remesh" not in planned and "ground_truth" not in planned, planned
+    print(f"min_overlap 0.1 -> 0.15 plans: {planned}")
 
 
 def test_original_settings_plan_uses_the_published_pairs(becos_code, tmp_path):

@@ -39,7 +39,7 @@ def chunk_files(setting, kind):
 
 
 def all_targets(wildcards):
-    targets = []
+    targets = [str(LAYOUT.config)]
     for setting in SETTINGS:
         base = f"{RESULTS}/{setting}"
         targets.append(f"{base}/validation.json")

@@ -9,7 +9,7 @@ rule resolved_config:
     log:
         "logs/resolved_config.log",
     shell:
-        "becos write-config --json {params.config:q} --out {output} > {log} 2>&1"
+        "becos write-config --options {params.config:q} --out {output} > {log} 2>&1"
 
 
 if config["synthetic"]["enabled"]:
@@ -60,13 +60,12 @@ checkpoint check_datasets:
 
 rule catalog:
     input:
-        checks=LAYOUT.checks,
-        config=ancient(LAYOUT.config),
+        LAYOUT.checks,
     output:
         LAYOUT.catalog,
     params:
-        options=bw.digest(bw.stage_options(config, "catalog")),
+        options=bw.job_options(config, "catalog"),
     log:
         "logs/catalog.log",
     shell:
-        "becos catalog --config {input.config} --out {output} > {log} 2>&1"
+        "becos catalog --options {params.options:q} --out {output} > {log} 2>&1"

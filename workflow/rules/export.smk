@@ -2,16 +2,14 @@
 
 
 rule store_metadata:
-    input:
-        config=ancient(LAYOUT.config),
     output:
         f"{RESULTS}/{{setting}}/metadata.json",
     params:
-        config=bw.digest(config),
+        config=json.dumps(config, sort_keys=True),
     log:
         "logs/store_metadata/{setting}.log",
     shell:
-        "becos metadata --config {input.config} --setting {wildcards.setting} --out {output} > {log} 2>&1"
+        "becos metadata --options {params.config:q} --setting {wildcards.setting} --out {output} > {log} 2>&1"
 
 
 rule zarr_store:
@@ -71,13 +69,14 @@ rule published_pairings:
     input:
         manifest=f"{RESULTS}/{{setting}}/manifest.csv",
         catalog=LAYOUT.catalog,
-        config=ancient(LAYOUT.config),
     output:
         f"{RESULTS}/{{setting}}/pairings_{{setting}}.pkl",
+    params:
+        options=bw.job_options(config, "export"),
     log:
         "logs/published_pairings/{setting}.log",
     shell:
-        "becos export-pairings --config {input.config} --setting {wildcards.setting} --out {output} > {log} 2>&1"
+        "becos export-pairings --options {params.options:q} --setting {wildcards.setting} --out {output} > {log} 2>&1"
 
 
 rule report:

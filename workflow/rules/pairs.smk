@@ -1,32 +1,33 @@
 # Stage 3-4: pair manifests, remeshing per shape variant, ground truth and pair records per chunk.
+# A remesh job gets its shape's catalog row as a parameter (not the catalog file), so rewriting the
+# catalog never reruns a remesh; a chunk job reruns whenever the manifest is rewritten, but keeps
+# every pair file whose input key is unchanged (becos.workflow).
 
 
 rule manifest:
     input:
         catalog=LAYOUT.catalog,
-        config=ancient(LAYOUT.config),
     output:
         f"{RESULTS}/{{setting}}/manifest.csv",
     params:
-        options=bw.digest(bw.stage_options(config, "manifest")),
+        options=bw.job_options(config, "manifest"),
     log:
         "logs/manifest/{setting}.log",
     shell:
-        "becos manifest --config {input.config} --setting {wildcards.setting}"
+        "becos manifest --options {params.options:q} --setting {wildcards.setting}"
         " --catalog {input.catalog} --out {output} > {log} 2>&1"
 
 
 rule remesh:
     input:
-        mesh=lambda w: plan().files[(w.dataset, w.name)],
-        catalog=ancient(LAYOUT.catalog),
-        config=ancient(LAYOUT.config),
+        lambda w: plan().files[(w.dataset, w.name)],
     output:
         npz=f"{RESULTS}/remeshed/{{dataset}}/{{name}}/{{token}}.npz",
         ply=f"{RESULTS}/remeshed/{{dataset}}/{{name}}/{{token}}.ply",
     params:
         target=lambda w: plan().remesh_target(w.dataset, w.name, w.token),
-        shape=lambda w: plan().shape_digest(w.dataset, w.name),
+        shape=lambda w: plan().shape_json(w.dataset, w.name),
+        options=bw.job_options(config, "remesh"),
     wildcard_constraints:
         dataset="[a-z0-9_]+",
         name=".+",
@@ -37,20 +38,20 @@ rule remesh:
     log:
         "logs/remesh/{dataset}/{name}/{token}.log",
     shell:
-        "becos remesh --config {input.config} --dataset {wildcards.dataset:q} --name {wildcards.name:q}"
+        "becos remesh --options {params.options:q} --shape {params.shape:q}"
         " --token {wildcards.token} --out {output.npz} --ply {output.ply} > {log} 2>&1"
 
 
 rule ground_truth:
     input:
-        manifest=ancient(f"{RESULTS}/{{setting}}/manifest.csv"),
-        catalog=ancient(LAYOUT.catalog),
-        config=ancient(LAYOUT.config),
+        manifest=f"{RESULTS}/{{setting}}/manifest.csv",
+        catalog=LAYOUT.catalog,
         remeshed=lambda w: plan().chunk_inputs(w.setting, int(w.chunk)),
     output:
         f"{RESULTS}/{{setting}}/ground_truth/chunk_{{chunk}}.json",
     params:
         rows=lambda w: plan().chunk_digest(w.setting, int(w.chunk), "ground_truth"),
+        options=bw.job_options(config, "ground_truth"),
     wildcard_constraints:
         chunk="[0-9]{4}",
     resources:
@@ -59,21 +60,21 @@ rule ground_truth:
     log:
         "logs/ground_truth/{setting}/{chunk}.log",
     shell:
-        "becos ground-truth --config {input.config} --setting {wildcards.setting} --chunk {wildcards.chunk}"
+        "becos ground-truth --options {params.options:q} --setting {wildcards.setting} --chunk {wildcards.chunk}"
         " --out {output} > {log} 2>&1"
 
 
 rule pairs:
     input:
         ground_truth=f"{RESULTS}/{{setting}}/ground_truth/chunk_{{chunk}}.json",
-        manifest=ancient(f"{RESULTS}/{{setting}}/manifest.csv"),
-        catalog=ancient(LAYOUT.catalog),
-        config=ancient(LAYOUT.config),
+        manifest=f"{RESULTS}/{{setting}}/manifest.csv",
+        catalog=LAYOUT.catalog,
         remeshed=lambda w: plan().chunk_inputs(w.setting, int(w.chunk)),
     output:
         f"{RESULTS}/{{setting}}/pairs/chunk_{{chunk}}.json",
     params:
         rows=lambda w: plan().chunk_digest(w.setting, int(w.chunk), "pairs"),
+        options=lambda w: bw.job_options(config, "pairs", w.setting),
     wildcard_constraints:
         chunk="[0-9]{4}",
     resources:
@@ -82,5 +83,5 @@ rule pairs:
     log:
         "logs/pairs/{setting}/{chunk}.log",
     shell:
-        "becos pairs --config {input.config} --setting {wildcards.setting} --chunk {wildcards.chunk}"
+        "becos pairs --options {params.options:q} --setting {wildcards.setting} --chunk {wildcards.chunk}"
         " --ground-truth {input.ground_truth} --out {output} > {log} 2>&1"
