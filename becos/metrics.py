@@ -14,14 +14,17 @@ Conventions (Princeton protocol, as in the BeCoS paper):
 Error arrays: (N,) float64, NaN = excluded, inf = P2P failure. All fractions are in [0, 1]; the
 "x 100" of tables is the caller's.
 
-Two AUC conventions are offered as named presets, and every AUC result carries the preset's name:
+AUC conventions are named presets, and every AUC result carries its preset's name
+(:func:`get_preset` parses the parametrised families; T and the number of steps are in the name):
 
-- ``"princeton-0.1x40"`` (default): PCK at 40 thresholds ``linspace(0, 0.10, 40)``; AUC = trapezoid of
-  the PCK curve against ``linspace(0, 1, 40)``, i.e. the area normalised by the threshold range, as in
-  ULRSSM's ``metrics/geodist_metric.py``. Ground truth scores exactly 1.
+- ``"mean-<T>x<N>"``, default ``"mean-0.10x40"``: PCK at the N thresholds ``linspace(0, T, N)``;
+  AUC = the arithmetic mean of those PCK values (the issue's "mean PCK over [0, T]"). Ground truth = 1.
+- ``"ulrssm-<T>x<N>"``, e.g. ``"ulrssm-0.10x40"``: the same thresholds; AUC = trapezoid of the PCK curve
+  against ``linspace(0, 1, N)``, i.e. normalised by the threshold range, as in ULRSSM's
+  ``metrics/geodist_metric.py``. Ground truth = 1.
 - ``"paper-0.00-0.99"``: PCK at ``0.00, 0.01, ..., 0.99`` (100 values); AUC = trapezoid with step 0.01,
   NOT renormalised (so ground truth scores 0.99), as in DeepShapeMatchingKit; x 100 this reproduces the
-  AUC figures of the BeCoS paper (reference facts §11/§12).
+  AUC figures of the BeCoS paper (reference facts §11/§12). Use it for any comparison with the paper.
 """
 
 from __future__ import annotations
@@ -71,16 +74,57 @@ def _area(pck: np.ndarray, thresholds: np.ndarray, rule: str) -> float:
     raise ValueError(f"unknown AUC rule {rule!r}; choose one of {AUC_RULES}")
 
 
+PRESET_FAMILIES = {"mean": "mean", "ulrssm": "trapezoid-normalised"}
+"""Parametrised preset families ``<family>-<T>x<N>`` -> their AUC rule."""
+
+PAPER_PRESET = "paper-0.00-0.99"
+DEFAULT_AUC_PRESET = "mean-0.10x40"
+
+
+def preset_name(family: str, max_threshold: float, steps: int) -> str:
+    """The name of a parametrised preset, e.g. ``preset_name("mean", 0.1, 40) == "mean-0.10x40"``
+    (T written with at least two decimals, exactly)."""
+    if family not in PRESET_FAMILIES:
+        raise ValueError(f"unknown AUC preset family {family!r}; choose one of {sorted(PRESET_FAMILIES)}")
+    text = f"{max_threshold:.2f}"
+    if float(text) != float(max_threshold):
+        text = repr(float(max_threshold))
+    return f"{family}-{text}x{int(steps)}"
+
+
+def get_preset(name: str) -> AucPreset:
+    """The :class:`AucPreset` of a name: ``"paper-0.00-0.99"`` or ``"<family>-<T>x<N>"`` with family
+    ``mean`` or ``ulrssm`` (see the module docstring), T > 0 in units of sqrt(area), N >= 2."""
+    if name in AUC_PRESETS:
+        return AUC_PRESETS[name]
+    family, _, rest = str(name).partition("-")
+    t_text, _, n_text = rest.partition("x")
+    try:
+        max_threshold, steps = float(t_text), int(n_text)
+    except ValueError:
+        max_threshold, steps = float("nan"), 0
+    if family not in PRESET_FAMILIES or not max_threshold > 0 or steps < 2:
+        raise ValueError(f"unknown AUC preset {name!r}; choose {PAPER_PRESET!r} or '<family>-<T>x<N>' with "
+                         f"family in {sorted(PRESET_FAMILIES)}, T > 0 and N >= 2 (e.g. {DEFAULT_AUC_PRESET!r})")
+    rule = PRESET_FAMILIES[family]
+    what = "mean of the PCK values" if rule == "mean" else "trapezoid normalised by the range (ULRSSM)"
+    return AucPreset(name, np.linspace(0.0, max_threshold, steps), rule,
+                     f"PCK at linspace(0, {max_threshold:g}, {steps}); AUC = {what}; ground truth = 1")
+
+
 AUC_PRESETS: dict[str, AucPreset] = {
-    "princeton-0.1x40": AucPreset(
-        "princeton-0.1x40", np.linspace(0.0, 0.10, 40), "trapezoid-normalised",
+    "mean-0.10x40": AucPreset(
+        "mean-0.10x40", np.linspace(0.0, 0.10, 40), "mean",
+        "PCK at linspace(0, 0.10, 40); AUC = mean of the PCK values; ground truth = 1"),
+    "ulrssm-0.10x40": AucPreset(
+        "ulrssm-0.10x40", np.linspace(0.0, 0.10, 40), "trapezoid-normalised",
         "PCK at linspace(0, 0.10, 40); AUC = trapezoid normalised by the range (ULRSSM); ground truth = 1"),
-    "paper-0.00-0.99": AucPreset(
-        "paper-0.00-0.99", np.round(np.arange(100) * 0.01, 2), "trapezoid",
+    PAPER_PRESET: AucPreset(
+        PAPER_PRESET, np.round(np.arange(100) * 0.01, 2), "trapezoid",
         "PCK at 0.00..0.99 step 0.01; AUC = trapezoid, not renormalised (DeepShapeMatchingKit, the "
         "BeCoS paper's figures); ground truth = 0.99"),
 }
-DEFAULT_AUC_PRESET = "princeton-0.1x40"
+"""The standard presets (any other ``<family>-<T>x<N>`` name works too, see :func:`get_preset`)."""
 
 
 def pck_curve(errors: np.ndarray, thresholds: np.ndarray) -> np.ndarray:
@@ -113,19 +157,16 @@ class AucResult:
 
 
 def auc_preset(errors: np.ndarray, preset: str = DEFAULT_AUC_PRESET) -> AucResult:
-    """AUC of the PCK curve of ``errors`` (see :func:`pck_curve`) under a named preset of
-    :data:`AUC_PRESETS`."""
-    if preset not in AUC_PRESETS:
-        raise ValueError(f"unknown AUC preset {preset!r}; choose one of {sorted(AUC_PRESETS)}")
-    spec = AUC_PRESETS[preset]
+    """AUC of the PCK curve of ``errors`` (see :func:`pck_curve`) under a named preset
+    (:func:`get_preset`)."""
+    spec = get_preset(preset)
     pck = pck_curve(errors, spec.thresholds)
     return AucResult(spec.area(pck), preset, pck)
 
 
-def auc(errors: np.ndarray, max_threshold: float = 0.10, steps: int = 40,
-        rule: str = "trapezoid-normalised") -> float:
+def auc(errors: np.ndarray, max_threshold: float = 0.10, steps: int = 40, rule: str = "mean") -> float:
     """AUC of the PCK curve over ``linspace(0, max_threshold, steps)`` (see :class:`AucPreset` for the
-    rules). The defaults equal the ``"princeton-0.1x40"`` preset."""
+    rules). The defaults equal the default preset ``"mean-0.10x40"``."""
     thresholds = np.linspace(0.0, max_threshold, steps)
     return _area(pck_curve(errors, thresholds), thresholds, rule)
 
@@ -170,7 +211,8 @@ def _check_prediction(pred_10: np.ndarray, n_x: int | None) -> np.ndarray:
 
 
 def pair_errors(pred_10: np.ndarray, gt_10, geodesics_on_x, sqrt_area_x: float,
-                gt_weights: np.ndarray | None = None, x_to_full: np.ndarray | None = None) -> np.ndarray:
+                gt_weights: np.ndarray | None = None, x_to_full: np.ndarray | None = None,
+                p2p: bool = True) -> np.ndarray:
     """(V_y,) Princeton errors of one predicted map Y -> X, with the P2P infinity rule.
 
     Args:
@@ -185,10 +227,15 @@ def pair_errors(pred_10: np.ndarray, gt_10, geodesics_on_x, sqrt_area_x: float,
         sqrt_area_x: sqrt of the total area of the full X, in the same units as the geodesics.
         x_to_full: (V_x_partial,) int, X's partial-to-full vertex map (partial2full) when ``pred_10`` and
             vertex-id ground truth refer to a partial X; None when they already index the full X.
+        p2p: True (default) applies the P2P rule below to vertices without a true counterpart; False
+            (F2F/P2F, where a method is not asked to detect missing parts) excludes them whatever the
+            prediction.
 
     Returns:
         (V_y,) float64: geodesic error / sqrt_area_x where both predicted and true points exist; inf where
-        exactly one of them exists; NaN (excluded) where neither does.
+        exactly one of them exists (with ``p2p=False``: only where the true point exists and the
+        prediction is -1); NaN (excluded) where neither does (with ``p2p=False``: wherever the true point
+        is missing).
     """
     from becos.surface_map import SurfaceMap
 
@@ -216,6 +263,8 @@ def pair_errors(pred_10: np.ndarray, gt_10, geodesics_on_x, sqrt_area_x: float,
     has_true = true_map.matched
     errors = np.full(len(pred), np.nan)
     errors[has_pred != has_true] = np.inf
+    if not p2p:
+        errors[~has_true] = np.nan
     both = np.flatnonzero(has_pred & has_true)
     if len(both):
         d = geodesics_on_x.between(pred[both], true_map.face[both], true_map.weights[both])

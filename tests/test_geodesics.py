@@ -216,3 +216,60 @@ def test_bad_arguments(small_tosca):
         geo.between([0], [-1], [[1.0, 0.0, 0.0]])
     with pytest.raises(ValueError, match="equally long"):
         dijkstra_to_points(mesh, [0, 1], [0], [[1.0, 0.0, 0.0]])
+
+
+@pytest.mark.parametrize("method", ["heat", "dijkstra"])
+def test_point_to_vertices_reads_rows_from_the_points_side(method, small_tosca):
+    """Σ_k w_k d(corner_k, target): equal to :meth:`between` from the target's side where distances are
+    symmetric (Dijkstra exactly; heat within its small asymmetry), with rows only for corners that
+    differ from their targets."""
+    mesh = small_tosca["horse0"]
+    rng = np.random.default_rng(6)
+    n = 300
+    face = rng.integers(0, mesh.n_faces, n)
+    weights = rng.dirichlet(np.ones(3), n)
+    targets = np.stack([rng.integers(0, mesh.n_vertices, n), rng.integers(0, mesh.n_vertices, n)], axis=1)
+    targets[:10, 1] = -1
+    geo = GeodesicDistances(mesh, method)
+    out = geo.point_to_vertices(face, weights, targets)
+    assert out.shape == (n, 2) and np.isnan(out[:10, 1]).all() and np.isfinite(out[10:]).all()
+    rows = geo.from_vertices(mesh.faces[face].ravel()).reshape(n, 3, -1)
+    expected = np.einsum("nk,nkm->nm", weights, rows[np.arange(n)[:, None], :, np.maximum(targets, 0)].transpose(0, 2, 1))
+    np.testing.assert_allclose(out[:, 0], expected[:, 0], rtol=1e-12)
+    from_target = GeodesicDistances(mesh, method).between(targets[:, 0], face, weights)
+    rel = np.abs(out[:, 0] - from_target) / from_target
+    if method == "dijkstra":
+        np.testing.assert_allclose(out[:, 0], from_target, rtol=1e-12)
+    else:
+        assert np.median(rel) < 0.01
+    # one-hot points whose vertex is the target: zero, and no row computed
+    fresh = GeodesicDistances(mesh, method)
+    same = mesh.faces[face, 0]
+    one_hot = np.zeros((n, 3))
+    one_hot[:, 0] = 1.0
+    assert np.all(fresh.point_to_vertices(face, one_hot, same) == 0.0) and fresh.n_computed == 0
+    moved = same.copy()
+    moved[:7] = mesh.faces[face[:7], 1]
+    d = fresh.point_to_vertices(face, one_hot, moved)
+    assert fresh.n_computed == len(np.unique(same[:7])) and (d[:7] > 0).all() and (d[7:] == 0).all()
+
+
+def test_geodesics_cache_per_shape(small_tosca):
+    from becos.geodesics import GeodesicsCache, shape_key
+
+    mesh = small_tosca["cat0"]
+    angle = 1.1
+    rot = np.array([[np.cos(angle), 0, np.sin(angle)], [0, 1, 0], [-np.sin(angle), 0, np.cos(angle)]])
+    moved = TriMesh(mesh.vertices @ rot + [3.0, -1.0, 2.0], mesh.faces)
+    # a rigid motion keeps the key; a rescaled copy or another shape does not
+    assert shape_key(moved, "tosca", "cat0") == shape_key(mesh, "tosca", "cat0")
+    assert shape_key(TriMesh(mesh.vertices * 2.0, mesh.faces), "tosca", "cat0") != shape_key(mesh, "tosca", "cat0")
+    cache = GeodesicsCache("dijkstra", max_shapes=2)
+    a = cache.get(shape_key(mesh, "cat0"), mesh)
+    assert cache.get(shape_key(moved, "cat0"), moved) is a and cache.hits == 1
+    b = cache.get(shape_key(small_tosca["horse0"], "horse0"), small_tosca["horse0"])
+    c = cache.get(shape_key(small_tosca["michael0"], "michael0"), small_tosca["michael0"])
+    assert len({id(a), id(b), id(c)}) == 3
+    assert cache.get(shape_key(mesh, "cat0"), mesh) is not a  # evicted: least recently used first
+    with pytest.raises(ValueError, match="unknown geodesic method"):
+        GeodesicsCache("exact")

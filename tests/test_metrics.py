@@ -8,8 +8,9 @@ import pytest
 
 from becos.geodesics import GeodesicDistances
 from becos.geometry import surface_area
-from becos.metrics import (AUC_PRESETS, DEFAULT_AUC_PRESET, auc, auc_preset, left_right_accuracy,
-                           overlap_f1, overlap_iou, pair_errors, pair_record, pck_curve, summarise)
+from becos.metrics import (AUC_PRESETS, DEFAULT_AUC_PRESET, PAPER_PRESET, auc, auc_preset, get_preset,
+                           left_right_accuracy, overlap_f1, overlap_iou, pair_errors, pair_record, pck_curve,
+                           preset_name, summarise)
 from becos.surface_map import SurfaceMap
 
 
@@ -40,8 +41,9 @@ def test_ground_truth_prediction_scores_perfectly(wolf):
     errors = pair_errors(gt, gt, geo, sqrt_area)
     assert errors.shape == (y.n_vertices,) and np.all(errors == 0.0)
     result = auc_preset(errors)
-    assert result.preset == DEFAULT_AUC_PRESET == "princeton-0.1x40"
+    assert result.preset == DEFAULT_AUC_PRESET == "mean-0.10x40"
     assert result.value * 100 == pytest.approx(100.0, abs=1e-12)
+    assert auc_preset(errors, "ulrssm-0.10x40").value * 100 == pytest.approx(100.0, abs=1e-12)
     assert auc_preset(errors, "paper-0.00-0.99").value * 100 == pytest.approx(99.0, abs=1e-9)
     overlap = x.vertices[:, 2] > np.median(x.vertices[:, 2])  # any true overlap mask
     assert overlap_iou(overlap, overlap) * 100 == 100.0
@@ -97,10 +99,15 @@ def test_p2p_infinity_rule_on_a_hand_built_case(wolf):
     # 5 vertices count; the two infinite ones are never correct
     pck = pck_curve(errors, [0.0, edge, 1e9])
     np.testing.assert_allclose(pck, [2 / 5, 3 / 5, 3 / 5])
-    record = pair_record(errors, presets=("princeton-0.1x40", "paper-0.00-0.99"))
+    record = pair_record(errors, presets=("mean-0.10x40", "paper-0.00-0.99"))
     assert record["n_scored"] == 5 and record["n_infinite"] == 2
-    assert record["auc_preset"] == "princeton-0.1x40"
-    assert record["auc"] == record["auc_princeton-0.1x40"] <= 3 / 5
+    assert record["auc_preset"] == "mean-0.10x40"
+    assert record["auc"] == record["auc_mean-0.10x40"] <= 3 / 5
+
+    # F2F/P2F rule: vertices without a true counterpart are excluded whatever the prediction
+    lenient = pair_errors(pred, truth, geo, sqrt_area, p2p=False)
+    np.testing.assert_array_equal(np.isnan(lenient), [False, False, True, True, False, False])
+    np.testing.assert_array_equal(np.isinf(lenient), [False, True, False, False, False, False])
     assert record["mean_error"] == pytest.approx(edge / 3)
 
     # left/right: the two failures count 0, the correctly unmatched vertex is excluded
@@ -131,29 +138,41 @@ def test_partial_x_errors_are_measured_on_the_full_shape(wolf):
     assert np.isnan(errors[10:20]).all() and np.isinf(errors[:10]).all() and np.isinf(errors[20:30]).all()
 
 
-def test_the_two_auc_presets_differ_as_expected():
+def test_the_auc_presets_differ_as_expected():
     n = 1000
-    # every error 0.05: princeton thresholds k*0.1/39 reach it at k = 20 -> (19 + 1/2) / 39 = 0.5;
-    # paper thresholds reach it at 0.05 exactly -> trapezoid 0.005 + (0.99 - 0.05) = 0.945
-    errors = np.full(n, 0.05)
-    assert auc_preset(errors, "princeton-0.1x40").value == pytest.approx(0.5)
-    assert auc_preset(errors, "paper-0.00-0.99").value == pytest.approx(0.945)
-    # every error 0.5: beyond the princeton range (0), halfway in the paper's (0.005 + 0.49)
+    # every error 0.03: thresholds k*0.1/39 reach it from k = 12 -> mean 28/40; ULRSSM trapezoid
+    # (27 + 1/2) / 39; paper thresholds reach it at 0.03 exactly -> 0.005 (the step 0.02..0.03) + 0.96
+    errors = np.full(n, 0.03)
+    assert auc_preset(errors, "mean-0.10x40").value == pytest.approx(28 / 40)
+    assert auc_preset(errors, "ulrssm-0.10x40").value == pytest.approx(27.5 / 39)
+    assert auc_preset(errors, PAPER_PRESET).value == pytest.approx(0.965)
+    # every error 0.5: beyond the [0, 0.1] range (0), halfway in the paper's (0.005 + 0.49)
     errors = np.full(n, 0.5)
-    assert auc_preset(errors, "princeton-0.1x40").value == 0.0
-    assert auc_preset(errors, "paper-0.00-0.99").value == pytest.approx(0.495)
-    # infinite errors score 0 under both; NaN (excluded) entries change nothing
+    assert auc_preset(errors, "mean-0.10x40").value == 0.0
+    assert auc_preset(errors, "ulrssm-0.10x40").value == 0.0
+    assert auc_preset(errors, PAPER_PRESET).value == pytest.approx(0.495)
+    # infinite errors score 0 under every preset; NaN (excluded) entries change nothing
     errors = np.concatenate([np.zeros(n), np.full(n, np.inf), np.full(n, np.nan)])
-    assert auc_preset(errors, "princeton-0.1x40").value == pytest.approx(0.5)
-    assert auc_preset(errors, "paper-0.00-0.99").value == pytest.approx(0.495)
-    # the generic function's defaults are the default preset; the 'mean' rule is a different number
+    assert auc_preset(errors, "mean-0.10x40").value == pytest.approx(0.5)
+    assert auc_preset(errors, "ulrssm-0.10x40").value == pytest.approx(0.5)
+    assert auc_preset(errors, PAPER_PRESET).value == pytest.approx(0.495)
+    # the generic function's defaults are the default preset; the trapezoid rule is a different number
     rng = np.random.default_rng(9)
     errors = rng.exponential(0.03, n)
     assert auc(errors) == auc_preset(errors).value
-    assert auc(errors, rule="mean") != pytest.approx(auc(errors), abs=1e-6)
-    assert set(AUC_PRESETS) == {"princeton-0.1x40", "paper-0.00-0.99"}
-    with pytest.raises(ValueError, match="unknown AUC preset"):
-        auc_preset(errors, "princeton")
+    assert auc(errors, rule="trapezoid-normalised") == auc_preset(errors, "ulrssm-0.10x40").value
+    assert auc(errors, rule="trapezoid-normalised") != pytest.approx(auc(errors), abs=1e-6)
+    assert set(AUC_PRESETS) == {"mean-0.10x40", "ulrssm-0.10x40", "paper-0.00-0.99"}
+    # parametrised names: T and the number of steps are in the name
+    assert preset_name("mean", 0.1, 40) == "mean-0.10x40"
+    assert preset_name("ulrssm", 0.125, 50) == "ulrssm-0.125x50"
+    wide = get_preset("mean-0.25x60")
+    assert len(wide.thresholds) == 60 and wide.thresholds[-1] == 0.25 and wide.rule == "mean"
+    assert auc_preset(errors, "mean-0.25x60").value == auc(errors, 0.25, 60)
+    assert auc_preset(errors, "mean-0.25x60").value > auc(errors)  # a wider range forgives more
+    for bad in ("princeton", "mean-0.1", "mean-0x40", "median-0.10x40", "mean-0.10x1"):
+        with pytest.raises(ValueError, match="unknown AUC preset"):
+            auc_preset(errors, bad)
     assert np.isnan(auc_preset(np.full(3, np.nan)).value)
 
 
@@ -236,6 +255,6 @@ def test_summarise_means_per_pair_then_over_pairs(wolf):
         human = table[(table["auc_preset"] == preset) & (table["group"] == "human")]
         assert human["mean_error"].item() == pytest.approx(mine["mean_error"].iloc[3])
     # more displaced pairs score lower, and the presets were never averaged together
-    princeton = per_pair[per_pair["auc_preset"] == "princeton-0.1x40"]["auc"].to_numpy()
-    assert (np.diff(princeton) < 0).all()
-    assert len(table) == 2 * (1 + 2 + 2 + 1)
+    default = per_pair[per_pair["auc_preset"] == DEFAULT_AUC_PRESET]["auc"].to_numpy()
+    assert (np.diff(default) < 0).all()
+    assert len(table) == len(AUC_PRESETS) * (1 + 2 + 2 + 1)
