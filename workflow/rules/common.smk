@@ -12,6 +12,7 @@ SETTINGS = bw.settings_of(config)
 LAYOUT = bw.Layout.of(config)
 RESULTS = str(LAYOUT.results)
 EXPORTS = config["exports"]
+BASELINES = config["evaluation"]["baselines"]
 
 
 envvars:
@@ -51,8 +52,8 @@ def all_targets(wildcards):
             targets.append(f"{base}/pairings_{setting}.pkl")
         if EXPORTS["report"]:
             targets.append(f"{base}/report")
-        for baseline in config["evaluation"]["baselines"]:
-            targets.append(f"{base}/evaluation/{baseline}/summary.csv")
+        if BASELINES:
+            targets.append(f"{base}/evaluation/summary.csv")
     return targets
 
 

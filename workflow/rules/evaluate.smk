@@ -1,0 +1,42 @@
+# Scoring: baselines predict on each store, `becos evaluate` scores every method of a setting together.
+
+
+rule baseline:
+    input:
+        store=f"{RESULTS}/{{setting}}/benchmark.zarr",
+        validation=f"{RESULTS}/{{setting}}/validation.json",
+    output:
+        directory(f"{RESULTS}/{{setting}}/predictions/{{baseline}}"),
+    params:
+        split=config["evaluation"]["split"],
+    wildcard_constraints:
+        baseline="nn|zoomout",
+    resources:
+        mem_mb=4000,
+        runtime=120,
+    log:
+        "logs/baseline/{setting}/{baseline}.log",
+    shell:
+        "becos baseline {wildcards.baseline} {input.store} --out {output} --split {params.split} > {log} 2>&1"
+
+
+rule evaluate:
+    input:
+        store=f"{RESULTS}/{{setting}}/benchmark.zarr",
+        predictions=expand(f"{RESULTS}/{{{{setting}}}}/predictions/{{baseline}}", baseline=BASELINES),
+    output:
+        summary=report(f"{RESULTS}/{{setting}}/evaluation/summary.csv", category="Evaluation"),
+        plot=report(f"{RESULTS}/{{setting}}/evaluation/pck.png", category="Evaluation"),
+        per_pair=f"{RESULTS}/{{setting}}/evaluation/per_pair.csv",
+    params:
+        out=lambda w: f"{RESULTS}/{w.setting}/evaluation",
+        split=config["evaluation"]["split"],
+        geodesics=config["evaluation"]["geodesics"],
+    resources:
+        mem_mb=6000,
+        runtime=240,
+    log:
+        "logs/evaluate/{setting}.log",
+    shell:
+        "becos evaluate {input.store} {input.predictions} --out {params.out} --split {params.split}"
+        " --geodesics {params.geodesics} > {log} 2>&1"
