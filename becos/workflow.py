@@ -552,12 +552,22 @@ def _chunk_rows(config: dict, setting: str, chunk: int) -> pd.DataFrame:
     return rows.sort_values(["x_dataset", "x_name", "y_dataset", "y_name", "pair_id"])
 
 
-def _write_index(path: Path, setting: str, chunk: int, entries: list[dict], started: float) -> None:
+def _progress(stage: str, setting: str, chunk: int, entries: list[dict], n_rows: int, started: float) -> None:
+    """A progress line every 10 pairs and at the end of a chunk."""
+    done = len(entries)
+    if done % 10 == 0 or done == n_rows:
+        _log(f"{stage} {setting} chunk {chunk}: {done}/{n_rows} pairs ({sum(e['computed'] for e in entries)} "
+             f"computed, the rest up to date) {time.perf_counter() - started:.1f} s")
+
+
+def _write_index(path: Path, setting: str, chunk: int, entries: list[dict], started: float) -> dict:
+    """Write a chunk's index (pairs, their files and input keys, what was computed); return its counts."""
     computed = sum(e["computed"] for e in entries)
     index = {"setting": setting, "chunk": int(chunk), "n_pairs": len(entries), "computed": computed,
              "reused": len(entries) - computed, "seconds": round(time.perf_counter() - started, 3),
              "pairs": sorted(entries, key=lambda e: e["pair_id"])}
     write_text(path, json.dumps(index, indent=1) + "\n")
+    return {"n": len(entries), "computed": computed}
 
 
 def ground_truth_stage(config: dict, setting: str, chunk: int, out_index: Path) -> dict:
@@ -571,7 +581,7 @@ def ground_truth_stage(config: dict, setting: str, chunk: int, out_index: Path) 
     shapes = ShapeStore(config, read_catalog(layout.catalog))
     rows = _chunk_rows(config, setting, chunk)
     entries = []
-    for i, row in enumerate(rows.to_dict("records")):
+    for row in rows.to_dict("records"):
         tx, ty = remesh_token(row, "x", remesh), remesh_token(row, "y", remesh)
         key = digest({"version": GROUND_TRUTH_VERSION, "x": [row["x_dataset"], row["x_name"], tx],
                       "y": [row["y_dataset"], row["y_name"], ty],
@@ -590,11 +600,8 @@ def ground_truth_stage(config: dict, setting: str, chunk: int, out_index: Path) 
                      yx_distance=gt_yx.distance)
         entries.append({"pair_id": row["pair_id"], "path": str(path), "input_key": key, "computed": computed,
                         "digest": shapes.file_digest(path)})
-        if (i + 1) % 10 == 0 or i + 1 == len(rows):
-            _log(f"ground truth {setting} chunk {chunk}: {i + 1}/{len(rows)} pairs "
-                 f"({sum(e['computed'] for e in entries)} computed) {time.perf_counter() - started:.1f} s")
-    _write_index(Path(out_index), setting, chunk, entries, started)
-    return {"n": len(entries), "computed": sum(e["computed"] for e in entries)}
+        _progress("ground truth", setting, chunk, entries, len(rows), started)
+    return _write_index(Path(out_index), setting, chunk, entries, started)
 
 
 def load_ground_truth(path: Path):
@@ -629,7 +636,7 @@ def pairs_stage(config: dict, setting: str, chunk: int, gt_index: Path, out_inde
     scanners: dict = {}
     labels = _labeller(config, shapes) if config.get("propagate_annotations", True) else None
     entries = []
-    for i, row in enumerate(rows.to_dict("records")):
+    for row in rows.to_dict("records"):
         tx, ty = remesh_token(row, "x", remesh), remesh_token(row, "y", remesh)
         gt = gt_files.get(row["pair_id"])
         if gt is None:
@@ -664,11 +671,8 @@ def pairs_stage(config: dict, setting: str, chunk: int, gt_index: Path, out_inde
             record.save(path)
         entries.append({"pair_id": row["pair_id"], "path": str(path), "input_key": key, "computed": computed,
                         "split": row["split"]})
-        if (i + 1) % 10 == 0 or i + 1 == len(rows):
-            _log(f"pairs {setting} chunk {chunk}: {i + 1}/{len(rows)} "
-                 f"({sum(e['computed'] for e in entries)} built) {time.perf_counter() - started:.1f} s")
-    _write_index(Path(out_index), setting, chunk, entries, started)
-    return {"n": len(entries), "computed": sum(e["computed"] for e in entries)}
+        _progress("pairs", setting, chunk, entries, len(rows), started)
+    return _write_index(Path(out_index), setting, chunk, entries, started)
 
 
 def _published_rotations(row: dict):
