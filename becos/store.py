@@ -34,7 +34,7 @@ used is recorded in the root attribute ``becos_store.layout`` (key -> group, or 
 Files: arrays are sharded (``SHARD_BYTES`` per shard file, inner chunks of ``CHUNK_BYTES``,
 Blosc zstd with byte shuffle, chunk files named ``c.<i>.<j>``), so a store holds about two files
 per array (``zarr.json`` + one shard) until an array outgrows a shard: ~115 files for a few pairs,
-149 for 1,000 pairs of 10k-vertex shapes (2.9 GB of arrays, 0.6 GB on disk; written in ~12 s,
+815 for 1,000 F2F pairs of 10k-vertex shapes (2.9 GB of arrays, 0.6 GB on disk; written in ~12 s,
 ``benchmarks/store.py``) instead of one file per pair and key — while
 reading one pair still decodes only the inner chunks it touches.
 
@@ -80,8 +80,9 @@ STORE_FORMAT = 1
 SPLIT_ORDER = ("train", "val", "test")
 CHUNK_BYTES = 1 << 20
 """Uncompressed bytes per inner chunk (the unit a partial read decodes)."""
-SHARD_BYTES = 64 << 20
-"""Uncompressed bytes per shard file (also the most :func:`write_store` buffers per array)."""
+SHARD_BYTES = 4 << 20
+"""Uncompressed bytes per shard file (also the most :func:`write_store` buffers per array, so the
+writer's memory stays flat as stores grow: ~40 arrays x 4 MiB)."""
 CHUNK_KEYS = {"name": "default", "separator": "."}
 """Chunk files named ``c.0.0`` inside each array's folder (no nested folders per dimension)."""
 READ_BLOCK_BYTES = 64 << 20
