@@ -85,6 +85,8 @@ def test_every_setting_is_built_and_validated(tiny_tosca_run):
         assert names <= {s.split("/")[1] for s in TINY_SHAPES}
         assert (base / "released").is_dir() and (base / f"pairings_{setting}.pkl").is_file()
         assert (base / "report").is_dir()
+        print(f"\n{setting}: {len(bench)} pairs {bench.table['split'].value_counts().to_dict()}, "
+              f"validation: valid={validation['valid']}, problems={validation['n_problems']}")
 
 
 def test_store_round_trips_the_pair_records(tiny_tosca_run):
