@@ -7,6 +7,7 @@ trimesh ``process=False, maintain_order=True`` and never merged, re-ordered or r
 from __future__ import annotations
 
 import hashlib
+from collections import OrderedDict
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -118,9 +119,10 @@ class MeshCache:
     ``cache_dir=None`` keeps only an in-process cache.
     """
 
-    def __init__(self, cache_dir: str | Path | None = None):
+    def __init__(self, cache_dir: str | Path | None = None, max_in_memory: int = 32):
         self.cache_dir = Path(cache_dir) if cache_dir is not None else None
-        self._memory: dict[str, TriMesh] = {}
+        self.max_in_memory = max_in_memory
+        self._memory: OrderedDict[str, TriMesh] = OrderedDict()
 
     def _key(self, path: Path) -> str:
         stat = path.stat()
@@ -134,6 +136,7 @@ class MeshCache:
             return read_mesh(path)  # raises the explanatory error
         key = self._key(path)
         if key in self._memory:
+            self._memory.move_to_end(key)
             return self._memory[key]
         mesh = None
         if self.cache_dir is not None:
@@ -147,4 +150,6 @@ class MeshCache:
         else:
             mesh = read_mesh(path)
         self._memory[key] = mesh
+        while len(self._memory) > self.max_in_memory:  # a long job must not hold every mesh it met
+            self._memory.popitem(last=False)
         return mesh

@@ -74,6 +74,10 @@ _SIDE_DTYPES = {
 }
 _PAIR_DTYPES = {"": ("int64", ()), "_face": ("int64", ()), "_weights": ("float64", (3,))}
 
+VALIDATE_BLOCK_BYTES = 16 << 20
+"""Uncompressed bytes checked at once (the checks make several temporaries per block, so the
+block size sets the validator's memory, independent of the store's size)."""
+
 
 def expected_schema() -> dict[str, tuple[str, tuple[int, ...]]]:
     """Record key -> (dtype name, trailing shape) as stored: ragged keys without their leading length,
@@ -444,7 +448,7 @@ def validate(path: str | Path, progress: bool = False) -> ValidationReport:
     ids = table["pair_id"].to_numpy().astype(str)
     if _check_schema(bench, problems):
         reported = 0
-        for block in bench.blocks():
+        for block in bench.blocks(max_bytes=VALIDATE_BLOCK_BYTES):
             block_ids = ids[block.start:block.stop]
             _BlockChecker(block, bench.setting, block_ids, found).run()
             _check_metas(block, bench.setting, table, found)
@@ -453,7 +457,7 @@ def validate(path: str | Path, progress: bool = False) -> ValidationReport:
                 print(f"validate: {block.stop}/{n} pairs checked ({time.perf_counter() - started:.1f} s)",
                       file=sys.stderr, flush=True)
     else:
-        for block in bench.blocks():
+        for block in bench.blocks(max_bytes=VALIDATE_BLOCK_BYTES):
             _check_metas(block, bench.setting, table, found)
 
     values, counts = np.unique(ids, return_counts=True)

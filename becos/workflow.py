@@ -31,6 +31,7 @@ import hashlib
 import json
 import sys
 import time
+from collections import OrderedDict
 from copy import deepcopy
 from dataclasses import dataclass, field
 from functools import cached_property
@@ -48,6 +49,8 @@ GROUND_TRUTH_VERSION = 1
 """Bumped when the ground-truth computation changes, so cached files are recomputed."""
 RECORD_VERSION = 1
 """Bumped when pair assembly changes, so cached records are rebuilt."""
+SHAPES_KEPT = 6
+"""Shapes (prepared, remeshed, scanners) a chunk job keeps in memory."""
 
 STAGE_KEYS: dict[str, tuple[str, ...]] = {
     "catalog": ("data_dir", "annotations", "datasets", "shapes", "template_file"),
@@ -402,10 +405,28 @@ def _entry(row) -> "object":
                       scale=float(row["scale"]), frame_rotation=frame_rotation(row), usage=int(row["usage"]))
 
 
+class _Recent(OrderedDict):
+    """A dict that keeps only its ``size`` most recently used entries."""
+
+    def __init__(self, size: int):
+        super().__init__()
+        self.size = size
+
+    def get_or_make(self, key, make):
+        if key in self:
+            self.move_to_end(key)
+            return self[key]
+        value = self[key] = make()
+        while len(self) > self.size:
+            self.popitem(last=False)
+        return value
+
+
 class ShapeStore:
     """The shapes of one job: catalog entries, parsed meshes, prepared meshes and remesh variants.
 
-    Everything is loaded once per job and kept (a chunk job reuses shapes across its pairs).
+    A chunk job visits its pairs sorted by shape, so a few recently used shapes are kept
+    (:data:`SHAPES_KEPT`): the job's memory does not grow with the number of pairs in a chunk.
     """
 
     def __init__(self, config: dict, catalog: pd.DataFrame):
@@ -414,9 +435,9 @@ class ShapeStore:
         self.config = config
         self.layout = Layout.of(config)
         self.entries = {(r["dataset"], r["name"]): _entry(r) for r in catalog.to_dict("records")}
-        self.mesh_cache = MeshCache(self.layout.cache / "meshes")
-        self._prepared: dict = {}
-        self._remeshed: dict = {}
+        self.mesh_cache = MeshCache(self.layout.cache / "meshes", max_in_memory=2 * SHAPES_KEPT)
+        self._prepared = _Recent(SHAPES_KEPT)
+        self._remeshed = _Recent(SHAPES_KEPT)
         self._digests: dict[Path, str] = {}
         self._network = None
 
@@ -435,10 +456,8 @@ class ShapeStore:
     def prepared(self, dataset: str, name: str):
         from becos.datasets import prepare_shape
 
-        key = (dataset, name)
-        if key not in self._prepared:
-            self._prepared[key] = prepare_shape(self.entry(dataset, name), self.mesh_cache)
-        return self._prepared[key]
+        return self._prepared.get_or_make((dataset, name),
+                                          lambda: prepare_shape(self.entry(dataset, name), self.mesh_cache))
 
     def remeshed(self, dataset: str, name: str, token: str):
         """The remesh variant (:class:`becos.remesh.Remeshed`), or None for ``original``."""
@@ -446,10 +465,8 @@ class ShapeStore:
 
         if token == "original":
             return None
-        key = (dataset, name, token)
-        if key not in self._remeshed:
-            self._remeshed[key] = load_remeshed(self.layout.remeshed(dataset, name, token))
-        return self._remeshed[key]
+        return self._remeshed.get_or_make((dataset, name, token),
+                                          lambda: load_remeshed(self.layout.remeshed(dataset, name, token)))
 
     def file_digest(self, path: Path) -> str:
         path = Path(path)
@@ -633,7 +650,7 @@ def pairs_stage(config: dict, setting: str, chunk: int, gt_index: Path, out_inde
     options = pair_options(config, setting)
     gt_files = {e["pair_id"]: e for e in json.loads(Path(gt_index).read_text())["pairs"]}
     rows = _chunk_rows(config, setting, chunk)
-    scanners: dict = {}
+    scanners = _Recent(SHAPES_KEPT)
     labels = _labeller(config, shapes) if config.get("propagate_annotations", True) else None
     entries = []
     for row in rows.to_dict("records"):
@@ -652,12 +669,10 @@ def pairs_stage(config: dict, setting: str, chunk: int, gt_index: Path, out_inde
             x = shapes.instance(row["x_dataset"], row["x_name"], tx)
             y = shapes.instance(row["y_dataset"], row["y_name"], ty)
             gt_xy, gt_yx = load_ground_truth(Path(gt["path"]))
-            for s, t in ((x, tx), (y, ty)):
-                if setting != "full_full" and (s.dataset, s.name, t) not in scanners:
-                    if len(scanners) > 16:
-                        scanners.pop(next(iter(scanners)))
-                    scanners[(s.dataset, s.name, t)] = Scanner(s.mesh)
-            pair_scanners = (scanners.get((x.dataset, x.name, tx)), scanners.get((y.dataset, y.name, ty)))
+            pair_scanners = (None, None)
+            if setting != "full_full":
+                pair_scanners = tuple(scanners.get_or_make((s.dataset, s.name, t), lambda s=s: Scanner(s.mesh))
+                                      for s, t in ((x, tx), (y, ty)))
             record = build_pair(x, y, gt_xy, gt_yx, pair_id=row["pair_id"], seed=int(row["seed"]),
                                 split=row["split"], options=options, scanners=pair_scanners,
                                 rotations=_published_rotations(row))
