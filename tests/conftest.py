@@ -35,26 +35,45 @@ def mesh_cache(tmp_path_factory):
 
 
 @pytest.fixture(scope="session")
-def tosca_pair_inputs(becos_code, tosca_dir, mesh_cache, tmp_path_factory):
-    """Remeshed cat0 (9,200 vertices) and cat3 (9,800) with network ground truth both ways.
-
-    Returns ``(x, y, gt_xy, gt_yx)``: two :class:`becos.pairs.ShapeInstance` and two
-    :class:`becos.surface_map.SurfaceMap`.
-    """
+def annotations(becos_code, tmp_path_factory):
+    """The BeCoS annotation folder (``becos.annotations.AnnotationSource``, full template table)."""
     from becos.annotations import AnnotationSource
-    from becos.datasets import DatasetSpec, prepare_shape
-    from becos.network import ShapeNetwork
-    from becos.pairs import ShapeInstance
-    from becos.remesh import remesh
 
-    annotations = AnnotationSource(becos_code, cache_dir=tmp_path_factory.mktemp("edges"))
-    entries = {e.name: e for e in DatasetSpec.load("tosca").list_shapes(becos_code / "data", annotations)}
+    return AnnotationSource(becos_code, cache_dir=tmp_path_factory.mktemp("edge-cache"))
+
+
+@pytest.fixture(scope="session")
+def tosca_entries(becos_code, annotations) -> dict:
+    """The 76 TOSCA shapes as ``becos.datasets.ShapeEntry``, by name."""
+    from becos.datasets import DatasetSpec
+
+    return {e.name: e for e in DatasetSpec.load("tosca").list_shapes(becos_code / "data", annotations)}
+
+
+@pytest.fixture(scope="session")
+def tosca_network(annotations, tosca_dir, mesh_cache):
+    """A shape network that knows TOSCA only (FAUST, DT4D absent, as on a fresh machine)."""
+    from becos.network import ShapeNetwork
 
     def meshes(dataset, name):
         path = tosca_dir / f"{name}.off"
         return mesh_cache.load(path) if dataset == "tosca" and path.is_file() else None
 
-    network = ShapeNetwork(annotations, meshes)
+    return ShapeNetwork(annotations, meshes)
+
+
+@pytest.fixture(scope="session")
+def tosca_pair_inputs(tosca_entries, tosca_network, mesh_cache):
+    """Remeshed cat0 (9,200 vertices) and cat3 (9,800) with network ground truth both ways.
+
+    Returns ``(x, y, gt_xy, gt_yx)``: two :class:`becos.pairs.ShapeInstance` and two
+    :class:`becos.surface_map.SurfaceMap`.
+    """
+    from becos.datasets import prepare_shape
+    from becos.pairs import ShapeInstance
+    from becos.remesh import remesh
+
+    entries, network = tosca_entries, tosca_network
     shapes, remeshes = {}, {}
     for name, target in (("cat0", 9200), ("cat3", 9800)):
         entry = entries[name]

@@ -18,15 +18,8 @@ TOSCA_CLASSES = {"cat": 11, "centaur": 6, "david": 7, "dog": 9, "horse": 8, "mic
 
 
 @pytest.fixture(scope="session")
-def annotations(becos_code, tmp_path_factory):
-    from becos.annotations import AnnotationSource
-
-    return AnnotationSource(becos_code, cache_dir=tmp_path_factory.mktemp("datasets-edge-cache"))
-
-
-@pytest.fixture(scope="session")
-def tosca(becos_code, annotations):
-    return {e.name: e for e in DatasetSpec.load("tosca").list_shapes(becos_code / "data", annotations)}
+def tosca(tosca_entries):
+    return tosca_entries
 
 
 @pytest.fixture(scope="session")

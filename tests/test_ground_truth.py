@@ -16,29 +16,13 @@ from becos.surface_map import compose
 
 
 @pytest.fixture(scope="session")
-def annotations(becos_code, tmp_path_factory):
-    from becos.annotations import AnnotationSource
-
-    return AnnotationSource(becos_code, cache_dir=tmp_path_factory.mktemp("edge-cache"))
+def tosca_shapes(tosca_entries):
+    return tosca_entries
 
 
 @pytest.fixture(scope="session")
-def tosca_shapes(becos_code, annotations):
-    from becos.datasets import DatasetSpec
-
-    entries = DatasetSpec.load("tosca").list_shapes(becos_code / "data", annotations)
-    return {e.name: e for e in entries}
-
-
-@pytest.fixture(scope="session")
-def network(annotations, tosca_dir, mesh_cache):
-    from becos.network import ShapeNetwork
-
-    def meshes(dataset, name):
-        path = tosca_dir / f"{name}.off"
-        return mesh_cache.load(path) if dataset == "tosca" and path.is_file() else None
-
-    return ShapeNetwork(annotations, meshes)
+def network(tosca_network):
+    return tosca_network
 
 
 @pytest.fixture(scope="session")

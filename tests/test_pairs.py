@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from becos.pairs import PairOptions, ShapeInstance, build_pair
+from becos.pairs import PairOptions, build_pair
 from becos.record import PairRecord
 from becos.visibility import largest_component
 

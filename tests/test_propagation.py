@@ -16,29 +16,13 @@ from becos.propagation import (LABEL_NAMES, NO_LABEL, agreement, labels_for_inst
 
 
 @pytest.fixture(scope="module")
-def annotations(becos_code, tmp_path_factory):
-    from becos.annotations import AnnotationSource
-
-    return AnnotationSource(becos_code, cache_dir=tmp_path_factory.mktemp("edge-cache"))
+def entries(tosca_entries):
+    return tosca_entries
 
 
 @pytest.fixture(scope="module")
-def entries(becos_code, annotations):
-    from becos.datasets import DatasetSpec
-
-    return {e.name: e for e in DatasetSpec.load("tosca").list_shapes(becos_code / "data", annotations)}
-
-
-@pytest.fixture(scope="module")
-def network(annotations, tosca_dir, mesh_cache):
-    """A network that knows TOSCA only (FAUST, DT4D absent, as on a fresh machine)."""
-    from becos.network import ShapeNetwork
-
-    def meshes(dataset, name):
-        path = tosca_dir / f"{name}.off"
-        return mesh_cache.load(path) if dataset == "tosca" and path.is_file() else None
-
-    return ShapeNetwork(annotations, meshes)
+def network(tosca_network):
+    return tosca_network
 
 
 @pytest.fixture(scope="module")
