@@ -109,3 +109,21 @@ def pair_record_files(tosca_pair_inputs, tmp_path_factory) -> dict[str, list[Pat
             paths.append(path)
         out[setting] = paths
     return out
+
+
+@pytest.fixture
+def store_of(tmp_path):
+    """``store_of(records, setting) -> Path``: save PairRecords and write them into one Zarr store."""
+    from becos.store import write_store
+
+    def build(records, setting: str) -> Path:
+        folder = tmp_path / f"{setting}-records"
+        folder.mkdir(exist_ok=True)
+        paths = []
+        for record in records:
+            path = folder / f"{record.pair_id}.npz"
+            record.save(path)
+            paths.append(path)
+        return write_store(paths, tmp_path / f"{setting}.zarr", setting=setting, progress=False)
+
+    return build

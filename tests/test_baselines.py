@@ -109,18 +109,11 @@ def test_run_baseline_writes_the_folder_format(records, tmp_path):
         run_baseline("icp", pairs, tmp_path / "icp")
 
 
-def test_baseline_command_on_a_store(records, tmp_path):
-    """``becos baseline nn STORE --out DIR`` then ``becos evaluate`` (runs once becos.store exists)."""
-    store_module = pytest.importorskip("becos.store")
+def test_baseline_command_on_a_store(records, store_of, tmp_path):
+    """``becos baseline nn STORE --out DIR`` then ``becos evaluate``."""
     from becos.cli import main
 
-    paths = []
-    for record in records["full_full"]:
-        path = tmp_path / "records" / f"{record.pair_id}.npz"
-        path.parent.mkdir(exist_ok=True)
-        record.save(path)
-        paths.append(path)
-    store = store_module.write_store(paths, tmp_path / "ff.zarr", setting="full_full", progress=False)
+    store = store_of(records["full_full"], "full_full")
     assert main(["baseline", "nn", str(store), "--out", str(tmp_path / "nn"), "--split", "test"]) == 0
     test_ids = [r.pair_id for r in records["full_full"] if r.meta["split"] == "test"]
     assert sorted(open_predictions(tmp_path / "nn").pair_ids()) == sorted(test_ids)

@@ -283,19 +283,13 @@ def test_bad_predictions_are_reported(records, tmp_path):
         open_predictions(tmp_path / "nowhere")
 
 
-def test_store_level_evaluate_command(records, tmp_path):
-    """``becos evaluate STORE PRED --out DIR`` end to end (runs once becos.store exists)."""
-    store_module = pytest.importorskip("becos.store")
+def test_store_level_evaluate_command(records, store_of, tmp_path):
+    """``becos evaluate STORE PRED --out DIR`` end to end."""
     from becos.cli import main
+    from becos.store import open_benchmark
 
-    paths = []
-    for record in records["partial_full"]:
-        path = tmp_path / "records" / f"{record.pair_id}.npz"
-        path.parent.mkdir(exist_ok=True)
-        label_left_right(record).save(path)
-        paths.append(path)
-    store = store_module.write_store(paths, tmp_path / "pf.zarr", setting="partial_full", progress=False)
-    bench = store_module.open_benchmark(store)
+    store = store_of([label_left_right(r) for r in records["partial_full"]], "partial_full")
+    bench = open_benchmark(store)
     preds = tmp_path / "truth"
     for record in bench.records():
         write_prediction(preds, record.pair_id, Prediction(record["corr_10"]))
@@ -303,7 +297,7 @@ def test_store_level_evaluate_command(records, tmp_path):
     assert main(["evaluate", str(store), str(preds), "--out", str(out), "--split", "all"]) == 0
     summary = pd.read_csv(out / "summary.csv")
     overall = summary[summary["grouping"] == "all"]
-    assert overall["n_pairs"].item() == len(paths)
+    assert overall["n_pairs"].item() == len(records["partial_full"])
     assert overall[f"auc_x100[{DEFAULT_AUC_PRESET}]"].item() == 100.0
     assert overall["left_right_x100"].item() == 100.0
     assert set(summary[summary["grouping"] == "split"]["group"]) == {"train", "test"}

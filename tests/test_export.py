@@ -374,7 +374,7 @@ def test_geodesics_on_full_shape(small_record, tmp_path):
 
 
 def test_cli_exports_a_store(records, pair_record_files, small_record, tmp_path, capsys):
-    store = pytest.importorskip("becos.store")
+    import becos.store as store
     from becos.cli import main
 
     setting = "partial_partial"

@@ -205,7 +205,7 @@ def test_cli_arguments_and_missing_store(tmp_path):
 
 
 def test_cli_on_a_store(pair_record_files, tmp_path, capsys):
-    store = pytest.importorskip("becos.store")
+    import becos.store as store
     from becos.cli import main
 
     path = store.write_store(pair_record_files["partial_partial"], tmp_path / "p2p.zarr",
