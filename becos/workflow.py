@@ -17,8 +17,10 @@ Files under ``results`` (config key ``results``)::
     cache/                              parsed meshes and edge files (safe to delete)
 
 Incremental rebuilds. A pair belongs to chunk ``hash(pair_id) % n_chunks`` forever, so growth adds
-pairs to chunks and never moves one. A chunk job reruns when its rows or its stage's options change
-(Snakemake ``params`` hold their digests); inside it, a pair's file is rewritten only when the pair's
+pairs to chunks and never moves one. A chunk job reruns when the manifest or catalog is rewritten or
+its stage's options change (they are its Snakemake ``params``, :func:`job_options`); a remesh job
+only when its shape's catalog row or target changes. Inside a chunk job, a pair's file is rewritten
+only when the pair's
 *input key* changed: the digest of its manifest row, the stage options and the digests of the files
 it reads (remesh variants, ground truth). So enabling another dataset recomputes only the new or
 re-partnered pairs, and changing ``min_overlap`` recomputes records but no remesh and no ground truth.
@@ -49,6 +51,7 @@ GROUND_TRUTH_VERSION = 1
 """Bumped when the ground-truth computation changes, so cached files are recomputed."""
 RECORD_VERSION = 1
 """Bumped when pair assembly changes, so cached records are rebuilt."""
+STAGE_VERSIONS = {"ground_truth": GROUND_TRUTH_VERSION, "pairs": RECORD_VERSION}
 SHAPES_KEPT = 6
 """Shapes (prepared, remeshed, scanners) a chunk job keeps in memory."""
 
@@ -100,8 +103,9 @@ def resolve_config(raw: dict) -> dict:
     """
     import jsonschema
 
-    config = _fill_defaults(_schema(), deepcopy(dict(raw)))
-    validator = jsonschema.Draft202012Validator(_schema())
+    schema = _schema()
+    config = _fill_defaults(schema, deepcopy(dict(raw)))
+    validator = jsonschema.Draft202012Validator(schema)
     errors = sorted(validator.iter_errors(config), key=lambda e: list(e.path))
     if errors:
         lines = [f"  {'/'.join(map(str, e.path)) or '(top level)'}: {e.message}" for e in errors]
@@ -163,6 +167,8 @@ def job_options(config: dict, stage: str, setting: str | None = None) -> str:
     """
     options = stage_options(config, stage, setting)
     options["results"] = config.get("results", "results")
+    if stage in STAGE_VERSIONS:
+        options["version"] = STAGE_VERSIONS[stage]  # a bump reruns the stage's chunk jobs
     return json.dumps(options, sort_keys=True)
 
 
@@ -371,18 +377,6 @@ class Plan:
     def shape_json(self, dataset: str, name: str) -> str:
         """A shape's catalog row as JSON (the remesh job's description of its shape)."""
         return json.dumps(self._catalog_rows[(dataset, name)], sort_keys=True)
-
-    def shape_digest(self, dataset: str, name: str) -> str:
-        """Digest of a shape's catalog row (file, scale, frame rotation, template, split ...)."""
-        return digest(self._catalog_rows[(dataset, name)])
-
-    def chunk_digest(self, setting: str, chunk: int, stage: str) -> str:
-        """Digest of everything a chunk job of ``stage`` reads besides its input files' contents."""
-        rows = self.chunk_rows(setting, chunk)
-        shapes = sorted({(d, n) for side in ("x", "y") for d, n in zip(rows[f"{side}_dataset"], rows[f"{side}_name"])})
-        return digest({"rows": rows.to_dict("records"), "options": stage_options(self.config, stage, setting),
-                       "shapes": [self.shape_digest(d, n) for d, n in shapes],
-                       "version": GROUND_TRUTH_VERSION if stage == "ground_truth" else RECORD_VERSION})
 
     def remesh_target(self, dataset: str, name: str, token: str) -> dict:
         """Arguments of :func:`becos.remesh.remesh` for a token."""
@@ -700,10 +694,8 @@ def _published_rotations(row: dict):
 
 def _labeller(config: dict, shapes: ShapeStore):
     """``labels(dataset, name, token) -> (V,) int8 or None``: propagated left/right labels of a full shape."""
-    try:
-        from becos.propagation import labels_for_instance
-    except ImportError:
-        return None
+    from becos.propagation import labels_for_instance
+
     cache: dict = {}
 
     def labels(dataset: str, name: str, token: str):

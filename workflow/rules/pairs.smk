@@ -50,7 +50,6 @@ rule ground_truth:
     output:
         f"{RESULTS}/{{setting}}/ground_truth/chunk_{{chunk}}.json",
     params:
-        rows=lambda w: plan().chunk_digest(w.setting, int(w.chunk), "ground_truth"),
         options=bw.job_options(config, "ground_truth"),
     wildcard_constraints:
         chunk="[0-9]{4}",
@@ -73,7 +72,6 @@ rule pairs:
     output:
         f"{RESULTS}/{{setting}}/pairs/chunk_{{chunk}}.json",
     params:
-        rows=lambda w: plan().chunk_digest(w.setting, int(w.chunk), "pairs"),
         options=lambda w: bw.job_options(config, "pairs", w.setting),
     wildcard_constraints:
         chunk="[0-9]{4}",
