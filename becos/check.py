@@ -17,16 +17,24 @@ last face lines are parsed (3 coordinates; ``k i_1 .. i_k`` with ``k >= 3`` and 
 ``[0, V)``); for binary PLY the file size must hold the announced elements (faces counted as
 triangles) and the last face row is checked when the size matches exactly; for OBJ at least one
 ``v``/``f`` line must exist and the last line must parse with in-range indices. This catches empty and
-truncated files at ~10 ms per 5 MB. ``full_parse=True`` additionally reads every mesh with
-:func:`becos.mesh.read_mesh` (~0.4 s per 50k-vertex mesh).
+truncated files at ~10 ms per 5 MB. Vertex lines (text formats) and the vertex block (binary PLY) are
+also scanned for NaN / infinite coordinates. ``full_parse=True`` additionally reads every mesh with
+:func:`becos.mesh.read_mesh` (~0.4 s per 50k-vertex mesh) and lists, per mesh, the repair remeshing
+will apply to a copy (:func:`inspect_mesh_file`: faces with a repeated index, zero-area and duplicate
+faces, unreferenced vertices, small extra components, inconsistent winding); a mesh whose extra
+components are too large to drop is a problem. With mesh checks on, the edge files the enabled datasets
+need are parsed, and where both templates' files are present their row counts and face indices are
+compared with the meshes' header counts.
 
 Report layout (``check_datasets`` return value)::
 
     {<dataset>: {"ok", "path", "folder", "found", "expected", "excluded_found", "meshes_checked",
-                 "bad_meshes": [{"path", "problem"}], "problems": [...]},
+                 "bad_meshes": [{"path", "problem", "fix"}], "repairs": [{"path", "repair", <counts>}],
+                 "problems": [...]},
      ...,
      "annotations": {"ok", "path", "found", "nodes", "edges", "template_rows", "files": {rel: bool},
                      "edge_files": {"needed", "missing"}, "default_faces": {"needed", "missing"},
+                     "edge_contents": {"parsed", "compared_with_meshes", "bad"},
                      "unresolved_template_keys", "problems", "notes"},
      "ok": bool, "data_dir": str}
 """
@@ -80,6 +88,38 @@ class DatasetCheckError(ConfigError):
 
 
 # --- mesh files ------------------------------------------------------------------------------------
+_NAN_FIX = "re-export or re-download the mesh; becos cannot guess the positions"
+_TRUNCATED_FIX = "re-download or re-extract the dataset (the file is truncated or corrupt)"
+
+
+class _MeshProblem(ValueError):
+    """A problem found by the cheap check whose fix is not 're-download a truncated file'."""
+
+    def __init__(self, message: str, fix: str):
+        super().__init__(message)
+        self.fix = fix
+
+
+_NON_FINITE = re.compile(rb"nan|inf", re.IGNORECASE)
+
+
+def _check_finite_text(data: bytes, start: int, end: int, first_line: int, line_starts: np.ndarray,
+                       what: str) -> None:
+    """Raise if ``data[start:end]`` (vertex lines) holds a NaN or infinite value (text formats)."""
+    hit = _NON_FINITE.search(data, start, end)
+    if hit is not None:
+        line = int(np.searchsorted(line_starts, hit.start(), side="right")) - 1
+        raise _MeshProblem(f"{what} {line - first_line + 1} holds a NaN or infinite coordinate "
+                           f"({_line_at(data, int(line_starts[line]))!r})", _NAN_FIX)
+
+
+def _line_at(data: bytes, position: int) -> bytes:
+    """The (stripped, at most 80 bytes) text line of ``data`` holding byte ``position``."""
+    start = data.rfind(b"\n", 0, position) + 1
+    end = data.find(b"\n", position)
+    return data[start:end if end >= 0 else len(data)].strip()[:80]
+
+
 class _Lines:
     """Non-blank, non-comment lines of a text buffer, located with numpy (no per-line Python loop)."""
 
@@ -143,6 +183,8 @@ def _check_text_body(lines: _Lines, first: int, n_vertices: int, n_faces: int, f
                          f"data lines follow (truncated file)")
     _check_vertex_line(lines, first, "the first vertex line")
     _check_vertex_line(lines, first + n_vertices - 1, "the last vertex line")
+    _check_finite_text(lines.data, int(lines.starts[first]), int(lines.ends[first + n_vertices - 1]), first,
+                       lines.starts, "vertex line")
     _check_face_tokens(lines.tokens(first + n_vertices), n_vertices, "the first face line")
     _check_face_tokens(lines.tokens(first + n_vertices + n_faces - 1), n_vertices, "the last face line")
 
@@ -221,10 +263,21 @@ def _check_ply(path: Path, size: int) -> tuple[int, int]:
     if size < need:
         raise ValueError(f"the binary PLY header announces {n_vertices} vertices and {n_faces} triangles, which need "
                          f"at least {need} bytes, but the file has {size} (truncated file)")
+    order = "<" if fmt == "binary_little_endian" else ">"
+    first_element = elements[0]
+    if first_element[0] == "vertex" and first_element[2] and all(p[0] == "scalar" for p in first_element[2]):
+        dtype = np.dtype([(f"p{i}", order + _PLY_DTYPES.get(p[1], "f4")) for i, p in enumerate(first_element[2])])
+        with open(path, "rb") as fh:
+            fh.seek(body_start)
+            block = np.frombuffer(fh.read(dtype.itemsize * n_vertices), dtype=dtype, count=n_vertices)
+        for i, p in enumerate(first_element[2]):
+            column = block[f"p{i}"]
+            if column.dtype.kind == "f" and not np.isfinite(column).all():
+                bad = int(np.flatnonzero(~np.isfinite(column))[0])
+                raise _MeshProblem(f"vertex {bad} has a NaN or infinite '{p[2]}' coordinate", _NAN_FIX)
     last = elements[-1]
     if size == need and last[0] == "face" and len(last[2]) == 1 and last[2][0][0] == "list":
         count_type, index_type = last[2][0][1:3]
-        order = "<" if fmt == "binary_little_endian" else ">"
         row = _PLY_SIZES.get(count_type, 1) + 3 * _PLY_SIZES.get(index_type, 4)
         with open(path, "rb") as fh:
             fh.seek(size - row)
@@ -245,6 +298,11 @@ def _check_obj(data: bytes) -> tuple[int, int]:
     n_faces = len(_OBJ_F.findall(data))
     if n_vertices == 0 or n_faces == 0:
         raise ValueError(f"holds {n_vertices} vertex lines and {n_faces} face lines (empty or truncated mesh)")
+    bad = re.search(rb"^v[ \t][^\n]*?(nan|inf)", data, re.MULTILINE | re.IGNORECASE)
+    if bad is not None:
+        line = data.count(b"\n", 0, bad.start()) + 1
+        raise _MeshProblem(f"line {line} ({_line_at(data, bad.start())!r}) holds a NaN or infinite coordinate",
+                           _NAN_FIX)
     lines = _Lines(data)
     tokens = lines.tokens(len(lines) - 1)
     if tokens[0] == b"v":
@@ -270,7 +328,7 @@ def check_mesh_file(path: str | Path, full_parse: bool = False) -> tuple[int, in
         InputFileError: missing, empty, truncated or unparsable file.
     """
     path = Path(path)
-    fix = "re-download or re-extract the dataset (the file is truncated or corrupt)"
+    fix = _TRUNCATED_FIX
     if not path.is_file():
         raise InputFileError(path, "mesh file not found", fix)
     size = path.stat().st_size
@@ -287,7 +345,7 @@ def check_mesh_file(path: str | Path, full_parse: bool = False) -> tuple[int, in
         else:
             raise ValueError(f"unknown mesh type '{suffix}' (use .off, .ply or .obj)")
     except (ValueError, IndexError, OverflowError) as exc:
-        raise InputFileError(path, str(exc) or type(exc).__name__, fix) from None
+        raise InputFileError(path, str(exc) or type(exc).__name__, getattr(exc, "fix", fix)) from None
     if full_parse:
         from becos.mesh import read_mesh
 
@@ -296,7 +354,61 @@ def check_mesh_file(path: str | Path, full_parse: bool = False) -> tuple[int, in
     return counts
 
 
+def inspect_mesh_file(path: str | Path):
+    """Check a mesh file completely and say how remeshing will repair it.
+
+    The cheap check of :func:`check_mesh_file`, then :func:`becos.mesh.read_mesh` (NaN coordinates,
+    face indices out of range, OFF header counts) and :func:`becos.mesh.surface_for_remeshing`
+    (faces with a repeated index, zero-area and duplicate faces, unreferenced vertices, extra
+    components, inconsistent winding).
+
+    Returns:
+        The :class:`becos.mesh.MeshRepair` report (``needs_attention`` is False for a clean mesh).
+
+    Raises:
+        InputFileError: any problem no repair handles, naming the file, the problem and the fix.
+    """
+    from becos.mesh import read_mesh, surface_for_remeshing
+
+    path = Path(path)
+    check_mesh_file(path)
+    return surface_for_remeshing(read_mesh(path), source=path)[1]
+
+
 # --- datasets --------------------------------------------------------------------------------------
+def _natural(text: str):
+    from becos.catalog import natural_key
+
+    return natural_key(text)
+
+
+_PUBLISHED_CACHE: dict[str, dict[str, set[str]]] = {}
+
+
+def _published_names(root: Path | None) -> dict[str, set[str]]:
+    """Dataset -> shape names used by the published pair lists in ``root/config`` (empty if absent)."""
+    if root is None:
+        return {}
+    key = str(root)
+    if key not in _PUBLISHED_CACHE:
+        out: dict[str, set[str]] = {}
+        for setting in ("full_full", "partial_partial"):
+            path = Path(root) / "config" / f"pairings_original_{setting}.pkl"
+            if not path.is_file():
+                continue
+            try:
+                from becos.published import load_published
+
+                for split in load_published(path):
+                    for pair in split:
+                        for shape in pair:
+                            out.setdefault(str(shape["org_dataset"]), set()).add(str(shape["name"]))
+            except Exception:  # an unreadable list only loses the names in a message
+                continue
+        _PUBLISHED_CACHE[key] = out
+    return _PUBLISHED_CACHE[key]
+
+
 def _missing_dataset_text(spec, folder: Path, data_dir: Path) -> str:
     s = spec.source
     parts = [f"dataset '{spec.name}' ({spec.title}) not found: folder {folder} does not exist.",
@@ -318,7 +430,7 @@ def _check_one_dataset(name: str, data_dir: Path, annotations, read_meshes: bool
     from becos.datasets import DatasetSpec
 
     entry: dict = {"ok": False, "path": None, "folder": None, "found": 0, "expected": None, "excluded_found": 0,
-                   "meshes_checked": 0, "bad_meshes": [], "problems": []}
+                   "meshes_checked": 0, "bad_meshes": [], "repairs": [], "problems": []}
     problems: list[str] = []
     try:
         spec = DatasetSpec.load(name, config_dir)
@@ -345,9 +457,19 @@ def _check_one_dataset(name: str, data_dir: Path, annotations, read_meshes: bool
     counts_ok = True
     if len(used) != spec.expected_count:
         counts_ok = False
+        published = _published_names(getattr(annotations, "root", None)).get(name, set())
+        # the published lists name every shape of the reference's datasets; a registry that expects
+        # another count (a subset, a newer release) gets no names
+        absent = sorted(published - set(names), key=_natural) if len(published) == spec.expected_count else []
+        entry["missing_published"] = absent
+        named = ""
+        if absent:
+            shown = ", ".join(f"{n}.{spec.file_type}" for n in absent[:MAX_LISTED_MESHES])
+            more = f" and {len(absent) - MAX_LISTED_MESHES} more" if len(absent) > MAX_LISTED_MESHES else ""
+            named = f"; missing files named by the published BeCoS pair lists: {shown}{more}"
         problems.append(f"dataset '{name}': found {len(used)} shapes ({spec.file_glob}) in {folder}, expected "
-                        f"{spec.expected_count}. Fix: complete or re-extract the download ({spec.download_help()}), "
-                        f"or check `data_dir`")
+                        f"{spec.expected_count}{named}. Fix: complete or re-extract the download "
+                        f"({spec.download_help()}), or check `data_dir`")
     if spec.expected_per_class:
         per_class: dict[str, int] = {}
         for n in used:
@@ -365,13 +487,20 @@ def _check_one_dataset(name: str, data_dir: Path, annotations, read_meshes: bool
         for n in names:
             path = folder / f"{n}.{spec.file_type}"
             try:
-                check_mesh_file(path, full_parse=full_parse)
+                if full_parse:
+                    repair = inspect_mesh_file(path)
+                    if repair.needs_attention:
+                        entry["repairs"].append({"path": str(path), "repair": repair.summary(), **repair.counts()})
+                else:
+                    check_mesh_file(path)
             except InputFileError as exc:
-                entry["bad_meshes"].append({"path": str(path), "problem": exc.problem})
+                entry["bad_meshes"].append({"path": str(path), "problem": exc.problem, "fix": exc.fix})
             entry["meshes_checked"] += 1
         bad = entry["bad_meshes"]
         if bad:
-            listed = "; ".join(f"{b['path']}: {b['problem']}" for b in bad[:MAX_LISTED_MESHES])
+            listed = "; ".join(f"{b['path']}: {b['problem']}" + (f" (fix: {b['fix']})" if b["fix"] != _TRUNCATED_FIX
+                                                                else "")
+                               for b in bad[:MAX_LISTED_MESHES])
             more = f"; and {len(bad) - MAX_LISTED_MESHES} more (all in the report)" if len(bad) > MAX_LISTED_MESHES else ""
             problems.append(f"dataset '{name}': {len(bad)} of {len(names)} mesh files are empty, truncated or corrupt: "
                             f"{listed}{more}. Fix: re-download or re-extract them ({spec.download_help()})")
@@ -387,9 +516,44 @@ def _check_one_dataset(name: str, data_dir: Path, annotations, read_meshes: bool
 
 
 # --- annotations -----------------------------------------------------------------------------------
+def _check_edge_contents(source, edges: list[tuple[str, str]], present: dict[str, list]) -> tuple[dict, list[str]]:
+    """Parse each needed edge file (non-numeric text, columns, face indices below -1...) and, where both
+    templates' mesh files are present, compare its rows with the source template's vertex count and
+    its face indices with the target template's face count (counts from the file headers)."""
+    paths = {(e.dataset, e.name): e.path for entries in present.values() for e in entries}
+    counts: dict = {}
+
+    def mesh_counts(node: str):
+        key = source.node_template(node)
+        if key not in counts:
+            counts[key] = None
+            if key in paths:
+                try:
+                    counts[key] = check_mesh_file(paths[key])
+                except InputFileError:
+                    pass  # reported with the dataset's meshes
+        return counts[key]
+
+    problems, bad, compared = [], [], 0
+    for a, b in edges:
+        try:
+            if source.edge_source(a, b).kind != "file":
+                continue
+            source.edge_report(a, b)                      # parses (and validates) the file once
+            ca, cb = mesh_counts(a), mesh_counts(b)
+            if ca is not None and cb is not None:
+                source.check_edge(a, b, ca[0], cb[1])
+                compared += 1
+        except BecosError as exc:
+            bad.append(f"{a} -> {b}")
+            problems.append(f"annotation folder: {exc}")
+    return {"parsed": len(edges), "compared_with_meshes": compared, "bad": bad}, problems
+
+
 def _check_annotations(root: Path, template_table: str, enabled: list[str], present: dict[str, list],
-                       specs: dict) -> tuple[dict, list[str]]:
-    """Annotation-folder part of the report; ``present`` maps found datasets to their ShapeEntry rows."""
+                       specs: dict, check_edges: bool = True) -> tuple[dict, list[str]]:
+    """Annotation-folder part of the report; ``present`` maps found datasets to their ShapeEntry rows.
+    ``check_edges`` also parses the needed edge files and compares them with the present meshes."""
     from becos.annotations import (ADJACENCY_CSV, CHIRALITY_CSV, DEFAULT_FACES_DIR, EDGE_DIR, AnnotationSource,
                                    _user_cache_dir)
 
@@ -464,6 +628,11 @@ def _check_annotations(root: Path, template_table: str, enabled: list[str], pres
                 missing_edges.append(f"{a} -> {b}")
                 problems.append(f"annotation folder: {exc}")
     report["edge_files"] = {"needed": n_edges, "missing": missing_edges}
+    if check_edges:
+        missing = {tuple(m.split(" -> ")) for m in missing_edges}
+        needed = [(a, b) for u, v in sorted(sub.edges) for a, b in ((u, v), (v, u)) if (a, b) not in missing]
+        report["edge_contents"], edge_problems = _check_edge_contents(source, needed, present)
+        problems += edge_problems
     missing_faces = []
     n_faces = 0
     for node in sorted(nodes):
@@ -504,7 +673,8 @@ def check_datasets(datasets: list[str], data_dir: str | Path, annotations_dir: s
             then fail, as they read files from it).
         read_meshes: check every listed mesh file (cheap header/size check, see module docstring);
             False checks folders and counts only.
-        full_parse: also parse every mesh completely with :func:`becos.mesh.read_mesh` (slow).
+        full_parse: also parse every mesh completely with :func:`becos.mesh.read_mesh` and report the
+            repairs remeshing will apply (``<dataset>["repairs"]``; slow).
         template_table: the template table in ``<annotations>/config`` (config key ``template_file``).
         config_dir: dataset registry folder (default ``config/datasets`` or ``$BECOS_DATASETS_DIR``).
 
@@ -549,7 +719,8 @@ def check_datasets(datasets: list[str], data_dir: str | Path, annotations_dir: s
     if root is None:
         report["annotations"] = {"ok": None, "path": None, "notes": ["not checked (no annotation folder given)"]}
     else:
-        report["annotations"], ann_problems = _check_annotations(root, template_table, enabled, present, specs)
+        report["annotations"], ann_problems = _check_annotations(root, template_table, enabled, present, specs,
+                                                                 check_edges=read_meshes)
         problems += ann_problems
     report["ok"] = not problems
     report["data_dir"] = str(data_dir)
@@ -739,7 +910,8 @@ def configure_parser(parser: argparse.ArgumentParser, name: str = "check") -> ar
         parser.add_argument("--no-mesh-check", dest="read_meshes", action="store_false",
                             help="only check folders and counts, not the mesh files")
         parser.add_argument("--full-parse", action="store_true",
-                            help="also parse every mesh completely with read_mesh (slow: ~35 s for TOSCA)")
+                            help="also parse every mesh completely with read_mesh and list the repairs remeshing "
+                                 "applies to a copy (slow: ~35 s for TOSCA)")
     elif name == "fetch-annotations":
         parser.add_argument("--url", required=True, help="archive URL (http, https or file://)")
         parser.add_argument("--sha256", required=True, help="pinned SHA-256 of the archive")
@@ -770,6 +942,11 @@ def run_cli(args: argparse.Namespace) -> int:
     for name in args.datasets:
         r = report[name]
         print(f"check: {name}: {r['found']} shapes in {r['path']}", file=sys.stderr)
+        if r.get("repairs"):
+            print(f"check: {name}: {len(r['repairs'])} meshes are repaired on a copy before remeshing (the files "
+                  f"are not changed):", file=sys.stderr)
+            for item in r["repairs"]:
+                print(f"  {item['path']}: {item['repair']}", file=sys.stderr)
     print(f"check: all ok in {time.perf_counter() - start:.1f} s", file=sys.stderr)
     if args.out is not None:
         write_text(args.out, text)

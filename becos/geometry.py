@@ -142,39 +142,65 @@ class SurfaceLocator:
     ``max_detour`` (default: the mean edge length) farther than the plain closest point -- a jump
     across a contact is that local; farther answers mean the normal test misleads (thin or open
     parts) -- else by the plain closest point.
+
+    Answers never lie in a degenerate face (repeated vertex index or zero area) or in a duplicate of
+    an earlier face row (:func:`becos.mesh.surface_faces`): such faces are left out of the search, so
+    barycentric weights are always well defined. Face indices returned are rows of ``mesh.faces``.
     """
 
     def __init__(self, mesh: TriMesh):
         import igl
 
+        from becos.mesh import degenerate_faces, duplicate_faces
+
         self.mesh = mesh
+        degenerate = degenerate_faces(mesh)
+        self._first = duplicate_faces(mesh.faces, mesh.n_vertices, among=~degenerate)
+        usable = ~degenerate & (self._first < 0)
+        if not usable.any():
+            raise ValueError(f"SurfaceLocator: none of the {mesh.n_faces} faces has a non-zero area")
+        self._rows = None if usable.all() else np.flatnonzero(usable)   # searched rows (None: all)
+        self._faces = mesh.faces if self._rows is None else mesh.faces[self._rows]
         self._tree = igl.AABB()
-        self._tree.init(mesh.vertices, mesh.faces)
+        self._tree.init(mesh.vertices, self._faces)
         self._normals = None
         self._centroids = None
-        edges = mesh.vertices[mesh.faces] - mesh.vertices[np.roll(mesh.faces, 1, axis=1)]
+        edges = mesh.vertices[self._faces] - mesh.vertices[np.roll(self._faces, 1, axis=1)]
         self.max_detour = float(np.linalg.norm(edges, axis=2).mean())
+
+    def _row(self, index: np.ndarray) -> np.ndarray:
+        """Rows of ``mesh.faces`` of indices into the searched faces."""
+        return index if self._rows is None else self._rows[index]
 
     @property
     def face_normals(self) -> np.ndarray:
-        """(F, 3) unit face normals of the mesh, consistently oriented (computed once)."""
+        """(F, 3) unit face normals of the mesh, consistently oriented (computed once).
+
+        A duplicate row gets the normal of the row it repeats; a degenerate one zero."""
         if self._normals is None:
-            self._normals = oriented_face_normals(self.mesh)
+            if self._rows is None:
+                self._normals = oriented_face_normals(self.mesh)
+            else:
+                normals = np.zeros((self.mesh.n_faces, 3))
+                normals[self._rows] = oriented_face_normals(TriMesh(self.mesh.vertices, self._faces))
+                dup = np.flatnonzero(self._first >= 0)
+                normals[dup] = normals[self._first[dup]]
+                self._normals = normals
         return self._normals
 
     def _plain(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        sq_dist, face, closest = self._tree.squared_distance(self.mesh.vertices, self.mesh.faces, points)
-        return np.asarray(face, dtype=np.int64), np.asarray(closest)
+        sq_dist, face, closest = self._tree.squared_distance(self.mesh.vertices, self._faces, points)
+        return self._row(np.asarray(face, dtype=np.int64)), np.asarray(closest)
 
     def _compatible(self, points: np.ndarray, normals: np.ndarray, min_cos: float, k: int):
         """Closest point among the k nearest-centroid faces with a compatible normal; face -1 if none."""
         from scipy.spatial import cKDTree
 
         if self._centroids is None:
-            self._centroids = cKDTree(self.mesh.vertices[self.mesh.faces].mean(axis=1))
-        k = min(k, self.mesh.n_faces)
+            self._centroids = cKDTree(self.mesh.vertices[self._faces].mean(axis=1))
+        k = min(k, len(self._faces))
         _, cand = self._centroids.query(points, k=k)
-        cand = np.asarray(cand).reshape(len(points), k)
+        cand = self._row(np.asarray(cand).reshape(len(points), k))
         tri = self.mesh.vertices[self.mesh.faces[cand]]                      # (M, k, 3, 3)
         closest = closest_points_on_triangles(points[:, None, :], tri[..., 0, :], tri[..., 1, :], tri[..., 2, :])
         dist = np.linalg.norm(closest - points[:, None, :], axis=2)

@@ -1,14 +1,32 @@
-"""Triangle meshes: the in-memory type, reading mesh files, and a cache of parsed arrays.
+"""Triangle meshes: the in-memory type, reading mesh files, a cache of parsed arrays, and the
+repairs applied to a COPY of a mesh before remeshing.
 
 Vertex order is always the file's order (ground truth is indexed by it): files are read with
 trimesh ``process=False, maintain_order=True`` and never merged, re-ordered or repaired in place.
+
+Faults that real downloads have and how becos treats them (see ``docs/faults.md``):
+
+- NaN/infinite coordinates, face indices out of range, empty/truncated/unparsable files:
+  :class:`~becos.errors.InputFileError` from :func:`read_mesh` (file, problem, fix).
+- faces with a repeated vertex index, duplicate faces (the same three vertices as an earlier row,
+  in any order or winding), unreferenced vertices, and small extra connected components:
+  :func:`surface_for_remeshing` drops them on a copy (zero-area faces, ``area <= ZERO_AREA_RTOL ×
+  longest edge²``, are kept there so the surface stays closed); the copy remembers, per vertex and per face, the input vertex and the
+  input face row it came from, so maps computed on it are translated back to the input's vertex
+  order and face rows (:mod:`becos.remesh` does this). No surface point is ever placed in a
+  degenerate or duplicate face (:func:`surface_faces`; :class:`becos.geometry.SurfaceLocator`
+  skips them too).
+- extra components holding more than :data:`MAX_DROPPED_AREA_SHARE` of the area: an error (the file
+  holds several shapes, not one surface with specks).
+- inconsistently wound faces (normal in real data: TOSCA michael0, david0, horse5/6, centaur3/4):
+  counted here, re-oriented on the copy by :mod:`becos.remesh`.
 """
 
 from __future__ import annotations
 
 import hashlib
 from collections import OrderedDict
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
@@ -17,6 +35,14 @@ from becos.atomic import save_npz as atomic_save_npz
 from becos.errors import InputFileError
 
 MESH_SUFFIXES = (".off", ".ply", ".obj")
+
+ZERO_AREA_RTOL = 1e-12
+"""A face is degenerate (zero area) when ``area <= ZERO_AREA_RTOL × (its longest edge)²`` (scale-free;
+the smallest ratio on the 76 TOSCA meshes is 1.6e-4)."""
+
+MAX_DROPPED_AREA_SHARE = 0.05
+""":func:`surface_for_remeshing` keeps the largest connected component; extra components holding more
+than this share of the total area are an error rather than specks to drop."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -153,3 +179,264 @@ class MeshCache:
         while len(self._memory) > self.max_in_memory:  # a long job must not hold every mesh it met
             self._memory.popitem(last=False)
         return mesh
+
+
+# ----------------------------------------------------------------------------------------------
+# faults of a mesh's connectivity, and the repaired copy used for remeshing
+
+def vertex_set_keys(faces: np.ndarray, n_vertices: int) -> np.ndarray:
+    """(F,) keys, equal exactly for faces with the same vertex set (any order / winding) and sortable:
+    int64 below 2**21 vertices, else a structured (a, b, c) array."""
+    s = np.sort(np.asarray(faces, dtype=np.int64), axis=1)
+    n = max(int(n_vertices), 1)
+    if n < 2 ** 21:                                    # three 21-bit fields fit in an int64
+        return (s[:, 0] * n + s[:, 1]) * n + s[:, 2]
+    return np.ascontiguousarray(s).view([("a", np.int64), ("b", np.int64), ("c", np.int64)]).ravel()
+
+
+def repeated_index_faces(faces: np.ndarray) -> np.ndarray:
+    """(F,) bool: the face names one vertex twice (``[a, a, b]``)."""
+    f = np.asarray(faces)
+    return (f[:, 0] == f[:, 1]) | (f[:, 1] == f[:, 2]) | (f[:, 0] == f[:, 2])
+
+
+def zero_area_faces(mesh: TriMesh) -> np.ndarray:
+    """(F,) bool: ``area <= ZERO_AREA_RTOL × longest edge²`` (collinear or coincident corners).
+
+    Faces with a repeated index are included (their area is 0)."""
+    tri = mesh.vertices[mesh.faces]
+    doubled_area = np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    longest = (np.diff(tri, axis=1, append=tri[:, :1]) ** 2).sum(axis=2).max(axis=1)
+    return 0.5 * doubled_area <= ZERO_AREA_RTOL * longest
+
+
+def degenerate_faces(mesh: TriMesh) -> np.ndarray:
+    """(F,) bool: a repeated vertex index or zero area (see :data:`ZERO_AREA_RTOL`)."""
+    return repeated_index_faces(mesh.faces) | zero_area_faces(mesh)
+
+
+def duplicate_faces(faces: np.ndarray, n_vertices: int, among: np.ndarray | None = None) -> np.ndarray:
+    """(F,) int64: for a face with the same vertex set as an EARLIER row (any winding), that row's
+    index; -1 for first occurrences. ``among`` (F,) bool restricts the comparison to those rows
+    (others get -1)."""
+    faces = np.asarray(faces, dtype=np.int64)
+    rows = np.arange(len(faces)) if among is None else np.flatnonzero(among)
+    out = np.full(len(faces), -1, dtype=np.int64)
+    if len(rows) == 0:
+        return out
+    keys = vertex_set_keys(faces[rows], n_vertices)
+    _, first, inverse = np.unique(keys, return_index=True, return_inverse=True)
+    first_row = rows[first][inverse.ravel()]
+    dup = first_row != rows
+    out[rows[dup]] = first_row[dup]
+    return out
+
+
+def surface_faces(mesh: TriMesh) -> np.ndarray:
+    """(F,) bool: faces that may carry surface points: not degenerate and not a duplicate of an
+    earlier row. All True for a clean mesh."""
+    usable = ~degenerate_faces(mesh)
+    if usable.any():
+        usable &= duplicate_faces(mesh.faces, mesh.n_vertices, among=usable) < 0
+    return usable
+
+
+def misoriented_edge_count(faces: np.ndarray, n_vertices: int) -> int:
+    """Directed edges used by two faces (two neighbours wound against each other); 0 when consistent."""
+    f = np.asarray(faces, dtype=np.int64)
+    directed = f[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+    keys = directed[:, 0] * max(int(n_vertices), 1) + directed[:, 1]
+    _, counts = np.unique(keys, return_counts=True)
+    return int((counts > 1).sum())
+
+
+@dataclass(frozen=True, eq=False)
+class MeshRepair:
+    """What :func:`surface_for_remeshing` changed on its copy, and how the copy maps back.
+
+    Attributes:
+        vertex_index: (V_copy,) int64 input vertex of each copy vertex (increasing: input order kept).
+        face_index: (F_copy,) int64 input face row of each copy face (increasing; columns unchanged).
+        n_input_vertices, n_input_faces: sizes of the input.
+        repeated_index_faces: faces dropped for naming a vertex twice.
+        zero_area_faces: other faces of zero area (collinear or coincident corners). They are KEPT in
+            the copy (dropping them would cut slits that the remesh turns into holes); closest-point
+            queries skip them (:class:`becos.geometry.SurfaceLocator`), so no map point lies in one.
+        duplicate_faces: faces dropped for repeating an earlier row's vertex set.
+        unreferenced_vertices: input vertices used by no face at all.
+        orphaned_vertices: vertices used only by dropped degenerate or duplicate faces.
+        components: connected components of the remaining faces (1 after the repair).
+        dropped_component_faces, dropped_component_vertices: faces and vertices of the smaller
+            components that were dropped.
+        dropped_area_share: their share of the total area (0..1).
+        misoriented_edges: directed edges used twice in the input (inconsistent winding); NOT
+            changed here, :func:`becos.remesh.remesh` re-orients its own copy.
+    """
+
+    vertex_index: np.ndarray
+    face_index: np.ndarray
+    n_input_vertices: int
+    n_input_faces: int
+    repeated_index_faces: int = 0
+    zero_area_faces: int = 0
+    duplicate_faces: int = 0
+    unreferenced_vertices: int = 0
+    orphaned_vertices: int = 0
+    components: int = 1
+    dropped_component_faces: int = 0
+    dropped_component_vertices: int = 0
+    dropped_area_share: float = 0.0
+    misoriented_edges: int = 0
+
+    @property
+    def changed(self) -> bool:
+        """True when the copy differs from the input (something was dropped)."""
+        return len(self.vertex_index) != self.n_input_vertices or len(self.face_index) != self.n_input_faces
+
+    @property
+    def needs_attention(self) -> bool:
+        """True when anything is reported: a change, zero-area faces, or faces to re-orient."""
+        return self.changed or self.zero_area_faces > 0 or self.misoriented_edges > 0
+
+    def input_to_copy(self) -> np.ndarray:
+        """(V_input,) int64 copy vertex of each input vertex, -1 where it was dropped."""
+        out = np.full(self.n_input_vertices, -1, dtype=np.int64)
+        out[self.vertex_index] = np.arange(len(self.vertex_index))
+        return out
+
+    def counts(self) -> dict:
+        """The counts as a JSON-able dict (no arrays)."""
+        d = asdict(self)
+        d.pop("vertex_index")
+        d.pop("face_index")
+        return d
+
+    def summary(self) -> str:
+        """One line naming every repair, e.g. ``dropped 5 faces with a repeated vertex index; ...``."""
+        parts = []
+        if self.repeated_index_faces:
+            parts.append(f"dropped {self.repeated_index_faces} faces with a repeated vertex index")
+        if self.zero_area_faces:
+            parts.append(f"found {self.zero_area_faces} zero-area faces (kept, so the surface stays closed, but "
+                         f"no surface point is placed in them)")
+        if self.duplicate_faces:
+            parts.append(f"dropped {self.duplicate_faces} duplicate faces (same vertices as an earlier row)")
+        if self.dropped_component_faces:
+            parts.append(f"kept the largest of {self.components} connected components, dropping "
+                         f"{self.dropped_component_faces} faces and {self.dropped_component_vertices} vertices "
+                         f"({100 * self.dropped_area_share:.2f}% of the area; those vertices get no counterpart)")
+        if self.unreferenced_vertices:
+            parts.append(f"ignored {self.unreferenced_vertices} unreferenced vertices (used by no face; "
+                         f"they get no counterpart)")
+        if self.orphaned_vertices:
+            parts.append(f"ignored {self.orphaned_vertices} vertices used only by dropped faces (they get no "
+                         f"counterpart)")
+        if self.misoriented_edges:
+            parts.append(f"re-orients inconsistently wound faces ({self.misoriented_edges} directed edges "
+                         f"used twice)")
+        if not parts:
+            return "no repair needed"
+        return "; ".join(parts) + (" — on a copy: the file is unchanged and the maps refer to its vertex "
+                                   "order and face rows")
+
+
+def surface_for_remeshing(mesh: TriMesh, *, source: str | Path | None = None,
+                          max_dropped_area_share: float = MAX_DROPPED_AREA_SHARE) -> tuple[TriMesh, MeshRepair]:
+    """A copy of ``mesh`` that a remesher can take: faces with a repeated vertex index, duplicate
+    faces, unreferenced vertices and small extra connected components dropped (zero-area faces with
+    three distinct vertices stay: they close the surface; no map point is placed in them). The
+    input is not modified.
+
+    The copy keeps the input's vertex order and face-row order among what is kept (both index
+    arrays of the report are increasing) and each kept face's columns; so a point (face k,
+    weights w) of the copy is the point (``face_index[k]``, w) of the input, and copy vertex j is
+    input vertex ``vertex_index[j]``. When nothing needs dropping the input object itself is
+    returned (the remesh of a clean mesh is unchanged by this step).
+
+    Components are vertex-connected over the kept faces; the one with the largest area is kept.
+
+    Args:
+        mesh: the input (any units; areas are compared as shares only).
+        source: the file the mesh came from, named in the error.
+        max_dropped_area_share: the largest area share (0..1) the dropped components may hold.
+
+    Returns:
+        (copy, report); see :class:`MeshRepair`.
+
+    Raises:
+        InputFileError: no usable face is left, the extra components hold more than
+            ``max_dropped_area_share`` of the area (the file holds several shapes), or edges are
+            shared by more than two faces (non-manifold; the remesher cannot orient such a surface).
+    """
+    import scipy.sparse as sp
+    from scipy.sparse.csgraph import connected_components
+
+    n, faces = mesh.n_vertices, mesh.faces
+    where = Path(source) if source is not None else Path(f"<mesh with {n} vertices and {len(faces)} faces>")
+    repeated = repeated_index_faces(faces)
+    zero = zero_area_faces(mesh) & ~repeated
+    keep = ~repeated
+    dup = duplicate_faces(faces, n, among=keep) >= 0
+    keep &= ~dup
+    if not (keep & ~zero).any():
+        raise InputFileError(where, f"none of its {len(faces)} faces has a non-zero area",
+                             "re-export the mesh; becos needs a triangle surface")
+    referenced = np.zeros(n, dtype=bool)
+    referenced[faces.ravel()] = True
+    kept_faces = faces[keep]
+    clean_used = np.zeros(n, dtype=bool)
+    clean_used[kept_faces.ravel()] = True
+    # vertex-connected components over the kept faces
+    e = kept_faces[:, [0, 1, 1, 2]].reshape(-1, 2)
+    graph = sp.coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))
+    _, labels = connected_components(graph, directed=False)
+    face_label = labels[kept_faces[:, 0]]
+    comp_ids, face_label = np.unique(face_label, return_inverse=True)
+    face_label = face_label.ravel()
+    n_surface_components = len(comp_ids)
+    dropped_faces = dropped_vertices = 0
+    share = 0.0
+    if n_surface_components > 1:
+        tri = mesh.vertices[kept_faces]
+        area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+        per_comp = np.bincount(face_label, weights=area, minlength=n_surface_components)
+        main = int(per_comp.argmax())
+        share = float(1.0 - per_comp[main] / per_comp.sum())
+        if share > max_dropped_area_share:
+            sizes = ", ".join(f"{100 * a / per_comp.sum():.1f}%" for a in sorted(per_comp, reverse=True)[:5])
+            raise InputFileError(where, f"has {n_surface_components} connected components; besides the largest "
+                                 f"they hold {100 * share:.1f}% of the area (shares: {sizes}), more than the "
+                                 f"{100 * max_dropped_area_share:.0f}% becos drops as specks",
+                                 "a shape must be one connected surface: remove the extra pieces (e.g. MeshLab: "
+                                 "Filters > Cleaning and Repairing > Remove Isolated pieces) or split the file "
+                                 "into separate shapes")
+        in_main = face_label == main
+        rows = np.flatnonzero(keep)
+        dropped_faces = int((~in_main).sum())
+        keep[rows[~in_main]] = False
+    kept = faces[keep]
+    edge_keys = np.sort(kept[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    _, edge_use = np.unique(edge_keys[:, 0] * max(n, 1) + edge_keys[:, 1], return_counts=True)
+    non_manifold = int((edge_use > 2).sum())
+    if non_manifold:
+        raise InputFileError(where, f"{non_manifold} edges are shared by more than two faces (non-manifold) after "
+                             f"dropping duplicate and repeated-index faces; becos cannot remesh such a surface",
+                             "repair the mesh (e.g. MeshLab: Filters > Cleaning and Repairing > Repair non Manifold "
+                             "Edges) or leave the shape out")
+    used = np.zeros(n, dtype=bool)
+    used[kept.ravel()] = True
+    dropped_vertices = int((clean_used & ~used).sum())
+    report_kw = dict(orphaned_vertices=int((referenced & ~clean_used).sum()),
+        n_input_vertices=n, n_input_faces=len(faces), repeated_index_faces=int(repeated.sum()),
+        zero_area_faces=int(zero.sum()), duplicate_faces=int(dup.sum()),
+        unreferenced_vertices=int((~referenced).sum()), components=int(n_surface_components),
+        dropped_component_faces=dropped_faces, dropped_component_vertices=dropped_vertices,
+        dropped_area_share=share, misoriented_edges=misoriented_edge_count(kept, n))
+    if keep.all() and used.all():
+        return mesh, MeshRepair(np.arange(n), np.arange(len(faces)), **report_kw)
+    vertex_index = np.flatnonzero(used)
+    new_index = np.full(n, -1, dtype=np.int64)
+    new_index[vertex_index] = np.arange(len(vertex_index))
+    face_index = np.flatnonzero(keep)
+    copy = TriMesh(mesh.vertices[vertex_index], new_index[faces[face_index]])
+    return copy, MeshRepair(vertex_index, face_index, **report_kw)

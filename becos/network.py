@@ -12,6 +12,15 @@ from the vertices of one surface to points on the next:
   sharing a triangulation.
 - remeshed X -> X: :attr:`becos.remesh.Remeshed.to_original`; Y -> remeshed Y: ``from_original``.
 
+Identity hops at the END of a path (onto Y's original mesh, no remeshed Y) are applied exactly: a
+point with weights w in the face with vertices {a, b, c} of the last mapped surface becomes the point
+with the same weights on a, b and c in Y's face with that vertex set (:func:`transplant`; the weights
+are permuted where the winding differs), not a closest-point projection. Only points whose vertex
+set is no usable face of Y (a different triangulation) are projected. Y's vertices that lie in no
+usable face (unreferenced vertices, e.g. the three isolated vertices of a KIDS mesh; vertices only
+used by degenerate faces) have no counterpart there (:func:`identity_map`). No point is placed in a
+degenerate or duplicate face (:func:`becos.mesh.surface_faces`).
+
 The template-to-template part is composed once per pair of classes and cached (projected onto the
 last template, whose mesh is in Y's dataset); the shape and remesh hops are then composed onto the
 target per pair. Compositions run backwards from their target
@@ -29,8 +38,77 @@ import numpy as np
 
 from becos.errors import BecosError, InputFileError
 from becos.geometry import SurfaceLocator
-from becos.mesh import TriMesh
-from becos.surface_map import SurfaceMap, compose_path
+from becos.mesh import TriMesh, surface_faces, vertex_set_keys
+from becos.surface_map import NONE, SurfaceMap, compose, compose_path
+
+
+def identity_map(mesh: TriMesh) -> SurfaceMap:
+    """Vertex i -> vertex i of ``mesh`` (weight 1 at its corner of an incident face).
+
+    Only usable faces (:func:`becos.mesh.surface_faces`) carry the points; a vertex in no usable face
+    (unreferenced, or used only by degenerate faces) gets no counterpart (face -1). On a clean mesh
+    this equals :meth:`SurfaceMap.identity`.
+    """
+    rows = np.flatnonzero(surface_faces(mesh))
+    faces = mesh.faces[rows]
+    incident = np.full(mesh.n_vertices, NONE, dtype=np.int64)
+    corner = np.zeros(mesh.n_vertices, dtype=np.int64)
+    incident[faces.ravel()] = np.repeat(rows, 3)            # the last write wins, as SurfaceMap.identity
+    corner[faces.ravel()] = np.tile(np.arange(3), len(faces))
+    weights = np.zeros((mesh.n_vertices, 3))
+    has = np.flatnonzero(incident >= 0)
+    weights[has, corner[has]] = 1.0
+    return SurfaceMap(incident, weights)
+
+
+def transplant(m: SurfaceMap, source_faces: np.ndarray, target: TriMesh,
+               locator: SurfaceLocator | None = None) -> SurfaceMap:
+    """Carry ``m`` (points on a surface with faces ``source_faces``) to ``target``, a mesh with the
+    same vertex order (another pose of the class, or the class template), by vertex identity.
+
+    A point with weights w in source face (a, b, c) lands in the usable target face with the vertex
+    set {a, b, c}, with w permuted into that face's column order: exactly the same vertices and
+    weights. Points whose vertex set is no usable target face (the triangulations differ there) are
+    composed with :func:`identity_map` (closest-point projection, :func:`becos.surface_map.compose`).
+    Distances are inherited.
+
+    Raises:
+        BecosError: ``source_faces`` index vertices the target does not have.
+    """
+    source_faces = np.asarray(source_faces, dtype=np.int64)
+    if len(source_faces) and int(source_faces.max()) >= target.n_vertices:
+        raise BecosError(f"a ground-truth path carries points by vertex identity onto a mesh with "
+                         f"{target.n_vertices} vertices from a surface whose faces use vertex "
+                         f"{int(source_faces.max())}. Fix: check that the shape and its template come from the "
+                         f"same dataset release (same vertex count and order)")
+    face = np.full(len(m), NONE, dtype=np.int64)
+    weights = np.zeros((len(m), 3))
+    distance = np.full(len(m), np.nan)
+    alive = np.flatnonzero(m.matched)
+    src = source_faces[m.face[alive]]                                     # (M, 3) vertex ids
+    rows = np.flatnonzero(surface_faces(target))
+    target_keys = vertex_set_keys(target.faces[rows], target.n_vertices)
+    order = np.argsort(target_keys, kind="stable")
+    sorted_keys = target_keys[order]
+    keys = vertex_set_keys(src, target.n_vertices)
+    if len(sorted_keys):
+        pos = np.minimum(np.searchsorted(sorted_keys, keys), len(sorted_keys) - 1)
+        found = sorted_keys[pos] == keys
+    else:
+        pos, found = np.zeros(len(keys), dtype=np.int64), np.zeros(len(keys), dtype=bool)
+    hit = alive[found]
+    target_face = rows[order[pos[found]]]
+    # (H, 3 source columns, 3 target columns): where each source corner sits in the target row
+    same = (src[found][:, :, None] == target.faces[target_face][:, None, :]).astype(np.float64)
+    face[hit] = target_face
+    weights[hit] = np.einsum("hk,hkj->hj", m.weights[hit], same)
+    distance[hit] = m.distance[hit]
+    rest = alive[~found]
+    if len(rest):
+        sub = SurfaceMap(m.face[rest], m.weights[rest], m.distance[rest])
+        projected = compose(sub, source_faces, identity_map(target), target, locator)
+        face[rest], weights[rest], distance[rest] = projected.face, projected.weights, projected.distance
+    return SurfaceMap(face, weights, distance)
 
 class ShapeLike(Protocol):
     """What the network needs to know of a shape (``becos.datasets.ShapeEntry`` satisfies it)."""
@@ -70,6 +148,7 @@ class ShapeNetwork:
         self._faces_cache: dict[tuple[str, str], np.ndarray] = {}
         self._chains: dict[tuple[str, ...], SurfaceMap] = {}
         self._locators: OrderedDict[int, tuple[TriMesh, SurfaceLocator]] = OrderedDict()
+        self._geometries: OrderedDict[tuple, tuple] = OrderedDict()
 
     # --- paths ----------------------------------------------------------------------------------
     def template_node(self, shape: ShapeLike) -> str:
@@ -170,9 +249,37 @@ class ShapeNetwork:
             if mesh is None:
                 return None
             hops = [self.hop(a, b) for a, b in zip(templates, templates[1:])]
-            middle = [self.faces_of(t) for t in templates[1:-1]]
-            self._chains[key] = compose_path(hops, middle, mesh, self.locator(mesh))
+            self._chains[key] = self._compose_onto(hops, templates[1:], mesh)
         return self._chains[key]
+
+    def _geometry_with_faces(self, target: TriMesh, faces: np.ndarray) -> TriMesh:
+        """``target``'s vertices with ``faces`` (a surface of the same vertex order), kept for reuse."""
+        if faces is target.faces or (faces.shape == target.faces.shape and np.array_equal(faces, target.faces)):
+            return target
+        key = ("geometry", id(target), id(faces))
+        if key not in self._geometries:
+            self._geometries[key] = (target, faces, TriMesh(target.vertices, faces))  # refs keep the ids
+            while len(self._geometries) > 8:
+                self._geometries.popitem(last=False)
+        return self._geometries[key][2]
+
+    def _compose_onto(self, hops: list[SurfaceMap | None], landing: list[Surface | None],
+                      target: TriMesh) -> SurfaceMap:
+        """Compose ``hops`` (hop j lands on ``landing[j]``; the last lands on ``target``) onto ``target``.
+
+        Trailing identity hops are applied exactly by :func:`transplant`; everything before them is
+        composed onto the last mapped surface, with the target's vertex positions."""
+        mapped = [j for j, h in enumerate(hops) if h is not None]
+        if not mapped:
+            return identity_map(target)
+        k = mapped[-1]
+        middle = [self.faces_of(surface) for surface in landing[:k]]
+        if k == len(hops) - 1:
+            return compose_path(hops, middle, target, self.locator(target))
+        faces = self.faces_of(landing[k])
+        geometry = self._geometry_with_faces(target, faces)
+        head = compose_path(hops[:k + 1], middle, geometry, self.locator(geometry))
+        return transplant(head, faces, target, self.locator(target))
 
     def ground_truth(self, x: ShapeLike, y: ShapeLike, *, x_remesh=None, y_remesh=None,
                      y_mesh: TriMesh | None = None) -> SurfaceMap:
@@ -213,12 +320,8 @@ class ShapeNetwork:
             if target is None:
                 raise BecosError(f"shape {y.dataset}/{y.name} is not available. Fix: enable/download "
                                  f"dataset '{y.dataset}'")
-        if not steps:
-            return SurfaceMap.identity(target.faces, target.n_vertices)
         if y_mesh is not None:
             if y_mesh.n_vertices != target.n_vertices or y_mesh.n_faces != target.n_faces:
                 raise ValueError("y_mesh must have the connectivity of the target surface")
             target = y_mesh
-        hops = [hop for hop, _ in steps]
-        middle = [self.faces_of(surface) for _, surface in steps[:-1]]
-        return compose_path(hops, middle, target, self.locator(target))
+        return self._compose_onto([hop for hop, _ in steps], [surface for _, surface in steps], target)

@@ -6,7 +6,14 @@ original position, so two remeshes of one shape class (same triangulation, diffe
 (the run to the smaller target is the run to the larger one continued). The pipeline below breaks
 both:
 
-1. a COPY of the input is re-oriented coherently (pymeshlab ``meshing_re_orient_faces_coherently``;
+0. a COPY of the input without faces that repeat a vertex index, duplicate faces, unreferenced
+   vertices and small extra components (:func:`becos.mesh.surface_for_remeshing`; a warning names
+   the ``source`` file and the repair). Zero-area faces stay in the copy (they close the surface)
+   but no map point is placed in one (:class:`becos.geometry.SurfaceLocator` skips them). Everything below runs on that copy; the
+   copy remembers the input vertex and face row of each of its vertices and faces, so both maps
+   refer to the input as given. Original vertices that the copy dropped (unreferenced, or on a
+   dropped speck) have no image in ``from_original`` (face -1). A clean input is used as is.
+1. the copy is re-oriented coherently (pymeshlab ``meshing_re_orient_faces_coherently``;
    TOSCA michael0/david0/horse5/6/centaur3/4 have inconsistently wound faces). The input's vertex
    order and face rows are never touched: both maps are computed against the input as given.
 2. seeded jitter: every non-boundary vertex of the copy moves to a random point of one of its own
@@ -56,7 +63,7 @@ import numpy as np
 from becos.errors import InputFileError
 from becos.geometry import SurfaceLocator, face_areas, points_on_surface
 from becos.atomic import save_npz as atomic_save_npz, write_bytes
-from becos.mesh import TriMesh
+from becos.mesh import TriMesh, surface_for_remeshing
 from becos.seeding import rng_for, stable_hash
 from becos.surface_map import SurfaceMap
 
@@ -287,13 +294,16 @@ def _to_vertex_target(sub_v: np.ndarray, sub_f: np.ndarray, target_vertices: int
 
 
 def remesh_with_stats(mesh: TriMesh, target_vertices: int | None = None, target_faces: int | None = None,
-                      *, jitter: float = DEFAULT_JITTER, seed: int | None = None) -> tuple[Remeshed, dict]:
+                      *, jitter: float = DEFAULT_JITTER, seed: int | None = None,
+                      source: str | Path | None = None) -> tuple[Remeshed, dict]:
     """:func:`remesh`, also returning a dict of diagnostics (stage times in s, snap distances in input
     units, dropped faces, decimation attempts, ``vertices_off_target`` (0 when the vertex target is
-    met exactly), ``unsnapped_vertices`` and ``snap_flipped_faces`` (always 0 after the fix-up)).
+    met exactly), ``unsnapped_vertices`` and ``snap_flipped_faces`` (always 0 after the fix-up),
+    ``input_repair``: the counts of :class:`becos.mesh.MeshRepair` for step 0).
 
     ``jitter`` (fraction, see :data:`DEFAULT_JITTER`; 0 disables it) and ``seed`` (default: derived
-    from the mesh content and the target) control step 2 of the pipeline."""
+    from the mesh content and the target) control step 2 of the pipeline. ``source`` (the mesh's
+    file) is named in the repair warning and in errors."""
     if (target_vertices is None) == (target_faces is None):
         raise ValueError("remesh needs exactly one of target_vertices (the paper's rule, e.g. 9000-10000) "
                          "or target_faces (the published pair lists' desired_n_face_remeshed)")
@@ -304,8 +314,91 @@ def remesh_with_stats(mesh: TriMesh, target_vertices: int | None = None, target_
     stats: dict = {"dropped_faces": 0, "attempts": 1}
     face_goal = int(target_faces) if target_faces is not None else 2 * int(target_vertices)
 
+    # 0. the surface to remesh: a repaired copy (the input itself when clean)
+    surface, repair = surface_for_remeshing(mesh, source=source)
+    stats["input_repair"] = repair.counts()
+    where = str(source) if source is not None else f"remesh input ({mesh.n_vertices} vertices, {mesh.n_faces} faces)"
+    if repair.changed or repair.zero_area_faces:
+        log.warning("%s: %s", where, repair.summary())
+    elif repair.misoriented_edges:
+        log.info("%s: %s", where, repair.summary())
+    try:
+        v, f, stats = _remesh_surface(mesh, surface, target_vertices, target_faces, face_goal, jitter, seed, stats,
+                                      t0)
+    except Exception as exc:
+        import pymeshlab
+
+        if not isinstance(exc, pymeshlab.PyMeshLabException):
+            raise
+        message = " ".join(str(exc).split())
+        raise InputFileError(Path(where), f"the remesher (pymeshlab) failed on this surface: {message}",
+                             "repair the mesh (e.g. MeshLab: Filters > Cleaning and Repairing) or leave the "
+                             "shape out") from None
+    stats["seconds_decimate"] = time.perf_counter() - t0 - stats["seconds_prepare"]
+
+    # 6. orientation vote and snap onto the original surface (its repaired copy: same geometry,
+    # no degenerate or duplicate faces; face and vertex indices are translated back below)
+    locator = SurfaceLocator(surface)
+    face, weights, dist = locator.closest(v)
+    tri = v[f]
+    normals = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])       # length = 2 × area
+    orig_tri = surface.vertices[surface.faces]
+    orig_n = np.cross(orig_tri[:, 1] - orig_tri[:, 0], orig_tri[:, 2] - orig_tri[:, 0])
+    orig_n /= np.maximum(np.linalg.norm(orig_n, axis=1, keepdims=True), 1e-300)
+    ref = orig_n[face[f]].sum(axis=1)                                       # input normal at the corners
+    if np.einsum("ij,ij->i", normals, ref).sum() < 0:
+        f = f[:, ::-1].copy()
+        normals = -normals
+    # snap again with normals: where two parts touch (a hand on a hip, a horse's legs) the plain
+    # closest point can sit on the other part; their normals are opposite there
+    face, weights, dist = locator.closest(v, _vertex_normals(v, f))
+    stats["snap_distance_mean"] = float(dist.mean())
+    stats["snap_distance_max"] = float(dist.max())
+    snapped = points_on_surface(surface, face, weights)
+    kept = np.zeros(len(v), dtype=bool)           # vertices left where decimation put them
+    flipped = np.zeros(len(f), dtype=bool)
+    for _ in range(10):
+        # a snap may fold a sliver face in a crease: leave the corners of folded faces unsnapped
+        tri = snapped[f]
+        new_normals = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        flipped = (np.einsum("ij,ij->i", normals, new_normals) <= 0) & (np.abs(normals).sum(axis=1) > 0)
+        if not flipped.any():
+            break
+        back = np.unique(f[flipped].ravel())
+        kept[back] = True
+        snapped[back] = v[back]
+    stats["snap_flipped_faces"] = int(flipped.sum())
+    stats["unsnapped_vertices"] = int(kept.sum())
+    remeshed = TriMesh(snapped, f)
+    # snapped vertices ARE their image (distance 0); unsnapped ones keep their projection distance.
+    # Faces are rows of the input as given (the copy keeps each kept row's columns).
+    to_original = SurfaceMap(repair.face_index[face], weights, np.where(kept, dist, 0.0))
+    # 7. original vertices -> remeshed surface; vertices the copy dropped have no image
+    rf, rw, rd = SurfaceLocator(remeshed).closest(surface.vertices, _original_vertex_normals(surface))
+    if surface is mesh:
+        from_original = SurfaceMap(rf, rw, rd)
+    else:
+        of = np.full(mesh.n_vertices, -1, dtype=np.int64)
+        ow = np.zeros((mesh.n_vertices, 3))
+        od = np.full(mesh.n_vertices, np.nan)
+        of[repair.vertex_index], ow[repair.vertex_index], od[repair.vertex_index] = rf, rw, rd
+        from_original = SurfaceMap(of, ow, od)
+    seconds = time.perf_counter() - t0
+    stats["seconds"] = seconds
+    result = Remeshed(remeshed, to_original, from_original,
+                      None if target_vertices is None else int(target_vertices),
+                      None if target_faces is None else int(target_faces), seconds)
+    return result, stats
+
+
+def _remesh_surface(mesh: TriMesh, surface: TriMesh, target_vertices: int | None, target_faces: int | None,
+                    face_goal: int, jitter: float, seed: int | None, stats: dict,
+                    t0: float) -> tuple[np.ndarray, np.ndarray, dict]:
+    """Steps 1-5 on the repaired copy ``surface``: (V_r, 3) vertices and (F_r, 3) faces of the remesh
+    before the snap. The jitter seed is derived from the INPUT ``mesh`` (as before the repair step);
+    ``t0`` is the start time of the whole remesh."""
     # 1. oriented copy
-    ms = _meshset(mesh.vertices, mesh.faces)
+    ms = _meshset(surface.vertices, surface.faces)
     ms.meshing_re_orient_faces_coherently()
     v, f = _arrays(ms)
     # 2. seeded jitter on the surface
@@ -332,65 +425,24 @@ def remesh_with_stats(mesh: TriMesh, target_vertices: int | None = None, target_
     if stats["dropped_faces"]:
         log.warning("remesh: decimation left %d faces in small components; kept the largest component",
                     stats["dropped_faces"])
-    stats["seconds_decimate"] = time.perf_counter() - t0 - stats["seconds_prepare"]
-
-    # 6. orientation vote and snap onto the original surface
-    locator = SurfaceLocator(mesh)
-    face, weights, dist = locator.closest(v)
-    tri = v[f]
-    normals = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])       # length = 2 × area
-    orig_tri = mesh.vertices[mesh.faces]
-    orig_n = np.cross(orig_tri[:, 1] - orig_tri[:, 0], orig_tri[:, 2] - orig_tri[:, 0])
-    orig_n /= np.maximum(np.linalg.norm(orig_n, axis=1, keepdims=True), 1e-300)
-    ref = orig_n[face[f]].sum(axis=1)                                       # input normal at the corners
-    if np.einsum("ij,ij->i", normals, ref).sum() < 0:
-        f = f[:, ::-1].copy()
-        normals = -normals
-    # snap again with normals: where two parts touch (a hand on a hip, a horse's legs) the plain
-    # closest point can sit on the other part; their normals are opposite there
-    face, weights, dist = locator.closest(v, _vertex_normals(v, f))
-    stats["snap_distance_mean"] = float(dist.mean())
-    stats["snap_distance_max"] = float(dist.max())
-    snapped = points_on_surface(mesh, face, weights)
-    kept = np.zeros(len(v), dtype=bool)           # vertices left where decimation put them
-    flipped = np.zeros(len(f), dtype=bool)
-    for _ in range(10):
-        # a snap may fold a sliver face in a crease: leave the corners of folded faces unsnapped
-        tri = snapped[f]
-        new_normals = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-        flipped = (np.einsum("ij,ij->i", normals, new_normals) <= 0) & (np.abs(normals).sum(axis=1) > 0)
-        if not flipped.any():
-            break
-        back = np.unique(f[flipped].ravel())
-        kept[back] = True
-        snapped[back] = v[back]
-    stats["snap_flipped_faces"] = int(flipped.sum())
-    stats["unsnapped_vertices"] = int(kept.sum())
-    remeshed = TriMesh(snapped, f)
-    # snapped vertices ARE their image (distance 0); unsnapped ones keep their projection distance
-    to_original = SurfaceMap(face, weights, np.where(kept, dist, 0.0))
-    # 7. original vertices -> remeshed surface
-    rf, rw, rd = SurfaceLocator(remeshed).closest(mesh.vertices, _original_vertex_normals(mesh))
-    from_original = SurfaceMap(rf, rw, rd)
-    seconds = time.perf_counter() - t0
-    stats["seconds"] = seconds
-    result = Remeshed(remeshed, to_original, from_original,
-                      None if target_vertices is None else int(target_vertices),
-                      None if target_faces is None else int(target_faces), seconds)
-    return result, stats
+    return v, f, stats
 
 
-def remesh(mesh: TriMesh, target_vertices: int | None = None, target_faces: int | None = None) -> Remeshed:
+def remesh(mesh: TriMesh, target_vertices: int | None = None, target_faces: int | None = None, *,
+           source: str | Path | None = None) -> Remeshed:
     """Remesh ``mesh`` to a vertex target (paper: 9,000–10,000) or a face target (pair lists: 18,000–20,000).
 
     See the module docstring for the pipeline and guarantees. Exactly one target must be given.
-    The input is never modified; the maps refer to its vertex order and its face rows as given.
+    The input is never modified; the maps refer to its vertex order and its face rows as given,
+    also when step 0 remeshes a repaired copy (the warning then names ``source``, the mesh's file).
     Deterministic: the same input arrays and target give byte-identical output.
 
     Raises:
         ValueError: no target, both targets, or a target below 4.
+        InputFileError: the mesh is several shapes (large extra components), has no face of non-zero
+            area, or still has non-manifold edges that stop the remesher (names ``source``).
     """
-    return remesh_with_stats(mesh, target_vertices, target_faces)[0]
+    return remesh_with_stats(mesh, target_vertices, target_faces, source=source)[0]
 
 
 def variant_target_vertices(seed: int, dataset: str, name: str, variant: int,
@@ -458,13 +510,12 @@ def save_remeshed(path: Path, r: Remeshed) -> None:
         from_original_distance=r.from_original.distance,
         target_vertices=np.int64(-1 if r.target_vertices is None else r.target_vertices),
         target_faces=np.int64(-1 if r.target_faces is None else r.target_faces),
-        seconds=np.float64(r.seconds),
-    )
+    )  # no wall time: the same input gives the same bytes (``seconds`` is logged instead)
 
 
 _KEYS = ("format_version", "vertices", "faces", "to_original_face", "to_original_weights",
          "to_original_distance", "from_original_face", "from_original_weights", "from_original_distance",
-         "target_vertices", "target_faces", "seconds")
+         "target_vertices", "target_faces")
 
 
 def load_remeshed(path: Path) -> Remeshed:
@@ -483,6 +534,7 @@ def load_remeshed(path: Path) -> Remeshed:
             if missing:
                 raise InputFileError(path, f"not a becos remesh file (missing arrays {missing})", fix)
             d = {k: data[k] for k in _KEYS}
+            seconds = float(data["seconds"]) if "seconds" in data.files else float("nan")  # files of becos < 0.2
     except InputFileError:
         raise
     except Exception as exc:
@@ -495,7 +547,7 @@ def load_remeshed(path: Path) -> Remeshed:
         TriMesh(d["vertices"], d["faces"]),
         SurfaceMap(d["to_original_face"], d["to_original_weights"], d["to_original_distance"]),
         SurfaceMap(d["from_original_face"], d["from_original_weights"], d["from_original_distance"]),
-        None if tv < 0 else tv, None if tf < 0 else tf, float(d["seconds"]))
+        None if tv < 0 else tv, None if tf < 0 else tf, seconds)
 
 
 def write_ply(path: Path, mesh: TriMesh) -> None:

@@ -533,6 +533,9 @@ def write_store(record_paths: Iterable[str | Path], out: str | Path, *, setting:
         _progress(f"{n} records scanned in {time.perf_counter() - started:.1f} s")
 
     out.parent.mkdir(parents=True, exist_ok=True)
+    # one job writes a store: temporary folders beside it are left by an earlier, killed write
+    for stale in out.parent.glob(f".{out.name}.*.tmp"):
+        shutil.rmtree(stale, ignore_errors=True)
     tmp = Path(tempfile.mkdtemp(dir=out.parent, prefix=f".{out.name}.", suffix=".tmp"))
     try:
         root = zarr.open_group(str(tmp), mode="w", zarr_format=3)
@@ -641,6 +644,10 @@ class Block:
         return PairRecord(arrays, self.metas[i])
 
 
+class DamagedStoreError(InputFileError):
+    """A store whose root opens but one of whose arrays, offsets or pair tables is missing or unreadable."""
+
+
 class Benchmark:
     """A benchmark store opened for reading (:func:`open_benchmark`).
 
@@ -675,13 +682,26 @@ class Benchmark:
         self.metadata = {k: v for k, v in attrs.items() if k != "becos_store"}
         self.setting = attrs["setting"]
         self.layout: dict[str, str | None] = dict(info["layout"])
-        self._arrays = {key: root[f"arrays/{key}"] for key in self.layout}
-        groups = sorted({g for g in self.layout.values() if g is not None})
-        self.offsets = {g: np.asarray(root[f"offsets/{g}"][:]) for g in groups}
-        self._meta_offsets = np.asarray(root["pairs/meta_offsets"][:])
-        self._meta_json = root["pairs/meta_json"]
-        table = json.loads(bytes(np.asarray(root["pairs/table_json"][:])).decode("utf-8"))
-        frame = pd.DataFrame(table["rows"], columns=table["columns"])
+        node = "arrays"
+        try:  # a missing or damaged node is a damaged store, not a traceback
+            self._arrays = {}
+            for key in self.layout:
+                node = f"arrays/{key}"
+                self._arrays[key] = root[node]
+            self.offsets = {}
+            for g in sorted({g for g in self.layout.values() if g is not None}):
+                node = f"offsets/{g}"
+                self.offsets[g] = np.asarray(root[node][:])
+            node = "pairs/meta_offsets"
+            self._meta_offsets = np.asarray(root[node][:])
+            node = "pairs/meta_json"
+            self._meta_json = root[node]
+            node = "pairs/table_json"
+            table = json.loads(bytes(np.asarray(root[node][:])).decode("utf-8"))
+            frame = pd.DataFrame(table["rows"], columns=table["columns"])
+        except Exception as exc:
+            raise DamagedStoreError(self.path, f"{node} is missing or unreadable ({type(exc).__name__}: {exc})",
+                                 "re-export the store with `becos export-zarr` (it is damaged)") from exc
         self.table = frame.astype({k: v for k, v in TABLE_DTYPES.items() if k in frame.columns})
         self._row_of = {pid: i for i, pid in enumerate(self.table["pair_id"])}
         n = len(self.table)

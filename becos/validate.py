@@ -5,14 +5,21 @@ of the check that failed, then says what is wrong, in how many pairs, with examp
 
     index_range: corr_01 outside [-1, V_y) in 1 pair(s), e.g. pp00000000000001 (1 value(s))
 
-Checks (vectorised over blocks of pairs read with :meth:`becos.store.Benchmark.blocks`):
+Problems about the store as a whole (``store``, ``schema``, ``metadata``) name the store, array or
+attribute instead of pairs. Checks (vectorised over blocks of pairs of about
+:data:`VALIDATE_BLOCK_BYTES`, read with :meth:`becos.store.Benchmark.read_block`):
 
 ================  ==================================================================================
+``store``         the store opens and reads: the folder exists and is a Zarr v3 becos store, every
+                  array, offsets and pairs node its layout names is present with readable metadata,
+                  every chunk decodes (a damaged store ends in this one problem, not a traceback)
 ``schema``        keys, dtypes, trailing shapes and offset groups as in :mod:`becos.record` /
-                  :mod:`becos.store`
-``metadata``      root attributes: schema version, setting, pair count
-``meta``          per pair: setting equals the store's, split is train/val/test
-``table``         the pairs table agrees with the metas and arrays (ids, splits, sizes, overlaps)
+                  :mod:`becos.store`; offsets start at 0, never decrease and end at the array's rows
+``metadata``      root attributes: schema version, setting, pair count, pairs per split, the
+                  ``versions`` of the building libraries
+``meta``          per pair: setting equals the store's, split is train/val/test, schema version
+``table``         the pairs table agrees with the metas (every column :func:`becos.store.table_row`
+                  derives from them) and the arrays (sizes, overlaps); index column 0..N-1
 ``pair_id``       pair ids unique
 ``index_range``   faces, corr_01/corr_10 (+ ``_face``), partial_to_full, full_to_partial,
                   full_face_ids, full_faces index inside their targets (-1 only where allowed)
@@ -30,8 +37,10 @@ Checks (vectorised over blocks of pairs read with :meth:`becos.store.Benchmark.b
 ``connectivity``  partial shapes: one edge-connected component, every vertex on a face
 ``rotation``      frame, alignment and random rotations orthonormal with det +1
 ``alignment``     X's alignment is the identity (rotation I, translation 0)
-``camera``        NaN for full shapes, finite for partial ones
-``scalars``       full_area > 0, full_sqrt_area**2 == full_area, dataset_scale > 0
+``camera``        NaN for the shapes the setting keeps full (both in full_full, X in partial_full),
+                  finite for scanned ones (a scan that happens to see every face is stored as a
+                  full shape but keeps its camera)
+``scalars``       full_area > 0, full_sqrt_area**2 == full_area, dataset_scale > 0, remesh_variant >= -1
 ``finite``        vertex coordinates, centres and translations finite
 ``split_classes`` no (dataset, class) in two splits — for datasets whose split rule holds classes
                   out (``by_class``, ``template_table`` or unknown; not ``slices``/``by_name``,
@@ -40,8 +49,12 @@ Checks (vectorised over blocks of pairs read with :meth:`becos.store.Benchmark.b
 ``centaur``       centaur shapes only in train
 ================  ==================================================================================
 
-Command line: ``becos validate STORE [--json OUT]`` prints a JSON summary; with problems it lists
-them on stderr and exits with status 1.
+Command line: ``becos validate STORE [--json OUT] [--against OTHER [--atol TOL]]`` prints a JSON
+summary; with problems it lists them on stderr and exits with status 1. With ``--against`` it then
+compares STORE with OTHER (:func:`becos.compare.compare_stores`: pairs only in one store, per pair
+which arrays differ and why, metadata and library versions that differ), prints the comparison's
+summary on stdout and exits with status 1 when the stores differ too; ``--json`` then also holds the
+full comparison under ``comparison``. Exit status 2: OTHER cannot be opened.
 """
 
 from __future__ import annotations
@@ -216,7 +229,7 @@ class _BlockChecker:
         bad = (~np.isfinite(wm).all(axis=1)) | (wm < -WEIGHT_TOL).any(axis=1) | (np.abs(wm.sum(axis=1) - 1) > WEIGHT_TOL)
         self.report("weights", f"{corr}_weights negative, non-finite or not summing to 1",
                     np.unique(self.pair_of[gv][fmatched][bad]))
-        face_ok = fmatched & (face < self.rep(Fo, gv)) & matched
+        face_ok = fmatched & (face < self.rep(Fo, gv)) & matched & (c < self.rep(Vo, gv))   # in range (else index_range)
         if face_ok.any():
             rows = np.flatnonzero(face_ok)
             gface = face[rows] + self.rep(self.start[go_f], gv)[rows]
@@ -267,8 +280,11 @@ class _BlockChecker:
         if must_be_full:
             self.report("setting", f"{s} is partial in a {self.setting} store", partial)
         camera = a[f"{s}_camera"].reshape(self.n, -1)
-        self.report("camera", f"{s}_camera not NaN for a full shape", full & ~np.isnan(camera).all(axis=1))
-        self.report("camera", f"{s}_camera not finite for a partial shape", partial & ~np.isfinite(camera).all(axis=1))
+        if must_be_full:                 # (a partial shape here is the ``setting`` problem)
+            self.report("camera", f"{s}_camera not NaN though a {self.setting} store keeps {s} full",
+                        full & ~np.isnan(camera).all(axis=1))
+        else:
+            self.report("camera", f"{s}_camera not finite for a scanned {s} shape", ~np.isfinite(camera).all(axis=1))
 
         if partial.any():
             self.partial_side(s, partial)
@@ -336,6 +352,7 @@ class _BlockChecker:
             bad = ~((area > 0) & np.isfinite(area) & (np.abs(sqrt_area ** 2 - area) <= 1e-9 * np.abs(area))
                     & (scale > 0) & np.isfinite(scale))
             self.report("scalars", f"{s}_full_area / {s}_full_sqrt_area / {s}_dataset_scale inconsistent", bad)
+            self.report("scalars", f"{s}_remesh_variant below -1", a[f"{s}_remesh_variant"] < -1)
             for key, group in ((f"{s}_vertices", f"{s}_vertex"), (f"{s}_full_vertices", f"{s}_full_vertex")):
                 self.report("finite", f"{key} not finite", self.pairs_with(~np.isfinite(a[key]), group))
             bad = ~(np.isfinite(a[f"{s}_centre"]).all(axis=1) & np.isfinite(a[f"{s}_align_translation"]).all(axis=1))
@@ -381,9 +398,15 @@ def _check_schema(bench, problems: list[str]) -> bool:
         if group is None and array.shape[0] != len(bench):
             problems.append(f"schema: {key} has {array.shape[0]} rows for {len(bench)} pairs")
             ok = False
+    ids = bench.table["pair_id"].to_numpy().astype(str)
     for group, o in bench.offsets.items():
-        if o[0] != 0 or (np.diff(o) < 0).any():
-            problems.append(f"schema: offsets '{group}' do not start at 0 or decrease")
+        if len(o) and o[0] != 0:
+            problems.append(f"schema: offsets '{group}' start at {o[0]}, not 0")
+            ok = False
+        bad = np.flatnonzero(np.diff(o) < 0)
+        if len(bad):
+            problems.append(f"schema: offsets '{group}' decrease (negative row count) in {len(bad)} pair(s), "
+                            f"e.g. {', '.join(ids[bad[:MAX_EXAMPLES]])}")
             ok = False
     return ok
 
@@ -420,45 +443,152 @@ def _check_splits(table, setting: str, problems: _Problems) -> None:
     problems.add("centaur", "centaur shape outside train", sorted(set(centaurs["pair_id"])))
 
 
-def validate(path: str | Path, progress: bool = False) -> ValidationReport:
-    """Run every check on a store; see the module docstring."""
-    from becos.errors import InputFileError
-    from becos.store import open_benchmark
+STORE_FIX = "re-export the store with `becos export-zarr` (it is damaged or was copied incompletely)"
 
+
+def _node_problem(path: Path, node: str) -> str | None:
+    """Why the Zarr node ``node`` (e.g. ``arrays/x_faces``) of a store cannot be opened, else None."""
+    meta = path / node / "zarr.json"
+    if not meta.is_file():
+        return "missing"
+    try:
+        info = json.loads(meta.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        return f"has unreadable metadata ({node}/zarr.json: {exc})"
+    if not isinstance(info, dict) or info.get("node_type") != "array":
+        return f"is not a Zarr array ({node}/zarr.json)"
+    return None
+
+
+def _diagnose(path: Path, exc: Exception) -> list[str]:
+    """Readable ``store`` problems of a store that exists but does not open (missing or damaged nodes)."""
+    try:
+        attrs = json.loads((path / "zarr.json").read_text(encoding="utf-8")).get("attributes", {})
+        layout = dict(attrs["becos_store"]["layout"])
+    except Exception:                    # root metadata unreadable: nothing more specific to say
+        layout = {}
+    nodes = [f"arrays/{k}" for k in layout]
+    nodes += [f"offsets/{g}" for g in sorted({g for g in layout.values() if g is not None})]
+    nodes += ["pairs/meta_json", "pairs/meta_offsets", "pairs/table_json"]
+    found: dict[str, list[str]] = {}
+    for node in nodes:
+        problem = _node_problem(path, node)
+        if problem is not None:
+            found.setdefault(problem if problem == "missing" else "unreadable", []).append(
+                node if problem == "missing" else f"{node} {problem}")
+    out = []
+    if "missing" in found:
+        names = found["missing"]
+        out.append(f"store: {path}: {len(names)} of its arrays missing: {', '.join(names[:8])}"
+                   f"{' ...' if len(names) > 8 else ''}. Fix: {STORE_FIX}")
+    if "unreadable" in found:
+        out.append(f"store: {path}: {'; '.join(found['unreadable'][:4])}. Fix: {STORE_FIX}")
+    if not out:
+        out.append(f"store: {path}: cannot be opened ({type(exc).__name__}: {exc}). Fix: {STORE_FIX}")
+    return out
+
+
+def open_for_validation(path: str | Path):
+    """``(Benchmark, [])`` or ``(None, [store problem])``: never raises for a missing or damaged store."""
+    from becos.errors import InputFileError
+    from becos.store import DamagedStoreError, open_benchmark
+
+    path = Path(path)
+    fix = "give a store folder (*.zarr) written by `becos export-zarr`"
+    if not path.exists():
+        return None, [f"store: {path}: not found. Fix: check the path; {fix}"]
+    if not path.is_dir():
+        return None, [f"store: {path}: is a file, not a store folder. Fix: {fix}"]
+    try:
+        return open_benchmark(path), []
+    except DamagedStoreError as exc:    # name every missing or unreadable node, not just the first
+        return None, _diagnose(path, exc.__cause__)
+    except InputFileError as exc:
+        return None, [f"store: {exc}"]
+    except Exception as exc:            # zarr raises KeyError, JSONDecodeError ... for damaged stores
+        return None, _diagnose(path, exc)
+
+
+def _ranges(bench, max_bytes: int) -> list[tuple[int, int]]:
+    """Consecutive row ranges of about ``max_bytes`` of arrays (as :meth:`Benchmark.blocks`)."""
+    size = bench.pair_bytes()
+    out, start, acc = [], 0, 0
+    for i in range(len(size)):
+        if acc and acc + size[i] > max_bytes:
+            out.append((start, i))
+            start, acc = i, 0
+        acc += int(size[i])
+    if len(size):
+        out.append((start, len(size)))
+    return out
+
+
+def _unreadable(bench, start: int, stop: int, exc: Exception, ids: np.ndarray) -> str:
+    """The ``store`` problem of rows ``start:stop`` that failed to read: which arrays fail, why, and for
+    which pairs (each failing array re-read pair by pair)."""
+    def rows_of(key: str, i: int, j: int) -> tuple[int, int]:
+        group = bench.layout[key]
+        return (i, j) if group is None else (int(bench.offsets[group][i]), int(bench.offsets[group][j]))
+
+    failing, bad = [], np.zeros(stop - start, dtype=bool)
+    for key in bench.layout:
+        try:
+            bench.array(key)[slice(*rows_of(key, start, stop))]
+        except Exception as err:
+            failing.append(f"arrays/{key} ({type(err).__name__}: {err})")
+            for i in range(start, stop):
+                try:
+                    bench.array(key)[slice(*rows_of(key, i, i + 1))]
+                except Exception:
+                    bad[i - start] = True
+    if not failing:
+        failing.append(f"pairs/meta_json ({type(exc).__name__}: {exc})")
+    if not bad.any():
+        bad[:] = True
+    pairs = ids[start:stop][bad]
+    return (f"store: {bench.path}: chunks of {'; '.join(failing[:4])}{' ...' if len(failing) > 4 else ''} cannot "
+            f"be read, in {len(pairs)} pair(s), e.g. {', '.join(pairs[:MAX_EXAMPLES])}. Fix: {STORE_FIX}")
+
+
+def validate(path: str | Path, progress: bool = False) -> ValidationReport:
+    """Run every check on a store; see the module docstring. Never raises for a bad store: a store that
+    is missing or does not open gives one ``store`` problem."""
     started = time.perf_counter()
     path = Path(path)
-    try:
-        bench = open_benchmark(path)
-    except InputFileError as exc:
-        return ValidationReport(path, [f"store: {exc}"], seconds=time.perf_counter() - started)
-    problems: list[str] = []
+    bench, problems = open_for_validation(path)
+    if bench is None:
+        return ValidationReport(path, problems, seconds=time.perf_counter() - started)
     found = _Problems()
     table = bench.table
     n = len(bench)
-    meta = bench.metadata
-    if meta.get("schema_version") != SCHEMA_VERSION:
-        problems.append(f"metadata: schema_version {meta.get('schema_version')}, expected {SCHEMA_VERSION}")
-    if bench.setting not in SETTINGS:
-        problems.append(f"metadata: setting {bench.setting!r} is not one of {SETTINGS}")
-    if meta.get("n_pairs", n) != n:
-        problems.append(f"metadata: n_pairs says {meta.get('n_pairs')} but the table has {n} rows")
+    ids = table["pair_id"].to_numpy().astype(str)
+    _check_metadata(bench, problems)
     if list(table["index"]) != list(range(n)):
         problems.append("table: the index column is not 0..N-1")
 
-    ids = table["pair_id"].to_numpy().astype(str)
-    if _check_schema(bench, problems):
-        reported = 0
-        for block in bench.blocks(max_bytes=VALIDATE_BLOCK_BYTES):
-            block_ids = ids[block.start:block.stop]
-            _BlockChecker(block, bench.setting, block_ids, found).run()
-            _check_metas(block, bench.setting, table, found)
-            if progress and (10 * block.stop // n > reported or block.stop == n):   # about every 10 %
-                reported = 10 * block.stop // n
-                print(f"validate: {block.stop}/{n} pairs checked ({time.perf_counter() - started:.1f} s)",
-                      file=sys.stderr, flush=True)
-    else:
-        for block in bench.blocks(max_bytes=VALIDATE_BLOCK_BYTES):
-            _check_metas(block, bench.setting, table, found)
+    rows_ok = _check_schema(bench, problems)
+    if not rows_ok:                    # the arrays cannot be trusted: check the metas and the table only
+        from becos.store import Block
+
+        try:
+            metas = bench.read_metas()
+        except Exception as exc:
+            problems.append(_unreadable(bench, 0, n, exc, ids))
+        else:
+            _check_metas(Block(0, n, {}, {}, bench.layout, metas), bench.setting, table, found)
+    reported = 0
+    for start, stop in _ranges(bench, VALIDATE_BLOCK_BYTES) if rows_ok else []:
+        try:
+            block = bench.read_block(start, stop)
+        except Exception as exc:        # a damaged chunk: name it, check the other blocks
+            problems.append(_unreadable(bench, start, stop, exc, ids))
+            continue
+        _BlockChecker(block, bench.setting, ids[start:stop], found).run()
+        _check_metas(block, bench.setting, table, found)
+        if progress and (10 * stop // n > reported or stop == n):   # about every 10 %
+            reported = 10 * stop // n
+            print(f"validate: {stop}/{n} pairs checked ({time.perf_counter() - started:.1f} s)",
+                  file=sys.stderr, flush=True)
 
     values, counts = np.unique(ids, return_counts=True)
     dup = values[counts > 1]
@@ -470,7 +600,32 @@ def validate(path: str | Path, progress: bool = False) -> ValidationReport:
     return ValidationReport(path, problems, n, bench.setting, splits, time.perf_counter() - started)
 
 
+def _check_metadata(bench, problems: list[str]) -> None:
+    """Root attributes (``metadata``)."""
+    meta, n, table = bench.metadata, len(bench), bench.table
+    if meta.get("schema_version") != SCHEMA_VERSION:
+        problems.append(f"metadata: schema_version {meta.get('schema_version')}, expected {SCHEMA_VERSION}")
+    if bench.setting not in SETTINGS:
+        problems.append(f"metadata: setting {bench.setting!r} is not one of {SETTINGS}")
+    if meta.get("n_pairs", n) != n:
+        problems.append(f"metadata: n_pairs says {meta.get('n_pairs')} but the table has {n} rows")
+    splits = {str(k): int(v) for k, v in table["split"].value_counts().items()}
+    if "splits" in meta and meta["splits"] != splits:
+        problems.append(f"metadata: splits says {meta['splits']} but the table has {splits}")
+    versions = meta.get("versions")
+    if not isinstance(versions, dict) or not {"python", "numpy", "zarr"} <= set(versions):
+        problems.append(f"metadata: versions is {versions!r}, not a {{package: version}} mapping with at least "
+                        "python, numpy and zarr (the store does not say which libraries built it)")
+
+
+_META_COLUMNS = ("pair_id", "split", "category", "seed", "x_dataset", "x_name", "x_class", "x_category",
+                 "y_dataset", "y_name", "y_class", "y_category", "n_tries", "accepted")
+"""Table columns :func:`becos.store.table_row` derives from a pair's meta alone."""
+
+
 def _check_metas(block, setting: str, table, found: _Problems) -> None:
+    from becos.store import TABLE_COLUMNS, table_row
+
     rows = table.iloc[block.start:block.stop]
     ids = rows["pair_id"].to_numpy().astype(str)
     metas = block.metas
@@ -478,19 +633,31 @@ def _check_metas(block, setting: str, table, found: _Problems) -> None:
     found.add("meta", f"meta setting differs from the store's ({setting})", ids[bad])
     bad = np.array([m.get("split") not in SPLITS for m in metas])
     found.add("meta", "meta split is not train/val/test", ids[bad])
-    meta_ids = np.array([str(m.get("pair_id")) for m in metas])
-    found.add("table", "table pair_id differs from meta pair_id", ids[meta_ids != ids])
-    meta_split = np.array([str(m.get("split")) for m in metas])
-    found.add("table", "table split differs from meta split", ids[meta_split != rows["split"].to_numpy().astype(str)])
+    bad = np.array([m.get("schema_version", SCHEMA_VERSION) != SCHEMA_VERSION for m in metas])
+    found.add("meta", f"meta schema_version is not {SCHEMA_VERSION}", ids[bad])
+    expected, unreadable = [], np.zeros(len(metas), dtype=bool)
+    for i, m in enumerate(metas):
+        try:
+            expected.append(table_row(block.start + i, {"pair_id": None, **m}, 0, 0, 0.0, 0.0))
+        except (TypeError, ValueError, AttributeError):
+            unreadable[i] = True
+            expected.append([None] * len(TABLE_COLUMNS))
+    found.add("meta", "meta seed/n_tries not integers or x/y not objects", ids[unreadable])
+    for column in _META_COLUMNS:
+        j = TABLE_COLUMNS.index(column)
+        want = [row[j] for row in expected]
+        have = rows[column].tolist()
+        bad = np.array([w != h for w, h in zip(want, have)]) & ~unreadable
+        found.add("table", f"table {column} differs from the pair meta", ids[bad])
     for s in ("x", "y"):
         group = f"{s}_vertex"
         if group in block.offsets:
             found.add("table", f"table {s}_n_vertices differs from the arrays",
                       ids[block.counts(group) != rows[f"{s}_n_vertices"].to_numpy()])
-        if f"{s}_overlap" in block.arrays:
+        if f"{s}_overlap" in block.arrays and block.arrays[f"{s}_overlap"].shape == (len(block),):
             stored = block.arrays[f"{s}_overlap"]
             found.add("table", f"table {s}_overlap differs from the arrays",
-                      ids[np.abs(stored - rows[f"{s}_overlap"].to_numpy()) > 1e-12])
+                      ids[~(np.abs(stored - rows[f"{s}_overlap"].to_numpy()) <= 1e-12)])
 
 
 def validate_store(path: str | Path) -> list[str]:
@@ -504,7 +671,14 @@ def validate_store(path: str | Path) -> list[str]:
 
 def configure_parser(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("store", type=Path, help="benchmark store written by `becos export-zarr`")
-    parser.add_argument("--json", type=Path, help="also write the summary and the problems to this JSON file")
+    parser.add_argument("--json", type=Path, help="also write the summary and the problems (and with --against "
+                                                  "the full comparison) to this JSON file")
+    parser.add_argument("--against", type=Path, metavar="OTHER",
+                        help="then compare STORE with OTHER, a store of the same setting (e.g. rebuilt after a "
+                             "library upgrade): pairs only in one store, per pair which arrays differ and why, "
+                             "differing versions and config; exit status 1 when they differ")
+    parser.add_argument("--atol", type=float, default=0.0,
+                        help="with --against: float values within ATOL count as equal (default 0: exact)")
 
 
 def run_cli(args: argparse.Namespace) -> int:
@@ -512,9 +686,30 @@ def run_cli(args: argparse.Namespace) -> int:
 
     report = validate(args.store, progress=True)
     summary = report.summary()
-    if args.json is not None:
-        write_text(args.json, json.dumps({**summary, "problems": report.problems}, indent=1) + "\n")
+    out = {**summary, "problems": report.problems}
     print(json.dumps(summary))
     for problem in report.problems:
         print(f"becos validate: {problem}", file=sys.stderr)
-    return 0 if report.valid else 1
+    status = 0 if report.valid else 1
+    against = getattr(args, "against", None)
+    if against is not None:
+        from becos.compare import compare_stores
+
+        if report.problems and report.problems[0].startswith("store:"):
+            out["comparison"] = None
+            print(f"becos validate: not compared with {against}: {args.store} cannot be read", file=sys.stderr)
+        else:
+            try:
+                comparison = compare_stores(args.store, against, atol=args.atol)
+            except BecosError as exc:
+                print(f"becos validate: --against: {exc}", file=sys.stderr)
+                out["comparison"] = {"error": str(exc)}
+                status = 2
+            else:
+                print(comparison.summary())
+                out["comparison"] = comparison.to_json()
+                if not comparison.identical:
+                    status = max(status, 1)
+    if args.json is not None:
+        write_text(args.json, json.dumps(out, indent=1) + "\n")
+    return status

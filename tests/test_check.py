@@ -101,6 +101,7 @@ def test_truncated_and_empty_meshes_are_named(becos_code, tosca_dir, tmp_path):
     assert str(folder / "wolf1.off") in message and "truncated" in message
     assert str(folder / "wolf2.off") in message and "empty" in message
     assert "wolf0.off" not in message and "2 of 3 mesh files" in message
+    assert "Fix: re-download or re-extract them" in message
     bad = {Path(b["path"]).name for b in info.value.report["tosca"]["bad_meshes"]}
     assert bad == {"wolf1.off", "wolf2.off"}
     # a count mismatch is listed together with the bad files, not instead of them

@@ -220,7 +220,8 @@ def test_save_load_and_ply(remeshes, tmp_path):
         assert np.array_equal(m.face, n.face) and np.array_equal(m.weights, n.weights)
         assert np.array_equal(m.distance, n.distance)
     assert back.target_vertices == r.target_vertices and back.target_faces is None
-    assert back.seconds == r.seconds
+    # the wall time is not stored (the same input gives the same bytes); older files carried it
+    assert np.isnan(back.seconds) or back.seconds == r.seconds
     assert [p.name for p in path.parent.iterdir()] == ["wolf0.npz"]        # no temporary files left
 
     ply = tmp_path / "wolf0.ply"

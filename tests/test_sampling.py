@@ -310,8 +310,9 @@ def test_val_centaur_is_reported_not_paired(entries):
 # ------------------------------------------------------------------------------------------ scale
 
 
-def test_benchmark_size_is_fast():
-    """~2,500 shapes with the published datasets' usage counts: ≤ 5 s per setting."""
+def test_benchmark_size_pair_counts():
+    """~2,500 shapes with the published datasets' usage counts (time printed; speed is measured by
+    benchmarks/workflow.py, never asserted in a test)."""
     spec = [("faust", "human", 40, 100), ("scape", "human", 40, 71), ("kids", "human", 50, 32),
             ("dt4d_human", "human", 10, 248), ("tosca", "human", 70, 39), ("dt4d_animal", "four-legged", 4, 1950),
             ("smal", "four-legged", 60, 49), ("shrec20", "four-legged", 80, 11), ("toscaq", "four-legged", 70, 31),
@@ -325,7 +326,6 @@ def test_benchmark_size_is_fast():
     dt = time.perf_counter() - t0
     half = sample_pairs(cat, "partial_partial", seed=42, combinations="all", usage_scale=0.5)
     print(f"\n{len(cat)} shapes: {len(m)} pairs in {dt:.2f} s (usage_scale 0.5: {len(half)} pairs)")
-    assert dt <= 5.0
     expected_train = sum(u * sum(1 for i in range(n) if c == "centaur" or i % 10 < 8) for _, c, u, n in spec)
     assert m.attrs["report"]["n_pairs"]["train"] == expected_train
 

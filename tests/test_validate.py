@@ -1,9 +1,14 @@
-"""Store validation: real stores validate clean; each specific corruption is reported by its check."""
+"""Store validation: real stores validate clean; every check of :mod:`becos.validate` catches a store
+corrupted in exactly one way (one case per check, :data:`CORRUPTIONS`), with a message naming the
+check, what is wrong, how many pairs and an example pair; damaged stores are reported, never a
+traceback."""
 
 from __future__ import annotations
 
 import json
 import shutil
+from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 import pytest
@@ -11,8 +16,13 @@ import zarr
 
 from becos.cli import main
 from becos.record import PairRecord
-from becos.store import open_benchmark, table_row, write_pairs, write_store
+from becos.store import TABLE_COLUMNS, open_benchmark, table_row, write_pairs, write_store
 from becos.validate import validate, validate_store
+
+CHECKS = ("schema", "metadata", "meta", "table", "pair_id", "index_range", "unmatched", "weights", "corr_face",
+          "overlap", "index_maps", "full_shape", "setting", "face_map", "vertex_map", "connectivity", "rotation",
+          "alignment", "camera", "scalars", "finite", "split_classes", "centaur")
+"""Every check in becos.validate's docstring table (``store`` is tested by test_damaged_store_is_reported)."""
 
 
 @pytest.fixture(scope="module")
@@ -43,14 +53,269 @@ def p2p_copy(clean_stores, tmp_path):
     return path
 
 
+# --------------------------------------------------------------------------------------------------
+# helpers that corrupt a store copy in place
+
+
 def _array(store, key):
     return zarr.open_array(str(store / "arrays" / key), mode="r+")
 
 
-def _problems_of(store, check):
-    problems = validate_store(store)
-    assert problems, "the corruption went unnoticed"
-    return [p for p in problems if p.startswith(check + ":")], problems
+def _rows(bench, key, pair):
+    """Global rows ``start, stop`` of one pair in a ragged array."""
+    o = bench.offsets[bench.layout[key]]
+    return int(o[pair]), int(o[pair + 1])
+
+
+def _set_attrs(store, **attrs):
+    zarr.open_group(str(store), mode="r+").attrs.update(attrs)
+
+
+def _rewrite_pairs(store, edit_metas=None, edit_rows=None):
+    """Rewrite the metas and the table (table rows derived from the edited metas, then ``edit_rows``)."""
+    bench = open_benchmark(store)
+    metas = bench.read_metas()
+    if edit_metas is not None:
+        edit_metas(metas)
+    t = bench.table
+    rows = [table_row(i, m, t["x_n_vertices"][i], t["y_n_vertices"][i], t["x_overlap"][i], t["y_overlap"][i])
+            for i, m in enumerate(metas)]
+    if edit_rows is not None:
+        edit_rows(rows)
+    write_pairs(zarr.open_group(str(store), mode="r+"), metas, rows)
+
+
+def _col(name):
+    return TABLE_COLUMNS.index(name)
+
+
+def c_schema(store, bench):
+    root = zarr.open_group(str(store), mode="r+")
+    data = root["arrays/x_annotation"][:]
+    del root["arrays/x_annotation"]
+    root["arrays"].create_array("x_annotation", data=data.astype(np.int32))
+
+
+def c_metadata(store, bench):
+    _set_attrs(store, n_pairs=3)
+
+
+def c_meta(store, bench):
+    _rewrite_pairs(store, lambda metas: metas[1].update(setting="partial_full"))
+    return 1
+
+
+def c_table(store, bench):
+    def edit(rows):
+        rows[1][_col("x_n_vertices")] += 1
+    _rewrite_pairs(store, edit_rows=edit)
+    return 1
+
+
+def c_pair_id(store, bench):
+    def edit(metas):
+        metas[1]["pair_id"] = metas[0]["pair_id"]
+    _rewrite_pairs(store, edit)
+    return 0
+
+
+def c_index_range(store, bench):
+    row = _rows(bench, "corr_01", 1)[0] + 5                       # pair 1, X vertex 5
+    _array(store, "corr_01")[row] = bench.table["y_n_vertices"][1] + 7
+    return 1
+
+
+def c_unmatched(store, bench):
+    a, b = _rows(bench, "y_overlap_mask", 0)
+    mask = np.asarray(bench.array("y_overlap_mask")[a:b])
+    _array(store, "corr_10")[a + int(np.flatnonzero(mask)[3])] = -1   # a matched Y vertex of pair 0
+    return 0
+
+
+def _matched_row(bench, pair, side="x"):
+    """Global row of a matched vertex of ``pair`` whose largest weight is clearly the largest."""
+    corr = "corr_01" if side == "x" else "corr_10"
+    a, b = _rows(bench, corr, pair)
+    w = np.asarray(bench.array(f"{corr}_weights")[a:b])
+    top = np.sort(w, axis=1)
+    return a + int(np.flatnonzero((np.asarray(bench.array(corr)[a:b]) >= 0) & (top[:, 2] > top[:, 1] + 0.1))[7])
+
+
+def c_weights(store, bench):
+    row = _matched_row(bench, 1)
+    weights = _array(store, "corr_01_weights")
+    weights[row] = weights[row] * 0.9                              # same largest corner, sum 0.9
+    return 1
+
+
+def c_corr_face(store, bench):
+    row = _matched_row(bench, 1)
+    face = int(bench.array("corr_01_face")[row])
+    corners = np.asarray(bench.array("y_faces")[_rows(bench, "y_faces", 1)[0] + face])
+    weights = np.asarray(bench.array("corr_01_weights")[row])
+    _array(store, "corr_01")[row] = corners[np.argsort(weights)[1]]   # a corner, not the largest-weight one
+    return 1
+
+
+def c_overlap(store, bench):
+    _array(store, "x_overlap")[1] = 0.95                           # mask mean 0.69, accepted range [0.1, 0.9]
+
+    def edit(rows):
+        rows[1][_col("x_overlap")] = 0.95                          # the table agrees with the array
+    _rewrite_pairs(store, edit_rows=edit)
+    return 1
+
+
+def c_index_maps(store, bench):
+    a, b = _rows(bench, "x_full_to_partial", 1)
+    ftp = np.asarray(bench.array("x_full_to_partial")[a:b])
+    _array(store, "x_full_to_partial")[a + int(np.flatnonzero(ftp < 0)[0])] = 0   # a dropped vertex "kept"
+    return 1
+
+
+def c_full_shape(store, bench):
+    a, _ = _rows(bench, "y_full_face_ids", 1)
+    _array(store, "y_full_face_ids")[a + 3] = 4                    # full shape: face 3 must come from face 3
+    return 1
+
+
+def c_setting(store, bench):
+    """A partial_full store labelled full_full (root attribute and metas): its Y shapes are partial."""
+    _set_attrs(store, setting="full_full")
+    _rewrite_pairs(store, lambda metas: [m.update(setting="full_full") for m in metas])
+    return 0
+
+
+def c_face_map(store, bench):
+    f0, _ = _rows(bench, "y_full_face_ids", 0)
+    full_face = int(bench.array("y_full_face_ids")[f0]) + _rows(bench, "y_full_faces", 0)[0]
+    faces = _array(store, "y_full_faces")
+    corners = faces[full_face]
+    corners[0] = corners[0] + 1 if corners[0] > 0 else 1
+    faces[full_face] = corners
+    return 0
+
+
+def c_vertex_map(store, bench):
+    kept = int(bench.array("y_partial_to_full")[_rows(bench, "y_partial_to_full", 1)[0] + 10])
+    row = _rows(bench, "y_full_vertices", 1)[0] + kept
+    vertices = _array(store, "y_full_vertices")
+    vertices[row] = vertices[row] + 1e-3
+    return 1
+
+
+def c_connectivity(store, bench):
+    """Pair 0's X: the only face of a boundary 'ear' vertex replaced by a copy of another face (with its
+    full face id, so the face map stays right): the ear vertex is on no face any more."""
+    f0, f1 = _rows(bench, "x_faces", 0)
+    faces = np.asarray(bench.array("x_faces")[f0:f1])
+    uses = np.bincount(faces.ravel())
+    ear_face = int(np.flatnonzero((uses[faces] == 1).any(axis=1))[0])
+    other = (ear_face + 1) % len(faces)
+    for key in ("x_faces", "x_full_face_ids"):
+        arr = _array(store, key)
+        arr[f0 + ear_face] = arr[f0 + other]
+    return 0
+
+
+def c_rotation(store, bench):
+    rotation = _array(store, "y_random_rotation")
+    rotation[1] = rotation[1] * 1.01
+    return 1
+
+
+def c_alignment(store, bench):
+    quarter_turn = np.array([[0.0, 0.0, -1.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0]])    # a rotation, det +1
+    _array(store, "x_align_rotation")[0] = quarter_turn
+    return 0
+
+
+def c_camera(store, bench):
+    _array(store, "x_camera")[1] = np.eye(3)                       # a camera for a full_full shape
+    return 1
+
+
+def c_scalars(store, bench):
+    sqrt_area = _array(store, "x_full_sqrt_area")
+    sqrt_area[1] = sqrt_area[1] * 1.1
+    return 1
+
+
+def c_finite(store, bench):
+    row = _rows(bench, "x_vertices", 0)[0] + 42
+    vertices = _array(store, "x_vertices")
+    vertices[row] = np.array([np.nan, 0.0, 0.0])
+    return 0
+
+
+def c_split_classes(store, bench):
+    """Pair 0 moved to train (meta, table and the root ``splits`` agree): class cat in train and test."""
+    _rewrite_pairs(store, lambda metas: metas[0].update(split="train"))
+    _set_attrs(store, splits={"train": 1, "test": 1})
+    return 0
+
+
+def c_centaur(store, bench):
+    _rewrite_pairs(store, lambda metas: metas[1]["y"].update(category="centaur"))
+    return 1
+
+
+@dataclass(frozen=True)
+class Corruption:
+    check: str
+    setting: str
+    corrupt: Callable          # (store, bench) -> row of the example pair, or None (store-level)
+    message: str               # expected in the check's problem
+    n_pairs: int = 1
+
+
+CORRUPTIONS = (
+    Corruption("schema", "full_full", c_schema, "schema: x_annotation has dtype int32, expected int8"),
+    Corruption("metadata", "full_full", c_metadata, "metadata: n_pairs says 3 but the table has 2 rows"),
+    Corruption("meta", "partial_partial", c_meta, "meta: meta setting differs from the store's (partial_partial)"),
+    Corruption("table", "partial_partial", c_table, "table: table x_n_vertices differs from the arrays"),
+    Corruption("pair_id", "partial_partial", c_pair_id, "pair_id: duplicate pair id"),
+    Corruption("index_range", "partial_partial", c_index_range, "index_range: corr_01 outside [-1, V_y)"),
+    Corruption("unmatched", "partial_partial", c_unmatched, "unmatched: corr_10 >= 0 differs from y_overlap_mask"),
+    Corruption("weights", "partial_partial", c_weights,
+               "weights: corr_01_weights negative, non-finite or not summing to 1"),
+    Corruption("corr_face", "partial_partial", c_corr_face,
+               "corr_face: corr_01 is not the largest-weight corner of corr_01_face"),
+    Corruption("overlap", "partial_partial", c_overlap, "overlap: x_overlap differs from the mean of x_overlap_mask"),
+    Corruption("index_maps", "partial_partial", c_index_maps,
+               "index_maps: x_full_to_partial keeps a different number of vertices than V_x"),
+    Corruption("full_shape", "full_full", c_full_shape,
+               "full_shape: full y shape does not keep every face and vertex (identity maps)"),
+    Corruption("setting", "partial_full", c_setting, "setting: y is partial in a full_full store", n_pairs=2),
+    Corruption("face_map", "partial_partial", c_face_map,
+               "face_map: y_partial_to_full[y_faces] != y_full_faces[y_full_face_ids]"),
+    Corruption("vertex_map", "partial_partial", c_vertex_map,
+               "vertex_map: y_vertices != y_full_vertices[y_partial_to_full]"),
+    Corruption("connectivity", "partial_partial", c_connectivity,
+               "connectivity: partial x shape has vertices on no face"),
+    Corruption("rotation", "partial_partial", c_rotation, "rotation: y_random_rotation not orthonormal with det +1"),
+    Corruption("alignment", "partial_partial", c_alignment,
+               "alignment: x_align_rotation / x_align_translation not the identity"),
+    Corruption("camera", "full_full", c_camera, "camera: x_camera not NaN though a full_full store keeps x full"),
+    Corruption("scalars", "partial_partial", c_scalars,
+               "scalars: x_full_area / x_full_sqrt_area / x_dataset_scale inconsistent"),
+    Corruption("finite", "full_full", c_finite, "finite: x_vertices not finite"),
+    Corruption("split_classes", "full_full", c_split_classes, "split_classes: class tosca/cat in splits train+test",
+               n_pairs=2),
+    Corruption("centaur", "full_full", c_centaur, "centaur: centaur shape outside train"),
+)
+
+
+def test_every_check_has_a_corruption():
+    import becos.validate
+
+    documented = [line.split("``")[1] for line in becos.validate.__doc__.splitlines() if line.startswith("``")]
+    assert set(documented) == set(CHECKS) | {"store"}
+    assert [c.check for c in CORRUPTIONS] == list(CHECKS)
+
+
+# --------------------------------------------------------------------------------------------------
+# tests
 
 
 def test_clean_stores_validate(clean_stores):
@@ -58,6 +323,24 @@ def test_clean_stores_validate(clean_stores):
         report = validate(path)
         assert report.problems == [], (setting, report.problems)
         assert report.n_pairs == 2 and report.splits == {"test": 2} and report.setting == setting
+
+
+@pytest.mark.parametrize("case", CORRUPTIONS, ids=[c.check for c in CORRUPTIONS])
+def test_corruption_is_caught(case, clean_stores, tmp_path):
+    """One corruption, one failing check, a message with the check, the problem, the pair count and an
+    example pair id (store-level checks name the array or attribute instead)."""
+    store = tmp_path / "corrupt.zarr"
+    shutil.copytree(clean_stores[case.setting], store)
+    bench = open_benchmark(store)
+    example = case.corrupt(store, bench)
+    problems = validate_store(store)
+    assert problems, "the corruption went unnoticed"
+    assert {p.split(":")[0] for p in problems} == {case.check}, problems
+    hit = next((p for p in problems if p.startswith(case.message)), None)
+    assert hit is not None, problems
+    if example is not None:
+        assert f" in {case.n_pairs} pair(s), e.g. {bench.table['pair_id'][example]}" in hit, hit
+    print(f"\n{case.check}: {case.corrupt.__name__} -> {hit}")
 
 
 def test_class_in_train_and_test(pair_record_files, tmp_path):
@@ -68,101 +351,98 @@ def test_class_in_train_and_test(pair_record_files, tmp_path):
     assert problems[0].startswith("split_classes: class tosca/cat in splits train+test")
 
 
-def test_index_out_of_range(p2p_copy):
-    bench = open_benchmark(p2p_copy)
-    row = int(bench.offsets["x_vertex"][1]) + 5                 # pair 1, vertex 5
-    _array(p2p_copy, "corr_01")[row] = bench.table["y_n_vertices"][1] + 7
-    hits, _ = _problems_of(p2p_copy, "index_range")
-    assert len(hits) == 1 and "corr_01 outside [-1, V_y)" in hits[0] and bench.table["pair_id"][1] in hits[0]
-
-
-def test_minus_one_where_mask_says_matched(p2p_copy):
-    bench = open_benchmark(p2p_copy)
-    mask, offsets = bench.concatenated("y_overlap_mask")
-    row = int(np.flatnonzero(mask[offsets[0]:offsets[1]])[3])       # a matched Y vertex of pair 0
-    _array(p2p_copy, "corr_10")[row] = -1
-    hits, _ = _problems_of(p2p_copy, "unmatched")
-    assert hits and "corr_10 >= 0 differs from y_overlap_mask" in hits[0]
-    assert bench.table["pair_id"][0] in hits[0]
-
-
-def test_weights_not_summing_to_one(p2p_copy):
-    bench = open_benchmark(p2p_copy)
-    mask, offsets = bench.concatenated("x_overlap_mask")
-    row = int(np.flatnonzero(mask)[10])
-    weights = _array(p2p_copy, "corr_01_weights")
-    weights[row] = np.array([0.5, 0.4, 0.0])
-    hits, _ = _problems_of(p2p_copy, "weights")
-    assert "corr_01_weights" in hits[0]
-
-
-def test_non_orthonormal_rotation(p2p_copy):
-    rotation = _array(p2p_copy, "y_random_rotation")
-    rotation[1] = rotation[1] * 1.01
-    hits, problems = _problems_of(p2p_copy, "rotation")
-    assert hits == [f"rotation: y_random_rotation not orthonormal with det +1 in 1 pair(s), "
-                    f"e.g. {open_benchmark(p2p_copy).table['pair_id'][1]}"], problems
-
-
 def test_reflection_is_not_a_rotation(p2p_copy):
     rotation = _array(p2p_copy, "x_frame_rotation")
     rotation[0] = rotation[0] @ np.diag([1.0, 1.0, -1.0])      # orthonormal, det -1
-    hits, _ = _problems_of(p2p_copy, "rotation")
-    assert "x_frame_rotation" in hits[0]
-
-
-def test_duplicated_pair_id(p2p_copy):
-    bench = open_benchmark(p2p_copy)
-    metas = bench.read_metas()
-    metas[1]["pair_id"] = metas[0]["pair_id"]
-    rows = [table_row(i, m, *bench.table.loc[i, ["x_n_vertices", "y_n_vertices", "x_overlap", "y_overlap"]])
-            for i, m in enumerate(metas)]
-    write_pairs(zarr.open_group(str(p2p_copy), mode="r+"), metas, rows)
-    hits, problems = _problems_of(p2p_copy, "pair_id")
-    assert hits == [f"pair_id: duplicate pair id in 1 pair(s), e.g. {metas[0]['pair_id']} (2 rows share 1 id(s))"]
-    assert problems == hits                                      # nothing else is wrong
+    problems = validate_store(p2p_copy)
+    assert len(problems) == 1 and problems[0].startswith("rotation: x_frame_rotation not orthonormal"), problems
 
 
 def test_partial_split_into_two_components(p2p_copy):
     bench = open_benchmark(p2p_copy)
-    faces, offsets = bench.concatenated("x_faces")
-    f0, f1 = int(offsets[0]), int(offsets[1])
-    local = faces[f0:f1]
+    f0, f1 = _rows(bench, "x_faces", 0)
+    local = np.asarray(bench.array("x_faces")[f0:f1])
     # re-point one face at three vertices of faces far apart: it shares no edge with any other face
     far = local[[0, len(local) // 2, len(local) - 1], [0, 1, 2]]
     _array(p2p_copy, "x_faces")[f0 + len(local) // 3] = far
-    hits, problems = _problems_of(p2p_copy, "connectivity")
-    assert any("partial x shape is not one edge-connected component" in h for h in hits), problems
+    problems = validate_store(p2p_copy)
+    assert any(p.startswith("connectivity: partial x shape is not one edge-connected component") for p in problems)
     assert any(p.startswith("face_map:") for p in problems)   # the face no longer matches its full face
 
 
-def test_full_shape_must_keep_every_face(clean_stores, tmp_path):
-    path = tmp_path / "ff.zarr"
-    shutil.copytree(clean_stores["full_full"], path)
-    ids = _array(path, "y_full_face_ids")
-    ids[3] = 4
-    hits, _ = _problems_of(path, "full_shape")
-    assert "full y shape does not keep every face" in hits[0]
-
-
-def test_partial_to_full_inverse(p2p_copy):
+def test_partial_to_full_not_increasing(p2p_copy):
     bench = open_benchmark(p2p_copy)
-    offsets = bench.offsets["y_vertex"]
+    start, _ = _rows(bench, "y_partial_to_full", 0)
     ptf = _array(p2p_copy, "y_partial_to_full")
-    start = int(offsets[0])
-    ptf[start + 1] = ptf[start + 0]                               # no longer strictly increasing
-    hits, _ = _problems_of(p2p_copy, "index_maps")
-    text = "\n".join(hits)
+    ptf[start + 1] = ptf[start + 0]
+    text = "\n".join(p for p in validate_store(p2p_copy) if p.startswith("index_maps:"))
     assert "y_partial_to_full not strictly increasing" in text and "is not the identity" in text
 
 
-def test_overlap_out_of_accepted_range(p2p_copy):
-    overlap = _array(p2p_copy, "x_overlap")
-    overlap[0] = 0.95
-    hits, _ = _problems_of(p2p_copy, "overlap")
-    text = "\n".join(hits)
-    assert "x_overlap differs from the mean of x_overlap_mask" in text
-    assert "outside [min_overlap, max_overlap]" in text
+def test_decreasing_offsets_name_the_pair(clean_stores, tmp_path):
+    store = tmp_path / "ff.zarr"
+    shutil.copytree(clean_stores["full_full"], store)
+    offsets = zarr.open_array(str(store / "offsets" / "x_face"), mode="r+")
+    offsets[1] = offsets[2] + 5                                   # pair 0 too long, pair 1 negative
+    problems = validate_store(store)
+    pair_1 = open_benchmark(store).table["pair_id"][1]
+    assert f"schema: offsets 'x_face' decrease (negative row count) in 1 pair(s), e.g. {pair_1}" in problems
+
+
+# --------------------------------------------------------------------------------------------------
+# stores that do not open or read: one readable ``store`` problem, never a traceback
+
+
+def _damage(kind, store):
+    if kind == "missing":
+        shutil.rmtree(store)
+    elif kind == "a file":
+        shutil.rmtree(store)
+        store.write_text("not a store\n")
+    elif kind == "no zarr.json":
+        (store / "zarr.json").unlink()
+    elif kind == "root zarr.json garbage":
+        (store / "zarr.json").write_text("{garbage")
+    elif kind == "missing array":
+        shutil.rmtree(store / "arrays" / "x_faces")
+    elif kind == "missing offsets":
+        shutil.rmtree(store / "offsets" / "x_vertex")
+    elif kind == "missing table":
+        shutil.rmtree(store / "pairs" / "table_json")
+    elif kind == "array zarr.json garbage":
+        (store / "arrays" / "corr_01" / "zarr.json").write_text("{garbage")
+    elif kind == "truncated chunk":
+        chunk = next((store / "arrays" / "x_vertices").glob("c.*"))
+        chunk.write_bytes(chunk.read_bytes()[:50])
+
+
+DAMAGES = {
+    "missing": "not found. Fix: check the path",
+    "a file": "is a file, not a store folder",
+    "no zarr.json": "is not a Zarr v3 store",
+    "root zarr.json garbage": "cannot be opened as a Zarr store",
+    "missing array": "1 of its arrays missing: arrays/x_faces. Fix: re-export the store",
+    "missing offsets": "1 of its arrays missing: offsets/x_vertex. Fix: re-export the store",
+    "missing table": "1 of its arrays missing: pairs/table_json. Fix: re-export the store",
+    "array zarr.json garbage": "arrays/corr_01 has unreadable metadata (arrays/corr_01/zarr.json",
+    "truncated chunk": "chunks of arrays/x_vertices (RuntimeError: error during blosc decompression",
+}
+
+
+@pytest.mark.parametrize("kind", list(DAMAGES))
+def test_damaged_store_is_reported(kind, clean_stores, tmp_path, capsys):
+    store = tmp_path / "damaged.zarr"
+    shutil.copytree(clean_stores["full_full"], store)
+    _damage(kind, store)
+    problems = validate_store(store)
+    assert len(problems) == 1 and problems[0].startswith(f"store: {store}: "), problems
+    assert DAMAGES[kind] in problems[0] and "Fix:" in problems[0], problems[0]
+    if kind == "truncated chunk":                                 # the pairs in the damaged chunk
+        assert " in 2 pair(s), e.g. ff00000000000000, ff00000000000001" in problems[0]
+    capsys.readouterr()
+    assert main(["validate", str(store)]) == 1
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and f"becos validate: {problems[0]}" in err
 
 
 def test_cli_exit_status_and_json(clean_stores, p2p_copy, tmp_path, capsys):
@@ -170,11 +450,10 @@ def test_cli_exit_status_and_json(clean_stores, p2p_copy, tmp_path, capsys):
     assert main(["validate", str(clean_stores["full_full"]), "--json", str(out)]) == 0
     report = json.loads(out.read_text())
     assert report["valid"] is True and report["problems"] == [] and report["n_pairs"] == 2
+    assert "comparison" not in report
     _array(p2p_copy, "x_random_rotation")[0] = np.zeros((3, 3))
     capsys.readouterr()
     assert main(["validate", str(p2p_copy), "--json", str(out)]) == 1
     err = capsys.readouterr().err
     assert "becos validate: rotation: x_random_rotation" in err
     assert json.loads(out.read_text())["problems"][0].startswith("rotation:")
-    assert main(["validate", str(tmp_path)]) == 1                 # not a store at all
-    assert "is not a Zarr v3 store" in capsys.readouterr().err

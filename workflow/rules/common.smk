@@ -6,6 +6,7 @@ import sys
 from pathlib import Path
 
 from becos import workflow as bw
+from becos.resources import RuleResources
 
 config.update(bw.resolve_config(config))
 SETTINGS = bw.settings_of(config)
@@ -13,6 +14,19 @@ LAYOUT = bw.Layout.of(config)
 RESULTS = str(LAYOUT.results)
 EXPORTS = config["exports"]
 BASELINES = config["evaluation"]["baselines"]
+# mem_mb / runtime per rule from measured peaks (benchmarks/resources.py); x attempt on retries
+RESOURCES = RuleResources.load(Path(workflow.basedir) / "workflow" / "resources.yaml")
+
+
+# bookkeeping rules run in the Snakemake process's machine, never as cluster jobs
+localrules:
+    all,
+    resolved_config,
+    check_datasets,
+    catalog,
+    manifest,
+    store_metadata,
+    published_pairings,
 
 
 envvars:
@@ -30,6 +44,16 @@ def plan():
     if "plan" not in _plans:
         _plans["plan"] = bw.Plan.build(config)
     return _plans["plan"]
+
+
+def chunk_pairs(wildcards):
+    """Pairs in a chunk job's chunk (its run time grows with them)."""
+    return len(plan().chunk_rows(wildcards.setting, int(wildcards.chunk)))
+
+
+def setting_pairs(wildcards):
+    """Pairs of a setting (the run time of its store, export and evaluation jobs grows with them)."""
+    return len(plan().manifests[wildcards.setting])
 
 
 def chunk_files(setting, kind):

@@ -20,6 +20,9 @@ if config["synthetic"]["enabled"]:
         params:
             seed=config["synthetic"]["seed"],
             poses=config["synthetic"]["poses"],
+        resources:
+            mem_mb=RESOURCES.mem_mb("synthetic_collection"),
+            runtime=RESOURCES.runtime("synthetic_collection"),
         log:
             "logs/synthetic_collection.log",
         shell:

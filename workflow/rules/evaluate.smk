@@ -12,8 +12,8 @@ rule baseline:
     wildcard_constraints:
         baseline="nn|zoomout",
     resources:
-        mem_mb=4000,
-        runtime=120,
+        mem_mb=RESOURCES.mem_mb("baseline"),
+        runtime=RESOURCES.runtime("baseline", n_pairs=setting_pairs),
     log:
         "logs/baseline/{setting}/{baseline}.log",
     shell:
@@ -33,8 +33,8 @@ rule evaluate:
         split=config["evaluation"]["split"],
         geodesics=config["evaluation"]["geodesics"],
     resources:
-        mem_mb=6000,
-        runtime=240,
+        mem_mb=RESOURCES.mem_mb("evaluate"),
+        runtime=RESOURCES.runtime("evaluate", n_pairs=setting_pairs),
     log:
         "logs/evaluate/{setting}.log",
     shell:

@@ -19,8 +19,8 @@ rule zarr_store:
     output:
         directory(f"{RESULTS}/{{setting}}/benchmark.zarr"),
     resources:
-        mem_mb=8000,
-        runtime=60,
+        mem_mb=RESOURCES.mem_mb("zarr_store"),
+        runtime=RESOURCES.runtime("zarr_store", n_pairs=setting_pairs),
     log:
         "logs/zarr_store/{setting}.log",
     shell:
@@ -33,6 +33,9 @@ rule validate_store:
         f"{RESULTS}/{{setting}}/benchmark.zarr",
     output:
         f"{RESULTS}/{{setting}}/validation.json",
+    resources:
+        mem_mb=RESOURCES.mem_mb("validate_store"),
+        runtime=RESOURCES.runtime("validate_store", n_pairs=setting_pairs),
     log:
         "logs/validate_store/{setting}.log",
     shell:
@@ -45,6 +48,9 @@ rule released_layout:
         validation=f"{RESULTS}/{{setting}}/validation.json",
     output:
         directory(f"{RESULTS}/{{setting}}/released"),
+    resources:
+        mem_mb=RESOURCES.mem_mb("released_layout"),
+        runtime=RESOURCES.runtime("released_layout", n_pairs=setting_pairs),
     log:
         "logs/released_layout/{setting}.log",
     shell:
@@ -59,6 +65,9 @@ rule psmal_layout:
         directory(f"{RESULTS}/{{setting}}/psmal"),
     params:
         geodesics="--geodesics" if EXPORTS["geodesics"] else "",
+    resources:
+        mem_mb=RESOURCES.mem_mb("psmal_layout"),
+        runtime=RESOURCES.runtime("psmal_layout", n_pairs=setting_pairs),
     log:
         "logs/psmal_layout/{setting}.log",
     shell:
@@ -87,6 +96,9 @@ rule report:
         directory(f"{RESULTS}/{{setting}}/report"),
     params:
         renders=config["n_renders"] if config["store_vis"] else 0,
+    resources:
+        mem_mb=RESOURCES.mem_mb("report"),
+        runtime=RESOURCES.runtime("report", n_pairs=setting_pairs),
     log:
         "logs/report/{setting}.log",
     shell:

@@ -33,8 +33,8 @@ rule remesh:
         name=".+",
         token="v[0-9]+|f[0-9]+",
     resources:
-        mem_mb=3000,
-        runtime=20,
+        mem_mb=RESOURCES.mem_mb("remesh"),
+        runtime=RESOURCES.runtime("remesh"),
     log:
         "logs/remesh/{dataset}/{name}/{token}.log",
     shell:
@@ -54,8 +54,8 @@ rule ground_truth:
     wildcard_constraints:
         chunk="[0-9]{4}",
     resources:
-        mem_mb=6000,
-        runtime=120,
+        mem_mb=RESOURCES.mem_mb("ground_truth"),
+        runtime=RESOURCES.runtime("ground_truth", n_pairs=chunk_pairs),
     log:
         "logs/ground_truth/{setting}/{chunk}.log",
     shell:
@@ -76,8 +76,8 @@ rule pairs:
     wildcard_constraints:
         chunk="[0-9]{4}",
     resources:
-        mem_mb=4000,
-        runtime=120,
+        mem_mb=RESOURCES.mem_mb("pairs"),
+        runtime=RESOURCES.runtime("pairs", n_pairs=chunk_pairs),
     log:
         "logs/pairs/{setting}/{chunk}.log",
     shell:

@@ -1,0 +1,79 @@
+"""Per-rule scheduler resources (memory in MiB, run time in minutes) from measured peaks.
+
+``workflow/resources.yaml`` holds, per rule, ``mem_mb`` and ``runtime`` set from the peaks that
+``benchmarks/resources.py`` measured on a real run (with margins), and for the chunk rules
+(``ground_truth``, ``pairs``) ``seconds_per_pair``: their run time grows with the pairs of the
+chunk, their memory does not (a chunk job keeps at most a few shapes loaded,
+:data:`becos.workflow.SHAPES_KEPT`). A rule missing from the file gets :data:`DEFAULT`.
+
+Snakemake calls the functions returned here with the job's wildcards and ``attempt`` (1, then 2, ...
+when a profile sets ``retries``), so a retried job asks for ``attempt`` times the memory and time:
+a job killed by the scheduler for exceeding its request comes back with a larger one.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Callable
+
+import yaml
+
+from becos.errors import InputFileError
+
+DEFAULT = {"mem_mb": 2000, "runtime": 30}
+"""Resources of a rule the table does not list."""
+
+
+class RuleResources:
+    """The resource table, handing Snakemake ``resources:`` callables per rule."""
+
+    def __init__(self, table: dict[str, dict]):
+        self.table = table
+
+    @classmethod
+    def load(cls, path: str | Path) -> "RuleResources":
+        path = Path(path)
+        try:
+            raw = yaml.safe_load(path.read_text()) or {}
+            table = raw["rules"]
+            for rule, entry in table.items():
+                for key in ("mem_mb", "runtime"):
+                    if not (isinstance(entry.get(key), (int, float)) and entry[key] > 0):
+                        raise ValueError(f"rule {rule}: {key} must be a positive number, got {entry.get(key)!r}")
+        except FileNotFoundError:
+            raise InputFileError(path, "the resource table is missing",
+                                 "restore workflow/resources.yaml from the repository or regenerate it with "
+                                 "`python benchmarks/resources.py --write`") from None
+        except (yaml.YAMLError, KeyError, TypeError, AttributeError, ValueError) as exc:
+            raise InputFileError(path, f"not a valid resource table ({type(exc).__name__}: {exc})",
+                                 "each entry under `rules:` needs positive mem_mb (MiB) and runtime (minutes); "
+                                 "regenerate it with `python benchmarks/resources.py --write`") from None
+        return cls(table)
+
+    def entry(self, rule: str) -> dict:
+        return {**DEFAULT, **self.table.get(rule, {})}
+
+    def mem_mb(self, rule: str) -> Callable[..., int]:
+        """``mem_mb`` of ``rule`` (MiB), times the attempt."""
+        base = int(self.entry(rule)["mem_mb"])
+
+        def mem_mb(wildcards, attempt: int = 1) -> int:
+            return base * attempt
+
+        return mem_mb
+
+    def runtime(self, rule: str, n_pairs: Callable[[object], int] | None = None) -> Callable[..., int]:
+        """``runtime`` of ``rule`` (minutes), times the attempt. For a chunk rule give ``n_pairs``
+        (wildcards -> pairs in the job's chunk): then it is the larger of the table's runtime and
+        ``seconds_per_pair`` × pairs."""
+        entry = self.entry(rule)
+        base, per_pair = int(entry["runtime"]), float(entry.get("seconds_per_pair", 0.0))
+
+        def runtime(wildcards, attempt: int = 1) -> int:
+            minutes = base
+            if n_pairs is not None and per_pair > 0:
+                minutes = max(base, math.ceil(per_pair * n_pairs(wildcards) / 60))
+            return minutes * attempt
+
+        return runtime

@@ -1,0 +1,197 @@
+"""Interrupted, concurrent and repeated runs of the workflow (real Snakemake on TOSCA meshes).
+
+One small configuration (six four-legged TOSCA shapes, all three settings, at most 6 pairs each) is
+built three ways and compared with :func:`results_fingerprint`:
+
+- ``--cores 2`` without interruption (the reference);
+- ``--cores 1`` without interruption: same manifests byte for byte, same arrays;
+- ``--cores 2`` killed with SIGKILL (the whole process tree: Snakemake and its jobs, as a crash or a
+  cluster pre-emption would) while remeshing, while building pair records and while writing the Zarr
+  stores, each time resumed with the documented commands (``snakemake --unlock``, then the same
+  command with ``--rerun-incomplete``): ends identical to the reference.
+
+And a second Snakemake started on a ``results/`` folder that a running one is writing is refused by
+Snakemake's lock, before it runs any job.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import signal
+import subprocess
+import time
+from pathlib import Path
+
+import numpy as np
+import psutil
+import pytest
+
+from test_workflow import SNAKEMAKE, snakemake, write_config
+
+SHAPES = ["tosca/cat0", "tosca/cat1", "tosca/dog0", "tosca/dog1", "tosca/wolf0", "tosca/wolf1"]
+SETTINGS = ("full_full", "partial_full", "partial_partial")
+
+
+def small_config(workdir: Path, becos_code: Path) -> Path:
+    return write_config(workdir, becos_code, shapes=SHAPES, combinations="four-legged",
+                        caps={"train": 4, "val": 1, "test": 1}, n_chunks=2,
+                        exports={"released": False, "published_pickle": False, "report": False})
+
+
+def results_fingerprint(workdir: Path) -> dict[str, str]:
+    """sha256 of every manifest, catalog, remesh, ground-truth and pair file (by path), and of every
+    array and the pairs table of every Zarr store (by setting/key): what must not depend on how the
+    run went. Store metadata (creation time) and logs are left out."""
+    from becos.store import open_benchmark
+
+    results = workdir / "results"
+    out = {}
+    for path in sorted(results.rglob("*")):
+        rel = path.relative_to(results)
+        if path.is_file() and ".zarr" not in str(rel) and path.suffix in (".csv", ".npz", ".json", ".ply") \
+                and not path.name.startswith(".") and rel.parts[0] != "config.json" \
+                and path.name != "validation.json":
+            out[str(rel)] = hashlib.sha256(path.read_bytes()).hexdigest()
+    for setting in SETTINGS:
+        bench = open_benchmark(results / setting / "benchmark.zarr")
+        out[f"{setting}/store/table"] = hashlib.sha256(bench.table.to_csv().encode()).hexdigest()
+        for record in bench.records():
+            h = hashlib.sha256(repr(sorted(record.meta.items())).encode())
+            for key in sorted(record.arrays):
+                value = np.ascontiguousarray(record[key])
+                h.update(key.encode() + str(value.dtype).encode() + str(value.shape).encode() + value.tobytes())
+            out[f"{setting}/store/{record.meta['pair_id']}"] = h.hexdigest()
+    return out
+
+
+def leftovers(workdir: Path) -> list[str]:
+    """Temporary files and folders of atomic writes left in results/ (hidden ``.<name>.*tmp*``)."""
+    return sorted(str(p.relative_to(workdir)) for p in (workdir / "results").rglob(".*") if "tmp" in p.name)
+
+
+def kill_tree(process: subprocess.Popen) -> int:
+    """SIGKILL Snakemake and every process it started; the number of processes killed."""
+    try:
+        procs = [psutil.Process(process.pid)]
+        procs += procs[0].children(recursive=True)
+    except psutil.NoSuchProcess:
+        return 0
+    for p in procs:
+        try:
+            p.send_signal(signal.SIGKILL)
+        except psutil.NoSuchProcess:
+            pass
+    process.wait()
+    psutil.wait_procs(procs, timeout=10)
+    return len(procs)
+
+
+def run_until(workdir: Path, cores: str, marker, *extra: str, timeout: float = 600) -> tuple[bool, int]:
+    """Start ``snakemake --cores N`` and SIGKILL it once ``marker(workdir)`` is true.
+
+    Returns (killed, processes killed); killed is False when the run ended before the marker."""
+    cmd = [*SNAKEMAKE, "-d", str(workdir), "--configfile", str(workdir / "config.yaml"), "--cores", cores, *extra]
+    with open(workdir / f"run-{time.monotonic_ns()}.out", "w") as out:
+        process = subprocess.Popen(cmd, stdout=out, stderr=subprocess.STDOUT, start_new_session=True,
+                                   env=dict(os.environ, PYTHONUNBUFFERED="1"))
+        deadline = time.monotonic() + timeout
+        while process.poll() is None and time.monotonic() < deadline:
+            if marker(workdir):
+                return True, kill_tree(process)
+            time.sleep(0.05)
+        if process.poll() is None:
+            kill_tree(process)
+            raise AssertionError(f"snakemake did not reach the kill point within {timeout} s")
+    return False, 0
+
+
+def remeshing(workdir: Path) -> bool:
+    """At least one remesh finished and others still to run."""
+    return any((workdir / "results" / "remeshed").rglob("v0.npz"))
+
+
+def building_pairs(workdir: Path) -> bool:
+    """A pair record written by a chunk job that has not finished (more pair files than the pairs of
+    the finished chunks' indices)."""
+    base = workdir / "results" / "partial_partial" / "pairs"
+    finished = sum(json.loads(p.read_text())["n_pairs"] for p in base.glob("chunk_*.json"))
+    return len(list(base.glob("[!.]*.npz"))) > finished
+
+
+def writing_stores(workdir: Path) -> bool:
+    """A Zarr store being written in its temporary folder (renamed into place when complete)."""
+    return any(p.is_dir() for p in (workdir / "results").glob("*/.benchmark.zarr.*tmp"))
+
+
+@pytest.fixture(scope="module")
+def reference_run(becos_code, tmp_path_factory) -> tuple[Path, dict]:
+    workdir = small_config(tmp_path_factory.mktemp("uninterrupted"), becos_code)
+    snakemake(workdir, "--cores", "2")
+    return workdir, results_fingerprint(workdir)
+
+
+def test_cores_1_and_cores_2_give_identical_results(reference_run, becos_code, tmp_path):
+    reference_dir, reference = reference_run
+    workdir = small_config(tmp_path / "cores1", becos_code)
+    snakemake(workdir, "--cores", "1")
+    fingerprint = results_fingerprint(workdir)
+    manifests = [k for k in reference if k.endswith("manifest.csv")]
+    assert len(manifests) == 3 and sum("/store/pp" in k or "/store/" in k for k in reference) > 3
+    differ = sorted(k for k in reference.keys() | fingerprint.keys() if reference.get(k) != fingerprint.get(k))
+    assert not differ, differ[:20]
+    print(f"\n--cores 1 vs --cores 2: {len(reference)} files and store records compared, all identical "
+          f"({len(manifests)} manifests byte-identical)")
+
+
+def test_store_metadata_names_the_library_versions_and_the_config_hash(reference_run):
+    from becos.store import open_benchmark
+    from becos.workflow import digest
+
+    workdir, _ = reference_run
+    for setting in SETTINGS:
+        meta = open_benchmark(workdir / "results" / setting / "benchmark.zarr").metadata
+        for package in ("numpy", "trimesh", "pymeshlab", "embreex", "zarr", "becos", "python"):
+            assert meta["versions"].get(package), (setting, package, meta["versions"])
+        assert meta["config_hash"] == digest(meta["config"]) and meta["config"]["seed"] is not None
+    print(f"\nstore metadata: config_hash {meta['config_hash']}, versions {meta['versions']}")
+
+
+def test_killed_runs_resume_to_the_uninterrupted_result(reference_run, becos_code, tmp_path):
+    _, reference = reference_run
+    workdir = small_config(tmp_path / "killed", becos_code)
+    report = []
+    for point in (remeshing, building_pairs, writing_stores):
+        killed, n = run_until(workdir, "2", point, "--rerun-incomplete")
+        report.append(f"{point.__name__}: {'killed ' + str(n) + ' processes' if killed else 'run ended first'}")
+        if killed:
+            # a killed Snakemake leaves its lock: the documented resume is --unlock, then the same command
+            locked = snakemake(workdir, "--cores", "2", "--rerun-incomplete", check=False)
+            assert locked.returncode != 0 and "cannot be locked" in locked.stdout + locked.stderr
+            snakemake(workdir, "--unlock")
+    assert sum(r.endswith("processes") for r in report) >= 2, report
+    snakemake(workdir, "--cores", "2", "--rerun-incomplete")
+    fingerprint = results_fingerprint(workdir)
+    differ = sorted(k for k in reference.keys() | fingerprint.keys() if reference.get(k) != fingerprint.get(k))
+    assert not differ, differ[:20]
+    assert not [p for p in leftovers(workdir) if ".zarr." in p]  # the store writer removes a killed write's folder
+    print(f"\nkill -9 and resume: {'; '.join(report)}; final results identical to the uninterrupted run "
+          f"({len(reference)} files and store records); temporary files left by the kills: {leftovers(workdir)}")
+
+
+def test_a_second_run_on_the_same_results_is_refused(becos_code, tmp_path):
+    workdir = small_config(tmp_path / "shared", becos_code)
+    cmd = [*SNAKEMAKE, "-d", str(workdir), "--configfile", str(workdir / "config.yaml"), "--cores", "1"]
+    first = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, start_new_session=True)
+    try:
+        deadline = time.monotonic() + 120
+        while not any((workdir / ".snakemake" / "locks").glob("*")) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert first.poll() is None, "the first run ended before the test could start a second one"
+        second = snakemake(workdir, "--cores", "1", check=False)
+        text = second.stdout + second.stderr
+        assert second.returncode != 0 and "cannot be locked" in text, text[-2000:]
+        print(f"\nsecond run refused: {next(line for line in text.splitlines() if 'cannot be locked' in line)}")
+    finally:
+        kill_tree(first)
