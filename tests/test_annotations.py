@@ -4,9 +4,7 @@ from __future__ import annotations
 
 import logging
 import os
-import shutil
 import time
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -203,34 +201,9 @@ def test_chirality_labels_have_one_label_per_template_vertex(source, tosca_dir, 
 
 
 # --- faulty copies ---------------------------------------------------------------------------------
-EDGE = "tosca_cat0_tosca_dog0_corres.txt"
-
-
-def faulty_copy(becos_code: Path, tmp_path: Path, edit_edge=None, edit_adjacency=None) -> Path:
-    """A copy of the annotation folder (symlinks) with the cat0->dog0 edge file or the adjacency CSV edited."""
-    root = tmp_path / "becos-code"
-    (root / "config").mkdir(parents=True)
-    for p in (becos_code / "config").glob("*.csv"):
-        shutil.copy(p, root / "config" / p.name)
-    corr = root / "precomputed_corr_templates"
-    corr.mkdir()
-    for p in (becos_code / "precomputed_corr_templates").iterdir():
-        (corr / p.name).symlink_to(p)
-    if edit_edge is not None:
-        lines = (becos_code / "precomputed_corr_templates" / EDGE).read_text().splitlines()
-        (corr / EDGE).unlink()
-        (corr / EDGE).write_text("\n".join(edit_edge(lines)) + "\n")
-    if edit_adjacency is not None:
-        path = root / "config" / "adjacency_matrix.csv"
-        rows = [line.split(",") for line in path.read_text().splitlines()]
-        edit_adjacency(rows)
-        path.write_text("\n".join(",".join(r) for r in rows) + "\n")
-    return root
-
-
-def _set(lines, i, text):
-    lines[i] = text
-    return lines
+# the annotation-folder copy of the fault suite (symlinks, except the edited files)
+from test_faults import EDGE, _set  # noqa: E402
+from test_faults import annotation_copy as faulty_copy  # noqa: E402
 
 
 @pytest.mark.parametrize("edit, message", [
