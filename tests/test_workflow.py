@@ -17,12 +17,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from tiny_tosca import TINY_SHAPES, tiny_tosca_config, tosca_config
 
 REPO = Path(__file__).resolve().parents[1]
 SNAKEMAKE = [sys.executable, "-m", "snakemake", "-s", str(REPO / "Snakefile")]
 SETTINGS = ("full_full", "partial_full", "partial_partial")
-TINY_SHAPES = ["tosca/cat0", "tosca/cat1", "tosca/dog0", "tosca/dog1", "tosca/horse0", "tosca/horse5",
-               "tosca/wolf0", "tosca/centaur0"]
 
 
 def snakemake(workdir: Path, *args: str, check: bool = True) -> subprocess.CompletedProcess:
@@ -37,18 +36,8 @@ def snakemake(workdir: Path, *args: str, check: bool = True) -> subprocess.Compl
 
 
 def write_config(workdir: Path, becos_code: Path, **overrides) -> Path:
-    config = {
-        "synthetic": {"enabled": False},
-        "data_dir": str(becos_code / "data"),
-        "annotations": str(becos_code),
-        "datasets": ["tosca"],
-        "template_file": "templates_tosca_demo.csv",
-        "remesh_variants": 1,
-        "store_vis": False,
-    }
-    config.update(overrides)
     workdir.mkdir(parents=True, exist_ok=True)
-    (workdir / "config.yaml").write_text(yaml.safe_dump(config, sort_keys=False))
+    (workdir / "config.yaml").write_text(yaml.safe_dump(tosca_config(becos_code, **overrides), sort_keys=False))
     return workdir
 
 
@@ -64,8 +53,8 @@ def jobs_planned(dry_run_output: str) -> dict[str, int]:
 
 @pytest.fixture(scope="session")
 def tiny_tosca_run(becos_code, tmp_path_factory) -> Path:
-    workdir = write_config(tmp_path_factory.mktemp("tiny-tosca"), becos_code, shapes=TINY_SHAPES,
-                           caps={"train": 4, "val": 1, "test": 1}, store_vis=True, n_renders=2)
+    workdir = write_config(tmp_path_factory.mktemp("tiny-tosca"), becos_code,
+                           **tiny_tosca_config(becos_code))
     snakemake(workdir, "--cores", "2")
     return workdir
 
