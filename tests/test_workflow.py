@@ -100,6 +100,15 @@ def test_rerun_of_a_finished_run_does_nothing(tiny_tosca_run):
     assert "Nothing to be done" in result.stdout + result.stderr, result.stdout[-2000:]
 
 
+def test_a_dry_run_before_any_job_lists_the_first_stages(becos_code, tmp_path):
+    """A first ``snakemake -n`` evaluates every job's resources before the dataset check has run."""
+    workdir = write_config(tmp_path / "fresh", becos_code, shapes=TINY_SHAPES)
+    result = snakemake(workdir, "-n", "--cores", "2")
+    planned = jobs_planned(result.stdout)
+    assert planned.get("check_datasets") == 1 and planned.get("zarr_store") == 3, planned
+    assert not (workdir / "results").exists()
+
+
 def test_a_bad_config_fails_before_any_job(becos_code, tmp_path):
     cases = {
         "unknown key": {"min_overlapp": 0.2},

@@ -52,7 +52,10 @@ def chunk_pairs(wildcards):
 
 
 def setting_pairs(wildcards):
-    """Pairs of a setting (the run time of its store, export and evaluation jobs grows with them)."""
+    """Pairs of a setting (the run time of its store, export and evaluation jobs grows with them);
+    0 while the dataset check has not run (a dry run before it), then the real count."""
+    if not LAYOUT.checks.exists():
+        return 0  # calling plan() from a resource before the checkpoint crashes Snakemake 9's dry run
     return len(plan().manifests[wildcards.setting])
 
 
