@@ -241,13 +241,30 @@ def surface_faces(mesh: TriMesh) -> np.ndarray:
     return usable
 
 
-def misoriented_edge_count(faces: np.ndarray, n_vertices: int) -> int:
+def undirected_edges(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(E, 2) sorted unique undirected edges and (E,) how many faces use each."""
+    e = np.sort(np.asarray(faces, dtype=np.int64)[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    return np.unique(e, axis=0, return_counts=True)
+
+
+def misoriented_edge_count(faces: np.ndarray) -> int:
     """Directed edges used by two faces (two neighbours wound against each other); 0 when consistent."""
-    f = np.asarray(faces, dtype=np.int64)
-    directed = f[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
-    keys = directed[:, 0] * max(int(n_vertices), 1) + directed[:, 1]
-    _, counts = np.unique(keys, return_counts=True)
+    directed = np.asarray(faces, dtype=np.int64)[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+    _, counts = np.unique(directed, axis=0, return_counts=True)
     return int((counts > 1).sum())
+
+
+def face_components(faces: np.ndarray, n_vertices: int) -> tuple[np.ndarray, int]:
+    """(F,) int64 vertex-connected component of each face, numbered 0..k-1, and k."""
+    import scipy.sparse as sp
+    from scipy.sparse.csgraph import connected_components
+
+    f = np.asarray(faces, dtype=np.int64)
+    e = f[:, [0, 1, 1, 2]].reshape(-1, 2)
+    graph = sp.coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n_vertices, n_vertices))
+    _, labels = connected_components(graph, directed=False)
+    ids, face_label = np.unique(labels[f[:, 0]], return_inverse=True)
+    return face_label.ravel().astype(np.int64), len(ids)
 
 
 @dataclass(frozen=True, eq=False)
@@ -368,9 +385,6 @@ def surface_for_remeshing(mesh: TriMesh, *, source: str | Path | None = None,
             ``max_dropped_area_share`` of the area (the file holds several shapes), or edges are
             shared by more than two faces (non-manifold; the remesher cannot orient such a surface).
     """
-    import scipy.sparse as sp
-    from scipy.sparse.csgraph import connected_components
-
     n, faces = mesh.n_vertices, mesh.faces
     where = Path(source) if source is not None else Path(f"<mesh with {n} vertices and {len(faces)} faces>")
     repeated = repeated_index_faces(faces)
@@ -386,14 +400,7 @@ def surface_for_remeshing(mesh: TriMesh, *, source: str | Path | None = None,
     kept_faces = faces[keep]
     clean_used = np.zeros(n, dtype=bool)
     clean_used[kept_faces.ravel()] = True
-    # vertex-connected components over the kept faces
-    e = kept_faces[:, [0, 1, 1, 2]].reshape(-1, 2)
-    graph = sp.coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))
-    _, labels = connected_components(graph, directed=False)
-    face_label = labels[kept_faces[:, 0]]
-    comp_ids, face_label = np.unique(face_label, return_inverse=True)
-    face_label = face_label.ravel()
-    n_surface_components = len(comp_ids)
+    face_label, n_surface_components = face_components(kept_faces, n)
     dropped_faces = dropped_vertices = 0
     share = 0.0
     if n_surface_components > 1:
@@ -415,9 +422,7 @@ def surface_for_remeshing(mesh: TriMesh, *, source: str | Path | None = None,
         dropped_faces = int((~in_main).sum())
         keep[rows[~in_main]] = False
     kept = faces[keep]
-    edge_keys = np.sort(kept[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
-    _, edge_use = np.unique(edge_keys[:, 0] * max(n, 1) + edge_keys[:, 1], return_counts=True)
-    non_manifold = int((edge_use > 2).sum())
+    non_manifold = int((undirected_edges(kept)[1] > 2).sum())
     if non_manifold:
         raise InputFileError(where, f"{non_manifold} edges are shared by more than two faces (non-manifold) after "
                              f"dropping duplicate and repeated-index faces; becos cannot remesh such a surface",
@@ -431,7 +436,7 @@ def surface_for_remeshing(mesh: TriMesh, *, source: str | Path | None = None,
         zero_area_faces=int(zero.sum()), duplicate_faces=int(dup.sum()),
         unreferenced_vertices=int((~referenced).sum()), components=int(n_surface_components),
         dropped_component_faces=dropped_faces, dropped_component_vertices=dropped_vertices,
-        dropped_area_share=share, misoriented_edges=misoriented_edge_count(kept, n))
+        dropped_area_share=share, misoriented_edges=misoriented_edge_count(kept))
     if keep.all() and used.all():
         return mesh, MeshRepair(np.arange(n), np.arange(len(faces)), **report_kw)
     vertex_index = np.flatnonzero(used)

@@ -63,7 +63,7 @@ import numpy as np
 from becos.errors import InputFileError
 from becos.geometry import SurfaceLocator, face_areas, points_on_surface
 from becos.atomic import save_npz as atomic_save_npz, write_bytes
-from becos.mesh import TriMesh, surface_for_remeshing
+from becos.mesh import TriMesh, face_components, misoriented_edge_count, surface_for_remeshing, undirected_edges
 from becos.seeding import rng_for, stable_hash
 from becos.surface_map import SurfaceMap
 
@@ -111,15 +111,9 @@ class Remeshed:
 # ----------------------------------------------------------------------------------------------
 # small mesh utilities (numpy)
 
-def _undirected_edges(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(E, 2) sorted unique undirected edges and (E,) how many faces use each."""
-    e = np.sort(faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
-    return np.unique(e, axis=0, return_counts=True)
-
-
 def boundary_vertices(faces: np.ndarray, n_vertices: int) -> np.ndarray:
     """(V,) bool: the vertex lies on an edge used by exactly one face."""
-    edges, counts = _undirected_edges(faces)
+    edges, counts = undirected_edges(faces)
     out = np.zeros(n_vertices, dtype=bool)
     out[edges[counts == 1].ravel()] = True
     return out
@@ -132,22 +126,15 @@ def mesh_checks(mesh: TriMesh) -> dict:
     used by more than two faces), ``misoriented_edges`` (directed edges used twice, i.e. two faces
     wound against each other), ``boundary_edges``, ``unreferenced_vertices``, ``euler_characteristic``.
     """
-    import scipy.sparse as sp
-    from scipy.sparse.csgraph import connected_components
-
     f = mesh.faces
     n = mesh.n_vertices
-    edges, counts = _undirected_edges(f)
-    directed = f[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
-    _, dcounts = np.unique(directed, axis=0, return_counts=True)
+    edges, counts = undirected_edges(f)
     referenced = np.zeros(n, dtype=bool)
     referenced[f.ravel()] = True
-    graph = sp.coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n))
-    _, labels = connected_components(graph, directed=False)
     return {
-        "components": int(len(np.unique(labels[f[:, 0]]))),
+        "components": face_components(f, n)[1],
         "non_manifold_edges": int((counts > 2).sum()),
-        "misoriented_edges": int((dcounts > 1).sum()),
+        "misoriented_edges": misoriented_edge_count(f),
         "boundary_edges": int((counts == 1).sum()),
         "unreferenced_vertices": int((~referenced).sum()),
         "euler_characteristic": int(referenced.sum() - len(edges) + len(f)),
@@ -159,16 +146,10 @@ def _largest_component(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndar
 
     Returns (vertices, faces, number of faces dropped). Vertex order of the kept ones is preserved.
     """
-    import scipy.sparse as sp
-    from scipy.sparse.csgraph import connected_components
-
     n = len(vertices)
-    e = faces[:, [0, 1, 1, 2]].reshape(-1, 2)
-    graph = sp.coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))
-    n_comp, labels = connected_components(graph, directed=False)
-    face_label = labels[faces[:, 0]]
+    face_label, n_comp = face_components(faces, n)
     dropped = 0
-    if n_comp > 1 and len(np.unique(face_label)) > 1:
+    if n_comp > 1:
         area = np.bincount(face_label, weights=face_areas(TriMesh(vertices, faces)), minlength=n_comp)
         keep = face_label == int(area.argmax())
         dropped = int((~keep).sum())
@@ -322,14 +303,11 @@ def remesh_with_stats(mesh: TriMesh, target_vertices: int | None = None, target_
         log.warning("%s: %s", where, repair.summary())
     elif repair.misoriented_edges:
         log.info("%s: %s", where, repair.summary())
-    try:
-        v, f, stats = _remesh_surface(mesh, surface, target_vertices, target_faces, face_goal, jitter, seed, stats,
-                                      t0)
-    except Exception as exc:
-        import pymeshlab
+    import pymeshlab
 
-        if not isinstance(exc, pymeshlab.PyMeshLabException):
-            raise
+    try:
+        v, f = _remesh_surface(mesh, surface, target_vertices, target_faces, face_goal, jitter, seed, stats, t0)
+    except pymeshlab.PyMeshLabException as exc:
         message = " ".join(str(exc).split())
         raise InputFileError(Path(where), f"the remesher (pymeshlab) failed on this surface: {message}",
                              "repair the mesh (e.g. MeshLab: Filters > Cleaning and Repairing) or leave the "
@@ -375,14 +353,11 @@ def remesh_with_stats(mesh: TriMesh, target_vertices: int | None = None, target_
     to_original = SurfaceMap(repair.face_index[face], weights, np.where(kept, dist, 0.0))
     # 7. original vertices -> remeshed surface; vertices the copy dropped have no image
     rf, rw, rd = SurfaceLocator(remeshed).closest(surface.vertices, _original_vertex_normals(surface))
-    if surface is mesh:
-        from_original = SurfaceMap(rf, rw, rd)
-    else:
-        of = np.full(mesh.n_vertices, -1, dtype=np.int64)
-        ow = np.zeros((mesh.n_vertices, 3))
-        od = np.full(mesh.n_vertices, np.nan)
-        of[repair.vertex_index], ow[repair.vertex_index], od[repair.vertex_index] = rf, rw, rd
-        from_original = SurfaceMap(of, ow, od)
+    of = np.full(mesh.n_vertices, -1, dtype=np.int64)
+    ow = np.zeros((mesh.n_vertices, 3))
+    od = np.full(mesh.n_vertices, np.nan)
+    of[repair.vertex_index], ow[repair.vertex_index], od[repair.vertex_index] = rf, rw, rd
+    from_original = SurfaceMap(of, ow, od)
     seconds = time.perf_counter() - t0
     stats["seconds"] = seconds
     result = Remeshed(remeshed, to_original, from_original,
@@ -393,10 +368,10 @@ def remesh_with_stats(mesh: TriMesh, target_vertices: int | None = None, target_
 
 def _remesh_surface(mesh: TriMesh, surface: TriMesh, target_vertices: int | None, target_faces: int | None,
                     face_goal: int, jitter: float, seed: int | None, stats: dict,
-                    t0: float) -> tuple[np.ndarray, np.ndarray, dict]:
+                    t0: float) -> tuple[np.ndarray, np.ndarray]:
     """Steps 1-5 on the repaired copy ``surface``: (V_r, 3) vertices and (F_r, 3) faces of the remesh
-    before the snap. The jitter seed is derived from the INPUT ``mesh`` (as before the repair step);
-    ``t0`` is the start time of the whole remesh."""
+    before the snap (diagnostics go into ``stats``). The jitter seed is derived from the INPUT
+    ``mesh`` (as before the repair step); ``t0`` is the start time of the whole remesh."""
     # 1. oriented copy
     ms = _meshset(surface.vertices, surface.faces)
     ms.meshing_re_orient_faces_coherently()
@@ -425,7 +400,7 @@ def _remesh_surface(mesh: TriMesh, surface: TriMesh, target_vertices: int | None
     if stats["dropped_faces"]:
         log.warning("remesh: decimation left %d faces in small components; kept the largest component",
                     stats["dropped_faces"])
-    return v, f, stats
+    return v, f
 
 
 def remesh(mesh: TriMesh, target_vertices: int | None = None, target_faces: int | None = None, *,
@@ -489,7 +464,7 @@ def intrinsic_coincidence(a: Remeshed, a_faces: np.ndarray, b: Remeshed, b_origi
     from scipy.spatial import cKDTree
 
     carried = points_on_surface(TriMesh(b_original.vertices, a_faces), a.to_original.face, a.to_original.weights)
-    e, _ = _undirected_edges(b.mesh.faces)
+    e, _ = undirected_edges(b.mesh.faces)
     edge = float(np.linalg.norm(b.mesh.vertices[e[:, 0]] - b.mesh.vertices[e[:, 1]], axis=1).mean())
     d, _ = cKDTree(b.mesh.vertices).query(carried)
     return float((d < rel_tol * edge).mean())
