@@ -764,22 +764,29 @@ class Benchmark:
             total += row_bytes if group is None else np.diff(self.offsets[group]) * row_bytes
         return total
 
-    def blocks(self, split: str | None = None, max_bytes: int = READ_BLOCK_BYTES) -> Iterator[Block]:
-        """Consecutive pairs (of one split, or all) in blocks of about ``max_bytes`` of arrays."""
+    def block_ranges(self, split: str | None = None, max_bytes: int = READ_BLOCK_BYTES) -> list[tuple[int, int]]:
+        """Row ranges ``(start, stop)`` of consecutive pairs (of one split, or all) holding about
+        ``max_bytes`` of arrays each (at least one pair)."""
         rows = np.arange(len(self)) if split is None else np.flatnonzero(self.table["split"].to_numpy() == split)
         if not len(rows):
-            return
+            return []
         size = self.pair_bytes()
-        runs = np.split(rows, np.flatnonzero(np.diff(rows) != 1) + 1)
-        for run in runs:
+        out = []
+        for run in np.split(rows, np.flatnonzero(np.diff(rows) != 1) + 1):
             start = int(run[0])
             acc = 0
             for i in run:
                 if acc and acc + size[i] > max_bytes:
-                    yield self.read_block(start, int(i))
+                    out.append((start, int(i)))
                     start, acc = int(i), 0
                 acc += int(size[i])
-            yield self.read_block(start, int(run[-1]) + 1)
+            out.append((start, int(run[-1]) + 1))
+        return out
+
+    def blocks(self, split: str | None = None, max_bytes: int = READ_BLOCK_BYTES) -> Iterator[Block]:
+        """Consecutive pairs (of one split, or all) in blocks of about ``max_bytes`` of arrays."""
+        for start, stop in self.block_ranges(split, max_bytes):
+            yield self.read_block(start, stop)
 
     def read_block(self, start: int, stop: int) -> Block:
         """Pairs ``start:stop`` (store rows) as one :class:`Block`."""

@@ -509,20 +509,6 @@ def open_for_validation(path: str | Path):
         return None, _diagnose(path, exc)
 
 
-def _ranges(bench, max_bytes: int) -> list[tuple[int, int]]:
-    """Consecutive row ranges of about ``max_bytes`` of arrays (as :meth:`Benchmark.blocks`)."""
-    size = bench.pair_bytes()
-    out, start, acc = [], 0, 0
-    for i in range(len(size)):
-        if acc and acc + size[i] > max_bytes:
-            out.append((start, i))
-            start, acc = i, 0
-        acc += int(size[i])
-    if len(size):
-        out.append((start, len(size)))
-    return out
-
-
 def _unreadable(bench, start: int, stop: int, exc: Exception, ids: np.ndarray) -> str:
     """The ``store`` problem of rows ``start:stop`` that failed to read: which arrays fail, why, and for
     which pairs (each failing array re-read pair by pair)."""
@@ -577,7 +563,7 @@ def validate(path: str | Path, progress: bool = False) -> ValidationReport:
         else:
             _check_metas(Block(0, n, {}, {}, bench.layout, metas), bench.setting, table, found)
     reported = 0
-    for start, stop in _ranges(bench, VALIDATE_BLOCK_BYTES) if rows_ok else []:
+    for start, stop in bench.block_ranges(max_bytes=VALIDATE_BLOCK_BYTES) if rows_ok else []:
         try:
             block = bench.read_block(start, stop)
         except Exception as exc:        # a damaged chunk: name it, check the other blocks
