@@ -432,26 +432,26 @@ def _check_one_dataset(name: str, data_dir: Path, annotations, read_meshes: bool
     entry: dict = {"ok": False, "path": None, "folder": None, "found": 0, "expected": None, "excluded_found": 0,
                    "meshes_checked": 0, "bad_meshes": [], "repairs": [], "problems": []}
     problems: list[str] = []
+
+    def stop(problem: str) -> tuple[dict, list[str], list]:
+        problems.append(problem)
+        entry["problems"] = problems
+        return entry, problems, []
+
     try:
         spec = DatasetSpec.load(name, config_dir)
     except BecosError as exc:
-        problems.append(f"{exc} (config key `datasets`)")
-        entry["problems"] = problems
-        return entry, problems, []
+        return stop(f"{exc} (config key `datasets`)")
     folder = data_dir / spec.folder
     entry.update(path=str(folder), folder=spec.folder, expected=spec.expected_count)
     if spec.expected_per_class:
         entry["expected_per_class"] = dict(spec.expected_per_class)
     if not folder.is_dir():
-        problems.append(_missing_dataset_text(spec, folder, data_dir))
-        entry["problems"] = problems
-        return entry, problems, []
+        return stop(_missing_dataset_text(spec, folder, data_dir))
     try:
         names = spec.list_names(data_dir, annotations)
     except BecosError as exc:
-        problems.append(f"dataset '{name}': {exc}")
-        entry["problems"] = problems
-        return entry, problems, []
+        return stop(f"dataset '{name}': {exc}")
     used = [n for n in names if n not in spec.excluded]
     entry.update(found=len(used), excluded_found=len(names) - len(used))
     counts_ok = True
