@@ -16,16 +16,6 @@ from becos.surface_map import compose
 
 
 @pytest.fixture(scope="session")
-def tosca_shapes(tosca_entries):
-    return tosca_entries
-
-
-@pytest.fixture(scope="session")
-def network(tosca_network):
-    return tosca_network
-
-
-@pytest.fixture(scope="session")
 def remeshed(tosca_dir, mesh_cache):
     """Remeshes of the same-class test shapes, each with its own vertex target."""
     from becos.remesh import remesh
@@ -36,11 +26,11 @@ def remeshed(tosca_dir, mesh_cache):
 
 
 @pytest.mark.parametrize("x_name, y_name", [("cat0", "cat3"), ("michael0", "michael3"), ("horse0", "horse5")])
-def test_same_class_remeshed_ground_truth_is_accurate(x_name, y_name, network, tosca_shapes, remeshed,
+def test_same_class_remeshed_ground_truth_is_accurate(x_name, y_name, tosca_network, tosca_entries, remeshed,
                                                      tosca_dir, mesh_cache):
-    x, y = tosca_shapes[x_name], tosca_shapes[y_name]
+    x, y = tosca_entries[x_name], tosca_entries[y_name]
     rx, ry = remeshed[x_name], remeshed[y_name]
-    gt = network.ground_truth(x, y, x_remesh=rx, y_remesh=ry)
+    gt = tosca_network.ground_truth(x, y, x_remesh=rx, y_remesh=ry)
     predicted = gt.to_vertex_indices(ry.mesh.faces)
     assert len(predicted) == rx.mesh.n_vertices
     assert (predicted >= 0).all() and predicted.max() < ry.mesh.n_vertices
@@ -63,7 +53,7 @@ def test_same_class_remeshed_ground_truth_is_accurate(x_name, y_name, network, t
 @pytest.mark.parametrize("x_name, y_name, reversed_rows", [("michael0", "michael3", 1594), ("horse5", "horse0", 108),
                                                           ("cat0", "cat3", 0)])
 def test_same_class_ground_truth_onto_an_original_pose_is_the_identity_transplant(x_name, y_name, reversed_rows,
-                                                                                  network, tosca_shapes, remeshed,
+                                                                                  tosca_network, tosca_entries, remeshed,
                                                                                   tosca_dir, mesh_cache):
     """Poses of a class share vertex i, but michael0 and horse5 wind some faces the other way (real
     TOSCA data). The ground truth of a remeshed X vertex on Y's original mesh must be its point on X
@@ -71,7 +61,7 @@ def test_same_class_ground_truth_onto_an_original_pose_is_the_identity_transplan
     column order where the winding differs), not a projection."""
     import scipy.sparse as sp
 
-    x, y = tosca_shapes[x_name], tosca_shapes[y_name]
+    x, y = tosca_entries[x_name], tosca_entries[y_name]
     ox = mesh_cache.load(tosca_dir / f"{x_name}.off")
     oy = mesh_cache.load(tosca_dir / f"{y_name}.off")
     differ = (ox.faces != oy.faces).any(axis=1)
@@ -79,7 +69,7 @@ def test_same_class_ground_truth_onto_an_original_pose_is_the_identity_transplan
     assert (np.sort(ox.faces, axis=1) == np.sort(oy.faces, axis=1)).all()   # same triangles, winding aside
 
     to_x = remeshed[x_name].to_original
-    gt = network.ground_truth(x, y, x_remesh=remeshed[x_name])
+    gt = tosca_network.ground_truth(x, y, x_remesh=remeshed[x_name])
 
     def vertex_weights(face, weights, faces):
         rows = np.repeat(np.arange(len(face)), 3)
@@ -91,10 +81,10 @@ def test_same_class_ground_truth_onto_an_original_pose_is_the_identity_transplan
     assert np.nanmax(gt.distance) == np.nanmax(to_x.distance)      # no projection added on the way
 
 
-def cycle_error(network, x, y, mx, my) -> np.ndarray:
+def cycle_error(tosca_network, x, y, mx, my) -> np.ndarray:
     """X vertex -> Y surface -> X surface, distance to where it started, over sqrt(area of X)."""
-    gt_xy = network.ground_truth(x, y)
-    gt_yx = network.ground_truth(y, x)
+    gt_xy = tosca_network.ground_truth(x, y)
+    gt_yx = tosca_network.ground_truth(y, x)
     back = compose(gt_xy, my.faces, gt_yx, mx)
     matched = back.matched
     start = np.flatnonzero(matched)
@@ -109,13 +99,13 @@ def cycle_error(network, x, y, mx, my) -> np.ndarray:
     ("michael4", "victoria2", ["tosca_michael0", "faust_tr_reg_000", "tosca_victoria0"], (0.0, 0.10)),
     ("centaur1", "horse7", ["tosca_centaur0", "tosca_horse0"], (0.55, 0.70)),
 ])
-def test_cross_class_paths(x_name, y_name, via, missing_range, network, tosca_shapes, tosca_dir, mesh_cache):
-    x, y = tosca_shapes[x_name], tosca_shapes[y_name]
-    nodes = [s.node for s in network.surface_path(x, y) if s.node is not None]
+def test_cross_class_paths(x_name, y_name, via, missing_range, tosca_network, tosca_entries, tosca_dir, mesh_cache):
+    x, y = tosca_entries[x_name], tosca_entries[y_name]
+    nodes = [s.node for s in tosca_network.surface_path(x, y) if s.node is not None]
     assert nodes == via
     mx = mesh_cache.load(tosca_dir / f"{x_name}.off")
     my = mesh_cache.load(tosca_dir / f"{y_name}.off")
-    gt = network.ground_truth(x, y)
+    gt = tosca_network.ground_truth(x, y)
     idx = gt.to_vertex_indices(my.faces)
     assert len(gt) == mx.n_vertices
     assert idx.max() < my.n_vertices and idx.min() >= -1
@@ -124,7 +114,7 @@ def test_cross_class_paths(x_name, y_name, via, missing_range, network, tosca_sh
     assert lo <= gt.missing_fraction <= hi, gt.missing_fraction
     scale = np.sqrt(surface_area(my))
     projection = np.nanmax(gt.distance) / scale
-    errors = cycle_error(network, x, y, mx, my)
+    errors = cycle_error(tosca_network, x, y, mx, my)
     print(f"\n{x_name}->{y_name} via {'->'.join(via)}: missing {gt.missing_fraction:.3f}, largest projection "
           f"{projection:.4f} (x sqrt area), cycle error mean {errors.mean():.4f} median {np.median(errors):.4f} "
           f"over {len(errors)} vertices")
@@ -132,23 +122,23 @@ def test_cross_class_paths(x_name, y_name, via, missing_range, network, tosca_sh
     assert np.median(errors) < 0.05
 
 
-def test_centaur_missing_part_is_the_human_torso(network, tosca_shapes, tosca_dir, mesh_cache):
+def test_centaur_missing_part_is_the_human_torso(tosca_network, tosca_entries, tosca_dir, mesh_cache):
     """The centaur's vertices without a horse counterpart are its upper (human) body: high up."""
-    x, y = tosca_shapes["centaur0"], tosca_shapes["horse0"]
-    gt = network.ground_truth(x, y)
+    x, y = tosca_entries["centaur0"], tosca_entries["horse0"]
+    gt = tosca_network.ground_truth(x, y)
     mx = mesh_cache.load(tosca_dir / "centaur0.off")
     up = mx.vertices[:, 2]  # TOSCA files are z-up
     assert up[~gt.matched].mean() > up[gt.matched].mean()
     assert 0.55 < gt.missing_fraction < 0.70  # reference facts: about 63 % of the centaur is missing
 
 
-def test_identity_path_is_exact(network, tosca_shapes, tosca_dir, mesh_cache):
-    gt = network.ground_truth(tosca_shapes["cat1"], tosca_shapes["cat4"])
+def test_identity_path_is_exact(tosca_network, tosca_entries, tosca_dir, mesh_cache):
+    gt = tosca_network.ground_truth(tosca_entries["cat1"], tosca_entries["cat4"])
     faces = mesh_cache.load(tosca_dir / "cat4.off").faces
     assert (gt.to_vertex_indices(faces) == np.arange(len(gt))).all()
 
 
-def test_wrong_vertex_count_in_a_class_is_an_error(network, tosca_shapes, tmp_path, tosca_dir):
+def test_wrong_vertex_count_in_a_class_is_an_error(tosca_network, tosca_entries, tmp_path, tosca_dir):
     from becos.errors import BecosError
     from becos.network import ShapeNetwork
 
@@ -160,6 +150,6 @@ def test_wrong_vertex_count_in_a_class_is_an_error(network, tosca_shapes, tmp_pa
             return TriMesh(mesh.vertices[:-1], mesh.faces[keep])
         return mesh
 
-    broken = ShapeNetwork(network.annotations, meshes)
+    broken = ShapeNetwork(tosca_network.annotations, meshes)
     with pytest.raises(BecosError, match="cat3.*share one triangulation"):
-        broken.ground_truth(tosca_shapes["cat3"], tosca_shapes["cat1"])
+        broken.ground_truth(tosca_entries["cat3"], tosca_entries["cat1"])

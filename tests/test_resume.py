@@ -1,7 +1,7 @@
 """Interrupted, concurrent and repeated runs of the workflow (real Snakemake on TOSCA meshes).
 
 One small configuration (six four-legged TOSCA shapes, all three settings, at most 6 pairs each) is
-built three ways and compared with :func:`results_fingerprint`:
+built three ways and compared with :func:`tiny_tosca.results_fingerprint`:
 
 - ``--cores 2`` without interruption (the reference);
 - ``--cores 1`` without interruption: same manifests byte for byte, same arrays;
@@ -16,7 +16,6 @@ Snakemake's lock, before it runs any job.
 
 from __future__ import annotations
 
-import hashlib
 import json
 import os
 import signal
@@ -24,46 +23,19 @@ import subprocess
 import time
 from pathlib import Path
 
-import numpy as np
 import psutil
 import pytest
 
 from test_workflow import SNAKEMAKE, snakemake, write_config
+from tiny_tosca import SETTINGS, results_fingerprint
 
 SHAPES = ["tosca/cat0", "tosca/cat1", "tosca/dog0", "tosca/dog1", "tosca/wolf0", "tosca/wolf1"]
-SETTINGS = ("full_full", "partial_full", "partial_partial")
 
 
 def small_config(workdir: Path, becos_code: Path) -> Path:
     return write_config(workdir, becos_code, shapes=SHAPES, combinations="four-legged",
                         caps={"train": 4, "val": 1, "test": 1}, n_chunks=2,
                         exports={"released": False, "published_pickle": False, "report": False})
-
-
-def results_fingerprint(workdir: Path) -> dict[str, str]:
-    """sha256 of every manifest, catalog, remesh, ground-truth and pair file (by path), and of every
-    array and the pairs table of every Zarr store (by setting/key): what must not depend on how the
-    run went. Store metadata (creation time) and logs are left out."""
-    from becos.store import open_benchmark
-
-    results = workdir / "results"
-    out = {}
-    for path in sorted(results.rglob("*")):
-        rel = path.relative_to(results)
-        if path.is_file() and ".zarr" not in str(rel) and path.suffix in (".csv", ".npz", ".json", ".ply") \
-                and not path.name.startswith(".") and rel.parts[0] != "config.json" \
-                and path.name != "validation.json":
-            out[str(rel)] = hashlib.sha256(path.read_bytes()).hexdigest()
-    for setting in SETTINGS:
-        bench = open_benchmark(results / setting / "benchmark.zarr")
-        out[f"{setting}/store/table"] = hashlib.sha256(bench.table.to_csv().encode()).hexdigest()
-        for record in bench.records():
-            h = hashlib.sha256(repr(sorted(record.meta.items())).encode())
-            for key in sorted(record.arrays):
-                value = np.ascontiguousarray(record[key])
-                h.update(key.encode() + str(value.dtype).encode() + str(value.shape).encode() + value.tobytes())
-            out[f"{setting}/store/{record.meta['pair_id']}"] = h.hexdigest()
-    return out
 
 
 def leftovers(workdir: Path) -> list[str]:
@@ -138,7 +110,7 @@ def test_cores_1_and_cores_2_give_identical_results(reference_run, becos_code, t
     snakemake(workdir, "--cores", "1")
     fingerprint = results_fingerprint(workdir)
     manifests = [k for k in reference if k.endswith("manifest.csv")]
-    assert len(manifests) == 3 and sum("/store/pp" in k or "/store/" in k for k in reference) > 3
+    assert len(manifests) == 3 and sum("/arrays/" in k for k in reference) > 3
     differ = sorted(k for k in reference.keys() | fingerprint.keys() if reference.get(k) != fingerprint.get(k))
     assert not differ, differ[:20]
     print(f"\n--cores 1 vs --cores 2: {len(reference)} files and store records compared, all identical "

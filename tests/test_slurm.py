@@ -17,7 +17,6 @@ fresh machine); docs/cluster.md.
 
 from __future__ import annotations
 
-import hashlib
 import importlib.util
 import json
 import os
@@ -32,11 +31,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tiny_tosca import write_tiny_tosca_config
+from tiny_tosca import results_fingerprint, write_tiny_tosca_config
 
 REPO = Path(__file__).resolve().parents[1]
 SNAKEMAKE = [sys.executable, "-m", "snakemake", "-s", str(REPO / "Snakefile")]
-SETTINGS = ("full_full", "partial_full", "partial_partial")
 # test-only speed-ups (a real cluster keeps the plugin's defaults: first check after 40 s, then every 10 s+)
 FAST_STATUS = ["--slurm-init-seconds-before-status-checks", "2", "--seconds-between-status-checks", "2"]
 RUN_TIMEOUT_S = 1800
@@ -104,37 +102,6 @@ def _snakemake(workdir: Path, args: list[str], env: dict[str, str]) -> tuple[flo
     return seconds, output
 
 
-def _sha(data: bytes) -> str:
-    return hashlib.sha256(data).hexdigest()
-
-
-def output_digests(workdir: Path) -> dict[str, str]:
-    """sha256 of the catalog, every manifest and every part of every Zarr store of a finished run.
-
-    Store parts (``becos.store.open_benchmark``): each array key (dtype, shape and bytes of all pairs'
-    rows), each offsets group, the pair metas, the pairs table and the root metadata without
-    ``created`` (the export's wall-clock time).
-    """
-    from becos.store import open_benchmark
-
-    results = workdir / "results"
-    out = {"catalog.csv": _sha((results / "catalog.csv").read_bytes())}
-    for setting in SETTINGS:
-        base = results / setting
-        out[f"{setting}/manifest.csv"] = _sha((base / "manifest.csv").read_bytes())
-        bench = open_benchmark(base / "benchmark.zarr")
-        for key in sorted(bench.layout):
-            data = np.ascontiguousarray(bench.concatenated(key)[0])
-            out[f"{setting}/arrays/{key}"] = _sha(f"{data.dtype.str}{data.shape}".encode() + data.tobytes())
-        for group, offsets in sorted(bench.offsets.items()):
-            out[f"{setting}/offsets/{group}"] = _sha(np.ascontiguousarray(offsets).tobytes())
-        out[f"{setting}/metas"] = _sha(json.dumps(bench.read_metas(), sort_keys=True).encode())
-        out[f"{setting}/table"] = _sha(bench.table.to_json(orient="split").encode())
-        metadata = {k: v for k, v in bench.metadata.items() if k != "created"}
-        out[f"{setting}/metadata"] = _sha(json.dumps(metadata, sort_keys=True, default=str).encode())
-    return out
-
-
 def test_workflow_on_slurm_equals_local_run(slurm_cluster, becos_code, tmp_path_factory):
     harness = slurm_cluster
     env = _env(harness)
@@ -172,12 +139,14 @@ def test_workflow_on_slurm_equals_local_run(slurm_cluster, becos_code, tmp_path_
     assert not rules & local_rules, rules & local_rules
 
     # 4. identical outputs
-    expected, got = output_digests(local), output_digests(remote)
+    expected, got = results_fingerprint(local), results_fingerprint(remote)
     differ = sorted(k for k in expected if got.get(k) != expected[k])
     assert set(got) == set(expected) and not differ, f"SLURM run differs from the local run in {differ}"
     n_arrays = sum("/arrays/" in k for k in expected)
-    print(f"identical: {len(expected)} sha256 digests (catalog, 3 manifests, {n_arrays} store arrays, "
-          "offsets, metas, tables, metadata)")
+    n_files = sum("/" not in k or k.split("/")[1] in ("manifest.csv", "ground_truth", "pairs") or
+                  k.startswith("remeshed/") for k in expected)
+    print(f"identical: {len(expected)} sha256 digests ({n_files} result files: catalog, manifests, remeshes, "
+          f"ground truth, pair files; {n_arrays} store arrays, offsets, metas, tables, metadata)")
 
     # 5. the cluster-generic profile (its SLURM example) submits a remesh job; same file as the local run
     generic = write_tiny_tosca_config(tmp_path_factory.mktemp("slurm-generic"), becos_code, n_chunks=N_CHUNKS).parent

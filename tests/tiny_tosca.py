@@ -8,9 +8,14 @@ configurations from :func:`tosca_config`.
 
 from __future__ import annotations
 
+import hashlib
+import json
 from pathlib import Path
 
+import numpy as np
 import yaml
+
+SETTINGS = ("full_full", "partial_full", "partial_partial")
 
 TINY_SHAPES = ["tosca/cat0", "tosca/cat1", "tosca/dog0", "tosca/dog1", "tosca/horse0", "tosca/horse5",
                "tosca/wolf0", "tosca/centaur0"]
@@ -46,3 +51,41 @@ def write_tiny_tosca_config(workdir: Path, becos_code: Path, **overrides) -> Pat
     path = workdir / "config.yaml"
     path.write_text(yaml.safe_dump(tiny_tosca_config(becos_code, **overrides), sort_keys=False))
     return path
+
+
+def _sha(data: bytes) -> str:
+    return hashlib.sha256(data).hexdigest()
+
+
+def results_fingerprint(workdir: Path, settings=SETTINGS) -> dict[str, str]:
+    """sha256 of what must not depend on how a run went (cores, interruptions, executor).
+
+    Files under ``results/`` by path: catalog, manifests, remeshes, ground truth, pair files and
+    chunk indices (not ``config.json``, ``validation.json``, the reports, which quote the store's
+    creation time, or hidden temporary files). Per Zarr store
+    (:func:`becos.store.open_benchmark`): each array key (dtype, shape and bytes of all pairs' rows),
+    each offsets group, the pair metas, the pairs table and the root metadata without ``created``
+    (the export's wall-clock time).
+    """
+    from becos.store import open_benchmark
+
+    results = Path(workdir) / "results"
+    out = {}
+    for path in sorted(results.rglob("*")):
+        rel = path.relative_to(results)
+        if path.is_file() and ".zarr" not in str(rel) and path.suffix in (".csv", ".npz", ".json", ".ply") \
+                and not path.name.startswith(".") and path.name not in ("config.json", "validation.json") \
+                and "report" not in rel.parts:
+            out[str(rel)] = _sha(path.read_bytes())
+    for setting in settings:
+        bench = open_benchmark(results / setting / "benchmark.zarr")
+        for key in sorted(bench.layout):
+            data = np.ascontiguousarray(bench.concatenated(key)[0])
+            out[f"{setting}/arrays/{key}"] = _sha(f"{data.dtype.str}{data.shape}".encode() + data.tobytes())
+        for group, offsets in sorted(bench.offsets.items()):
+            out[f"{setting}/offsets/{group}"] = _sha(np.ascontiguousarray(offsets).tobytes())
+        out[f"{setting}/metas"] = _sha(json.dumps(bench.read_metas(), sort_keys=True).encode())
+        out[f"{setting}/table"] = _sha(bench.table.to_json(orient="split").encode())
+        metadata = {k: v for k, v in bench.metadata.items() if k != "created"}
+        out[f"{setting}/metadata"] = _sha(json.dumps(metadata, sort_keys=True, default=str).encode())
+    return out
