@@ -153,17 +153,35 @@ def test_killed_runs_resume_to_the_uninterrupted_result(reference_run, becos_cod
 
 
 def test_a_second_run_on_the_same_results_is_refused(becos_code, tmp_path):
+    """A second Snakemake on a folder a running one is writing runs no job.
+
+    Snakemake checks for incomplete files while building its DAG, before it takes the lock, so a
+    second run that looks while one of the first run's jobs is finishing stops with "incomplete
+    files" and the advice ``--rerun-incomplete``; following that advice must then meet the lock."""
     workdir = small_config(tmp_path / "shared", becos_code)
     cmd = [*SNAKEMAKE, "-d", str(workdir), "--configfile", str(workdir / "config.yaml"), "--cores", "1"]
-    first = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, start_new_session=True)
+    out = open(workdir / "first-run.out", "w")  # a file, not a pipe nobody reads (it would fill and block)
+    first = subprocess.Popen(cmd, stdout=out, stderr=subprocess.STDOUT, start_new_session=True)
     try:
-        deadline = time.monotonic() + 120
-        while not any((workdir / ".snakemake" / "locks").glob("*")) and time.monotonic() < deadline:
+        deadline = time.monotonic() + 300
+        while not remeshing(workdir) and first.poll() is None and time.monotonic() < deadline:
             time.sleep(0.05)
         assert first.poll() is None, "the first run ended before the test could start a second one"
+        before = sorted(p.name for p in (workdir / "results" / "remeshed").rglob("*.npz"))
         second = snakemake(workdir, "--cores", "1", check=False)
         text = second.stdout + second.stderr
-        assert second.returncode != 0 and "cannot be locked" in text, text[-2000:]
-        print(f"\nsecond run refused: {next(line for line in text.splitlines() if 'cannot be locked' in line)}")
+        assert second.returncode != 0, text[-2000:]
+        assert "cannot be locked" in text or "incomplete" in text.lower(), text[-2000:]
+        assert "rule remesh" not in text and "localrule" not in text, text[-2000:]  # no job started
+        advised = snakemake(workdir, "--cores", "1", "--rerun-incomplete", check=False)
+        advised_text = advised.stdout + advised.stderr
+        assert advised.returncode != 0 and "cannot be locked" in advised_text, advised_text[-2000:]
+        after = sorted(p.name for p in (workdir / "results" / "remeshed").rglob("*.npz"))
+        assert set(before) <= set(after), "the refused runs removed the first run's outputs"
+        assert first.poll() is None, "the first run stopped while the second ones were refused"
+        refusal = next(line for line in advised_text.splitlines() if "cannot be locked" in line)
+        print(f"\nsecond run refused: {next(line for line in text.splitlines() if 'locked' in line or 'ncomplete' in line)}"
+              f"; with --rerun-incomplete: {refusal}")
     finally:
         kill_tree(first)
+        out.close()
