@@ -42,7 +42,10 @@ Root attributes (``Benchmark.metadata``): the caller's metadata (``config_hash``
 ``datasets`` with licence and citation ...) plus ``schema_version`` (:data:`becos.record.SCHEMA_VERSION`),
 ``setting``, ``n_pairs``, ``splits`` (pairs per split), ``created`` (ISO 8601, UTC) and
 ``versions`` (python, becos, numpy, zarr, trimesh, pymeshlab, embreex, snakemake where installed);
-``becos_store`` holds the store format and layout.
+``becos_store`` holds the store format, the layout and ``sha256``: the digest of every array's and
+offsets array's content (:class:`ContentDigests`), taken from the data as it was written, so that
+``becos validate`` notices a chunk file deleted (Zarr reads it back as zeros), truncated or edited
+after the store was written.
 
 Writing (:func:`write_store`) streams: one pass over the .npz headers and metas (shapes, dtypes,
 order), then one pass over the records, buffering at most one shard per array, into a hidden
@@ -56,6 +59,7 @@ from __future__ import annotations
 
 import argparse
 import ast
+import hashlib
 import json
 import math
 import os
@@ -322,6 +326,25 @@ def _chunking(n_rows: int, row_shape: tuple[int, ...], itemsize: int) -> tuple[t
     return chunks, (chunk_rows * per_shard, *row_shape)
 
 
+class ContentDigests:
+    """sha256 of each array's content: its rows in store order, as the C-order bytes of its dtype.
+
+    Keys are store node names (``arrays/x_vertices``, ``offsets/x_vertex``); feed the rows of each
+    array in order, in any number of pieces (the digest of the whole array does not depend on how
+    it is cut)."""
+
+    def __init__(self, dtypes: Mapping[str, np.dtype]):
+        self.dtypes = {key: np.dtype(dtype) for key, dtype in dtypes.items()}
+        self._hashes = {key: hashlib.sha256() for key in self.dtypes}
+
+    def update(self, key: str, rows: np.ndarray) -> None:
+        data = np.ascontiguousarray(rows, dtype=self.dtypes[key])
+        self._hashes[key].update(data.reshape(-1).view(np.uint8))
+
+    def hexdigests(self) -> dict[str, str]:
+        return {key: h.hexdigest() for key, h in self._hashes.items()}
+
+
 class _Writer:
     """Writes array regions in one background thread (compression overlaps reading the next records);
     at most ``max_pending`` bytes wait in the queue."""
@@ -362,13 +385,15 @@ class _Writer:
 class _Sink:
     """Buffers rows of one array and hands them to the writer a whole number of shards at a time."""
 
-    def __init__(self, array, shard_rows: int, writer: _Writer):
+    def __init__(self, array, shard_rows: int, writer: _Writer, digests: ContentDigests, node: str):
         self.array, self.shard_rows, self.writer = array, max(1, shard_rows), writer
+        self.digests, self.node = digests, node
         self.parts: list[np.ndarray] = []
         self.buffered = 0
         self.pos = 0
 
     def add(self, rows: np.ndarray) -> None:
+        self.digests.update(self.node, rows)
         if len(rows):
             self.parts.append(rows)
             self.buffered += len(rows)
@@ -540,14 +565,17 @@ def write_store(record_paths: Iterable[str | Path], out: str | Path, *, setting:
     try:
         root = zarr.open_group(str(tmp), mode="w", zarr_format=3)
         arrays, offsets_group = root.create_group("arrays"), root.create_group("offsets")
+        first = infos[0].shapes
+        digests = ContentDigests({**{f"arrays/{key}": first[key][1] for key in layout},
+                                  **{f"offsets/{group}": np.int64 for group in lengths}})
         for group, n_rows in lengths.items():
             offsets = np.zeros(n + 1, dtype=np.int64)
             offsets[1:] = np.cumsum(n_rows)
             offsets_group.create_array(group, data=offsets, chunks=(n + 1,), compressors=_compressors(),
                                        chunk_key_encoding=CHUNK_KEYS)
+            digests.update(f"offsets/{group}", offsets)
         sinks = {}
         writer = _Writer()
-        first = infos[0].shapes
         for key, group in layout.items():
             shape, dtype = first[key]
             total = n if group is None else int(lengths[group].sum())
@@ -555,8 +583,10 @@ def write_store(record_paths: Iterable[str | Path], out: str | Path, *, setting:
             chunks, shards = _chunking(total, row_shape, dtype.itemsize)
             array = arrays.create_array(key, shape=(total, *row_shape), dtype=dtype, chunks=chunks, shards=shards,
                                         compressors=_compressors(), fill_value=np.zeros((), dtype).item(),
-                                        chunk_key_encoding=CHUNK_KEYS)
-            sinks[key] = _Sink(array, (shards or chunks)[0], writer)
+                                        chunk_key_encoding=CHUNK_KEYS,
+                                        # every chunk file exists, even all-zero ones: an absent file is damage
+                                        config={"write_empty_chunks": True})
+            sinks[key] = _Sink(array, (shards or chunks)[0], writer, digests, f"arrays/{key}")
         metas, rows = [], []
         step = max(1, math.ceil(n / 10))
         try:
@@ -577,7 +607,7 @@ def write_store(record_paths: Iterable[str | Path], out: str | Path, *, setting:
         attrs = dict(metadata)
         attrs.update(schema_version=SCHEMA_VERSION, setting=setting, n_pairs=n, splits=splits,
                      created=datetime.now(timezone.utc).isoformat(timespec="seconds"), versions=_versions(),
-                     becos_store={"format": STORE_FORMAT, "layout": layout})
+                     becos_store={"format": STORE_FORMAT, "layout": layout, "sha256": digests.hexdigests()})
         root.attrs.update(attrs)
         os.chmod(tmp, 0o755)
         _replace_dir(tmp, out)
@@ -682,6 +712,9 @@ class Benchmark:
         self.metadata = {k: v for k, v in attrs.items() if k != "becos_store"}
         self.setting = attrs["setting"]
         self.layout: dict[str, str | None] = dict(info["layout"])
+        self.content_digests: dict[str, str] = dict(info.get("sha256") or {})
+        """Node name -> sha256 of its content when written (:class:`ContentDigests`); empty for stores
+        written before becos recorded them."""
         node = "arrays"
         try:  # a missing or damaged node is a damaged store, not a traceback
             self._arrays = {}

@@ -13,6 +13,10 @@ attribute instead of pairs. Checks (vectorised over blocks of pairs of about
 ``store``         the store opens and reads: the folder exists and is a Zarr v3 becos store, every
                   array, offsets and pairs node its layout names is present with readable metadata,
                   every chunk decodes (a damaged store ends in this one problem, not a traceback)
+``checksum``      every array's and offsets array's content has the sha256 recorded when the store was
+                  written (``becos_store.sha256``): catches a chunk file deleted (Zarr reads it back
+                  as zeros), truncated or edited afterwards; skipped for stores written before
+                  becos recorded digests, and when a chunk does not decode (``store`` says which)
 ``schema``        keys, dtypes, trailing shapes and offset groups as in :mod:`becos.record` /
                   :mod:`becos.store`; offsets start at 0, never decrease and end at the array's rows
 ``metadata``      root attributes: schema version, setting, pair count, pairs per split, the
@@ -563,12 +567,17 @@ def validate(path: str | Path, progress: bool = False) -> ValidationReport:
         else:
             _check_metas(Block(0, n, {}, {}, bench.layout, metas), bench.setting, table, found)
     reported = 0
+    digests = _digests_to_check(bench) if rows_ok else None
     for start, stop in bench.block_ranges(max_bytes=VALIDATE_BLOCK_BYTES) if rows_ok else []:
         try:
             block = bench.read_block(start, stop)
         except Exception as exc:        # a damaged chunk: name it, check the other blocks
             problems.append(_unreadable(bench, start, stop, exc, ids))
+            digests = None
             continue
+        if digests is not None:
+            for key in bench.layout:
+                digests.update(f"arrays/{key}", block.arrays[key])
         _BlockChecker(block, bench.setting, ids[start:stop], found).run()
         _check_metas(block, bench.setting, table, found)
         if progress and (10 * stop // n > reported or stop == n):   # about every 10 %
@@ -576,6 +585,8 @@ def validate(path: str | Path, progress: bool = False) -> ValidationReport:
             print(f"validate: {stop}/{n} pairs checked ({time.perf_counter() - started:.1f} s)",
                   file=sys.stderr, flush=True)
 
+    if digests is not None:
+        _check_digests(bench, digests, problems)
     values, counts = np.unique(ids, return_counts=True)
     dup = values[counts > 1]
     if len(dup):
@@ -584,6 +595,43 @@ def validate(path: str | Path, progress: bool = False) -> ValidationReport:
     problems.extend(found.messages())
     splits = {str(k): int(v) for k, v in table["split"].value_counts().items()}
     return ValidationReport(path, problems, n, bench.setting, splits, time.perf_counter() - started)
+
+
+def _digests_to_check(bench):
+    """A :class:`becos.store.ContentDigests` for the store's nodes, or None if it recorded none."""
+    from becos.store import ContentDigests
+
+    if not bench.content_digests:
+        return None
+    dtypes = {f"arrays/{key}": bench.array(key).dtype for key in bench.layout}
+    dtypes.update({f"offsets/{group}": np.int64 for group in bench.offsets})
+    return ContentDigests(dtypes)
+
+
+def _absent_chunk_files(bench, node: str) -> list[str]:
+    """Chunk (shard) file names of ``node`` that its shape calls for but are not on disk."""
+    array = bench.array(node.split("/", 1)[1]) if node.startswith("arrays/") else None
+    if array is None:
+        return []
+    files_per_axis = [-(-size // step) for size, step in zip(array.shape, array.shards or array.chunks)]
+    names = [f"c.{'.'.join(map(str, idx))}" for idx in np.ndindex(*files_per_axis)]
+    return [name for name in names if not (bench.path / node / name).exists()]
+
+
+def _check_digests(bench, digests, problems: list[str]) -> None:
+    """``checksum``: content read back (every block, then the offsets) against the recorded sha256."""
+    for group, offsets in bench.offsets.items():
+        digests.update(f"offsets/{group}", offsets)
+    actual = digests.hexdigests()
+    for node, recorded in sorted(bench.content_digests.items()):
+        if node in actual and actual[node] != recorded:
+            absent = _absent_chunk_files(bench, node)
+            why = (f"; chunk files absent (Zarr reads them as zeros): {', '.join(absent[:MAX_EXAMPLES])}"
+                   f"{' ...' if len(absent) > MAX_EXAMPLES else ''}" if absent else
+                   "; a chunk file changed after the store was written")
+            problems.append(f"checksum: {node} content differs from the sha256 recorded when the store was "
+                            f"written{why}. Fix: rebuild the store (delete it and rerun the workflow, or "
+                            "`becos export-zarr`) or restore it from a copy")
 
 
 def _check_metadata(bench, problems: list[str]) -> None:

@@ -19,7 +19,7 @@ from becos.record import PairRecord
 from becos.store import TABLE_COLUMNS, open_benchmark, table_row, write_pairs, write_store
 from becos.validate import validate, validate_store
 
-CHECKS = ("schema", "metadata", "meta", "table", "pair_id", "index_range", "unmatched", "weights", "corr_face",
+CHECKS = ("checksum", "schema", "metadata", "meta", "table", "pair_id", "index_range", "unmatched", "weights", "corr_face",
           "overlap", "index_maps", "full_shape", "setting", "face_map", "vertex_map", "connectivity", "rotation",
           "alignment", "camera", "scalars", "finite", "split_classes", "centaur")
 """Every check in becos.validate's docstring table (``store`` is tested by test_damaged_store_is_reported)."""
@@ -87,6 +87,30 @@ def _rewrite_pairs(store, edit_metas=None, edit_rows=None):
 
 def _col(name):
     return TABLE_COLUMNS.index(name)
+
+
+def _reseal(store):
+    """Record the sha256 of the store's current content, as a writer that wrote these (wrong) values would.
+
+    The corruptions below stand for a buggy writer, caught by the invariant they break; ``checksum``
+    stands for damage after writing (a deleted chunk file), caught by the digests alone."""
+    from becos.store import ContentDigests
+
+    root = zarr.open_group(str(store), mode="r+")
+    info = dict(root.attrs["becos_store"])
+    nodes = {node: root[node][:] for node in info["sha256"] if node in root}
+    digests = ContentDigests({node: data.dtype for node, data in nodes.items()})
+    for node, data in nodes.items():
+        digests.update(node, data)
+    root.attrs.update(becos_store={**info, "sha256": digests.hexdigests()})
+
+
+def c_checksum(store, bench):
+    """A deleted chunk file: Zarr reads it back as zeros, which are valid annotation labels."""
+    files = list((store / "arrays" / "y_annotation").glob("c.*"))
+    assert files and np.any(bench.concatenated("y_annotation")[0] != 0)
+    for f in files:
+        f.unlink()
 
 
 def c_schema(store, bench):
@@ -270,6 +294,9 @@ class Corruption:
 
 
 CORRUPTIONS = (
+    Corruption("checksum", "full_full", c_checksum,
+               "checksum: arrays/y_annotation content differs from the sha256 recorded when the store was written; "
+               "chunk files absent (Zarr reads them as zeros): c.0"),
     Corruption("schema", "full_full", c_schema, "schema: x_annotation has dtype int32, expected int8"),
     Corruption("metadata", "full_full", c_metadata, "metadata: n_pairs says 3 but the table has 2 rows"),
     Corruption("meta", "partial_partial", c_meta, "meta: meta setting differs from the store's (partial_partial)"),
@@ -333,6 +360,8 @@ def test_corruption_is_caught(case, clean_stores, tmp_path):
     shutil.copytree(clean_stores[case.setting], store)
     bench = open_benchmark(store)
     example = case.corrupt(store, bench)
+    if case.check != "checksum":
+        _reseal(store)
     problems = validate_store(store)
     assert problems, "the corruption went unnoticed"
     assert {p.split(":")[0] for p in problems} == {case.check}, problems
@@ -354,6 +383,7 @@ def test_class_in_train_and_test(pair_record_files, tmp_path):
 def test_reflection_is_not_a_rotation(p2p_copy):
     rotation = _array(p2p_copy, "x_frame_rotation")
     rotation[0] = rotation[0] @ np.diag([1.0, 1.0, -1.0])      # orthonormal, det -1
+    _reseal(p2p_copy)
     problems = validate_store(p2p_copy)
     assert len(problems) == 1 and problems[0].startswith("rotation: x_frame_rotation not orthonormal"), problems
 
@@ -365,6 +395,7 @@ def test_partial_split_into_two_components(p2p_copy):
     # re-point one face at three vertices of faces far apart: it shares no edge with any other face
     far = local[[0, len(local) // 2, len(local) - 1], [0, 1, 2]]
     _array(p2p_copy, "x_faces")[f0 + len(local) // 3] = far
+    _reseal(p2p_copy)
     problems = validate_store(p2p_copy)
     assert any(p.startswith("connectivity: partial x shape is not one edge-connected component") for p in problems)
     assert any(p.startswith("face_map:") for p in problems)   # the face no longer matches its full face
@@ -375,6 +406,7 @@ def test_partial_to_full_not_increasing(p2p_copy):
     start, _ = _rows(bench, "y_partial_to_full", 0)
     ptf = _array(p2p_copy, "y_partial_to_full")
     ptf[start + 1] = ptf[start + 0]
+    _reseal(p2p_copy)
     text = "\n".join(p for p in validate_store(p2p_copy) if p.startswith("index_maps:"))
     assert "y_partial_to_full not strictly increasing" in text and "is not the identity" in text
 
@@ -452,6 +484,7 @@ def test_cli_exit_status_and_json(clean_stores, p2p_copy, tmp_path, capsys):
     assert report["valid"] is True and report["problems"] == [] and report["n_pairs"] == 2
     assert "comparison" not in report
     _array(p2p_copy, "x_random_rotation")[0] = np.zeros((3, 3))
+    _reseal(p2p_copy)
     capsys.readouterr()
     assert main(["validate", str(p2p_copy), "--json", str(out)]) == 1
     err = capsys.readouterr().err
