@@ -274,8 +274,10 @@ def index_setting(path: str | Path) -> str | None:
 # writing
 
 
-def _split_rank(split: str) -> tuple[int, str]:
-    return (SPLIT_ORDER.index(split), "") if split in SPLIT_ORDER else (len(SPLIT_ORDER), str(split))
+def store_order_key(split: str, pair_id: str) -> tuple[int, str, str]:
+    """Sort key of store order: split train, val, test, then other splits alphabetically; by pair_id."""
+    rank = (SPLIT_ORDER.index(split), "") if split in SPLIT_ORDER else (len(SPLIT_ORDER), str(split))
+    return (*rank, str(pair_id))
 
 
 def _plan_layout(infos: list[_RecordInfo]) -> tuple[dict[str, str | None], dict[str, np.ndarray]]:
@@ -551,7 +553,7 @@ def write_store(record_paths: Iterable[str | Path], out: str | Path, *, setting:
             raise InputFileError(path, f"is a {info.meta.get('setting')} record, not {setting}",
                                  f"export only the records of {setting} into this store")
         infos.append(info)
-    infos.sort(key=lambda i: (_split_rank(i.meta.get("split", "")), i.meta["pair_id"]))
+    infos.sort(key=lambda i: store_order_key(i.meta.get("split", ""), i.meta["pair_id"]))
     layout, lengths = _plan_layout(infos)
     n = len(infos)
     if progress and n >= 50:
@@ -754,7 +756,7 @@ class Benchmark:
 
     def splits(self) -> list[str]:
         """Splits present, in store order (train, val, test first)."""
-        return sorted(set(self.table["split"]), key=_split_rank)
+        return sorted(set(self.table["split"]), key=lambda split: store_order_key(split, ""))
 
     def row(self, key: int | str) -> int:
         """Store row of a row index or pair_id (KeyError/IndexError if absent)."""

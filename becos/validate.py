@@ -23,7 +23,8 @@ attribute instead of pairs. Checks (vectorised over blocks of pairs of about
                   ``versions`` of the building libraries
 ``meta``          per pair: setting equals the store's, split is train/val/test, schema version
 ``table``         the pairs table agrees with the metas (every column :func:`becos.store.table_row`
-                  derives from them) and the arrays (sizes, overlaps); index column 0..N-1
+                  derives from them) and the arrays (sizes, overlaps); index column 0..N-1; rows in
+                  store order (split train, val, test, then others; by pair_id inside a split)
 ``pair_id``       pair ids unique
 ``index_range``   faces, corr_01/corr_10 (+ ``_face``), partial_to_full, full_to_partial,
                   full_face_ids, full_faces index inside their targets (-1 only where allowed)
@@ -555,6 +556,7 @@ def validate(path: str | Path, progress: bool = False) -> ValidationReport:
     _check_metadata(bench, problems)
     if list(table["index"]) != list(range(n)):
         problems.append("table: the index column is not 0..N-1")
+    _check_order(table, problems)
 
     rows_ok = _check_schema(bench, problems)
     if not rows_ok:                    # the arrays cannot be trusted: check the metas and the table only
@@ -595,6 +597,19 @@ def validate(path: str | Path, progress: bool = False) -> ValidationReport:
     problems.extend(found.messages())
     splits = {str(k): int(v) for k, v in table["split"].value_counts().items()}
     return ValidationReport(path, problems, n, bench.setting, splits, time.perf_counter() - started)
+
+
+def _check_order(table, problems: list[str]) -> None:
+    """``table``: rows in store order (:func:`becos.store.store_order_key`)."""
+    from becos.store import store_order_key
+
+    keys = [store_order_key(split, pid) for split, pid in zip(table["split"], table["pair_id"])]
+    late = [i for i in range(1, len(keys)) if keys[i] < keys[i - 1]]
+    if late:
+        i = late[0]
+        problems.append(f"table: {len(late)} row(s) out of store order (split train, val, test, then pair_id), "
+                        f"first at row {i}: {table['pair_id'][i]} ({table['split'][i]}) after "
+                        f"{table['pair_id'][i - 1]} ({table['split'][i - 1]})")
 
 
 def _digests_to_check(bench):

@@ -411,6 +411,19 @@ def test_partial_to_full_not_increasing(p2p_copy):
     assert "y_partial_to_full not strictly increasing" in text and "is not the identity" in text
 
 
+def test_pairs_out_of_store_order(clean_stores, tmp_path):
+    store = tmp_path / "ff.zarr"
+    shutil.copytree(clean_stores["full_full"], store)
+    first, second = open_benchmark(store).table["pair_id"][:2]
+
+    def swap(metas):
+        metas[0]["pair_id"], metas[1]["pair_id"] = second, first
+    _rewrite_pairs(store, swap)
+    problems = validate_store(store)
+    assert problems == [f"table: 1 row(s) out of store order (split train, val, test, then pair_id), first at row 1: "
+                        f"{first} (test) after {second} (test)"], problems
+
+
 def test_decreasing_offsets_name_the_pair(clean_stores, tmp_path):
     store = tmp_path / "ff.zarr"
     shutil.copytree(clean_stores["full_full"], store)
