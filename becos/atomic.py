@@ -1,6 +1,7 @@
 """Atomic file writes: write next to the destination, then rename, so no reader sees half a file.
 
-An interrupted job leaves either the old file or none, plus at most a hidden ``.<name>.*.tmp*``.
+An interrupted job leaves either the old file or none, plus at most a hidden ``.<name>.*.tmp*``,
+which the next job writing that file removes (:func:`remove_stale_temporaries`).
 """
 
 from __future__ import annotations
@@ -9,7 +10,7 @@ import os
 import tempfile
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Iterator
+from typing import Iterable, Iterator
 
 import numpy as np
 
@@ -31,6 +32,28 @@ def atomic_path(path: str | Path, suffix: str = ".tmp") -> Iterator[Path]:
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+
+
+def remove_stale_temporaries(folder: str | Path, names: Iterable[str]) -> int:
+    """Delete the hidden temporary files that killed writes of ``names`` (files in ``folder``) left
+    behind; the number deleted. Only the one job that writes ``names`` may call it (another job's
+    write in progress would lose its temporary file). One directory listing, whatever ``names`` holds.
+    """
+    names = set(names)
+    removed = 0
+    try:
+        entries = list(os.scandir(folder))
+    except FileNotFoundError:
+        return 0
+    for entry in entries:
+        if not entry.name.startswith(".") or ".tmp" not in entry.name:
+            continue
+        # ".<name>.<mkstemp's random part, no dots><suffix starting .tmp>"
+        target = entry.name[1:entry.name.rindex(".tmp")].rpartition(".")[0]
+        if target in names:
+            Path(entry.path).unlink(missing_ok=True)
+            removed += 1
+    return removed
 
 
 def save_npz(path: str | Path, compressed: bool = False, **arrays: np.ndarray) -> None:

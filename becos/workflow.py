@@ -42,7 +42,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from becos.atomic import write_text
+from becos.atomic import remove_stale_temporaries, write_text
 from becos.errors import ConfigError
 
 SETTINGS = ("full_full", "partial_full", "partial_partial")
@@ -535,6 +535,8 @@ def remesh_stage(config: dict, shape_row: dict, token: str, out: Path, ply: Path
     prepared = shapes.prepared(dataset, name)
     start = time.perf_counter()
     result = remesh(prepared.mesh, **target, source=prepared.entry.path)
+    for path in (Path(out), *([Path(ply)] if ply is not None else [])):
+        remove_stale_temporaries(path.parent, [path.name])
     save_remeshed(Path(out), result)
     if ply is not None:
         write_ply(Path(ply), result.mesh)
@@ -571,6 +573,14 @@ def _progress(stage: str, setting: str, chunk: int, entries: list[dict], n_rows:
              f"computed, the rest up to date) {time.perf_counter() - started:.1f} s")
 
 
+def _remove_killed_writes(paths: list[Path]) -> None:
+    """Before a chunk job writes its pairs' files: remove temporary files a killed run of it left."""
+    for folder in {p.parent for p in paths}:
+        n = remove_stale_temporaries(folder, [p.name for p in paths if p.parent == folder])
+        if n:
+            _log(f"removed {n} temporary file(s) left in {folder} by an interrupted run")
+
+
 def _write_index(path: Path, setting: str, chunk: int, entries: list[dict], started: float) -> dict:
     """Write a chunk's index (pairs, their files, input keys and digests); return its counts.
 
@@ -596,6 +606,7 @@ def ground_truth_stage(config: dict, setting: str, chunk: int, out_index: Path) 
     remesh = bool(config.get("remesh", True))
     shapes = ShapeStore(config, read_catalog(layout.catalog))
     rows = _chunk_rows(config, setting, chunk)
+    _remove_killed_writes([*(layout.ground_truth(setting, pid) for pid in rows["pair_id"]), Path(out_index)])
     entries = []
     for row in rows.to_dict("records"):
         tx, ty = remesh_token(row, "x", remesh), remesh_token(row, "y", remesh)
@@ -649,6 +660,7 @@ def pairs_stage(config: dict, setting: str, chunk: int, gt_index: Path, out_inde
     options = pair_options(config, setting)
     gt_files = {e["pair_id"]: e for e in json.loads(Path(gt_index).read_text())["pairs"]}
     rows = _chunk_rows(config, setting, chunk)
+    _remove_killed_writes([*(layout.record(setting, pid) for pid in rows["pair_id"]), Path(out_index)])
     scanners = _Recent(SHAPES_KEPT)
     labels = _labeller(config, shapes) if config.get("propagate_annotations", True) else None
     entries = []
