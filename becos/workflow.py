@@ -535,8 +535,7 @@ def remesh_stage(config: dict, shape_row: dict, token: str, out: Path, ply: Path
     prepared = shapes.prepared(dataset, name)
     start = time.perf_counter()
     result = remesh(prepared.mesh, **target, source=prepared.entry.path)
-    for path in (Path(out), *([Path(ply)] if ply is not None else [])):
-        remove_stale_temporaries(path.parent, [path.name])
+    _remove_killed_writes([Path(p) for p in (out, ply) if p is not None])
     save_remeshed(Path(out), result)
     if ply is not None:
         write_ply(Path(ply), result.mesh)
@@ -574,7 +573,7 @@ def _progress(stage: str, setting: str, chunk: int, entries: list[dict], n_rows:
 
 
 def _remove_killed_writes(paths: list[Path]) -> None:
-    """Before a chunk job writes its pairs' files: remove temporary files a killed run of it left."""
+    """Before a job writes ``paths``: remove the temporary files a killed run of it left beside them."""
     for folder in {p.parent for p in paths}:
         n = remove_stale_temporaries(folder, [p.name for p in paths if p.parent == folder])
         if n:
