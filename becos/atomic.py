@@ -7,6 +7,7 @@ which the next job writing that file removes (:func:`remove_stale_temporaries`).
 from __future__ import annotations
 
 import os
+import shutil
 import tempfile
 from contextlib import contextmanager
 from pathlib import Path
@@ -35,9 +36,10 @@ def atomic_path(path: str | Path, suffix: str = ".tmp") -> Iterator[Path]:
 
 
 def remove_stale_temporaries(folder: str | Path, names: Iterable[str]) -> int:
-    """Delete the hidden temporary files that killed writes of ``names`` (files in ``folder``) left
-    behind; the number deleted. Only the one job that writes ``names`` may call it (another job's
-    write in progress would lose its temporary file). One directory listing, whatever ``names`` holds.
+    """Delete the hidden temporary files (or folders, e.g. a Zarr store's) that killed writes of
+    ``names`` (in ``folder``) left behind; the number deleted. Only the one job that writes ``names``
+    may call it (another job's write in progress would lose its temporary file). One directory
+    listing, whatever ``names`` holds.
     """
     names = set(names)
     removed = 0
@@ -51,7 +53,10 @@ def remove_stale_temporaries(folder: str | Path, names: Iterable[str]) -> int:
         # ".<name>.<mkstemp's random part, no dots><suffix starting .tmp>"
         target = entry.name[1:entry.name.rindex(".tmp")].rpartition(".")[0]
         if target in names:
-            Path(entry.path).unlink(missing_ok=True)
+            if entry.is_dir(follow_symlinks=False):
+                shutil.rmtree(entry.path, ignore_errors=True)
+            else:
+                Path(entry.path).unlink(missing_ok=True)
             removed += 1
     return removed
 

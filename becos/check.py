@@ -100,7 +100,7 @@ class _MeshProblem(ValueError):
         self.fix = fix
 
 
-_NON_FINITE = re.compile(rb"nan|inf", re.IGNORECASE)
+_NON_FINITE = re.compile(rb"\b(?:nan|inf|infinity)\b", re.IGNORECASE)  # whole words: not "info" in a comment
 
 
 def _check_finite_text(data: bytes, start: int, end: int, first_line: int, line_starts: np.ndarray,
@@ -376,12 +376,6 @@ def inspect_mesh_file(path: str | Path):
 
 
 # --- datasets --------------------------------------------------------------------------------------
-def _natural(text: str):
-    from becos.catalog import natural_key
-
-    return natural_key(text)
-
-
 _PUBLISHED_CACHE: dict[str, dict[str, set[str]]] = {}
 
 
@@ -427,6 +421,7 @@ def _missing_dataset_text(spec, folder: Path, data_dir: Path) -> str:
 def _check_one_dataset(name: str, data_dir: Path, annotations, read_meshes: bool, full_parse: bool,
                        config_dir) -> tuple[dict, list[str], list]:
     """Report entry, problem texts and the listed ShapeEntry rows (empty unless the listing succeeded)."""
+    from becos.catalog import natural_key
     from becos.datasets import DatasetSpec
 
     entry: dict = {"ok": False, "path": None, "folder": None, "found": 0, "expected": None, "excluded_found": 0,
@@ -460,7 +455,7 @@ def _check_one_dataset(name: str, data_dir: Path, annotations, read_meshes: bool
         published = _published_names(getattr(annotations, "root", None)).get(name, set())
         # the published lists name every shape of the reference's datasets; a registry that expects
         # another count (a subset, a newer release) gets no names
-        absent = sorted(published - set(names), key=_natural) if len(published) == spec.expected_count else []
+        absent = sorted(published - set(names), key=natural_key) if len(published) == spec.expected_count else []
         entry["missing_published"] = absent
         named = ""
         if absent:

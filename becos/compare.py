@@ -189,7 +189,10 @@ class StoreComparison:
 
     def pair_keys(self, pair_id: str) -> dict[str, dict]:
         """key -> {"values": n differing (-1: shape differs), "max_abs": float or None} for one pair."""
-        i = int(np.flatnonzero(self.common == pair_id)[0])
+        return self._row_keys(int(np.flatnonzero(self.common == pair_id)[0]))
+
+    def _row_keys(self, i: int) -> dict[str, dict]:
+        """:meth:`pair_keys` of common row ``i``."""
         out = {}
         for key, v in self.values.items():
             if v[i]:
@@ -242,7 +245,7 @@ class StoreComparison:
         for i in np.flatnonzero(self.differing):
             pid = str(self.common[i])
             entry = {"reasons": [r for r, hit in zip(REASONS, self.reasons[i]) if hit],
-                     "arrays": self.pair_keys(pid)}
+                     "arrays": self._row_keys(int(i))}
             if pid in self.meta:
                 entry["meta"] = self.meta[pid]
             pairs[pid] = entry

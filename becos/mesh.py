@@ -315,12 +315,6 @@ class MeshRepair:
         """True when anything is reported: a change, zero-area faces, or faces to re-orient."""
         return self.changed or self.zero_area_faces > 0 or self.misoriented_edges > 0
 
-    def input_to_copy(self) -> np.ndarray:
-        """(V_input,) int64 copy vertex of each input vertex, -1 where it was dropped."""
-        out = np.full(self.n_input_vertices, -1, dtype=np.int64)
-        out[self.vertex_index] = np.arange(len(self.vertex_index))
-        return out
-
     def counts(self) -> dict:
         """The counts as a JSON-able dict (no arrays)."""
         d = asdict(self)
@@ -401,7 +395,7 @@ def surface_for_remeshing(mesh: TriMesh, *, source: str | Path | None = None,
     clean_used = np.zeros(n, dtype=bool)
     clean_used[kept_faces.ravel()] = True
     face_label, n_surface_components = face_components(kept_faces, n)
-    dropped_faces = dropped_vertices = 0
+    dropped_faces = 0
     share = 0.0
     if n_surface_components > 1:
         tri = mesh.vertices[kept_faces]

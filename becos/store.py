@@ -77,6 +77,7 @@ from typing import Iterable, Iterator, Mapping
 
 import numpy as np
 
+from becos.atomic import remove_stale_temporaries
 from becos.errors import BecosError, InputFileError
 from becos.record import PAIR_KEYS, SCHEMA_VERSION, SETTINGS, SHAPE_KEYS, PairRecord
 
@@ -560,9 +561,7 @@ def write_store(record_paths: Iterable[str | Path], out: str | Path, *, setting:
         _progress(f"{n} records scanned in {time.perf_counter() - started:.1f} s")
 
     out.parent.mkdir(parents=True, exist_ok=True)
-    # one job writes a store: temporary folders beside it are left by an earlier, killed write
-    for stale in out.parent.glob(f".{out.name}.*.tmp"):
-        shutil.rmtree(stale, ignore_errors=True)
+    remove_stale_temporaries(out.parent, [out.name])   # one job writes a store: these are a killed write's
     tmp = Path(tempfile.mkdtemp(dir=out.parent, prefix=f".{out.name}.", suffix=".tmp"))
     try:
         root = zarr.open_group(str(tmp), mode="w", zarr_format=3)
@@ -680,6 +679,9 @@ class DamagedStoreError(InputFileError):
     """A store whose root opens but one of whose arrays, offsets or pair tables is missing or unreadable."""
 
 
+DAMAGED_STORE_FIX = "re-export the store with `becos export-zarr` (it is damaged or was copied incompletely)"
+
+
 class Benchmark:
     """A benchmark store opened for reading (:func:`open_benchmark`).
 
@@ -736,7 +738,7 @@ class Benchmark:
             frame = pd.DataFrame(table["rows"], columns=table["columns"])
         except Exception as exc:
             raise DamagedStoreError(self.path, f"{node} is missing or unreadable ({type(exc).__name__}: {exc})",
-                                 "re-export the store with `becos export-zarr` (it is damaged)") from exc
+                                 DAMAGED_STORE_FIX) from exc
         self.table = frame.astype({k: v for k, v in TABLE_DTYPES.items() if k in frame.columns})
         self._row_of = {pid: i for i, pid in enumerate(self.table["pair_id"])}
         n = len(self.table)
@@ -841,7 +843,11 @@ class Benchmark:
         async def read_all():   # every array's slice concurrently: one round trip, not one per key
             return await asyncio.gather(*(array.async_array.getitem(slice(a, b)) for array, a, b in ranges))
 
-        values = sync(read_all())
+        try:
+            values = sync(read_all())
+        except Exception as exc:  # a chunk that does not decode: zarr and the codecs raise several types
+            raise DamagedStoreError(self.path, f"pairs {start}:{stop} cannot be read ({type(exc).__name__}: {exc})",
+                                    DAMAGED_STORE_FIX) from exc
         arrays = {key: np.asarray(v) for key, v in zip(keys, values)}
         offsets = {g: o[start:stop + 1] - o[start] for g, o in self.offsets.items()}
         blob = bytes(np.asarray(values[-1]))

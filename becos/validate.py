@@ -75,6 +75,7 @@ import numpy as np
 
 from becos.errors import BecosError
 from becos.record import SCHEMA_VERSION, SETTINGS
+from becos.store import DAMAGED_STORE_FIX as STORE_FIX
 
 SPLITS = ("train", "val", "test")
 WEIGHT_TOL = 1e-6
@@ -448,7 +449,6 @@ def _check_splits(table, setting: str, problems: _Problems) -> None:
     problems.add("centaur", "centaur shape outside train", sorted(set(centaurs["pair_id"])))
 
 
-STORE_FIX = "re-export the store with `becos export-zarr` (it is damaged or was copied incompletely)"
 
 
 def _node_problem(path: Path, node: str) -> str | None:
@@ -625,11 +625,11 @@ def _digests_to_check(bench):
 
 def _absent_chunk_files(bench, node: str) -> list[str]:
     """Chunk (shard) file names of ``node`` that its shape calls for but are not on disk."""
-    array = bench.array(node.split("/", 1)[1]) if node.startswith("arrays/") else None
-    if array is None:
-        return []
+    if not node.startswith("arrays/"):
+        return []                      # offsets are read whole when the store opens
+    array = bench.array(node.removeprefix("arrays/"))
     files_per_axis = [-(-size // step) for size, step in zip(array.shape, array.shards or array.chunks)]
-    names = [f"c.{'.'.join(map(str, idx))}" for idx in np.ndindex(*files_per_axis)]
+    names = [array.metadata.encode_chunk_key(idx) for idx in np.ndindex(*files_per_axis)]
     return [name for name in names if not (bench.path / node / name).exists()]
 
 
@@ -744,9 +744,10 @@ def run_cli(args: argparse.Namespace) -> int:
     if against is not None:
         from becos.compare import compare_stores
 
-        if report.problems and report.problems[0].startswith("store:"):
+        if any(problem.startswith("store:") for problem in report.problems):
             out["comparison"] = None
-            print(f"becos validate: not compared with {against}: {args.store} cannot be read", file=sys.stderr)
+            print(f"becos validate: not compared with {against}: {args.store} is damaged (see above)",
+                  file=sys.stderr)
         else:
             try:
                 comparison = compare_stores(args.store, against, atol=args.atol)

@@ -264,3 +264,9 @@ def test_cli_against(stores, tmp_path, capsys):
     assert main(["validate", str(a), "--against", str(b)]) == 2
     err = capsys.readouterr().err
     assert "1 of its arrays missing: arrays/x_faces" in err and "Traceback" not in err
+    c = _copy(stores, "full_full", tmp_path, "c.zarr")
+    chunk = next((c / "arrays" / "x_vertices").glob("c.*"))
+    chunk.write_bytes(chunk.read_bytes()[:50])                      # a truncated chunk in OTHER
+    assert main(["validate", str(a), "--against", str(c)]) == 2
+    err = capsys.readouterr().err
+    assert f"becos validate: --against: {c}: pairs 0:2 cannot be read" in err and "Fix: re-export" in err, err

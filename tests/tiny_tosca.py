@@ -89,3 +89,8 @@ def results_fingerprint(workdir: Path, settings=SETTINGS) -> dict[str, str]:
         metadata = {k: v for k, v in bench.metadata.items() if k != "created"}
         out[f"{setting}/metadata"] = _sha(json.dumps(metadata, sort_keys=True, default=str).encode())
     return out
+
+
+def fingerprint_differences(a: dict[str, str], b: dict[str, str]) -> list[str]:
+    """Keys of two :func:`results_fingerprint` results that differ or stand in only one of them."""
+    return sorted(k for k in a.keys() | b.keys() if a.get(k) != b.get(k))
