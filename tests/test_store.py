@@ -167,3 +167,14 @@ def test_compressed_and_fortran_records_round_trip(pair_record_files, tmp_path):
     bench = open_benchmark(path)
     assert_same_record(bench.record(record.pair_id), record)
     assert_same_record(bench.record(plain.pair_id), plain)
+
+
+def test_a_killed_writes_folder_is_removed_but_not_a_sibling_stores(pair_record_files, tmp_path):
+    """Writing ``s.zarr`` removes ``.s.zarr.<random>.tmp`` (a killed write of it), never the temporary
+    folder of ``s.zarr.v2`` being written beside it."""
+    killed, sibling = tmp_path / ".s.zarr.k1ll3d_x.tmp", tmp_path / ".s.zarr.v2.abcd1234.tmp"
+    for folder in (killed, sibling):
+        (folder / "arrays").mkdir(parents=True)
+    write_store(pair_record_files["full_full"], tmp_path / "s.zarr", setting="full_full", progress=False)
+    assert not killed.exists() and sibling.exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == [sibling.name, "s.zarr"]
