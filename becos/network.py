@@ -42,14 +42,14 @@ from becos.mesh import TriMesh, surface_faces, vertex_set_keys
 from becos.surface_map import NONE, SurfaceMap, compose, compose_path
 
 
-def identity_map(mesh: TriMesh) -> SurfaceMap:
+def identity_map(mesh: TriMesh, usable_rows: np.ndarray | None = None) -> SurfaceMap:
     """Vertex i -> vertex i of ``mesh`` (weight 1 at its corner of an incident face).
 
-    Only usable faces (:func:`becos.mesh.surface_faces`) carry the points; a vertex in no usable face
-    (unreferenced, or used only by degenerate faces) gets no counterpart (face -1). On a clean mesh
-    this equals :meth:`SurfaceMap.identity`.
+    Only usable faces (:func:`becos.mesh.surface_faces`; ``usable_rows``, their rows, when already
+    known) carry the points; a vertex in no usable face (unreferenced, or used only by degenerate
+    faces) gets no counterpart (face -1). On a clean mesh this equals :meth:`SurfaceMap.identity`.
     """
-    rows = np.flatnonzero(surface_faces(mesh))
+    rows = np.flatnonzero(surface_faces(mesh)) if usable_rows is None else usable_rows
     faces = mesh.faces[rows]
     incident = np.full(mesh.n_vertices, NONE, dtype=np.int64)
     corner = np.zeros(mesh.n_vertices, dtype=np.int64)
@@ -61,10 +61,43 @@ def identity_map(mesh: TriMesh) -> SurfaceMap:
     return SurfaceMap(incident, weights)
 
 
-def transplant(m: SurfaceMap, source_faces: np.ndarray, target: TriMesh,
+class FacesByVertexSet:
+    """The usable faces of ``mesh`` (:func:`becos.mesh.surface_faces`), found by their vertex set.
+
+    Built once per target mesh and shared by every :func:`transplant` onto it (sorting the keys of a
+    100k-face mesh costs tens of ms; a pair's lookups are one ``searchsorted``)."""
+
+    def __init__(self, mesh: TriMesh):
+        self.mesh = mesh
+        self.rows = np.flatnonzero(surface_faces(mesh))            # (U,) usable rows of mesh.faces
+        keys = vertex_set_keys(mesh.faces[self.rows], mesh.n_vertices)
+        self._order = np.argsort(keys, kind="stable")
+        self._sorted_keys = keys[self._order]
+        self._identity: SurfaceMap | None = None
+
+    def find(self, triples: np.ndarray) -> np.ndarray:
+        """(K,) int64 row of ``mesh.faces`` with the vertex set of each of ``triples`` ((K, 3) vertex
+        ids, any order), -1 where no usable face has it."""
+        keys = vertex_set_keys(triples, self.mesh.n_vertices)
+        out = np.full(len(keys), NONE, dtype=np.int64)
+        if len(self._sorted_keys):
+            pos = np.minimum(np.searchsorted(self._sorted_keys, keys), len(self._sorted_keys) - 1)
+            found = self._sorted_keys[pos] == keys
+            out[found] = self.rows[self._order[pos[found]]]
+        return out
+
+    def identity(self) -> SurfaceMap:
+        """:func:`identity_map` of ``mesh`` (computed on first use; read it, do not modify it)."""
+        if self._identity is None:
+            self._identity = identity_map(self.mesh, self.rows)
+        return self._identity
+
+
+def transplant(m: SurfaceMap, source_faces: np.ndarray, target: TriMesh | FacesByVertexSet,
                locator: SurfaceLocator | None = None) -> SurfaceMap:
     """Carry ``m`` (points on a surface with faces ``source_faces``) to ``target``, a mesh with the
     same vertex order (another pose of the class, or the class template), by vertex identity.
+    Pass the target's :class:`FacesByVertexSet` to reuse it across calls.
 
     A point with weights w in source face (a, b, c) lands in the usable target face with the vertex
     set {a, b, c}, with w permuted into that face's column order: exactly the same vertices and
@@ -75,6 +108,8 @@ def transplant(m: SurfaceMap, source_faces: np.ndarray, target: TriMesh,
     Raises:
         BecosError: ``source_faces`` index vertices the target does not have.
     """
+    index = target if isinstance(target, FacesByVertexSet) else FacesByVertexSet(target)
+    target = index.mesh
     source_faces = np.asarray(source_faces, dtype=np.int64)
     if len(source_faces) and int(source_faces.max()) >= target.n_vertices:
         raise BecosError(f"a ground-truth path carries points by vertex identity onto a mesh with "
@@ -86,18 +121,10 @@ def transplant(m: SurfaceMap, source_faces: np.ndarray, target: TriMesh,
     distance = np.full(len(m), np.nan)
     alive = np.flatnonzero(m.matched)
     src = source_faces[m.face[alive]]                                     # (M, 3) vertex ids
-    rows = np.flatnonzero(surface_faces(target))
-    target_keys = vertex_set_keys(target.faces[rows], target.n_vertices)
-    order = np.argsort(target_keys, kind="stable")
-    sorted_keys = target_keys[order]
-    keys = vertex_set_keys(src, target.n_vertices)
-    if len(sorted_keys):
-        pos = np.minimum(np.searchsorted(sorted_keys, keys), len(sorted_keys) - 1)
-        found = sorted_keys[pos] == keys
-    else:
-        pos, found = np.zeros(len(keys), dtype=np.int64), np.zeros(len(keys), dtype=bool)
+    rows = index.find(src)
+    found = rows >= 0
     hit = alive[found]
-    target_face = rows[order[pos[found]]]
+    target_face = rows[found]
     # (H, 3 source columns, 3 target columns): where each source corner sits in the target row
     same = (src[found][:, :, None] == target.faces[target_face][:, None, :]).astype(np.float64)
     face[hit] = target_face
@@ -106,7 +133,7 @@ def transplant(m: SurfaceMap, source_faces: np.ndarray, target: TriMesh,
     rest = alive[~found]
     if len(rest):
         sub = SurfaceMap(m.face[rest], m.weights[rest], m.distance[rest])
-        projected = compose(sub, source_faces, identity_map(target), target, locator)
+        projected = compose(sub, source_faces, index.identity(), target, locator)
         face[rest], weights[rest], distance[rest] = projected.face, projected.weights, projected.distance
     return SurfaceMap(face, weights, distance)
 
@@ -147,7 +174,7 @@ class ShapeNetwork:
         self._meshes = meshes
         self._faces_cache: dict[tuple[str, str], np.ndarray] = {}
         self._chains: dict[tuple[str, ...], SurfaceMap] = {}
-        self._locators: OrderedDict[int, tuple[TriMesh, SurfaceLocator]] = OrderedDict()
+        self._per_mesh: OrderedDict[tuple, tuple] = OrderedDict()
         self._geometries: OrderedDict[tuple, tuple] = OrderedDict()
 
     # --- paths ----------------------------------------------------------------------------------
@@ -226,17 +253,21 @@ class ShapeNetwork:
         return edge
 
     # --- ground truth ---------------------------------------------------------------------------
+    def _kept(self, make: Callable[[TriMesh], object], mesh: TriMesh):
+        """``make(mesh)``, kept for the last few meshes used as targets."""
+        key = (make, id(mesh))
+        if key in self._per_mesh:
+            self._per_mesh.move_to_end(key)
+            return self._per_mesh[key][1]
+        value = make(mesh)
+        self._per_mesh[key] = (mesh, value)  # holding the mesh keeps its id from being reused
+        while len(self._per_mesh) > 16:
+            self._per_mesh.popitem(last=False)
+        return value
+
     def locator(self, mesh: TriMesh) -> SurfaceLocator:
         """A closest-point structure of ``mesh``, kept for the last few meshes used as targets."""
-        key = id(mesh)
-        if key in self._locators:
-            self._locators.move_to_end(key)
-            return self._locators[key][1]
-        locator = SurfaceLocator(mesh)
-        self._locators[key] = (mesh, locator)  # holding the mesh keeps its id from being reused
-        while len(self._locators) > 8:
-            self._locators.popitem(last=False)
-        return locator
+        return self._kept(SurfaceLocator, mesh)
 
     def template_chain(self, templates: list[Surface]) -> SurfaceMap | None:
         """Template ``templates[0]`` vertices -> points on ``templates[-1]``, composed along the network
@@ -271,7 +302,7 @@ class ShapeNetwork:
         composed onto the last mapped surface, with the target's vertex positions."""
         mapped = [j for j, h in enumerate(hops) if h is not None]
         if not mapped:
-            return identity_map(target)
+            return identity_map(target, self._kept(FacesByVertexSet, target).rows)
         k = mapped[-1]
         middle = [self.faces_of(surface) for surface in landing[:k]]
         if k == len(hops) - 1:
@@ -279,7 +310,7 @@ class ShapeNetwork:
         faces = self.faces_of(landing[k])
         geometry = self._geometry_with_faces(target, faces)
         head = compose_path(hops[:k + 1], middle, geometry, self.locator(geometry))
-        return transplant(head, faces, target, self.locator(target))
+        return transplant(head, faces, self._kept(FacesByVertexSet, target), self.locator(target))
 
     def ground_truth(self, x: ShapeLike, y: ShapeLike, *, x_remesh=None, y_remesh=None,
                      y_mesh: TriMesh | None = None) -> SurfaceMap:
