@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tiny_tosca import fingerprint_differences, results_fingerprint, write_tiny_tosca_config
+from tiny_tosca import fingerprint_differences, results_fingerprint, tiny_tosca_config, write_config_file
 
 REPO = Path(__file__).resolve().parents[1]
 SNAKEMAKE = [sys.executable, "-m", "snakemake", "-s", str(REPO / "Snakefile")]
@@ -115,8 +115,9 @@ def test_workflow_on_slurm_equals_local_run(slurm_cluster, becos_code, tmp_path_
     assert smoke and smoke[0]["State"] == "COMPLETED", harness.sacct()
 
     # 2. the same configuration locally and through the SLURM profile, in separate working directories
-    local = write_tiny_tosca_config(tmp_path_factory.mktemp("slurm-local"), becos_code, n_chunks=N_CHUNKS).parent
-    remote = write_tiny_tosca_config(tmp_path_factory.mktemp("slurm-remote"), becos_code, n_chunks=N_CHUNKS).parent
+    config = tiny_tosca_config(becos_code, n_chunks=N_CHUNKS)
+    local = write_config_file(tmp_path_factory.mktemp("slurm-local"), config)
+    remote = write_config_file(tmp_path_factory.mktemp("slurm-remote"), config)
     local_s, _ = _snakemake(local, ["--cores", "2"], env)
     slurm_s, out = _snakemake(remote, ["--profile", str(REPO / "profiles" / "slurm"), *FAST_STATUS], env)
     print(f"tiny TOSCA run: local (--cores 2) {local_s:.1f} s, SLURM profile {slurm_s:.1f} s")
@@ -149,7 +150,7 @@ def test_workflow_on_slurm_equals_local_run(slurm_cluster, becos_code, tmp_path_
           f"ground truth, pair files; {n_arrays} store arrays, offsets, metas, tables, metadata)")
 
     # 5. the cluster-generic profile (its SLURM example) submits a remesh job; same file as the local run
-    generic = write_tiny_tosca_config(tmp_path_factory.mktemp("slurm-generic"), becos_code, n_chunks=N_CHUNKS).parent
+    generic = write_config_file(tmp_path_factory.mktemp("slurm-generic"), config)
     target = "results/remeshed/tosca/cat0/v0.npz"
     generic_s, out = _snakemake(generic, ["--profile", str(REPO / "profiles" / "cluster-generic"),
                                           "--seconds-between-status-checks", "2", target], env)

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from tiny_tosca import TINY_SHAPES, tiny_tosca_config, tosca_config
+from tiny_tosca import TINY_SHAPES, tiny_tosca_config, tosca_config, write_config_file
 
 REPO = Path(__file__).resolve().parents[1]
 SNAKEMAKE = [sys.executable, "-m", "snakemake", "-s", str(REPO / "Snakefile")]
@@ -36,9 +36,8 @@ def snakemake(workdir: Path, *args: str, check: bool = True) -> subprocess.Compl
 
 
 def write_config(workdir: Path, becos_code: Path, **overrides) -> Path:
-    workdir.mkdir(parents=True, exist_ok=True)
-    (workdir / "config.yaml").write_text(yaml.safe_dump(tosca_config(becos_code, **overrides), sort_keys=False))
-    return workdir
+    """``workdir`` with a ``config.yaml`` of :func:`tiny_tosca.tosca_config` and ``overrides``."""
+    return write_config_file(workdir, tosca_config(becos_code, **overrides))
 
 
 def jobs_planned(dry_run_output: str) -> dict[str, int]:
@@ -53,8 +52,7 @@ def jobs_planned(dry_run_output: str) -> dict[str, int]:
 
 @pytest.fixture(scope="session")
 def tiny_tosca_run(becos_code, tmp_path_factory) -> Path:
-    workdir = write_config(tmp_path_factory.mktemp("tiny-tosca"), becos_code,
-                           **tiny_tosca_config(becos_code))
+    workdir = write_config_file(tmp_path_factory.mktemp("tiny-tosca"), tiny_tosca_config(becos_code))
     snakemake(workdir, "--cores", "2")
     return workdir
 

@@ -44,13 +44,12 @@ def tiny_tosca_config(becos_code: Path, **overrides) -> dict:
     return tosca_config(becos_code, **{**tiny, **overrides})
 
 
-def write_tiny_tosca_config(workdir: Path, becos_code: Path, **overrides) -> Path:
-    """Write ``workdir/config.yaml`` (creating ``workdir``); returns its path."""
+def write_config_file(workdir: Path, config: dict) -> Path:
+    """Write ``config`` to ``workdir/config.yaml`` (creating ``workdir``); returns ``workdir``."""
     workdir = Path(workdir)
     workdir.mkdir(parents=True, exist_ok=True)
-    path = workdir / "config.yaml"
-    path.write_text(yaml.safe_dump(tiny_tosca_config(becos_code, **overrides), sort_keys=False))
-    return path
+    (workdir / "config.yaml").write_text(yaml.safe_dump(config, sort_keys=False))
+    return workdir
 
 
 def _sha(data: bytes) -> str:
