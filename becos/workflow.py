@@ -59,7 +59,7 @@ STAGE_KEYS: dict[str, tuple[str, ...]] = {
     "catalog": ("data_dir", "annotations", "datasets", "shapes", "template_file"),
     "manifest": ("data_dir", "annotations", "datasets", "shapes", "template_file", "combinations", "seed", "usage_scale",
                  "caps", "remesh", "remesh_variants", "n_chunks", "original_settings"),
-    "remesh": ("seed", "remesh"),
+    "remesh": ("seed", "remesh", "remesher"),
     "export": (),
     "ground_truth": ("annotations", "template_file", "remesh"),
     "pairs": ("one_axis_rotation", "up_axis", "area_normalised", "propagate_annotations", "annotations",
@@ -105,6 +105,8 @@ def resolve_config(raw: dict) -> dict:
 
     schema = _schema()
     config = _fill_defaults(schema, deepcopy(dict(raw)))
+    if config.get("remesher") == "auto":  # the published targets, rotations and views refer to the reference's remesh
+        config["remesher"] = "reference" if config.get("original_settings") else "becos"
     validator = jsonschema.Draft202012Validator(schema)
     errors = sorted(validator.iter_errors(config), key=lambda e: list(e.path))
     if errors:
@@ -525,7 +527,9 @@ def write_manifest_stage(config: dict, setting: str, catalog_path: Path, out: Pa
 def remesh_stage(config: dict, shape_row: dict, token: str, out: Path, ply: Path | None = None) -> None:
     """Remesh one shape variant (prepared, common-frame mesh) and write the maps (+ a PLY to look at).
 
-    ``shape_row`` is the shape's catalog row (:mod:`becos.catalog` columns).
+    ``shape_row`` is the shape's catalog row (:mod:`becos.catalog` columns). With ``remesher:
+    reference`` the reference's remesh of the file coordinates (:mod:`becos.reference_remesh`; a vertex
+    target n becomes the face target 2n).
     """
     from becos.remesh import remesh, save_remeshed, write_ply
 
@@ -534,13 +538,19 @@ def remesh_stage(config: dict, shape_row: dict, token: str, out: Path, ply: Path
     target = Plan(config, pd.DataFrame([shape_row]), {}).remesh_target(dataset, name, token)
     prepared = shapes.prepared(dataset, name)
     start = time.perf_counter()
-    result = remesh(prepared.mesh, **target, source=prepared.entry.path)
+    if config.get("remesher") == "reference":
+        from becos.reference_remesh import remesh_like_reference
+
+        faces = target.get("target_faces") or 2 * int(target["target_vertices"])
+        result, _ = remesh_like_reference(shapes.mesh(dataset, name), prepared, faces, source=prepared.entry.path)
+    else:
+        result = remesh(prepared.mesh, **target, source=prepared.entry.path)
     _remove_killed_writes([Path(p) for p in (out, ply) if p is not None])
     save_remeshed(Path(out), result)
     if ply is not None:
         write_ply(Path(ply), result.mesh)
-    _log(f"remesh {dataset}/{name} {token}: {prepared.mesh.n_vertices} -> {result.mesh.n_vertices} vertices "
-         f"({target}) in {time.perf_counter() - start:.1f} s")
+    _log(f"remesh {dataset}/{name} {token} ({config.get('remesher', 'becos')}): {prepared.mesh.n_vertices} -> "
+         f"{result.mesh.n_vertices} vertices ({target}) in {time.perf_counter() - start:.1f} s")
 
 
 def _stored_key(path: Path, member: str) -> str | None:

@@ -1,0 +1,250 @@
+"""becos under ``original_settings`` against the reference generator's own output (``reference_oracle/``).
+
+Run: ``python benchmarks/oracle.py [--results DIR]`` (JSON on stdout, the per-pair table on stderr).
+
+For every oracle pair (``reference_oracle/<setting>/<split>/<index>/``, ``index`` = position in that
+split's list of the published pickle) this builds what the workflow builds with ``original_settings:
+true`` on TOSCA (resolved config, catalog, published manifest written and read back as CSV, one
+``becos remesh`` stage per shape and face target) and compares, for ``full_full``:
+
+- ``fwd``: our remesh file (common frame), re-centred and carried forward with the info pickles'
+  ``surface_area``, ``align_rotation``/``align_translation`` (Y) and ``random_rotation`` into the
+  reference's output frame, against ``0_<x>.off`` / ``1_<y>.off``: max |Δ| (vertices in output units);
+- ``undo``: the oracle's vertices carried back (rotation, alignment undone) against our re-centred
+  remesh: max |Δ|;
+- ``bitwise``: the reference's remesh of the file (:func:`becos.reference_remesh.reference_remesh`)
+  carried forward exactly as the reference computes it: max |Δ| (0 = bit for bit);
+- ``faces``: identical face arrays; ``rot``: the manifest's rotation (the one the pairs stage applies)
+  bitwise equal to the info pickle's ``random_rotation``; ``area``: relative difference of our
+  sqrt-area to ``surface_area``;
+- ``corres``: for pairs of one TOSCA class (identity hop between the originals), the reference's
+  rounded vertex maps (:attr:`ReferenceRemesh.remeshed_to_source` / ``source_to_remeshed``) composed
+  equal ``corres_01`` / ``corres_10``.
+
+For ``partial_partial`` pairs the rotations are compared (``rot``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import pickle
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def becos_code() -> Path:
+    out = subprocess.run([str(REPO.parent / "shared" / "unpack")], check=True, capture_output=True,
+                         text=True).stdout.strip()
+    return Path(out.splitlines()[-1])
+
+
+def oracle_pairs(root: Path, setting: str) -> list[tuple[str, int, Path]]:
+    """(split, published index, folder) of every oracle pair of ``setting``, sorted."""
+    base = root / "reference_oracle" / setting
+    return sorted((p.parent.name, int(p.name), p) for p in base.glob("*/*") if p.is_dir())
+
+
+def oracle_side(folder: Path, side: int) -> tuple[str, np.ndarray, np.ndarray, dict]:
+    """(name, vertices, faces, info) of side 0 (x) or 1 (y) of an oracle pair folder."""
+    import trimesh
+
+    off = next(p for p in folder.glob(f"{side}_*.off"))
+    name = off.stem[2:]
+    mesh = trimesh.load(off, process=False, maintain_order=True)
+    with open(folder / f"{side}_{name}_info.pkl", "rb") as fh:
+        info = pickle.load(fh)
+    return name, np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces, dtype=np.int64), info
+
+
+def published_setup(root: Path, results: Path, settings: tuple[str, ...]) -> dict:
+    """The resolved ``original_settings`` config on TOSCA, its plan and manifests (written and read
+    back as the chunk jobs read them)."""
+    from becos.sampling import read_manifest, write_manifest
+    from becos.workflow import Plan, build_catalog, build_manifest, resolve_config
+
+    config = resolve_config({"data_dir": str(root / "data"), "annotations": str(root), "datasets": ["tosca"],
+                             "original_settings": True, "setting": list(settings), "results": str(results)})
+    catalog = build_catalog(config)
+    manifests = {}
+    for setting in settings:
+        path = results / setting / "manifest.csv"
+        write_manifest(build_manifest(config, setting, catalog), path)
+        manifests[setting] = read_manifest(path)
+    return {"config": config, "plan": Plan(config, catalog, manifests), "manifests": manifests}
+
+
+def manifest_row(manifest, split: str, index: int) -> dict:
+    rows = manifest[(manifest["split"] == split) & (manifest["published_index"] == index)]
+    if len(rows) != 1:
+        raise LookupError(f"published pair {split}/{index} is not in the manifest ({len(rows)} rows)")
+    return rows.iloc[0].to_dict()
+
+
+class StageRemeshes:
+    """Remesh files written by the workflow's own remesh stage (one per shape and token), kept."""
+
+    def __init__(self, setup: dict):
+        from becos.workflow import job_options
+
+        self.plan = setup["plan"]
+        self.options = json.loads(job_options(setup["config"], "remesh"))
+        self.seconds: dict[tuple[str, str], float] = {}
+        self._done: dict[tuple[str, str], object] = {}
+
+    def get(self, dataset: str, name: str, token: str):
+        from becos.remesh import load_remeshed
+        from becos.workflow import remesh_stage
+
+        key = (name, token)
+        if key not in self._done:
+            out = self.plan.layout.remeshed(dataset, name, token)
+            start = time.perf_counter()
+            remesh_stage(self.options, json.loads(self.plan.shape_json(dataset, name)), token, out)
+            self.seconds[key] = time.perf_counter() - start
+            self._done[key] = load_remeshed(out)
+        return self._done[key]
+
+
+def compare_full_side(remeshed, oracle_vertices: np.ndarray, oracle_faces: np.ndarray, info: dict) -> dict:
+    """Our remesh file vs one side of an oracle full_full pair (see the module docstring)."""
+    from becos.reference_remesh import reference_output, sqrt_area, undo_reference_output
+
+    ours = remeshed.mesh.vertices - np.mean(remeshed.mesh.vertices, axis=0)
+    align = (info["align_rotation"], info["align_translation"]) if info["align_rotation"] is not None else (None, None)
+    same_shape = ours.shape == oracle_vertices.shape
+    forward = reference_output(ours, info["surface_area"], info["random_rotation"], *align)
+    undone = undo_reference_output(oracle_vertices, info["random_rotation"], *align)
+    return {
+        "n_vertices": int(len(ours)), "n_faces": int(len(remeshed.mesh.faces)),
+        "faces_identical": bool(np.array_equal(remeshed.mesh.faces, oracle_faces)),
+        "max_abs_diff_forward": float(np.abs(forward - oracle_vertices).max()) if same_shape else float("inf"),
+        "max_abs_diff_undo": float(np.abs(undone - ours).max()) if same_shape else float("inf"),
+        "sqrt_area_rel_diff": abs(sqrt_area(ours, remeshed.mesh.faces) / info["surface_area"] - 1.0),
+    }
+
+
+def bitwise_side(root: Path, name: str, target_faces: int, scale: float, rot_deg, info: dict,
+                 oracle_vertices: np.ndarray):
+    """The reference's remesh of the file carried forward exactly as the reference does:
+    (max |Δ| to the oracle's vertices, the :class:`ReferenceRemesh`, seconds)."""
+    from becos.mesh import read_mesh
+    from becos.reference_remesh import open3d_rotation, reference_output, reference_pose, reference_remesh
+
+    start = time.perf_counter()
+    ref = reference_remesh(read_mesh(root / "data" / "tosca-off" / f"{name}.off"), target_faces)
+    seconds = time.perf_counter() - start
+    align = (info["align_rotation"], info["align_translation"]) if info["align_rotation"] is not None else (None, None)
+    posed = reference_pose(ref.mesh.vertices, scale, open3d_rotation(rot_deg))
+    out = reference_output(posed, info["surface_area"], info["random_rotation"], *align)
+    diff = float(np.abs(out - oracle_vertices).max()) if out.shape == oracle_vertices.shape else float("inf")
+    return diff, ref, seconds
+
+
+def rotation_identical(row: dict, info_x: dict, info_y: dict) -> bool:
+    from becos.workflow import _published_rotations
+
+    rx, ry = _published_rotations(row)
+    return bool(np.array_equal(rx, info_x["random_rotation"]) and np.array_equal(ry, info_y["random_rotation"]))
+
+
+def run(results: Path) -> dict:
+    from becos.datasets import DatasetSpec
+    from becos.workflow import remesh_token
+
+    root = becos_code()
+    t0 = time.perf_counter()
+    setup = published_setup(root, results, ("full_full", "partial_partial"))
+    seconds_setup = time.perf_counter() - t0
+    stage = StageRemeshes(setup)
+    spec = DatasetSpec.load("tosca")
+    rows_out = []
+    for split, index, folder in oracle_pairs(root, "full_full"):
+        row = manifest_row(setup["manifests"]["full_full"], split, index)
+        sides, refs = {}, {}
+        infos = []
+        for side_index, side in enumerate(("x", "y")):
+            name, vertices, faces, info = oracle_side(folder, side_index)
+            assert name == row[f"{side}_name"], (name, row[f"{side}_name"])
+            token = remesh_token(row, side, True)
+            result = compare_full_side(stage.get("tosca", name, token), vertices, faces, info)
+            diff, ref, seconds = bitwise_side(root, name, int(token[1:]), spec.scale, spec.rotation_deg, info, vertices)
+            result.update(name=name, token=token, max_abs_diff_bitwise=diff, seconds_reference_remesh=seconds,
+                          seconds_remesh_stage=stage.seconds.get((name, token), 0.0))
+            sides[side], refs[side] = result, ref
+            infos.append(info)
+        classes = setup["plan"]._catalog_rows
+        same_class = classes[("tosca", row["x_name"])]["class"] == classes[("tosca", row["y_name"])]["class"]
+        corres = None
+        if same_class:
+            c01, c10 = np.load(folder / "corres_01.npy"), np.load(folder / "corres_10.npy")
+            corres = bool(np.array_equal(refs["y"].source_to_remeshed[refs["x"].remeshed_to_source], c01)
+                          and np.array_equal(refs["x"].source_to_remeshed[refs["y"].remeshed_to_source], c10))
+        rows_out.append({"setting": "full_full", "split": split, "index": index, "x": sides["x"], "y": sides["y"],
+                         "random_rotation_identical": rotation_identical(row, *infos),
+                         "reference_maps_reproduce_corres": corres})
+    for split, index, folder in oracle_pairs(root, "partial_partial"):
+        row = manifest_row(setup["manifests"]["partial_partial"], split, index)
+        (nx, *_, ix), (ny, *_, iy) = oracle_side(folder, 0), oracle_side(folder, 1)
+        rows_out.append({"setting": "partial_partial", "split": split, "index": index,
+                         "x": {"name": nx}, "y": {"name": ny},
+                         "random_rotation_identical": rotation_identical(row, ix, iy)})
+    full = [r for r in rows_out if r["setting"] == "full_full"]
+    summary = {
+        "remesher": setup["config"]["remesher"],
+        "pairs_full_full": len(full),
+        "pairs_partial_partial": len(rows_out) - len(full),
+        "max_abs_diff_forward": max(max(r["x"]["max_abs_diff_forward"], r["y"]["max_abs_diff_forward"]) for r in full),
+        "max_abs_diff_undo": max(max(r["x"]["max_abs_diff_undo"], r["y"]["max_abs_diff_undo"]) for r in full),
+        "max_abs_diff_bitwise": max(max(r["x"]["max_abs_diff_bitwise"], r["y"]["max_abs_diff_bitwise"]) for r in full),
+        "all_faces_identical": all(r["x"]["faces_identical"] and r["y"]["faces_identical"] for r in full),
+        "all_rotations_identical": all(r["random_rotation_identical"] for r in rows_out),
+        "seconds_setup": seconds_setup,
+        "seconds_remesh_stage": stage.seconds,
+    }
+    summary["seconds_remesh_stage"] = {f"{n} {t}": round(s, 2) for (n, t), s in stage.seconds.items()}
+    return {"summary": summary, "pairs": rows_out}
+
+
+def table(report: dict) -> str:
+    lines = [f"{'setting':15} {'pair':10} {'x / y':22} {'n verts':>12} {'fwd max|d|':>11} {'undo max|d|':>11} "
+             f"{'bitwise':>9} {'faces':>6} {'rot':>5} {'corres':>6}"]
+    for r in report["pairs"]:
+        pair = f"{r['split']}/{r['index']}"
+        names = f"{r['x']['name']} / {r['y']['name']}"
+        if r["setting"] == "full_full":
+            x, y = r["x"], r["y"]
+            lines.append(f"{r['setting']:15} {pair:10} {names:22} {x['n_vertices']:>5}/{y['n_vertices']:<6} "
+                         f"{max(x['max_abs_diff_forward'], y['max_abs_diff_forward']):>11.2e} "
+                         f"{max(x['max_abs_diff_undo'], y['max_abs_diff_undo']):>11.2e} "
+                         f"{max(x['max_abs_diff_bitwise'], y['max_abs_diff_bitwise']):>9.1e} "
+                         f"{str(x['faces_identical'] and y['faces_identical']):>6} "
+                         f"{str(r['random_rotation_identical']):>5} {str(r['reference_maps_reproduce_corres']):>6}")
+        else:
+            lines.append(f"{r['setting']:15} {pair:10} {names:22} {'':>12} {'':>11} {'':>11} {'':>9} {'':>6} "
+                         f"{str(r['random_rotation_identical']):>5}")
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--results", type=Path, help="results folder (default: a temporary one)")
+    args = parser.parse_args(argv)
+    if args.results is None:
+        with tempfile.TemporaryDirectory() as tmp:
+            report = run(Path(tmp))
+    else:
+        report = run(args.results)
+    print(table(report), file=sys.stderr)
+    print(json.dumps(report, indent=1, default=float))
+
+
+if __name__ == "__main__":
+    main()
