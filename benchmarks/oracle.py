@@ -148,6 +148,84 @@ def bitwise_side(root: Path, name: str, target_faces: int, scale: float, rot_deg
     return diff, ref, seconds
 
 
+def casting_frames(root: Path, row: dict, infos: tuple[dict, dict], spec) -> tuple:
+    """The reference's remeshes of a pair's shapes in its casting frame (facts §7.4): posed, Y aligned as
+    the info pickle records, each divided by its sqrt-area. Returns ((vertices, faces) of x, of y)."""
+    from becos.mesh import read_mesh
+    from becos.reference_remesh import open3d_rotation, reference_pose, reference_remesh
+
+    out = []
+    for side, info in zip(("x", "y"), infos):
+        ref = reference_remesh(read_mesh(root / "data" / "tosca-off" / f"{row[side + '_name']}.off"),
+                               int(row[f"{side}_face_target"]))
+        posed = reference_pose(ref.mesh.vertices, spec.scale, open3d_rotation(spec.rotation_deg))
+        if info["align_rotation"] is not None:
+            posed = posed @ info["align_rotation"] + info["align_translation"]
+        out.append((posed / info["surface_area"], ref.mesh.faces))
+    return tuple(out)
+
+
+def compare_partial_pair(root: Path, setup: dict, row: dict, folder: Path, spec, cast: bool = True) -> dict:
+    """Our views of an oracle partial_partial pair from the published cameras vs the reference's partials.
+
+    The kept try: the one whose camera the info pickles record when its overlaps are in range, else the
+    LAST try (the reference keeps the last try's geometry, facts §7.5). Per side: where the triangle
+    ids came from (``file`` / ``cast``), vertex counts, identical triangle sets, identical kept full
+    faces (equal whichever diagonal fills a 4-edge hole) and ``partial2full``; with ``cast``, the
+    Jaccard index of our 5000² cast from the side's own camera against the file."""
+    from becos.reference_views import (cast_pinhole, full_faces_covering, full_triangles, pair_view_files,
+                                       read_triangle_ids, reference_component)
+
+    sides = [oracle_side(folder, i) for i in (0, 1)]
+    infos = (sides[0][3], sides[1][3])
+    cams = np.asarray(_published_cameras(setup)[row["pair_id"]])          # (2, 10, 3)
+    k_cam = int(np.flatnonzero(np.all(cams[0] == infos[0]["cam_pos"], axis=1))[0])
+    lo, hi = setup["config"]["min_overlap"], setup["config"]["max_overlap"]
+    accepted = all(lo <= i["overlap_percentage"] <= hi for i in infos)
+    k = k_cam if accepted else len(cams[0]) - 1
+    frames = casting_frames(root, row, infos, spec)
+    files = pair_view_files(root, "partial_partial", row["x_name"], row["y_name"], cams[0], k)
+    out = {"try": k, "accepted": accepted}
+    for i, side in enumerate(("x", "y")):
+        vertices, faces = frames[i]
+        start = time.perf_counter()
+        if files[i].is_file():
+            ids, source = read_triangle_ids(files[i], len(faces)), "file"
+        else:
+            ids, source = cast_pinhole(vertices, faces, cams[i][k]), "cast"
+        seconds_view = time.perf_counter() - start
+        comp = reference_component(vertices, faces, ids)
+        jaccard = None
+        if cast and source == "file":  # the cast the reference would do without the file, against the file
+            cast_ids = cast_pinhole(vertices, faces, cams[i][k])
+            jaccard = len(np.intersect1d(cast_ids, ids)) / len(np.union1d(cast_ids, ids))
+        _, o_vertices, o_faces, info = sides[i]
+        out[side] = {
+            "view_source": source, "seconds_view": round(seconds_view, 2), "cast_jaccard_vs_file": jaccard,
+            "n_partial_vertices": int(len(comp.partial_vertices)), "n_oracle_vertices": int(len(o_vertices)),
+            "same_triangles": full_triangles(comp.partial_faces, comp.partial_to_full)
+            == full_triangles(o_faces, info["partial2full"]),
+            "same_kept_full_faces": bool(np.array_equal(
+                comp.kept_faces, full_faces_covering(faces, len(vertices), info["partial2full"][o_faces])[0])),
+            "same_partial2full": bool(np.array_equal(comp.partial_to_full, info["partial2full"])),
+            "fill_faces_not_in_full_mesh": comp.unmatched_faces,
+        }
+    return out
+
+
+def _published_cameras(setup: dict) -> dict:
+    """``{pair_id: (2, 10, 3)}`` cameras of the published partial_partial list."""
+    from becos.published import import_published
+
+    if "cameras" not in setup:
+        config = setup["config"]
+        path = Path(config["annotations"]) / "config" / "pairings_original_partial_partial.pkl"
+        setup["cameras"] = import_published(path, setting="partial_partial", seed=config["seed"],
+                                            n_variants=config["remesh_variants"], n_chunks=config["n_chunks"],
+                                            datasets=config["datasets"]).cameras
+    return setup["cameras"]
+
+
 def rotation_identical(row: dict, info_x: dict, info_y: dict) -> bool:
     from becos.workflow import _published_rotations
 
@@ -193,10 +271,13 @@ def run(results: Path) -> dict:
     for split, index, folder in oracle_pairs(root, "partial_partial"):
         row = manifest_row(setup["manifests"]["partial_partial"], split, index)
         (nx, *_, ix), (ny, *_, iy) = oracle_side(folder, 0), oracle_side(folder, 1)
+        views = compare_partial_pair(root, setup, row, folder, spec)
         rows_out.append({"setting": "partial_partial", "split": split, "index": index,
-                         "x": {"name": nx}, "y": {"name": ny},
+                         "x": {"name": nx, **views["x"]}, "y": {"name": ny, **views["y"]},
+                         "try": views["try"], "accepted": views["accepted"],
                          "random_rotation_identical": rotation_identical(row, ix, iy)})
     full = [r for r in rows_out if r["setting"] == "full_full"]
+    partial = [r for r in rows_out if r["setting"] == "partial_partial"]
     summary = {
         "remesher": setup["config"]["remesher"],
         "pairs_full_full": len(full),
@@ -206,6 +287,12 @@ def run(results: Path) -> dict:
         "max_abs_diff_bitwise": max(max(r["x"]["max_abs_diff_bitwise"], r["y"]["max_abs_diff_bitwise"]) for r in full),
         "all_faces_identical": all(r["x"]["faces_identical"] and r["y"]["faces_identical"] for r in full),
         "all_rotations_identical": all(r["random_rotation_identical"] for r in rows_out),
+        "partial_sides_same_kept_full_faces": sum(r[s]["same_kept_full_faces"] for r in partial for s in "xy"),
+        "partial_sides_same_triangles": sum(r[s]["same_triangles"] for r in partial for s in "xy"),
+        "partial_sides_same_partial2full": sum(r[s]["same_partial2full"] for r in partial for s in "xy"),
+        "partial_sides": 2 * len(partial),
+        "cast_jaccard_vs_file_min": min((r[s]["cast_jaccard_vs_file"] for r in partial for s in "xy"
+                                         if r[s]["cast_jaccard_vs_file"] is not None), default=None),
         "seconds_setup": seconds_setup,
         "seconds_remesh_stage": stage.seconds,
     }
@@ -227,10 +314,25 @@ def table(report: dict) -> str:
                          f"{max(x['max_abs_diff_bitwise'], y['max_abs_diff_bitwise']):>9.1e} "
                          f"{str(x['faces_identical'] and y['faces_identical']):>6} "
                          f"{str(r['random_rotation_identical']):>5} {str(r['reference_maps_reproduce_corres']):>6}")
-        else:
-            lines.append(f"{r['setting']:15} {pair:10} {names:22} {'':>12} {'':>11} {'':>11} {'':>9} {'':>6} "
-                         f"{str(r['random_rotation_identical']):>5}")
+    lines.append("")
+    lines.append(f"{'setting':15} {'pair':10} {'x / y':22} {'try':>3} {'acc':>5} {'source x/y':>10} "
+                 f"{'n verts (ours=oracle)':>22} {'same tri':>8} {'kept':>5} {'p2f':>5} {'cast J':>11} {'rot':>5}")
+    for r in report["pairs"]:
+        if r["setting"] != "partial_partial":
+            continue
+        x, y = r["x"], r["y"]
+        verts = f"{x['n_partial_vertices']}={x['n_oracle_vertices']} {y['n_partial_vertices']}={y['n_oracle_vertices']}"
+        lines.append(f"{r['setting']:15} {r['split'] + '/' + str(r['index']):10} {x['name'] + ' / ' + y['name']:22} "
+                     f"{r['try']:>3} {str(r['accepted']):>5} {x['view_source'] + '/' + y['view_source']:>10} "
+                     f"{verts:>22} {str(x['same_triangles']) + '/' + str(y['same_triangles']):>8} "
+                     f"{str(x['same_kept_full_faces'] and y['same_kept_full_faces']):>5} "
+                     f"{str(x['same_partial2full'] and y['same_partial2full']):>5} "
+                     f"{_jaccards(x, y):>11} {str(r['random_rotation_identical']):>5}")
     return "\n".join(lines)
+
+
+def _jaccards(x: dict, y: dict) -> str:
+    return "/".join("-" if s["cast_jaccard_vs_file"] is None else f"{s['cast_jaccard_vs_file']:.4f}" for s in (x, y))
 
 
 def main(argv: list[str] | None = None) -> None:
