@@ -19,7 +19,11 @@ camera position ``cam_pos`` (a unit vector, one per try) is:
 Reference quirk kept (its ``save_corres_for_shape_pair``): for Y the triangle-id file is named with
 X's camera of the same try, while the file's content is Y's view from Y's own camera (checked on
 the oracle: a cast from Y's ``cam_pos`` gives exactly that file's set). :func:`pair_view_files`
-encodes that naming.
+encodes that naming. A shipped file is one per (shape, camera), while a train shape sits in many
+pairs: the files of wolf1 and centaur1 read as Y of oracle pairs train/384 and train/477 are their
+views in their OWN, unaligned frame (as the X of another pair; Jaccard 1.0 there, 0.77 / 0.52 in the
+pair's aligned frame). So the file is always preferred; a cast (file absent) uses the pair's frame,
+as the reference does when it casts.
 """
 
 from __future__ import annotations

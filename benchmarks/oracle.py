@@ -150,7 +150,8 @@ def bitwise_side(root: Path, name: str, target_faces: int, scale: float, rot_deg
 
 def casting_frames(root: Path, row: dict, infos: tuple[dict, dict], spec) -> tuple:
     """The reference's remeshes of a pair's shapes in its casting frame (facts §7.4): posed, Y aligned as
-    the info pickle records, each divided by its sqrt-area. Returns ((vertices, faces) of x, of y)."""
+    the info pickle records, each divided by its sqrt-area. Returns ((vertices, faces, ReferenceRemesh)
+    of x, of y)."""
     from becos.mesh import read_mesh
     from becos.reference_remesh import open3d_rotation, reference_pose, reference_remesh
 
@@ -161,18 +162,23 @@ def casting_frames(root: Path, row: dict, infos: tuple[dict, dict], spec) -> tup
         posed = reference_pose(ref.mesh.vertices, spec.scale, open3d_rotation(spec.rotation_deg))
         if info["align_rotation"] is not None:
             posed = posed @ info["align_rotation"] + info["align_translation"]
-        out.append((posed / info["surface_area"], ref.mesh.faces))
+        out.append((posed / info["surface_area"], ref.mesh.faces, ref))
     return tuple(out)
 
 
-def compare_partial_pair(root: Path, setup: dict, row: dict, folder: Path, spec, cast: bool = True) -> dict:
+def compare_partial_pair(root: Path, setup: dict, row: dict, folder: Path, spec, cast: bool = True,
+                         stage: "StageRemeshes | None" = None) -> dict:
     """Our views of an oracle partial_partial pair from the published cameras vs the reference's partials.
 
     The kept try: the one whose camera the info pickles record when its overlaps are in range, else the
     LAST try (the reference keeps the last try's geometry, facts §7.5). Per side: where the triangle
     ids came from (``file`` / ``cast``), vertex counts, identical triangle sets, identical kept full
     faces (equal whichever diagonal fills a 4-edge hole) and ``partial2full``; with ``cast``, the
-    Jaccard index of our 5000² cast from the side's own camera against the file."""
+    Jaccard index of our 5000² cast from the side's own camera against the file (in the pair's casting
+    frame; for Y also in its own unaligned frame: a shipped file of a train shape may come from a pair
+    where it was X); with ``stage`` (the
+    remesh files), the overlap masks (:func:`compare_masks`)."""
+    from becos.reference_remesh import open3d_rotation, reference_pose
     from becos.reference_views import (cast_pinhole, full_faces_covering, full_triangles, pair_view_files,
                                        read_triangle_ids, reference_component)
 
@@ -186,8 +192,9 @@ def compare_partial_pair(root: Path, setup: dict, row: dict, folder: Path, spec,
     frames = casting_frames(root, row, infos, spec)
     files = pair_view_files(root, "partial_partial", row["x_name"], row["y_name"], cams[0], k)
     out = {"try": k, "accepted": accepted}
+    comps = []
     for i, side in enumerate(("x", "y")):
-        vertices, faces = frames[i]
+        vertices, faces, _ = frames[i]
         start = time.perf_counter()
         if files[i].is_file():
             ids, source = read_triangle_ids(files[i], len(faces)), "file"
@@ -195,13 +202,16 @@ def compare_partial_pair(root: Path, setup: dict, row: dict, folder: Path, spec,
             ids, source = cast_pinhole(vertices, faces, cams[i][k]), "cast"
         seconds_view = time.perf_counter() - start
         comp = reference_component(vertices, faces, ids)
-        jaccard = None
+        jaccard = jaccard_own = None
         if cast and source == "file":  # the cast the reference would do without the file, against the file
-            cast_ids = cast_pinhole(vertices, faces, cams[i][k])
-            jaccard = len(np.intersect1d(cast_ids, ids)) / len(np.union1d(cast_ids, ids))
+            jaccard = _jaccard(cast_pinhole(vertices, faces, cams[i][k]), ids)
+            if i == 1:   # Y in its own, unaligned frame (as when it was the X of another pair)
+                own = reference_pose(frames[1][2].mesh.vertices, spec.scale, open3d_rotation(spec.rotation_deg))
+                jaccard_own = _jaccard(cast_pinhole(own / infos[1]["surface_area"], faces, cams[i][k]), ids)
         _, o_vertices, o_faces, info = sides[i]
         out[side] = {
             "view_source": source, "seconds_view": round(seconds_view, 2), "cast_jaccard_vs_file": jaccard,
+            "cast_unaligned_jaccard_vs_file": jaccard_own,
             "n_partial_vertices": int(len(comp.partial_vertices)), "n_oracle_vertices": int(len(o_vertices)),
             "same_triangles": full_triangles(comp.partial_faces, comp.partial_to_full)
             == full_triangles(o_faces, info["partial2full"]),
@@ -210,6 +220,71 @@ def compare_partial_pair(root: Path, setup: dict, row: dict, folder: Path, spec,
             "same_partial2full": bool(np.array_equal(comp.partial_to_full, info["partial2full"])),
             "fill_faces_not_in_full_mesh": comp.unmatched_faces,
         }
+        comps.append(comp)
+    if stage is not None:
+        out["masks"] = compare_masks(setup, stage, row, folder, comps, [f[2] for f in frames])
+    return out
+
+
+def compare_masks(setup: dict, stage: "StageRemeshes", row: dict, folder: Path, comps, refs) -> dict:
+    """Overlap masks of the kept views: becos's exact ground truth vs the reference's masks.
+
+    Per direction (``xy``: over partial-X vertices, the reference's mask in Y's info pickle; ``yx``
+    the converse): ``share_all`` = share of partial vertices whose masks agree; ``share_gt_agree``
+    = the same share among the vertices where the two ground truths agree, i.e. the reference's
+    rounded target vertex is a corner of our exact ground-truth face (or both have none). The
+    reference's full ground truth is its rounded vertex maps composed for a pair of one TOSCA class
+    (identity hop); otherwise it is known only where its partial correspondence is not -1.
+    ``share_differ_at_border``: of the vertices whose ground truths agree but masks differ, the share
+    whose reference target vertex lies on partial B's border (the two overlap rules differ there)."""
+    from becos.partiality import cut, overlap_mask
+    from becos.workflow import ShapeStore, remesh_token
+
+    config, plan = setup["config"], setup["plan"]
+    if "shapes" not in setup:
+        setup["shapes"] = ShapeStore(config, plan.catalog)
+    shapes = setup["shapes"]
+    names = (row["x_name"], row["y_name"])
+    remeshed = [stage.get("tosca", n, remesh_token(row, s, True)) for n, s in zip(names, ("x", "y"))]
+    entries = [shapes.entry("tosca", n) for n in names]
+    gt = {"xy": shapes.network.ground_truth(entries[0], entries[1], x_remesh=remeshed[0], y_remesh=remeshed[1]),
+          "yx": shapes.network.ground_truth(entries[1], entries[0], x_remesh=remeshed[1], y_remesh=remeshed[0])}
+    partials = [cut(r.mesh, c.kept_faces) for r, c in zip(remeshed, comps)]
+    infos = [oracle_side(folder, i)[3] for i in (0, 1)]
+    corres = {"xy": np.load(folder / "corres_01.npy"), "yx": np.load(folder / "corres_10.npy")}
+    same_class = plan._catalog_rows[("tosca", names[0])]["class"] == plan._catalog_rows[("tosca", names[1])]["class"]
+    out = {}
+    for d, (a, b) in (("xy", (0, 1)), ("yx", (1, 0))):
+        pa, pb = partials[a], partials[b]
+        ours = overlap_mask(pa, gt[d], pb)
+        theirs = np.asarray(infos[b]["overlap_mask"], dtype=bool)   # the reference stores it in the other side's info
+        assert np.array_equal(pa.partial_to_full, infos[a]["partial2full"])
+        full_rows = pa.partial_to_full
+        if same_class:
+            ref_target = refs[b].source_to_remeshed[refs[a].remeshed_to_source][full_rows]
+        else:   # known where the reference found the image in its partial
+            ref_target = np.where(corres[d] >= 0, pb.partial_to_full[np.maximum(corres[d], 0)], -2)
+        face = gt[d].face[full_rows]
+        corners = np.asarray(remeshed[b].mesh.faces)[np.maximum(face, 0)]
+        gt_agree = np.where(face >= 0, (corners == ref_target[:, None]).any(axis=1), ref_target == -1)
+        agree = ours == theirs
+        # the reference counts a vertex when its target VERTEX is in partial B; becos when the target
+        # POINT's face is kept: they differ where the target vertex is on partial B's border
+        full_b = remeshed[b].mesh
+        border = np.zeros(full_b.n_vertices, dtype=bool)
+        border[np.asarray(full_b.faces)[~pb.kept_faces].ravel()] = True
+        border &= pb.full_to_partial >= 0
+        differ = gt_agree & ~agree
+        on_border = border[np.maximum(ref_target, 0)] & (ref_target >= 0)
+        off_border = gt_agree & ~on_border
+        out[d] = {"n_differ_gt_agree": int(differ.sum()),
+                  "n_gt_agree_off_border": int(off_border.sum()),
+                  "share_gt_agree_off_border": float(agree[off_border].mean()) if off_border.any() else None,
+                  "share_differ_at_border": float(on_border[differ].mean()) if differ.any() else None,
+                  "n": int(len(ours)), "ours_overlap": float(ours.mean()), "reference_overlap": float(theirs.mean()),
+                  "share_all": float(agree.mean()), "n_gt_agree": int(gt_agree.sum()),
+                  "share_gt_agree": float(agree[gt_agree].mean()) if gt_agree.any() else None,
+                  "reference_full_gt": "rounded maps" if same_class else "partial correspondences"}
     return out
 
 
@@ -271,10 +346,10 @@ def run(results: Path) -> dict:
     for split, index, folder in oracle_pairs(root, "partial_partial"):
         row = manifest_row(setup["manifests"]["partial_partial"], split, index)
         (nx, *_, ix), (ny, *_, iy) = oracle_side(folder, 0), oracle_side(folder, 1)
-        views = compare_partial_pair(root, setup, row, folder, spec)
+        views = compare_partial_pair(root, setup, row, folder, spec, stage=stage)
         rows_out.append({"setting": "partial_partial", "split": split, "index": index,
                          "x": {"name": nx, **views["x"]}, "y": {"name": ny, **views["y"]},
-                         "try": views["try"], "accepted": views["accepted"],
+                         "try": views["try"], "accepted": views["accepted"], "masks": views["masks"],
                          "random_rotation_identical": rotation_identical(row, ix, iy)})
     full = [r for r in rows_out if r["setting"] == "full_full"]
     partial = [r for r in rows_out if r["setting"] == "partial_partial"]
@@ -293,11 +368,27 @@ def run(results: Path) -> dict:
         "partial_sides": 2 * len(partial),
         "cast_jaccard_vs_file_min": min((r[s]["cast_jaccard_vs_file"] for r in partial for s in "xy"
                                          if r[s]["cast_jaccard_vs_file"] is not None), default=None),
+        "cast_jaccard_vs_file_best_frame_min": min(
+            (max(v for v in (r[s]["cast_jaccard_vs_file"], r[s]["cast_unaligned_jaccard_vs_file"]) if v is not None)
+             for r in partial for s in "xy" if r[s]["cast_jaccard_vs_file"] is not None), default=None),
+        "mask_share_all": _pooled(partial, "share_all", "n"),
+        "mask_share_gt_agree": _pooled(partial, "share_gt_agree", "n_gt_agree"),
+        "mask_share_gt_agree_off_border": _pooled(partial, "share_gt_agree_off_border", "n_gt_agree_off_border"),
         "seconds_setup": seconds_setup,
         "seconds_remesh_stage": stage.seconds,
     }
     summary["seconds_remesh_stage"] = {f"{n} {t}": round(s, 2) for (n, t), s in stage.seconds.items()}
     return {"summary": summary, "pairs": rows_out}
+
+
+def _jaccard(a: np.ndarray, b: np.ndarray) -> float:
+    return len(np.intersect1d(a, b)) / max(len(np.union1d(a, b)), 1)
+
+
+def _pooled(rows: list[dict], share: str, count: str) -> float:
+    """A mask share over all partial vertices of all pairs and both directions (weighted by count)."""
+    masks = [m for r in rows for m in r["masks"].values() if m[share] is not None]
+    return sum(m[share] * m[count] for m in masks) / max(sum(m[count] for m in masks), 1)
 
 
 def table(report: dict) -> str:
@@ -316,7 +407,7 @@ def table(report: dict) -> str:
                          f"{str(r['random_rotation_identical']):>5} {str(r['reference_maps_reproduce_corres']):>6}")
     lines.append("")
     lines.append(f"{'setting':15} {'pair':10} {'x / y':22} {'try':>3} {'acc':>5} {'source x/y':>10} "
-                 f"{'n verts (ours=oracle)':>22} {'same tri':>8} {'kept':>5} {'p2f':>5} {'cast J':>11} {'rot':>5}")
+                 f"{'n verts (ours=oracle)':>22} {'same tri':>8} {'kept':>5} {'p2f':>5} {'cast J x/y/y own':>20} {'rot':>5}")
     for r in report["pairs"]:
         if r["setting"] != "partial_partial":
             continue
@@ -327,12 +418,24 @@ def table(report: dict) -> str:
                      f"{verts:>22} {str(x['same_triangles']) + '/' + str(y['same_triangles']):>8} "
                      f"{str(x['same_kept_full_faces'] and y['same_kept_full_faces']):>5} "
                      f"{str(x['same_partial2full'] and y['same_partial2full']):>5} "
-                     f"{_jaccards(x, y):>11} {str(r['random_rotation_identical']):>5}")
+                     f"{_jaccards(x, y):>20} {str(r['random_rotation_identical']):>5}")
+    lines.append("")
+    lines.append(f"{'overlap masks':26} {'dir':>3} {'n':>5} {'ours':>6} {'ref':>6} {'agree':>7} {'n GT=':>6} "
+                 f"{'agree|GT=':>9} {'at border':>9} {'n GT= off':>9} {'agree':>7}  reference GT from")
+    for r in report["pairs"]:
+        for d, m in sorted(r.get("masks", {}).items()):
+            f = lambda v: "-" if v is None else f"{v:.4f}"  # noqa: E731
+            lines.append(f"{r['split'] + '/' + str(r['index']) + ' ' + r['x']['name'] + '/' + r['y']['name']:26} "
+                         f"{d:>3} {m['n']:>5} {m['ours_overlap']:>6.3f} {m['reference_overlap']:>6.3f} "
+                         f"{m['share_all']:>7.4f} {m['n_gt_agree']:>6} {f(m['share_gt_agree']):>9} "
+                         f"{f(m['share_differ_at_border']):>9} {m['n_gt_agree_off_border']:>9} "
+                         f"{f(m['share_gt_agree_off_border']):>7}  {m['reference_full_gt']}")
     return "\n".join(lines)
 
 
 def _jaccards(x: dict, y: dict) -> str:
-    return "/".join("-" if s["cast_jaccard_vs_file"] is None else f"{s['cast_jaccard_vs_file']:.4f}" for s in (x, y))
+    f = lambda v: "-" if v is None else f"{v:.4f}"  # noqa: E731
+    return f"{f(x['cast_jaccard_vs_file'])}/{f(y['cast_jaccard_vs_file'])}/{f(y['cast_unaligned_jaccard_vs_file'])}"
 
 
 def main(argv: list[str] | None = None) -> None:
