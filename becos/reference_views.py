@@ -189,3 +189,154 @@ def full_triangles(partial_faces: np.ndarray, partial_to_full: np.ndarray) -> se
     order and winding."""
     tri = np.sort(np.asarray(partial_to_full)[np.asarray(partial_faces)], axis=1)
     return set(map(tuple, tri.tolist()))
+
+
+# ----------------------------------------------------------------------------------------------
+# a P2P pair from the published cameras: the reference's casting frame and its choice of try
+
+def reference_alignment(x_posed: np.ndarray, y_posed: np.ndarray, p2p_xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(R (3, 3), t (3,))`` as the reference's ``rigid_transform_3d(x, y[p2p])`` computes them (Kabsch,
+    reflection fixed), ``y ≈ R x + t`` in column form; ``-1`` entries of ``p2p_xy`` index Y's LAST vertex,
+    as numpy does there (facts §7.4). The reference then moves Y as ``y @ R + t``."""
+    a = np.asarray(x_posed, dtype=np.float64)
+    b = np.asarray(y_posed, dtype=np.float64)[np.asarray(p2p_xy, dtype=np.int64)]
+    ca, cb = a.mean(axis=0), b.mean(axis=0)
+    u, _, vt = np.linalg.svd((a - ca).T @ (b - cb))
+    r = vt.T @ u.T
+    if np.linalg.det(r) < 0:
+        vt[2, :] *= -1
+        r = vt.T @ u.T
+    return r, cb - r @ ca
+
+
+def casting_frames(x: TriMesh, y: TriMesh, gt_xy) -> tuple[np.ndarray, np.ndarray]:
+    """The two full shapes' vertices in the reference's casting frame (facts §7.4): centred, Y moved
+    by :func:`reference_alignment` from ``gt_xy`` rounded to vertices (becos's exact ground truth, where
+    the reference rounds at every hop: the alignment can differ slightly), each divided by its own
+    sqrt-area. ``x``, ``y``: full remeshed meshes in becos's common frame."""
+    from becos.reference_remesh import sqrt_area
+
+    xp = x.vertices - np.mean(x.vertices, axis=0)
+    yp = y.vertices - np.mean(y.vertices, axis=0)
+    r, t = reference_alignment(xp, yp, gt_xy.to_vertex_indices(y.faces))
+    return xp / sqrt_area(xp, x.faces), (yp @ r + t) / sqrt_area(yp, y.faces)
+
+
+class PublishedViews:
+    """Try k of a published P2P pair -> the two kept face masks (full faces), reading the shipped files
+    where they exist (named as the reference reads them, :func:`pair_view_files`), else casting.
+
+    Args:
+        root: the annotation folder (holds ``precomputed_triangle_ids/``).
+        x_name, y_name: the shapes' names in the pair list.
+        cameras: (2, n, 3) published ``cam_pos`` of x and y.
+        frames: ((V_x, 3), (V_y, 3)) vertices in the casting frame (:func:`casting_frames`).
+        faces: ((F_x, 3), (F_y, 3)) the reference remeshes' faces.
+    Attribute ``sources``: ``{(try, side): "file" | "cast"}`` for the tries asked for.
+    """
+
+    def __init__(self, root, x_name: str, y_name: str, cameras: np.ndarray, frames, faces,
+                 setting: str = "partial_partial"):
+        self.root, self.names, self.setting = Path(root), (x_name, y_name), setting
+        self.cameras = np.asarray(cameras, dtype=np.float64).reshape(2, -1, 3)
+        self.frames, self.faces = frames, faces
+        self.sources: dict[tuple[int, int], str] = {}
+
+    def __call__(self, k: int) -> tuple[np.ndarray, np.ndarray]:
+        files = pair_view_files(self.root, self.setting, *self.names, self.cameras[0], k)
+        kept = []
+        for side in (0, 1):
+            vertices, faces = self.frames[side], np.asarray(self.faces[side])
+            if files[side].is_file():
+                ids, self.sources[(k, side)] = read_triangle_ids(files[side], len(faces)), "file"
+            else:
+                ids, self.sources[(k, side)] = cast_pinhole(vertices, faces, self.cameras[side][k]), "cast"
+            kept.append(reference_component(vertices, faces, ids).kept_faces)
+        return kept[0], kept[1]
+
+
+def reference_overlap(partial_x, gt_xy, y_faces: np.ndarray, partial_y) -> float:
+    """The reference's overlap of partial X: the share of its vertices whose ground-truth target VERTEX
+    (``gt_xy`` rounded to its largest-weight corner) is a vertex of partial Y (facts §7.5)."""
+    target = gt_xy.to_vertex_indices(y_faces)[partial_x.partial_to_full]
+    found = (target >= 0) & (partial_y.full_to_partial[np.maximum(target, 0)] >= 0)
+    return float(found.mean()) if len(found) else 0.0
+
+
+@dataclass(frozen=True, eq=False)
+class PublishedP2P:
+    """The try of a published P2P pair, chosen as the reference chooses it (facts §7.5).
+
+    Attributes:
+        try_index: the try whose geometry is kept: the first accepted one, else the LAST try.
+        camera_try: the try whose camera the reference records: ``try_index`` if accepted, else the
+            try with the smallest summed shortfall below ``min_overlap`` (first such).
+        accepted: some try had both reference overlaps in range.
+        kept_x, kept_y: (F,) bool kept full faces of the geometry try.
+        reference_overlaps: (n, 2) the reference rule's overlaps (x, y) of the tries it cast.
+        exact_overlaps: (m, 2) becos's exact rule's overlaps, m ≥ n: tries are cast on until that rule
+            accepts one too (or all are cast).
+        exact_try: the try becos's exact rule keeps (first accepted, else the smallest summed distance
+            to the range); ``exact_differs`` when that is not ``try_index``.
+    """
+
+    try_index: int
+    camera_try: int
+    accepted: bool
+    kept_x: np.ndarray
+    kept_y: np.ndarray
+    reference_overlaps: np.ndarray
+    exact_overlaps: np.ndarray
+    exact_try: int
+
+    @property
+    def exact_differs(self) -> bool:
+        return self.exact_try != self.try_index
+
+
+def published_p2p(x: TriMesh, y: TriMesh, gt_xy, gt_yx, views, n_tries: int = 10,
+                  min_overlap: float = 0.1, max_overlap: float = 0.9) -> PublishedP2P:
+    """Cast the tries of a published P2P pair in order and keep the one the reference keeps.
+
+    ``views``: ``k -> (kept_x, kept_y)`` (e.g. :class:`PublishedViews`); ``gt_xy`` / ``gt_yx``: becos's
+    exact ground truth between the full meshes ``x`` and ``y``. The reference rule runs on the ground
+    truth rounded to vertices (:func:`reference_overlap`; the reference rounds at every hop of its
+    path, so near the range limits its choice can differ from this one); becos's exact rule
+    (:func:`becos.partiality.overlap_ratio`) is evaluated on the same tries and reported beside it.
+    """
+    from becos.partiality import cut, overlap_ratio
+
+    def distance(value: float) -> float:
+        return max(0.0, min_overlap - value) + max(0.0, value - max_overlap)
+
+    if n_tries < 1:
+        raise ValueError(f"n_tries must be ≥ 1, got {n_tries}")
+    tries, ref_overlaps, exact_overlaps = [], [], []
+
+    def cast(k: int) -> None:
+        kept = views(k)
+        px, py = cut(x, kept[0]), cut(y, kept[1])
+        tries.append(kept)
+        ref_overlaps.append((reference_overlap(px, gt_xy, y.faces, py), reference_overlap(py, gt_yx, x.faces, px)))
+        exact_overlaps.append((overlap_ratio(px, gt_xy, py), overlap_ratio(py, gt_yx, px)))
+
+    best_camera, min_shortfall, accepted = 0, 1.0, False
+    for k in range(n_tries):
+        cast(k)
+        ox, oy = ref_overlaps[k]
+        if min_overlap <= ox <= max_overlap and min_overlap <= oy <= max_overlap:
+            accepted, best_camera = True, k
+            break
+        shortfall = max(0.0, min_overlap - ox) + max(0.0, min_overlap - oy)
+        if shortfall < min_shortfall:
+            best_camera, min_shortfall = k, shortfall
+    geometry_try = k
+    # becos's exact rule on the same tries, casting on where it would not have stopped yet
+    while not any(distance(a) + distance(b) == 0 for a, b in exact_overlaps) and len(tries) < n_tries:
+        cast(len(tries))
+    exact_distance = np.array([distance(a) + distance(b) for a, b in exact_overlaps])
+    ok = np.flatnonzero(exact_distance == 0)
+    exact_try = int(ok[0]) if len(ok) else int(exact_distance.argmin())
+    kept_x, kept_y = tries[geometry_try]
+    return PublishedP2P(geometry_try, best_camera, accepted, kept_x, kept_y, np.asarray(ref_overlaps),
+                        np.asarray(exact_overlaps), exact_try)

@@ -226,6 +226,64 @@ def compare_partial_pair(root: Path, setup: dict, row: dict, folder: Path, spec,
     return out
 
 
+def pair_ground_truth(setup: dict, stage: "StageRemeshes", row: dict):
+    """``([Remeshed x, Remeshed y], {"xy": SurfaceMap, "yx": SurfaceMap})``: the remesh stage's files and
+    becos's exact ground truth between them (the network, as the ground-truth stage computes it)."""
+    from becos.workflow import ShapeStore, remesh_token
+
+    key = ("gt", row["x_name"], row["y_name"])
+    if key not in setup:
+        if "shapes" not in setup:
+            setup["shapes"] = ShapeStore(setup["config"], setup["plan"].catalog)
+        shapes = setup["shapes"]
+        names = (row["x_name"], row["y_name"])
+        remeshed = [stage.get("tosca", n, remesh_token(row, s, True)) for n, s in zip(names, ("x", "y"))]
+        entries = [shapes.entry("tosca", n) for n in names]
+        setup[key] = (remeshed, {
+            "xy": shapes.network.ground_truth(entries[0], entries[1], x_remesh=remeshed[0], y_remesh=remeshed[1]),
+            "yx": shapes.network.ground_truth(entries[1], entries[0], x_remesh=remeshed[1], y_remesh=remeshed[0])})
+    return setup[key]
+
+
+def compare_published_try(root: Path, setup: dict, stage: "StageRemeshes", row: dict, folder: Path) -> dict:
+    """becos's own run of a published P2P pair (:func:`becos.reference_views.published_p2p`: its casting
+    frames from the remesh files and its exact ground truth, views from the shipped files or cast) vs the
+    oracle: the kept try, the recorded camera's try, the reference rule's overlaps against the info
+    pickles' ``overlap_percentage``, the kept full faces, becos's exact rule's try, and the angle
+    between our alignment and the recorded ``align_rotation``."""
+    from becos.reference_views import (PublishedViews, casting_frames, full_faces_covering, published_p2p,
+                                       reference_alignment)
+
+    remeshed, gt = pair_ground_truth(setup, stage, row)
+    x, y = remeshed[0].mesh, remeshed[1].mesh
+    infos = [oracle_side(folder, i) for i in (0, 1)]
+    cams = np.asarray(_published_cameras(setup)[row["pair_id"]])
+    frames = casting_frames(x, y, gt["xy"])
+    views = PublishedViews(root, row["x_name"], row["y_name"], cams, frames, (x.faces, y.faces))
+    config = setup["config"]
+    start = time.perf_counter()
+    got = published_p2p(x, y, gt["xy"], gt["yx"], views, config["n_cam_pos"], config["min_overlap"],
+                        config["max_overlap"])
+    seconds = time.perf_counter() - start
+    k_cam = int(np.flatnonzero(np.all(cams[0] == infos[0][3]["cam_pos"], axis=1))[0])
+    lo, hi = config["min_overlap"], config["max_overlap"]
+    accepted = all(lo <= i[3]["overlap_percentage"] <= hi for i in infos)
+    expected = [full_faces_covering(m.faces, m.n_vertices, i[3]["partial2full"][i[2]])[0] for m, i in zip((x, y), infos)]
+    xp = x.vertices - x.vertices.mean(axis=0)
+    yp = y.vertices - y.vertices.mean(axis=0)
+    r, _ = reference_alignment(xp, yp, gt["xy"].to_vertex_indices(y.faces))
+    cos = (np.trace(r.T @ infos[1][3]["align_rotation"]) - 1) / 2
+    return {"try": got.try_index, "oracle_try": k_cam if accepted else cams.shape[1] - 1,
+            "camera_try": got.camera_try, "oracle_camera_try": k_cam, "accepted": got.accepted,
+            "reference_rule_overlaps": [float(v) for v in got.reference_overlaps[got.try_index]],
+            "oracle_overlaps": [float(infos[1][3]["overlap_percentage"]), float(infos[0][3]["overlap_percentage"])],
+            "exact_overlaps": [float(v) for v in got.exact_overlaps[got.try_index]],
+            "exact_try": got.exact_try, "exact_differs": got.exact_differs,
+            "same_kept_faces": bool(np.array_equal(got.kept_x, expected[0]) and np.array_equal(got.kept_y, expected[1])),
+            "alignment_angle_deg": float(np.degrees(np.arccos(np.clip(cos, -1, 1)))),
+            "sources": sorted(set(views.sources.values())), "seconds": round(seconds, 2)}
+
+
 def compare_masks(setup: dict, stage: "StageRemeshes", row: dict, folder: Path, comps, refs) -> dict:
     """Overlap masks of the kept views: becos's exact ground truth vs the reference's masks.
 
@@ -238,17 +296,10 @@ def compare_masks(setup: dict, stage: "StageRemeshes", row: dict, folder: Path, 
     ``share_differ_at_border``: of the vertices whose ground truths agree but masks differ, the share
     whose reference target vertex lies on partial B's border (the two overlap rules differ there)."""
     from becos.partiality import cut, overlap_mask
-    from becos.workflow import ShapeStore, remesh_token
 
-    config, plan = setup["config"], setup["plan"]
-    if "shapes" not in setup:
-        setup["shapes"] = ShapeStore(config, plan.catalog)
-    shapes = setup["shapes"]
+    plan = setup["plan"]
     names = (row["x_name"], row["y_name"])
-    remeshed = [stage.get("tosca", n, remesh_token(row, s, True)) for n, s in zip(names, ("x", "y"))]
-    entries = [shapes.entry("tosca", n) for n in names]
-    gt = {"xy": shapes.network.ground_truth(entries[0], entries[1], x_remesh=remeshed[0], y_remesh=remeshed[1]),
-          "yx": shapes.network.ground_truth(entries[1], entries[0], x_remesh=remeshed[1], y_remesh=remeshed[0])}
+    remeshed, gt = pair_ground_truth(setup, stage, row)
     partials = [cut(r.mesh, c.kept_faces) for r, c in zip(remeshed, comps)]
     infos = [oracle_side(folder, i)[3] for i in (0, 1)]
     corres = {"xy": np.load(folder / "corres_01.npy"), "yx": np.load(folder / "corres_10.npy")}
@@ -347,9 +398,11 @@ def run(results: Path) -> dict:
         row = manifest_row(setup["manifests"]["partial_partial"], split, index)
         (nx, *_, ix), (ny, *_, iy) = oracle_side(folder, 0), oracle_side(folder, 1)
         views = compare_partial_pair(root, setup, row, folder, spec, stage=stage)
+        views["published_p2p"] = compare_published_try(root, setup, stage, row, folder)
         rows_out.append({"setting": "partial_partial", "split": split, "index": index,
                          "x": {"name": nx, **views["x"]}, "y": {"name": ny, **views["y"]},
                          "try": views["try"], "accepted": views["accepted"], "masks": views["masks"],
+                         "published_p2p": views["published_p2p"],
                          "random_rotation_identical": rotation_identical(row, ix, iy)})
     full = [r for r in rows_out if r["setting"] == "full_full"]
     partial = [r for r in rows_out if r["setting"] == "partial_partial"]
@@ -419,6 +472,18 @@ def table(report: dict) -> str:
                      f"{str(x['same_kept_full_faces'] and y['same_kept_full_faces']):>5} "
                      f"{str(x['same_partial2full'] and y['same_partial2full']):>5} "
                      f"{_jaccards(x, y):>20} {str(r['random_rotation_identical']):>5}")
+    lines.append("")
+    lines.append(f"{'published_p2p (becos)':26} {'try':>3} {'oracle':>6} {'cam':>3} {'ref-rule overlaps':>17} "
+                 f"{'oracle overlaps':>15} {'exact overlaps':>14} {'exact try':>9} {'kept':>5} {'align°':>7}")
+    for r in report["pairs"]:
+        p = r.get("published_p2p")
+        if p is None:
+            continue
+        ov = lambda v: f"{v[0]:.3f}/{v[1]:.3f}"  # noqa: E731
+        lines.append(f"{r['split'] + '/' + str(r['index']) + ' ' + r['x']['name'] + '/' + r['y']['name']:26} "
+                     f"{p['try']:>3} {p['oracle_try']:>6} {p['camera_try']:>3} {ov(p['reference_rule_overlaps']):>17} "
+                     f"{ov(p['oracle_overlaps']):>15} {ov(p['exact_overlaps']):>14} {p['exact_try']:>9} "
+                     f"{str(p['same_kept_faces']):>5} {p['alignment_angle_deg']:>7.3f}")
     lines.append("")
     lines.append(f"{'overlap masks':26} {'dir':>3} {'n':>5} {'ours':>6} {'ref':>6} {'agree':>7} {'n GT=':>6} "
                  f"{'agree|GT=':>9} {'at border':>9} {'n GT= off':>9} {'agree':>7}  reference GT from")

@@ -185,3 +185,46 @@ def test_a_triangle_id_file_of_another_remesh_is_a_named_error(tmp_path):
     with pytest.raises(InputFileError, match="remesher: reference") as info:
         read_triangle_ids(path, 50)
     assert path.name in str(info.value)
+
+
+def test_published_p2p_keeps_the_try_and_the_faces_the_reference_kept(published, stage, becos_code):
+    """train 384 (horse7 / wolf1) with becos's own casting frames and exact ground truth: the reference
+    rule keeps try 0 as the oracle did, with the oracle's kept faces; its overlaps are within 1 % of
+    the oracle's (it rounds the ground truth at every hop); becos's exact rule is reported beside."""
+    got = oracle.compare_published_try(becos_code, published, stage,
+                                       oracle.manifest_row(published["manifests"]["partial_partial"], "train", 384),
+                                       becos_code / "reference_oracle" / "partial_partial" / "train" / "384")
+    assert (got["try"], got["camera_try"], got["accepted"]) == (got["oracle_try"], got["oracle_camera_try"], True)
+    assert got["same_kept_faces"] and got["sources"] == ["file"]
+    assert np.allclose(got["reference_rule_overlaps"], got["oracle_overlaps"], atol=0.01)
+    assert got["exact_try"] == 0 and not got["exact_differs"]
+    # the exact rule counts a point only inside a kept face: never more than the vertex rule
+    assert all(e <= r + 1e-12 for e, r in zip(got["exact_overlaps"], got["reference_rule_overlaps"]))
+    assert got["alignment_angle_deg"] < 0.5
+
+
+def test_published_p2p_without_an_accepted_try_keeps_the_last_geometry_and_the_best_camera():
+    """The reference's quirk (facts §7.5) on a synthetic pair: tries 0-2 all have a too-small overlap;
+    the recorded camera is the try with the smallest shortfall (1), the geometry is the last try's (2)."""
+    from becos.reference_views import published_p2p
+    from becos.surface_map import SurfaceMap
+
+    # a strip of 8 squares (16 faces); ground truth = identity onto the same strip
+    xs = np.arange(9, dtype=float)
+    vertices = np.array([[x, y, 0.0] for x in xs for y in (0.0, 1.0)])
+    faces = np.array([f for i in range(8) for f in ([2 * i, 2 * i + 2, 2 * i + 1], [2 * i + 1, 2 * i + 2, 2 * i + 3])])
+    mesh = TriMesh(vertices, faces)
+    first = {v: (i, c) for i, f in enumerate(faces) for c, v in enumerate(f)}
+    face = np.array([first[v][0] for v in range(len(vertices))])
+    weights = np.eye(3)[[first[v][1] for v in range(len(vertices))]]
+    gt = SurfaceMap(face, weights)
+
+    def keep(lo, hi):
+        return (np.arange(16) >= lo) & (np.arange(16) < hi)
+
+    # x keeps the left part, y a far right part: overlaps shrink to 0 as y moves right
+    tries = {0: (keep(0, 8), keep(14, 16)), 1: (keep(0, 8), keep(6, 16)), 2: (keep(0, 8), keep(12, 16))}
+    got = published_p2p(mesh, mesh, gt, gt, tries.__getitem__, n_tries=3, min_overlap=0.45, max_overlap=0.9)
+    assert not got.accepted and got.try_index == 2 and got.camera_try == 1
+    assert np.array_equal(got.kept_y, tries[2][1])
+    assert len(got.reference_overlaps) == 3
