@@ -743,7 +743,19 @@ def store_metadata(config: dict, setting: str) -> dict:
         spec = DatasetSpec.load(name)
         datasets[name] = {"title": spec.title, **{k: spec.source.get(k) for k in ("url", "licence", "citation")}}
     return {"setting": setting, "config": config, "config_hash": digest(config),
-            "datasets": datasets, "generator": "becos workflow"}
+            "datasets": datasets, "generator": "becos workflow",
+            "follows_published_lists": published_parts(config, setting)}
+
+
+def published_parts(config: dict, setting: str) -> dict[str, bool | None]:
+    """Per part of a setting's benchmark, whether it follows the published pair lists (None: the
+    setting has no such part). ``views`` stays False: the pairs stage draws its own cameras
+    (:mod:`becos.reference_views` reproduces the published views but is not wired into it yet)."""
+    original = bool(config.get("original_settings"))
+    remesh = bool(config.get("remesh", True))
+    return {"pairs": original, "rotations": original, "face_targets": original and remesh,
+            "remesh": original and remesh and config.get("remesher") == "reference",
+            "views": False if setting != "full_full" else None}
 
 
 def export_pairings_stage(config: dict, setting: str, out: Path) -> None:

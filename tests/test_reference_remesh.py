@@ -228,3 +228,16 @@ def test_published_p2p_without_an_accepted_try_keeps_the_last_geometry_and_the_b
     assert not got.accepted and got.try_index == 2 and got.camera_try == 1
     assert np.array_equal(got.kept_y, tries[2][1])
     assert len(got.reference_overlaps) == 3
+
+
+def test_store_metadata_says_which_parts_follow_the_published_lists():
+    from becos.workflow import store_metadata
+
+    original = resolve_config({**BASE, "original_settings": True, "setting": ["full_full", "partial_partial"]})
+    parts = store_metadata(original, "partial_partial")["follows_published_lists"]
+    assert parts == {"pairs": True, "rotations": True, "face_targets": True, "remesh": True, "views": False}
+    assert store_metadata(original, "full_full")["follows_published_lists"]["views"] is None
+    ours = store_metadata({**original, "remesher": "becos"}, "full_full")["follows_published_lists"]
+    assert ours["remesh"] is False and ours["face_targets"] is True
+    sampled = store_metadata(resolve_config(BASE), "full_full")["follows_published_lists"]
+    assert not any(sampled[k] for k in ("pairs", "rotations", "face_targets", "remesh"))
