@@ -124,7 +124,8 @@ def _shape_arrays(shape: ShapeInstance, partial: Partial, final_vertices: np.nda
 def build_pair(x: ShapeInstance, y: ShapeInstance, gt_xy: SurfaceMap, gt_yx: SurfaceMap, *, pair_id: str,
                seed: int, split: str, options: PairOptions,
                scanners: tuple[Scanner | None, Scanner | None] = (None, None),
-               rotations: tuple[np.ndarray, np.ndarray] | None = None) -> PairRecord:
+               rotations: tuple[np.ndarray, np.ndarray] | None = None,
+               published_views=None) -> PairRecord:
     """One matching instance.
 
     Args:
@@ -136,6 +137,9 @@ def build_pair(x: ShapeInstance, y: ShapeInstance, gt_xy: SurfaceMap, gt_yx: Sur
         scanners: optional reusable :class:`becos.partiality.Scanner` of x and y.
         rotations: optional fixed (3, 3) random rotations of x and y (row vectors, applied last), e.g.
             the published pair lists' ``random_rot``; by default drawn from the pair's seed.
+        published_views: P2P only, optional ``(x_mesh, y_mesh, gt_xy, gt_yx) ->``
+            :class:`becos.reference_views.PublishedScan`: the views of the published cameras, the try
+            the reference keeps; masks and maps are then computed on them with the exact ground truth.
     """
     from becos.geometry import surface_area
 
@@ -149,7 +153,22 @@ def build_pair(x: ShapeInstance, y: ShapeInstance, gt_xy: SurfaceMap, gt_yx: Sur
         meta[key] = {"name": s.name, "dataset": s.dataset, "category": s.category, "class": s.shape_class}
 
     camera_x = camera_y = None
-    if options.setting == "partial_partial":
+    if options.setting == "partial_partial" and published_views is not None:
+        from becos.partiality import cut, overlap_mask, partial_map
+
+        pub = published_views(x.mesh, y.mesh, gt_xy, gt_yx)
+        px, py = cut(x.mesh, pub.choice.kept_x), cut(y.mesh, pub.choice.kept_y)
+        alignment = align_to(x.mesh, y.mesh, gt_xy)
+        mask_x, mask_y = overlap_mask(px, gt_xy, py), overlap_mask(py, gt_yx, px)
+        map_xy, map_yx = partial_map(px, gt_xy, py), partial_map(py, gt_yx, px)
+        camera_x, camera_y = pub.camera_x, pub.camera_y
+        c = pub.choice
+        meta.update(n_tries=len(c.reference_overlaps), accepted=bool(c.accepted), try_index=int(c.try_index),
+                    published_views={"camera_try": int(c.camera_try), "exact_try": int(c.exact_try),
+                                     "exact_rule_keeps_another_try": bool(c.exact_differs),
+                                     "reference_overlaps": c.reference_overlaps.tolist(),
+                                     "exact_overlaps": c.exact_overlaps.tolist(), "sources": pub.sources})
+    elif options.setting == "partial_partial":
         scan = cast_p2p(x.mesh, y.mesh, gt_xy, gt_yx, (seed, pair_id), regime=options.cam_pos_regime,
                         up_axis=options.up_axis, camera_distance=options.camera_distance,
                         n_tries=options.n_cam_pos, min_overlap=options.min_overlap,

@@ -209,17 +209,53 @@ def reference_alignment(x_posed: np.ndarray, y_posed: np.ndarray, p2p_xy: np.nda
     return r, cb - r @ ca
 
 
-def casting_frames(x: TriMesh, y: TriMesh, gt_xy) -> tuple[np.ndarray, np.ndarray]:
-    """The two full shapes' vertices in the reference's casting frame (facts §7.4): centred, Y moved
-    by :func:`reference_alignment` from ``gt_xy`` rounded to vertices (becos's exact ground truth, where
+@dataclass(frozen=True, eq=False)
+class CastingFrames:
+    """A P2P pair's full shapes in the reference's casting frame (facts §7.4) and the way back.
+
+    Casting frame of X: ``(p - x_centre) / x_area``; of Y: ``((p - y_centre) @ rotation + translation)
+    / y_area`` (the reference's alignment, applied as it applies it), for points ``p`` of the meshes
+    given to :func:`casting_frames` (becos's common frame).
+
+    Attributes:
+        x_vertices, y_vertices: (V, 3) the shapes in the casting frame.
+        x_centre, y_centre: (3,) vertex means; x_area, y_area: sqrt-areas.
+        rotation, translation: the reference-style alignment (:func:`reference_alignment`).
+    """
+
+    x_vertices: np.ndarray
+    y_vertices: np.ndarray
+    x_centre: np.ndarray
+    y_centre: np.ndarray
+    x_area: float
+    y_area: float
+    rotation: np.ndarray
+    translation: np.ndarray
+
+    def camera(self, side: int, cam_pos):
+        """The reference's camera at ``cam_pos`` (casting frame) as a :class:`becos.cameras.Camera` in
+        the side's input frame (0: X, 1: Y)."""
+        from becos.cameras import Camera
+
+        cam = Camera(np.asarray(cam_pos, dtype=np.float64), np.zeros(3), np.array(UP), FOV_DEG)
+        if side == 0:
+            return cam.transformed(scale=self.x_area, translation=self.x_centre)
+        cam = cam.transformed(scale=self.y_area, translation=-self.translation)
+        return cam.transformed(rotation=self.rotation, translation=self.y_centre)
+
+
+def casting_frames(x: TriMesh, y: TriMesh, gt_xy) -> CastingFrames:
+    """The two full shapes in the reference's casting frame (facts §7.4): centred, Y moved by
+    :func:`reference_alignment` from ``gt_xy`` rounded to vertices (becos's exact ground truth, where
     the reference rounds at every hop: the alignment can differ slightly), each divided by its own
     sqrt-area. ``x``, ``y``: full remeshed meshes in becos's common frame."""
     from becos.reference_remesh import sqrt_area
 
-    xp = x.vertices - np.mean(x.vertices, axis=0)
-    yp = y.vertices - np.mean(y.vertices, axis=0)
+    cx, cy = np.mean(x.vertices, axis=0), np.mean(y.vertices, axis=0)
+    xp, yp = x.vertices - cx, y.vertices - cy
     r, t = reference_alignment(xp, yp, gt_xy.to_vertex_indices(y.faces))
-    return xp / sqrt_area(xp, x.faces), (yp @ r + t) / sqrt_area(yp, y.faces)
+    ax, ay = sqrt_area(xp, x.faces), sqrt_area(yp, y.faces)
+    return CastingFrames(xp / ax, (yp @ r + t) / ay, cx, cy, ax, ay, r, t)
 
 
 class PublishedViews:
@@ -230,7 +266,8 @@ class PublishedViews:
         root: the annotation folder (holds ``precomputed_triangle_ids/``).
         x_name, y_name: the shapes' names in the pair list.
         cameras: (2, n, 3) published ``cam_pos`` of x and y.
-        frames: ((V_x, 3), (V_y, 3)) vertices in the casting frame (:func:`casting_frames`).
+        frames: ((V_x, 3), (V_y, 3)) vertices in the casting frame (:attr:`CastingFrames.x_vertices`,
+            ``y_vertices``).
         faces: ((F_x, 3), (F_y, 3)) the reference remeshes' faces.
     Attribute ``sources``: ``{(try, side): "file" | "cast"}`` for the tries asked for.
     """
@@ -340,3 +377,26 @@ def published_p2p(x: TriMesh, y: TriMesh, gt_xy, gt_yx, views, n_tries: int = 10
     kept_x, kept_y = tries[geometry_try]
     return PublishedP2P(geometry_try, best_camera, accepted, kept_x, kept_y, np.asarray(ref_overlaps),
                         np.asarray(exact_overlaps), exact_try)
+
+
+@dataclass(frozen=True, eq=False)
+class PublishedScan:
+    """:func:`published_scan`'s result: the chosen try, its cameras (input frames), where views came from."""
+
+    choice: PublishedP2P
+    camera_x: object
+    camera_y: object
+    sources: dict
+
+
+def published_scan(x: TriMesh, y: TriMesh, gt_xy, gt_yx, root, x_name: str, y_name: str, cameras,
+                   n_tries: int = 10, min_overlap: float = 0.1, max_overlap: float = 0.9) -> PublishedScan:
+    """A published P2P pair's views, end to end: :func:`casting_frames`, :class:`PublishedViews`,
+    :func:`published_p2p`; the recorded cameras are the reference's (the camera try's, facts §7.5) in
+    the meshes' input frames. ``x``, ``y``: the reference remeshes in becos's common frame."""
+    frames = casting_frames(x, y, gt_xy)
+    views = PublishedViews(root, x_name, y_name, cameras, (frames.x_vertices, frames.y_vertices), (x.faces, y.faces))
+    choice = published_p2p(x, y, gt_xy, gt_yx, views, n_tries, min_overlap, max_overlap)
+    cams = views.cameras
+    return PublishedScan(choice, frames.camera(0, cams[0][choice.camera_try]), frames.camera(1, cams[1][choice.camera_try]),
+                         {f"{k}_{'xy'[side]}": v for (k, side), v in sorted(views.sources.items())})

@@ -63,7 +63,7 @@ STAGE_KEYS: dict[str, tuple[str, ...]] = {
     "export": (),
     "ground_truth": ("annotations", "template_file", "remesh"),
     "pairs": ("one_axis_rotation", "up_axis", "area_normalised", "propagate_annotations", "annotations",
-              "template_file"),
+              "template_file", "original_settings", "remesher"),
 }
 """The config keys each stage depends on: a change to one of them reruns that stage (and only it)."""
 SETTING_KEYS: dict[str, tuple[str, ...]] = {
@@ -283,7 +283,13 @@ def build_manifest(config: dict, setting: str, catalog: pd.DataFrame, annotation
         imported = import_published(path, setting=setting, seed=config["seed"],
                                     n_variants=config["remesh_variants"], n_chunks=config["n_chunks"],
                                     datasets=config["datasets"])
-        return _restrict_published(imported.manifest, catalog, config, setting)
+        manifest = imported.manifest
+        if imported.cameras:  # P2P: the published cameras travel with their pair (x_cam_pos_0..29, y_...)
+            cams = np.stack([imported.cameras[p] for p in manifest["pair_id"]]).reshape(len(manifest), 2, -1)
+            columns = {f"{side}_cam_pos_{i}": cams[:, s, i] for s, side in enumerate("xy") for i in range(cams.shape[2])}
+            manifest = pd.concat([manifest, pd.DataFrame(columns, index=manifest.index)], axis=1)
+            manifest.attrs = imported.manifest.attrs
+        return _restrict_published(manifest, catalog, config, setting)
     annotations = annotations or annotation_source(config)
     caps = {k: v for k, v in (config.get("caps") or {}).items() if v is not None}
     return sample_pairs(catalog, setting, seed=config["seed"], combinations=config["combinations"],
@@ -695,7 +701,8 @@ def pairs_stage(config: dict, setting: str, chunk: int, gt_index: Path, out_inde
                                       for s, t in ((x, tx), (y, ty)))
             record = build_pair(x, y, gt_xy, gt_yx, pair_id=row["pair_id"], seed=int(row["seed"]),
                                 split=row["split"], options=options, scanners=pair_scanners,
-                                rotations=_published_rotations(row))
+                                rotations=_published_rotations(row),
+                                published_views=_published_views(config, row, options))
             if labels is not None:
                 for side, s, t in (("x", x, tx), ("y", y, ty)):
                     full = labels(s.dataset, s.name, t)
@@ -708,6 +715,22 @@ def pairs_stage(config: dict, setting: str, chunk: int, gt_index: Path, out_inde
                         "split": row["split"]})
         _progress("pairs", setting, chunk, entries, len(rows), started)
     return _write_index(Path(out_index), setting, chunk, entries, started)
+
+
+def _published_views(config: dict, row: dict, options):
+    """``original_settings`` P2P with the reference remesh: the views of the pair's published cameras
+    (:func:`becos.reference_views.published_scan`), else None (the pairs stage draws cameras)."""
+    if (options.setting != "partial_partial" or not config.get("original_settings")
+            or config.get("remesher") != "reference" or "x_cam_pos_0" not in row):
+        return None
+    from becos.reference_views import published_scan
+
+    n = sum(1 for k in row if k.startswith("x_cam_pos_"))
+    cameras = np.array([[row[f"{side}_cam_pos_{i}"] for i in range(n)] for side in "xy"],
+                       dtype=np.float64).reshape(2, -1, 3)
+    return lambda x, y, gt_xy, gt_yx: published_scan(
+        x, y, gt_xy, gt_yx, config["annotations"], row["x_name"], row["y_name"], cameras,
+        options.n_cam_pos, options.min_overlap, options.max_overlap)
 
 
 def _published_rotations(row: dict):
@@ -749,13 +772,14 @@ def store_metadata(config: dict, setting: str) -> dict:
 
 def published_parts(config: dict, setting: str) -> dict[str, bool | None]:
     """Per part of a setting's benchmark, whether it follows the published pair lists (None: the
-    setting has no such part). ``views`` stays False: the pairs stage draws its own cameras
-    (:mod:`becos.reference_views` reproduces the published views but is not wired into it yet)."""
+    setting has no such part). P2P views follow them with the reference remesh (their triangle ids
+    index its faces; :mod:`becos.reference_views`); P2F has no published list."""
     original = bool(config.get("original_settings"))
     remesh = bool(config.get("remesh", True))
+    reference = original and remesh and config.get("remesher") == "reference"
     return {"pairs": original, "rotations": original, "face_targets": original and remesh,
-            "remesh": original and remesh and config.get("remesher") == "reference",
-            "views": False if setting != "full_full" else None}
+            "remesh": reference,
+            "views": None if setting == "full_full" else (reference and setting == "partial_partial")}
 
 
 def export_pairings_stage(config: dict, setting: str, out: Path) -> None:

@@ -251,15 +251,15 @@ def compare_published_try(root: Path, setup: dict, stage: "StageRemeshes", row: 
     oracle: the kept try, the recorded camera's try, the reference rule's overlaps against the info
     pickles' ``overlap_percentage``, the kept full faces, becos's exact rule's try, and the angle
     between our alignment and the recorded ``align_rotation``."""
-    from becos.reference_views import (PublishedViews, casting_frames, full_faces_covering, published_p2p,
-                                       reference_alignment)
+    from becos.reference_views import PublishedViews, casting_frames, full_faces_covering, published_p2p
 
     remeshed, gt = pair_ground_truth(setup, stage, row)
     x, y = remeshed[0].mesh, remeshed[1].mesh
     infos = [oracle_side(folder, i) for i in (0, 1)]
     cams = np.asarray(_published_cameras(setup)[row["pair_id"]])
     frames = casting_frames(x, y, gt["xy"])
-    views = PublishedViews(root, row["x_name"], row["y_name"], cams, frames, (x.faces, y.faces))
+    views = PublishedViews(root, row["x_name"], row["y_name"], cams, (frames.x_vertices, frames.y_vertices),
+                           (x.faces, y.faces))
     config = setup["config"]
     start = time.perf_counter()
     got = published_p2p(x, y, gt["xy"], gt["yx"], views, config["n_cam_pos"], config["min_overlap"],
@@ -269,10 +269,7 @@ def compare_published_try(root: Path, setup: dict, stage: "StageRemeshes", row: 
     lo, hi = config["min_overlap"], config["max_overlap"]
     accepted = all(lo <= i[3]["overlap_percentage"] <= hi for i in infos)
     expected = [full_faces_covering(m.faces, m.n_vertices, i[3]["partial2full"][i[2]])[0] for m, i in zip((x, y), infos)]
-    xp = x.vertices - x.vertices.mean(axis=0)
-    yp = y.vertices - y.vertices.mean(axis=0)
-    r, _ = reference_alignment(xp, yp, gt["xy"].to_vertex_indices(y.faces))
-    cos = (np.trace(r.T @ infos[1][3]["align_rotation"]) - 1) / 2
+    cos = (np.trace(frames.rotation.T @ infos[1][3]["align_rotation"]) - 1) / 2
     return {"try": got.try_index, "oracle_try": k_cam if accepted else cams.shape[1] - 1,
             "camera_try": got.camera_try, "oracle_camera_try": k_cam, "accepted": got.accepted,
             "reference_rule_overlaps": [float(v) for v in got.reference_overlaps[got.try_index]],

@@ -235,9 +235,42 @@ def test_store_metadata_says_which_parts_follow_the_published_lists():
 
     original = resolve_config({**BASE, "original_settings": True, "setting": ["full_full", "partial_partial"]})
     parts = store_metadata(original, "partial_partial")["follows_published_lists"]
-    assert parts == {"pairs": True, "rotations": True, "face_targets": True, "remesh": True, "views": False}
+    assert parts == {"pairs": True, "rotations": True, "face_targets": True, "remesh": True, "views": True}
     assert store_metadata(original, "full_full")["follows_published_lists"]["views"] is None
     ours = store_metadata({**original, "remesher": "becos"}, "full_full")["follows_published_lists"]
     assert ours["remesh"] is False and ours["face_targets"] is True
+    assert store_metadata({**original, "remesher": "becos"}, "partial_partial")["follows_published_lists"]["views"] is False
     sampled = store_metadata(resolve_config(BASE), "full_full")["follows_published_lists"]
     assert not any(sampled[k] for k in ("pairs", "rotations", "face_targets", "remesh"))
+
+
+def test_pairs_stage_builds_published_p2p_pairs_from_the_published_views(published, stage, becos_code):
+    """train 384 through the pairs stage's own pieces (manifest row with its cameras read back from CSV,
+    pair options, :func:`becos.pairs.build_pair`): the record keeps the oracle's full faces on both
+    sides, the published rotations, the try the reference kept; masks are becos's exact ones."""
+    from becos.pairs import build_pair
+    from becos.reference_views import full_faces_covering
+    from becos.workflow import ShapeStore, _published_rotations, _published_views, pair_options, remesh_token
+
+    config = published["config"]
+    row = oracle.manifest_row(published["manifests"]["partial_partial"], "train", 384)
+    folder = becos_code / "reference_oracle" / "partial_partial" / "train" / "384"
+    remeshed, gt = oracle.pair_ground_truth(published, stage, row)
+    shapes = ShapeStore(config, published["plan"].catalog)
+    x, y = (shapes.instance("tosca", row[f"{s}_name"], remesh_token(row, s, True)) for s in "xy")
+    options = pair_options(config, "partial_partial")
+    views = _published_views(config, row, options)
+    assert views is not None
+    record = build_pair(x, y, gt["xy"], gt["yx"], pair_id=row["pair_id"], seed=int(row["seed"]), split="train",
+                        options=options, rotations=_published_rotations(row), published_views=views)
+    sides = [oracle.oracle_side(folder, i) for i in (0, 1)]
+    for s, (name, _, o_faces, info), r in zip("xy", sides, remeshed):
+        expected, _ = full_faces_covering(r.mesh.faces, r.mesh.n_vertices, info["partial2full"][o_faces])
+        assert np.array_equal(record[f"{s}_full_face_ids"], np.flatnonzero(expected)), name
+        assert np.array_equal(record[f"{s}_random_rotation"], info["random_rotation"]), name
+    assert record.meta["try_index"] == 0 and record.meta["accepted"]
+    assert record.meta["published_views"]["sources"] == {"0_x": "file", "0_y": "file"}
+    # the camera recorded for X looks from the published direction (casting frame: scale and shift only)
+    eye, target = record["x_camera"][0], record["x_camera"][1]
+    assert np.allclose((eye - target) / np.linalg.norm(eye - target), sides[0][3]["cam_pos"], atol=1e-12)
+    assert record["x_overlap_mask"].dtype == bool and 0.1 <= record["x_overlap_mask"].mean() <= 0.9
