@@ -162,13 +162,13 @@ def test_views_from_the_published_cameras_keep_the_oracle_partials(published, be
     assert np.array_equal(cams[0][0], infos[0]["cam_pos"]) and np.array_equal(cams[1][0], infos[1]["cam_pos"])
     frames = oracle.casting_frames(becos_code, row, infos, DatasetSpec.load("tosca"))
     files = pair_view_files(becos_code, "partial_partial", row["x_name"], row["y_name"], cams[0], 0)
-    for (vertices, faces), path, (_, _, o_faces, info) in zip(frames, files, sides):
+    for (vertices, faces, _), path, (_, _, o_faces, info) in zip(frames, files, sides):
         comp = reference_component(vertices, faces, read_triangle_ids(path, len(faces)))
         assert np.array_equal(comp.partial_to_full, info["partial2full"]), path.name
         expected, unmatched = full_faces_covering(faces, len(vertices), info["partial2full"][o_faces])
         assert unmatched == 0 and comp.unmatched_faces == 0
         assert np.array_equal(comp.kept_faces, expected), path.name
-    vertices, faces = frames[0]
+    vertices, faces, _ = frames[0]
     ids = read_triangle_ids(files[0], len(faces))
     cast = cast_pinhole(vertices, faces, cams[0][0])
     # Embree here vs Open3D's Embree there: a grazing ray may hit the neighbour of an edge (2 of 8,539
