@@ -429,9 +429,14 @@ class DatasetSpec:
             parts.append(f"cite: {s['citation']}")
         return " | ".join(parts)
 
+    def info_file_candidates(self, annotations_root: str | Path | None, data_root: str | Path) -> list[Path]:
+        """Where a ``dt4d`` dataset's ``info_file`` is looked for, in order: the annotation folder's
+        ``data/``, then the data root."""
+        return ([Path(annotations_root) / "data" / self.info_file] if annotations_root is not None else []) + \
+            [Path(data_root) / self.info_file]
+
     def _dt4d_names(self, annotations: "AnnotationSource | None", data_root: Path) -> tuple[list[str], Path]:
-        candidates = ([Path(annotations.root) / "data" / self.info_file] if annotations is not None else []) + \
-            [data_root / self.info_file]
+        candidates = self.info_file_candidates(annotations.root if annotations is not None else None, data_root)
         path = next((p for p in candidates if p.is_file()), None)
         if path is None:
             raise InputFileError(candidates[0], f"the DT4D class/frame list of {self.name} is missing",
@@ -466,7 +471,8 @@ class DatasetSpec:
             if missing:
                 raise InputFileError(folder, f"{len(missing)} of the {len(names)} shapes listed in {info_path} are "
                                      f"missing (e.g. {missing[0]}.{self.file_type})",
-                                     f"run the DT4D preprocessing (facts §5) on the full download. {self.download_help()}")
+                                     f"put the full DeformingThings4D download in {Path(data_root) / 'DeformingThings4D'} and run the "
+                                     f"workflow (or `becos prepare-dt4d`), which writes them. {self.download_help()}")
         return sorted(names, key=natural_key)
 
     def list_shapes(self, data_root: str | Path, annotations: "AnnotationSource | None" = None) -> list[ShapeEntry]:

@@ -5,6 +5,7 @@ import os
 import sys
 from pathlib import Path
 
+from becos import dt4d as bdt4d
 from becos import workflow as bw
 from becos.resources import RuleResources
 
@@ -90,4 +91,5 @@ def generated_inputs(wildcards):
         inputs.append(config["synthetic"]["out"])
     if config["annotations_archive"]:
         inputs.append(config["annotations"])
+    inputs += [str(job.stamp) for job in DT4D_JOBS.values()]  # DeformingThings4D preparation (data.smk)
     return inputs

@@ -1,0 +1,219 @@
+"""DeformingThings4D preparation (issue #14, item 1): ``becos prepare-dt4d`` and its workflow rule.
+
+The ``.anime`` files are written by the test (DeformingThings4D needs a request form): an icosphere
+body with one face missing (a hole trimesh's split fills), a second small component, vertex rows
+shuffled over both components and face rows shuffled, animated by smooth per-frame offsets. The
+output must equal the reference procedure (``trimesh.Trimesh(v, f, process=False,
+maintain_order=True).split(only_watertight=False)``, then the component with the most vertices)
+computed here from the raw file, read back the way becos and the reference read OBJ files.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from becos.cli import main as becos_main
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+# --- synthetic .anime files ------------------------------------------------------------------------
+def synthetic_animation(n_frames: int, seed: int = 0, subdivisions: int = 2):
+    """``(frame0 (nv, 3) float32, faces (nt, 3) int32, offsets (nf-1, nv, 3) float32, n_body)``.
+
+    Body: an ellipsoid icosphere (``n_body`` vertices) with its first face removed; a small second
+    component (an icosphere of 12 vertices) beside it; vertex rows permuted over both, face rows
+    shuffled. Frames bend the body smoothly (a different bend per frame)."""
+    import trimesh
+
+    rng = np.random.default_rng(seed)
+    body = trimesh.creation.icosphere(subdivisions=subdivisions)
+    small = trimesh.creation.icosphere(subdivisions=0, radius=0.1)
+    v_body = body.vertices * [0.5, 0.25, 0.2]                     # metres-like, long along x
+    v = np.vstack([v_body, small.vertices + [0.9, 0.0, 0.0]])
+    f = np.vstack([body.faces[1:], small.faces + len(body.vertices)])
+    perm = rng.permutation(len(v))                                # new row of old vertex i: inverse[i]
+    inverse = np.empty_like(perm)
+    inverse[perm] = np.arange(len(v))
+    v, f = v[perm], inverse[f]
+    f = f[rng.permutation(len(f))]
+    t = np.linspace(0.0, 2.0 * np.pi, n_frames)[1:, None]
+    x = v[None, :, 0]
+    offsets = np.zeros((n_frames - 1, len(v), 3))
+    offsets[:, :, 2] = 0.15 * np.sin(t) * x ** 2 + 0.01 * np.cos(3 * t)   # bend up/down along the body
+    offsets[:, :, 1] = 0.05 * np.sin(2 * t) * x
+    return v.astype(np.float32), f.astype(np.int32), offsets.astype(np.float32), len(body.vertices)
+
+
+def write_anime(path: Path, frame0: np.ndarray, faces: np.ndarray, offsets: np.ndarray) -> Path:
+    """A little-endian .anime: int32 nf, nv, nt; float32 frame 0; int32 faces; float32 offsets."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    header = np.array([len(offsets) + 1, len(frame0), len(faces)], dtype="<i4")
+    path.write_bytes(header.tobytes() + frame0.astype("<f4").tobytes() + faces.astype("<i4").tobytes()
+                     + offsets.astype("<f4").tobytes())
+    return path
+
+
+def reference_frame(path: Path, k: int):
+    """The reference procedure from the raw file (np.fromfile as DeformingThings4D's reader does)."""
+    import trimesh
+
+    with open(path, "rb") as fh:
+        nf, nv, nt = (int(x) for x in np.fromfile(fh, dtype=np.int32, count=3))
+        v = np.fromfile(fh, dtype=np.float32, count=nv * 3).reshape(-1, 3)
+        f = np.fromfile(fh, dtype=np.int32, count=nt * 3).reshape(-1, 3)
+        off = np.fromfile(fh, dtype=np.float32, count=-1).reshape(nf - 1, nv, 3)
+    vertices = v if k == 0 else v + off[k - 1]
+    parts = trimesh.Trimesh(vertices, f, process=False, maintain_order=True).split(only_watertight=False)
+    return parts[int(np.argmax([len(p.vertices) for p in parts]))]
+
+
+def make_download(data_dir: Path, kind: str, classes: dict[str, dict[str, int]], seed: int = 0) -> None:
+    """``DATA/DeformingThings4D/<kind>/<class>_<action>/<class>_<action>.anime`` for ``{class: {action: nf}}``."""
+    for i, (cls, actions) in enumerate(classes.items()):
+        for j, (action, n_frames) in enumerate(actions.items()):
+            frame0, faces, offsets, _ = synthetic_animation(n_frames, seed=seed + 10 * i + j)
+            write_anime(data_dir / "DeformingThings4D" / kind / f"{cls}_{action}" / f"{cls}_{action}.anime",
+                        frame0, faces, offsets)
+
+
+def run_cli(capsys, *args) -> tuple[int, str, str]:
+    code = becos_main(["prepare-dt4d", *map(str, args)])
+    captured = capsys.readouterr()
+    return code, captured.out, captured.err
+
+
+# --- (a) the command -------------------------------------------------------------------------------
+def test_prepared_frames_equal_the_reference_procedure(tmp_path, capsys):
+    import trimesh
+
+    from becos.mesh import read_mesh
+
+    data = tmp_path / "data"
+    make_download(data, "animals", {"catBG": {"run": 50, "walk": 12}})
+    info = {"catBG": {"run": [43, 0, 7, 49], "walk": [3]}}
+    (tmp_path / "info.json").write_text(json.dumps(info))
+    code, out, err = run_cli(capsys, "--data-dir", data, "--info", tmp_path / "info.json", "--kind", "animals")
+    assert code == 0, err
+    assert json.loads(out)["written"] == 5
+    n_body = synthetic_animation(2)[3]
+    for action, frames in info["catBG"].items():
+        anime = data / "DeformingThings4D" / "animals" / f"catBG_{action}" / f"catBG_{action}.anime"
+        raw_order = np.fromfile(anime, dtype=np.float32, count=3 * 174, offset=12).reshape(-1, 3)
+        for k in frames:
+            path = data / "dt4d_animals" / "catBG" / f"{action}{k:03d}.obj"
+            ref = reference_frame(anime, k)
+            # the body (hole filled: 320 faces), not the small component; rows in trimesh's split order
+            assert len(ref.vertices) == n_body and len(ref.faces) == 320
+            assert not np.allclose(ref.vertices, raw_order[:n_body])       # the shuffle matters
+            back = trimesh.load(path, process=False, maintain_order=True, force="mesh")
+            ours = read_mesh(path)
+            for got in (np.asarray(back.vertices), ours.vertices):
+                assert got.shape == ref.vertices.shape
+                assert np.abs(got - ref.vertices).max() <= 1e-6
+            assert np.array_equal(np.asarray(back.faces), ref.faces) and np.array_equal(ours.faces, ref.faces)
+    print(f"\n{sum(map(len, info['catBG'].values()))} frames equal the reference procedure "
+          f"({n_body} vertices, 320 faces each; max |dv| <= 1e-6)")
+
+
+def test_a_prepared_obj_is_rewritten_only_when_its_anime_changed(tmp_path, capsys):
+    data = tmp_path / "data"
+    make_download(data, "animals", {"catBG": {"run": 20, "walk": 20}})
+    info_path = tmp_path / "info.json"
+    info_path.write_text(json.dumps({"catBG": {"run": [1, 2], "walk": [3]}}))
+    args = ("--data-dir", data, "--info", info_path, "--kind", "animals")
+    assert run_cli(capsys, *args)[0] == 0
+    objs = sorted((data / "dt4d_animals" / "catBG").glob("*.obj"))
+    mtimes = {p: p.stat().st_mtime_ns for p in objs}
+    stamp = json.loads((data / "dt4d_animals" / "catBG" / ".becos-dt4d.json").read_text())
+    assert set(stamp["animations"]) == {"run", "walk"} and len(stamp["animations"]["run"]["sha256"]) == 64
+
+    code, out, _ = run_cli(capsys, *args)                              # unchanged: nothing read or written
+    assert code == 0 and json.loads(out)["written"] == 0 and json.loads(out)["animations_read"] == 0
+    run = data / "DeformingThings4D" / "animals" / "catBG_run" / "catBG_run.anime"
+    os.utime(run, ns=(time.time_ns(), time.time_ns() + 10**9))          # re-extracted: same bytes, new mtime
+    code, out, _ = run_cli(capsys, *args)
+    assert code == 0 and json.loads(out)["written"] == 0
+    assert {p: p.stat().st_mtime_ns for p in objs} == mtimes
+
+    frame0, faces, offsets, _ = synthetic_animation(20, seed=99)          # new content: its frames only
+    write_anime(run, frame0, faces, offsets)
+    code, out, _ = run_cli(capsys, *args)
+    assert code == 0 and json.loads(out)["written"] == 2
+    changed = {p.name for p in objs if p.stat().st_mtime_ns != mtimes[p]}
+    assert changed == {"run001.obj", "run002.obj"}
+    assert not list((data / "dt4d_animals" / "catBG").glob(".*.tmp*"))
+
+
+def _corrupt(path: Path, edit) -> None:
+    data = bytearray(path.read_bytes())
+    path.write_bytes(bytes(edit(data)))
+
+
+def _set(dtype: str, offset: int, value):
+    def edit(data: bytearray) -> bytearray:
+        data[offset:offset + 4] = np.array([value], dtype=dtype).tobytes()
+        return data
+    return edit
+
+
+NV, NT = 174, 339          # icosphere(2) body + 12-vertex component; 319 + 20 faces
+FACES_AT = 12 + 12 * NV
+OFFSETS_AT = FACES_AT + 12 * NT
+
+BAD_INPUTS = {
+    # case: (edit of the .anime bytes, listed frames, words the message must hold)
+    "truncated file": (lambda d: d[:FACES_AT + 100], [1], ["is truncated", "needs"]),
+    "header shorter than 12 bytes": (lambda d: d[:7], [1], ["is truncated", "12-byte header"]),
+    "counts inconsistent with the size": (_set("<i4", 0, 30), [1], ["counts are inconsistent with the file size",
+                                                                    "nf=30"]),
+    "extra bytes": (lambda d: d + bytes(24), [1], ["counts are inconsistent with the file size"]),
+    "frame id beyond nf": (None, [1, 20], ["frame 20", "has 20 frames"]),
+    "face index >= nv": (_set("<i4", FACES_AT + 4 * 7, NV), [1], ["outside [0, 174)"]),
+    "negative face index": (_set("<i4", FACES_AT, -3), [1], ["outside [0, 174)"]),
+    "NaN position": (_set("<f4", OFFSETS_AT + 12 * NV * 0 + 4 * 5, np.nan), [1], ["frame 1", "NaN or infinite"]),
+    "infinite position": (_set("<f4", 12 + 8, np.inf), [0], ["frame 0", "NaN or infinite"]),
+    "missing .anime": ("delete", [1], ["animation file is missing", "catBG/run", "request DeformingThings4D"]),
+}
+
+
+@pytest.mark.parametrize("case", list(BAD_INPUTS))
+def test_bad_anime_input_names_file_problem_and_fix(tmp_path, capsys, case):
+    edit, frames, words = BAD_INPUTS[case]
+    data = tmp_path / "data"
+    make_download(data, "animals", {"catBG": {"run": 20}})
+    anime = data / "DeformingThings4D" / "animals" / "catBG_run" / "catBG_run.anime"
+    assert anime.stat().st_size == OFFSETS_AT + 19 * 12 * NV
+    if edit == "delete":
+        anime.unlink()
+    elif edit is not None:
+        _corrupt(anime, edit)
+    (tmp_path / "info.json").write_text(json.dumps({"catBG": {"run": frames}}))
+    code, out, err = run_cli(capsys, "--data-dir", data, "--info", tmp_path / "info.json", "--kind", "animals")
+    assert code == 2 and "Traceback" not in err
+    assert str(anime) in err and "Fix:" in err, err
+    for word in words:
+        assert word in err, (case, err)
+    assert not list((data / "dt4d_animals").rglob("*.obj"))
+    print(f"\n{case}: {err.strip()}")
+
+
+def test_the_installed_command_exits_2_without_a_traceback(tmp_path):
+    data = tmp_path / "data"
+    make_download(data, "animals", {"catBG": {"run": 20}})
+    anime = data / "DeformingThings4D" / "animals" / "catBG_run" / "catBG_run.anime"
+    _corrupt(anime, lambda d: d[:FACES_AT + 100])
+    (tmp_path / "info.json").write_text(json.dumps({"catBG": {"run": [1]}}))
+    result = subprocess.run([sys.executable, "-m", "becos", "prepare-dt4d", "--data-dir", str(data), "--info",
+                             str(tmp_path / "info.json"), "--kind", "animals"], capture_output=True, text=True,
+                            env=dict(os.environ, PYTHONPATH=str(REPO)))
+    assert result.returncode == 2 and "Traceback" not in result.stderr
+    assert f"{anime}: is truncated" in result.stderr and "Fix: re-download" in result.stderr
