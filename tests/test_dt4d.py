@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import subprocess
 import sys
 import time
@@ -26,12 +27,13 @@ REPO = Path(__file__).resolve().parents[1]
 
 
 # --- synthetic .anime files ------------------------------------------------------------------------
-def synthetic_animation(n_frames: int, seed: int = 0, subdivisions: int = 2):
+def synthetic_animation(n_frames: int, seed: int = 0, phase: float = 0.0, subdivisions: int = 2):
     """``(frame0 (nv, 3) float32, faces (nt, 3) int32, offsets (nf-1, nv, 3) float32, n_body)``.
 
     Body: an ellipsoid icosphere (``n_body`` vertices) with its first face removed; a small second
     component (an icosphere of 12 vertices) beside it; vertex rows permuted over both, face rows
-    shuffled. Frames bend the body smoothly (a different bend per frame)."""
+    shuffled (by ``seed``: one seed, one triangulation). Frames bend the body smoothly (a different
+    bend per frame, shifted by ``phase``)."""
     import trimesh
 
     rng = np.random.default_rng(seed)
@@ -45,7 +47,7 @@ def synthetic_animation(n_frames: int, seed: int = 0, subdivisions: int = 2):
     inverse[perm] = np.arange(len(v))
     v, f = v[perm], inverse[f]
     f = f[rng.permutation(len(f))]
-    t = np.linspace(0.0, 2.0 * np.pi, n_frames)[1:, None]
+    t = np.linspace(0.0, 2.0 * np.pi, n_frames)[1:, None] + phase
     x = v[None, :, 0]
     offsets = np.zeros((n_frames - 1, len(v), 3))
     offsets[:, :, 2] = 0.15 * np.sin(t) * x ** 2 + 0.01 * np.cos(3 * t)   # bend up/down along the body
@@ -76,11 +78,12 @@ def reference_frame(path: Path, k: int):
     return parts[int(np.argmax([len(p.vertices) for p in parts]))]
 
 
-def make_download(data_dir: Path, kind: str, classes: dict[str, dict[str, int]], seed: int = 0) -> None:
-    """``DATA/DeformingThings4D/<kind>/<class>_<action>/<class>_<action>.anime`` for ``{class: {action: nf}}``."""
+def make_download(data_dir: Path, kind: str, classes: dict[str, dict[str, int]], phase: float = 0.0) -> None:
+    """``DATA/DeformingThings4D/<kind>/<class>_<action>/<class>_<action>.anime`` for ``{class: {action: nf}}``:
+    one triangulation (DT4D classes listed as sharing one), a different motion per animation."""
     for i, (cls, actions) in enumerate(classes.items()):
         for j, (action, n_frames) in enumerate(actions.items()):
-            frame0, faces, offsets, _ = synthetic_animation(n_frames, seed=seed + 10 * i + j)
+            frame0, faces, offsets, _ = synthetic_animation(n_frames, phase=phase + 0.7 * i + 0.3 * j)
             write_anime(data_dir / "DeformingThings4D" / kind / f"{cls}_{action}" / f"{cls}_{action}.anime",
                         frame0, faces, offsets)
 
@@ -217,3 +220,89 @@ def test_the_installed_command_exits_2_without_a_traceback(tmp_path):
                             env=dict(os.environ, PYTHONPATH=str(REPO)))
     assert result.returncode == 2 and "Traceback" not in result.stderr
     assert f"{anime}: is truncated" in result.stderr and "Fix: re-download" in result.stderr
+
+
+# --- (b) the workflow ------------------------------------------------------------------------------
+def dt4d_annotations(becos_code: Path, root: Path, info: dict) -> Path:
+    """The BeCoS annotation folder with ``info`` as its ``data/info_dt4d_animals.json`` (the rest linked)."""
+    (root / "data").mkdir(parents=True, exist_ok=True)
+    for sub in ("config", "corres_comp", "precomputed_chirality_templates", "precomputed_corr_templates"):
+        if not (root / sub).exists():
+            (root / sub).symlink_to(becos_code / sub)
+    (root / "data" / "info_dt4d_animals.json").write_text(json.dumps(info))
+    return root
+
+
+def dt4d_registry(root: Path, info: dict) -> Path:
+    """A dataset registry whose dt4d_animal.yaml expects the shapes ``info`` lists."""
+    import yaml
+
+    from becos.datasets import CONFIG_DIR
+
+    raw = yaml.safe_load((CONFIG_DIR / "dt4d_animal.yaml").read_text())
+    raw["expected_count"] = sum(len(frames) for actions in info.values() for frames in actions.values())
+    root.mkdir(parents=True, exist_ok=True)
+    (root / "dt4d_animal.yaml").write_text(yaml.safe_dump(raw))
+    return root
+
+
+def test_workflow_prepares_catalogs_remeshes_and_pairs_dt4d(becos_code, tmp_path, monkeypatch):
+    """catBG first, then leopardSLM added: only leopardSLM's preparation (and its remeshes) run again.
+
+    Both classes are real DT4D classes with their real template rows (catBG/run043, leopardSLM/roam024,
+    both train) and their real network edge, an identity one (the annotation folder lists them as
+    sharing a triangulation), so the synthetic classes share one triangulation here too."""
+    from test_workflow import jobs_planned, snakemake
+    from tiny_tosca import write_config_file
+
+    from becos.store import open_benchmark
+
+    data, workdir = tmp_path / "data", tmp_path / "run"
+    first = {"catBG": {"run": [43, 7, 12]}}
+    make_download(data, "animals", {"catBG": {"run": 50}})
+    annotations = dt4d_annotations(becos_code, tmp_path / "becos-code", first)
+    monkeypatch.setenv("BECOS_DATASETS_DIR", str(dt4d_registry(tmp_path / "registry", first)))
+    monkeypatch.setenv("PYTHONPATH", os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")]))
+    write_config_file(workdir, {
+        "synthetic": {"enabled": False}, "data_dir": str(data), "annotations": str(annotations),
+        "datasets": ["dt4d_animal"], "template_file": "templates_all.csv", "setting": "partial_partial",
+        "remesh_variants": 1, "store_vis": False, "propagate_annotations": False, "n_chunks": 2,
+        "caps": {"train": 3, "val": 0, "test": 0},
+        "exports": {"released": False, "published_pickle": False, "report": False}})
+    t0 = time.perf_counter()
+    snakemake(workdir, "--cores", "1")
+    t1 = time.perf_counter()
+    cat = data / "dt4d_animals" / "catBG"
+    assert sorted(p.name for p in cat.glob("*.obj")) == ["run007.obj", "run012.obj", "run043.obj"]
+    base = workdir / "results" / "partial_partial"
+    assert json.loads((base / "validation.json").read_text())["valid"]
+    names = set(open_benchmark(base / "benchmark.zarr").table[["x_name", "y_name"]].to_numpy().ravel())
+    assert names and names <= {"catBG/run043", "catBG/run007", "catBG/run012"}
+    catalog = (workdir / "results" / "catalog.csv").read_text()
+    assert catalog.count("dt4d_animal,catBG/") == 3
+    before = {p: (p.stat().st_mtime_ns, p.read_bytes()) for p in cat.iterdir()}
+    remeshed_before = {str(p) for p in (workdir / "results" / "remeshed").rglob("*.npz")}
+
+    second = {**first, "leopardSLM": {"roam": [24, 31]}}
+    make_download(data, "animals", {"leopardSLM": {"roam": 50}}, phase=2.0)
+    dt4d_annotations(becos_code, annotations, second)
+    dt4d_registry(tmp_path / "registry", second)
+    dry = snakemake(workdir, "-n", "--cores", "1").stdout
+    planned = re.findall(r"wildcards: kind=animals, cls=(\S+)", dry)
+    assert planned == ["leopardSLM"], dry[-3000:]
+    assert jobs_planned(dry).get("check_datasets") == 1
+    t2 = time.perf_counter()
+    snakemake(workdir, "--cores", "1")
+    t3 = time.perf_counter()
+    assert {p: (p.stat().st_mtime_ns, p.read_bytes()) for p in cat.iterdir()} == before   # catBG untouched
+    assert sorted(p.name for p in (data / "dt4d_animals" / "leopardSLM").glob("*.obj")) == ["roam024.obj",
+                                                                                           "roam031.obj"]
+    remeshed_after = {str(p) for p in (workdir / "results" / "remeshed").rglob("*.npz")}
+    assert remeshed_before < remeshed_after and all("leopardSLM" in p for p in remeshed_after - remeshed_before)
+    assert json.loads((base / "validation.json").read_text())["valid"]
+    table = open_benchmark(base / "benchmark.zarr").table
+    classes = {n.split("/")[0] for n in table[["x_name", "y_name"]].to_numpy().ravel()}
+    assert "leopardSLM" in classes
+    print(f"\nfirst run (catBG) {t1 - t0:.1f} s; second run (+leopardSLM) {t3 - t2:.1f} s, prepare jobs planned: "
+          f"{planned}; pairs: "
+          f"{table[['x_name', 'y_name']].to_numpy().tolist()}")
