@@ -306,3 +306,22 @@ def test_workflow_prepares_catalogs_remeshes_and_pairs_dt4d(becos_code, tmp_path
     print(f"\nfirst run (catBG) {t1 - t0:.1f} s; second run (+leopardSLM) {t3 - t2:.1f} s, prepare jobs planned: "
           f"{planned}; pairs: "
           f"{table[['x_name', 'y_name']].to_numpy().tolist()}")
+
+
+def test_check_without_dt4d_says_what_to_request_and_where_to_put_it(becos_code, tmp_path):
+    from becos.check import DatasetCheckError, check_datasets
+
+    data = tmp_path / "data"
+    data.mkdir()
+    with pytest.raises(DatasetCheckError) as info:
+        check_datasets(["dt4d_animal"], data, becos_code, read_meshes=False)
+    text = str(info.value)
+    assert "dataset 'dt4d_animal' (DeformingThings4D animals) not found" in text
+    assert "request DeformingThings4D through the Google form" in text
+    assert f"unpack the download into {data / 'DeformingThings4D'}" in text
+    assert f"prepares {data / 'dt4d_animals'} from {data / 'DeformingThings4D' / 'animals'}" in text
+    assert "is present but no preparation job was planned" not in text
+    (data / "DeformingThings4D" / "animals").mkdir(parents=True)        # download there, not yet prepared
+    with pytest.raises(DatasetCheckError, match="is present but no preparation job was planned"):
+        check_datasets(["dt4d_animal"], data, becos_code, read_meshes=False)
+    print(f"\n{text}")
