@@ -102,9 +102,10 @@ class Animation:
 
     Attributes:
         path: the file.
-        frame0: (nv, 3) float32 vertices of frame 0.
+        frame0: (nv, 3) float32 (little-endian) vertices of frame 0.
         faces: (nt, 3) int32 faces, 0-based, checked to lie in [0, nv).
         offsets: (nf - 1, nv, 3) float32 offsets of frames 1 .. nf-1 from frame 0.
+        (Read-only views of the file's bytes.)
         sha256: hex digest of the file's bytes (the bytes parsed).
     """
 
@@ -169,8 +170,7 @@ def read_anime(path: str | Path) -> Animation:
         bad = int(((faces < 0) | (faces >= nv)).any(axis=1).sum())
         raise InputFileError(path, f"{bad} faces use vertex indices outside [0, {nv}) (they span [{low}, {high}])",
                              _REDOWNLOAD)
-    return Animation(path, frame0.astype(np.float32), faces.astype(np.int32), offsets.astype(np.float32),
-                     hashlib.sha256(data).hexdigest())
+    return Animation(path, frame0, faces, offsets, hashlib.sha256(data).hexdigest())  # read-only views, no copy
 
 
 def make_frame(animation: Animation, k: int):
@@ -315,7 +315,8 @@ class PreparationJob:
 
     Attributes:
         dataset: dataset name (``dt4d_animal``); kind: ``animals`` / ``humanoids``; cls: the class.
-        info: the info JSON; anime: the class's ``.anime`` files; stamp: the job's output.
+        info: the info JSON; anime: the class's ``.anime`` files that exist (a missing one is left to
+            the job, whose error names it and says where to get it); stamp: the job's output.
         listing: the class's ``{action: [frame ids]}`` as canonical JSON (a rule parameter, so a change
             of this class's entry reruns this job only).
     """
@@ -363,7 +364,7 @@ def preparation_plan(config: dict) -> list[PreparationJob]:
         for cls, actions in read_info(info_path).items():
             jobs.append(PreparationJob(
                 dataset=name, kind=kind, cls=cls, info=info_path,
-                anime=tuple(anime_path(data_dir, kind, cls, a) for a in actions),
+                anime=tuple(p for p in (anime_path(data_dir, kind, cls, a) for a in actions) if p.is_file()),
                 stamp=stamp_path(data_dir, kind, cls),
                 listing=json.dumps(actions, sort_keys=True, separators=(",", ":"))))
     return jobs
