@@ -24,7 +24,8 @@ YAML keys (all datasets):
 ``layout``             ``flat`` (``<folder>/<name>.<type>``), ``class_folders``
                        (``<folder>/<class>/<stem>.<type>``, name ``<class>/<stem>``) or ``dt4d``
                        (names ``<class>/<action><frame:03d>`` from ``info_file`` of the annotation
-                       folder's ``data/``; files ``<folder>/<class>/<action><frame:03d>.obj``)
+                       folder's ``data/``; files ``<folder>/<class>/<action><frame:03d>.obj``, written
+                       by :mod:`becos.dt4d` from ``DeformingThings4D/<kind>``; folder ``dt4d_<kind>``)
 ``file_glob``          optional glob of the files to list (flat/class_folders), default ``*.<type>``
 ``expected_count``     number of used shapes (excluded ones not counted)
 ``expected_per_class`` optional ``{class: count}``

@@ -303,6 +303,16 @@ def test_workflow_prepares_catalogs_remeshes_and_pairs_dt4d(becos_code, tmp_path
     table = open_benchmark(base / "benchmark.zarr").table
     classes = {n.split("/")[0] for n in table[["x_name", "y_name"]].to_numpy().ravel()}
     assert "leopardSLM" in classes
+    # a re-extracted catBG (same bytes, new mtime) reruns its job, which keeps every OBJ: Snakemake must
+    # not delete the stamp before the job (update()), and the stamp's sha256 says nothing changed.
+    # (Snakemake itself skips a newer input with the recorded checksum, below --max-checksum-file-size,
+    # 1 MB by default; real .anime files are larger, so 0 here.)
+    anime = data / "DeformingThings4D" / "animals" / "catBG_run" / "catBG_run.anime"
+    os.utime(anime, ns=(time.time_ns(), time.time_ns() + 10**9))
+    snakemake(workdir, "--cores", "1", "--max-checksum-file-size", "0", str(cat / ".becos-dt4d.json"))
+    assert "0 frames written, 3 kept" in (workdir / "logs" / "prepare_dt4d" / "animals" / "catBG.log").read_text()
+    assert {p: p.stat().st_mtime_ns for p in cat.glob("*.obj")} == {p: m for p, (m, _) in before.items()
+                                                                     if p.suffix == ".obj"}
     print(f"\nfirst run (catBG) {t1 - t0:.1f} s; second run (+leopardSLM) {t3 - t2:.1f} s, prepare jobs planned: "
           f"{planned}; pairs: "
           f"{table[['x_name', 'y_name']].to_numpy().tolist()}")
