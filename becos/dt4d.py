@@ -45,7 +45,7 @@ from pathlib import Path
 
 import numpy as np
 
-from becos.atomic import write_text
+from becos.atomic import remove_stale_temporaries, write_text
 from becos.errors import BecosError, ConfigError, InputFileError
 
 KINDS = ("animals", "humanoids")
@@ -237,6 +237,8 @@ def prepare_class(data_dir: str | Path, kind: str, cls: str, actions: dict[str, 
     out = output_folder(data_dir, kind) / cls
     spath = out / STAMP_NAME
     old = _read_stamp(spath, kind, cls).get("animations", {})
+    # this class's job is the only writer of its folder: drop what a killed run's atomic writes left
+    remove_stale_temporaries(out, [STAMP_NAME] + [f"{a}{k:03d}.obj" for a, frames in actions.items() for k in frames])
     stamp = {"format": STAMP_FORMAT, "kind": kind, "class": cls, "trimesh": trimesh.__version__, "animations": {}}
     counts = {"written": 0, "kept": 0, "animations_read": 0}
     for action, frames in actions.items():

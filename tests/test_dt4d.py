@@ -147,6 +147,8 @@ def test_a_prepared_obj_is_rewritten_only_when_its_anime_changed(tmp_path, capsy
     assert code == 0 and json.loads(out)["written"] == 0
     assert {p: p.stat().st_mtime_ns for p in objs} == mtimes
 
+    killed = data / "dt4d_animals" / "catBG" / ".run001.obj.k1ll3d.tmp"   # what a killed atomic write leaves
+    killed.write_text("v 0 0")
     frame0, faces, offsets, _ = synthetic_animation(20, seed=99)          # new content: its frames only
     write_anime(run, frame0, faces, offsets)
     code, out, _ = run_cli(capsys, *args)
