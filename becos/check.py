@@ -414,14 +414,16 @@ def _missing_dataset_text(spec, folder: Path, data_dir: Path) -> str:
     if spec.layout == "dt4d":
         from becos.dt4d import dataset_kind, source_folder
 
-        source = source_folder(data_dir, dataset_kind(spec))
+        kind = dataset_kind(spec)
+        source = source_folder(data_dir, kind)
         parts.append(f"Put it there: unpack the download into {data_dir / 'DeformingThings4D'} (data_dir + "
                      f"'DeformingThings4D'); the workflow then prepares {folder} from {source} "
                      f"(`becos prepare-dt4d`).")
         if source.is_dir():
-            parts.append(f"{source} is present but no preparation job was planned: the info file "
-                         f"data/{spec.info_file} of the annotation folder was missing when the workflow was "
-                         f"planned; run the workflow again.")
+            parts.append(f"{source} is present but not prepared yet: run the workflow (it plans one preparation "
+                         f"job per class once the annotation folder's data/{spec.info_file} exists), or "
+                         f"`becos prepare-dt4d --data-dir {data_dir} --info <annotations>/data/{spec.info_file} "
+                         f"--kind {kind}`.")
     else:
         parts.append(f"Put it there: create {folder} (data_dir {data_dir} + '{spec.folder}') and place the "
                      f"{spec.file_type.upper()} files in it.")

@@ -472,8 +472,9 @@ class DatasetSpec:
             if missing:
                 raise InputFileError(folder, f"{len(missing)} of the {len(names)} shapes listed in {info_path} are "
                                      f"missing (e.g. {missing[0]}.{self.file_type})",
-                                     f"put the full DeformingThings4D download in {Path(data_root) / 'DeformingThings4D'} and run the "
-                                     f"workflow (or `becos prepare-dt4d`), which writes them. {self.download_help()}")
+                                     f"put the full DeformingThings4D download in "
+                                     f"{Path(data_root) / 'DeformingThings4D'} and run the workflow (or "
+                                     f"`becos prepare-dt4d`), which writes them. {self.download_help()}")
         return sorted(names, key=natural_key)
 
     def list_shapes(self, data_root: str | Path, annotations: "AnnotationSource | None" = None) -> list[ShapeEntry]:

@@ -377,7 +377,8 @@ def configure_parser(parser: argparse.ArgumentParser) -> argparse.ArgumentParser
     parser.add_argument("--data-dir", type=Path, required=True,
                         help="data root (config key `data_dir`) holding DeformingThings4D/<kind>/")
     parser.add_argument("--info", type=Path, required=True,
-                        help="info JSON {class: {action: [frame ids]}} (annotation folder's data/info_dt4d_<kind>.json)")
+                        help="info JSON {class: {action: [frame ids]}} "
+                             "(the annotation folder's data/info_dt4d_<kind>.json)")
     parser.add_argument("--kind", required=True, choices=KINDS, help="animals or humanoids")
     parser.add_argument("--classes", nargs="+", metavar="CLASS", help="only these classes (default: all listed)")
     return parser

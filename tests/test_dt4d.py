@@ -332,8 +332,8 @@ def test_check_without_dt4d_says_what_to_request_and_where_to_put_it(becos_code,
     assert "request DeformingThings4D through the Google form" in text
     assert f"unpack the download into {data / 'DeformingThings4D'}" in text
     assert f"prepares {data / 'dt4d_animals'} from {data / 'DeformingThings4D' / 'animals'}" in text
-    assert "is present but no preparation job was planned" not in text
+    assert "is present but not prepared yet" not in text
     (data / "DeformingThings4D" / "animals").mkdir(parents=True)        # download there, not yet prepared
-    with pytest.raises(DatasetCheckError, match="is present but no preparation job was planned"):
+    with pytest.raises(DatasetCheckError, match="is present but not prepared yet: run the workflow"):
         check_datasets(["dt4d_animal"], data, becos_code, read_meshes=False)
     print(f"\n{text}")
