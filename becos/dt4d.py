@@ -15,11 +15,14 @@ Units and frame are the file's (metres, z up); the dataset YAML's ``rotation_deg
 Each frame is made exactly as the reference's ``preprocess_dt4d.py`` does, because the annotation
 files (edge files, chirality labels, default faces) index its vertex and face rows:
 ``trimesh.Trimesh(v, f, process=False, maintain_order=True).split(only_watertight=False)``, then the
-component with the most vertices (the first such in trimesh's order). trimesh's own split is used, so
+component with the most vertices. trimesh's own split is used, so
 its repair (it fills 3- and 4-edge holes of each component, reference facts §7.6) happens here too.
-The OBJ is written by trimesh's exporter (``v`` lines with 8 decimals, trimesh's default, then ``f``
-lines, both in the component's order); read back with ``process=False, maintain_order=True`` (as
+The OBJ is written by trimesh's exporter as the reference's ``mesh.export(path)`` writes it (the same
+bytes under the same trimesh version: ``v`` lines with 8 decimals, trimesh's default, then ``f`` lines,
+both in the component's order); read back with ``process=False, maintain_order=True`` (as
 :func:`becos.mesh.read_mesh` does) it gives the same vertex order and face rows, positions to 5e-9.
+The component is the first of the largest, as the reference's ``sorted(parts, key=vertex count,
+reverse=True)[0]`` (a stable sort) picks it.
 
 Never rewritten unless the ``.anime`` changed: each class folder holds a stamp
 ``DATA/dt4d_<kind>/<class>/.becos-dt4d.json`` (:data:`STAMP_NAME`)::
@@ -192,13 +195,12 @@ def make_frame(animation: Animation, k: int):
     return max(parts, key=lambda part: len(part.vertices))
 
 
-def obj_text(mesh, header: str | None = None) -> str:
-    """trimesh's OBJ export of ``mesh`` (``v`` lines with 8 decimals, then ``f`` lines; no normals, colours
-    or texture), the reference's file content."""
+def obj_text(mesh) -> str:
+    """trimesh's OBJ export of ``mesh`` (its header comment, ``v`` lines with 8 decimals, then ``f`` lines;
+    no normals, colours or texture): the bytes of the reference's ``mesh.export(path)``."""
     from trimesh.exchange.obj import export_obj
 
-    kwargs = {} if header is None else {"header": header}
-    return export_obj(mesh, include_normals=False, include_color=False, include_texture=False, **kwargs)
+    return export_obj(mesh, include_normals=False, include_color=False, include_texture=False)
 
 
 # --- preparing a class ----------------------------------------------------------------------------
@@ -270,7 +272,7 @@ def prepare_class(data_dir: str | Path, kind: str, cls: str, actions: dict[str, 
                                          "DeformingThings4D download")
             for k in todo:
                 mesh = make_frame(animation, k)
-                write_text(targets[k], obj_text(mesh, header=f"becos prepare-dt4d: {source.name} frame {k}"))
+                write_text(targets[k], obj_text(mesh))
             counts["written"] += len(todo)
         counts["kept"] += len(targets) - len(todo)
         stamp["animations"][action] = {"anime": str(source.relative_to(data_dir)), "size": st.st_size,
