@@ -356,16 +356,18 @@ def preparation_plan(config: dict) -> list[PreparationJob]:
     for name in config["datasets"]:
         try:
             spec = DatasetSpec.load(name)
+            kind = dataset_kind(spec)
         except BecosError:
             continue  # the dataset check reports it
-        kind = dataset_kind(spec)
         if kind is None or not source_folder(data_dir, kind).is_dir():
             continue
         info_path = next((p for p in spec.info_file_candidates(config.get("annotations"), data_dir) if p.is_file()),
                          None)
-        if info_path is None:
-            continue
-        for cls, actions in read_info(info_path).items():
+        try:
+            info = read_info(info_path) if info_path is not None else {}
+        except BecosError:
+            continue  # the dataset check names the file and the problem
+        for cls, actions in info.items():
             jobs.append(PreparationJob(
                 dataset=name, kind=kind, cls=cls, info=info_path,
                 anime=tuple(p for p in (anime_path(data_dir, kind, cls, a) for a in actions) if p.is_file()),
