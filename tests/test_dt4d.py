@@ -340,3 +340,23 @@ def test_check_without_dt4d_says_what_to_request_and_where_to_put_it(becos_code,
     with pytest.raises(DatasetCheckError, match="is present but not prepared yet: run the workflow"):
         check_datasets(["dt4d_animal"], data, becos_code, read_meshes=False)
     print(f"\n{text}")
+
+
+def test_the_plan_has_one_job_per_class_and_leaves_a_missing_anime_to_the_job(tmp_path):
+    from becos.dt4d import preparation_plan
+
+    data, annotations = tmp_path / "data", tmp_path / "becos-code"
+    info = {"catBG": {"run": [1, 2]}, "leopardSLM": {"roam": [3], "walk": [4]}}
+    (annotations / "data").mkdir(parents=True)
+    (annotations / "data" / "info_dt4d_animals.json").write_text(json.dumps(info))
+    config = {"data_dir": str(data), "annotations": str(annotations), "datasets": ["tosca", "dt4d_animal"]}
+    assert preparation_plan(config) == []                                  # no DeformingThings4D: the check explains
+    make_download(data, "animals", {"catBG": {"run": 5}, "leopardSLM": {"roam": 5}})   # leopardSLM_walk missing
+    jobs = {job.cls: job for job in preparation_plan(config)}
+    assert sorted(jobs) == ["catBG", "leopardSLM"]
+    assert [p.name for p in jobs["leopardSLM"].anime] == ["leopardSLM_roam.anime"]
+    assert jobs["catBG"].stamp == data / "dt4d_animals" / "catBG" / ".becos-dt4d.json"
+    assert json.loads(jobs["leopardSLM"].listing) == info["leopardSLM"]
+    code = becos_main(["prepare-dt4d", "--data-dir", str(data), "--info", str(jobs["leopardSLM"].info), "--kind",
+                       "animals", "--classes", "leopardSLM"])
+    assert code == 2 and not (data / "dt4d_animals" / "leopardSLM" / "walk004.obj").exists()
