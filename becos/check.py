@@ -411,8 +411,22 @@ def _missing_dataset_text(spec, folder: Path, data_dir: Path) -> str:
         parts.append(f"Site: {s['url']} .")
     if s.get("licence"):
         parts.append(f"Licence: {s['licence'].strip().rstrip('.')}.")
-    parts.append(f"Put it there: create {folder} (data_dir {data_dir} + '{spec.folder}') and place the "
-                 f"{spec.file_type.upper()} files in it.")
+    if spec.layout == "dt4d":
+        from becos.dt4d import dataset_kind, source_folder
+
+        kind = dataset_kind(spec)
+        source = source_folder(data_dir, kind)
+        parts.append(f"Put it there: unpack the download into {data_dir / 'DeformingThings4D'} (data_dir + "
+                     f"'DeformingThings4D'); the workflow then prepares {folder} from {source} "
+                     f"(`becos prepare-dt4d`).")
+        if source.is_dir():
+            parts.append(f"{source} is present but not prepared yet: run the workflow (it plans one preparation "
+                         f"job per class once the annotation folder's data/{spec.info_file} exists), or "
+                         f"`becos prepare-dt4d --data-dir {data_dir} --info <annotations>/data/{spec.info_file} "
+                         f"--kind {kind}`.")
+    else:
+        parts.append(f"Put it there: create {folder} (data_dir {data_dir} + '{spec.folder}') and place the "
+                     f"{spec.file_type.upper()} files in it.")
     parts.append(f"Or change the config: set `data_dir` to the folder that holds '{spec.folder}', or remove "
                  f"'{spec.name}' from `datasets`.")
     return " ".join(parts)

@@ -24,7 +24,8 @@ YAML keys (all datasets):
 ``layout``             ``flat`` (``<folder>/<name>.<type>``), ``class_folders``
                        (``<folder>/<class>/<stem>.<type>``, name ``<class>/<stem>``) or ``dt4d``
                        (names ``<class>/<action><frame:03d>`` from ``info_file`` of the annotation
-                       folder's ``data/``; files ``<folder>/<class>/<action><frame:03d>.obj``)
+                       folder's ``data/``; files ``<folder>/<class>/<action><frame:03d>.obj``, written
+                       by :mod:`becos.dt4d` from ``DeformingThings4D/<kind>``; folder ``dt4d_<kind>``)
 ``file_glob``          optional glob of the files to list (flat/class_folders), default ``*.<type>``
 ``expected_count``     number of used shapes (excluded ones not counted)
 ``expected_per_class`` optional ``{class: count}``
@@ -429,9 +430,14 @@ class DatasetSpec:
             parts.append(f"cite: {s['citation']}")
         return " | ".join(parts)
 
+    def info_file_candidates(self, annotations_root: str | Path | None, data_root: str | Path) -> list[Path]:
+        """Where a ``dt4d`` dataset's ``info_file`` is looked for, in order: the annotation folder's
+        ``data/``, then the data root."""
+        return ([Path(annotations_root) / "data" / self.info_file] if annotations_root is not None else []) + \
+            [Path(data_root) / self.info_file]
+
     def _dt4d_names(self, annotations: "AnnotationSource | None", data_root: Path) -> tuple[list[str], Path]:
-        candidates = ([Path(annotations.root) / "data" / self.info_file] if annotations is not None else []) + \
-            [data_root / self.info_file]
+        candidates = self.info_file_candidates(annotations.root if annotations is not None else None, data_root)
         path = next((p for p in candidates if p.is_file()), None)
         if path is None:
             raise InputFileError(candidates[0], f"the DT4D class/frame list of {self.name} is missing",
@@ -466,7 +472,9 @@ class DatasetSpec:
             if missing:
                 raise InputFileError(folder, f"{len(missing)} of the {len(names)} shapes listed in {info_path} are "
                                      f"missing (e.g. {missing[0]}.{self.file_type})",
-                                     f"run the DT4D preprocessing (facts §5) on the full download. {self.download_help()}")
+                                     f"put the full DeformingThings4D download in "
+                                     f"{Path(data_root) / 'DeformingThings4D'} and run the workflow (or "
+                                     f"`becos prepare-dt4d`), which writes them. {self.download_help()}")
         return sorted(names, key=natural_key)
 
     def list_shapes(self, data_root: str | Path, annotations: "AnnotationSource | None" = None) -> list[ShapeEntry]:
