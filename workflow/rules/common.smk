@@ -6,6 +6,7 @@ import sys
 from pathlib import Path
 
 from becos import workflow as bw
+from becos.download import archive_url
 from becos.resources import RuleResources
 
 config.update(bw.resolve_config(config))
@@ -90,4 +91,5 @@ def generated_inputs(wildcards):
         inputs.append(config["synthetic"]["out"])
     if config["annotations_archive"]:
         inputs.append(config["annotations"])
+    inputs += [str(LAYOUT.downloaded(name)) for name in config["download"]]
     return inputs
