@@ -54,7 +54,7 @@ from pathlib import Path
 
 import numpy as np
 
-from becos.atomic import write_text
+from becos.atomic import remove_stale_temporaries, write_text
 from becos.download import RECORD_NAME, discard_partial, extract_archive, fetch, partial_path
 from becos.errors import BecosError, ConfigError, InputFileError
 
@@ -408,6 +408,9 @@ def _missing_dataset_text(spec, folder: Path, data_dir: Path) -> str:
         parts.append(f"Licence: {s['licence'].strip().rstrip('.')}.")
     parts.append(f"Put it there: create {folder} (data_dir {data_dir} + '{spec.folder}') and place the "
                  f"{spec.file_type.upper()} files in it.")
+    if spec.archive is not None:
+        parts.append(f"Or let the workflow download it: add '{spec.name}' to the config key `download` (you accept "
+                     f"its licence), or run `becos download-dataset {spec.name} --data-dir {data_dir}`.")
     parts.append(f"Or change the config: set `data_dir` to the folder that holds '{spec.folder}', or remove "
                  f"'{spec.name}' from `datasets`.")
     return " ".join(parts)
@@ -764,7 +767,8 @@ def fetch_annotations(url: str, sha256: str, dest: str | Path) -> Path:
     fetch(url, part, expected, label="annotations",
           fix="check the URL and the network connection, or download it by hand and pass a file:// URL",
           pinned_in="the annotations_archive config / --sha256")
-    work = Path(tempfile.mkdtemp(dir=dest.parent, prefix=f".{dest.name}.fetch-"))
+    remove_stale_temporaries(dest.parent, [dest.name])  # extraction folders of killed fetches
+    work = Path(tempfile.mkdtemp(dir=dest.parent, prefix=f".{dest.name}.", suffix=".tmp-fetch"))
     try:
         out = work / "extract"
         out.mkdir()

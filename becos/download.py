@@ -46,7 +46,7 @@ import urllib.request
 import zipfile
 from pathlib import Path
 
-from becos.atomic import write_text
+from becos.atomic import remove_stale_temporaries, write_text
 from becos.errors import BecosError, ConfigError
 
 log = logging.getLogger(__name__)
@@ -139,6 +139,32 @@ def _content_range_start(value: str | None) -> tuple[int, int | None] | None:
     return int(m.group(1)), None if m.group(3) == "*" else int(m.group(3))
 
 
+def _start(url: str, offset: int, meta: dict, fix: str):
+    """(response, offset, total size or None) of a transfer continuing ``part`` at ``offset`` bytes;
+    offset 0 when the download starts again (the server cannot or will not resume)."""
+    validator = (meta.get("etag") or meta.get("last_modified")) if offset else None
+    response = _open(url, offset, validator, fix)
+    if response is None:  # 416: the part is no prefix of the current file
+        print(f"download: the server cannot resume {url} at byte {offset}; starting again", file=sys.stderr)
+        return _start(url, 0, meta, fix)
+    status = getattr(response, "status", None) or 200  # file:// has no status
+    length = int(response.headers.get("Content-Length") or 0) or None
+    if not offset:
+        return response, 0, length
+    if status != 206:
+        print(f"download: the server ignored the resume request (HTTP {status}); starting {url} again from "
+              f"byte 0", file=sys.stderr)
+        return response, 0, length
+    got = _content_range_start(response.headers.get("Content-Range"))
+    if got is None or got[0] != offset:
+        print(f"download: asked {url} for the bytes from {offset}, got the range "
+              f"{response.headers.get('Content-Range')!r}; starting again", file=sys.stderr)
+        response.close()
+        return _start(url, 0, meta, fix)
+    print(f"download: resuming {url} at byte {offset}", file=sys.stderr)
+    return response, offset, got[1] if got[1] is not None else (offset + length if length else None)
+
+
 def _hash_file(path: Path, h) -> None:
     with open(path, "rb") as fh:
         for block in iter(lambda: fh.read(CHUNK_BYTES), b""):
@@ -177,38 +203,16 @@ def fetch(url: str, part: str | Path, sha256: str | None = None, *, label: str |
     meta = _read_json(sidecar) or {}
     offset = part.stat().st_size if part.is_file() else 0
     if offset and meta.get("url") != url:
-        log.warning("%s: the partial download %s belongs to another URL (%s); starting again",
-                    url, part, meta.get("url"))
+        print(f"download: the partial file {part} belongs to another URL ({meta.get('url')}); starting {url} "
+              f"from byte 0", file=sys.stderr)
         offset = 0
-    if offset and meta.get("total") == offset:
-        response = None  # complete already (killed before it was unpacked)
-    else:
-        validator = meta.get("etag") or meta.get("last_modified") if offset else None
-        response = _open(url, offset, validator, fix)
-        if response is None:  # 416: the part is not a prefix of the current file
-            log.warning("%s: the server cannot resume %s at byte %d; starting again", url, part, offset)
-            offset = 0
-            response = _open(url, 0, None, fix)
+    response, mode, total = None, "wb", None
+    if not (offset and meta.get("total") == offset):  # else complete already (killed before it was unpacked)
+        response, offset, total = _start(url, offset, meta, fix)
+        mode = "ab" if offset else "wb"
     if response is not None:
         with response:
-            status = getattr(response, "status", None) or 200  # file:// has no status
             headers = response.headers
-            length = int(headers.get("Content-Length") or 0) or None
-            mode = "wb"
-            total = length
-            if offset and status == 206:
-                got = _content_range_start(headers.get("Content-Range"))
-                if got is not None and got[0] == offset:
-                    mode = "ab"
-                    total = got[1] if got[1] is not None else (offset + length if length else None)
-                    print(f"download: resuming {url} at byte {offset}", file=sys.stderr)
-                else:
-                    raise DownloadError(url, f"asked for bytes from {offset}, the server sent the range "
-                                        f"{headers.get('Content-Range')!r}", "run again (the partial file is kept)")
-            elif offset:
-                print(f"download: the server ignored the resume request (HTTP {status}); starting {url} "
-                      f"again from byte 0", file=sys.stderr)
-                offset = 0
             write_text(sidecar, json.dumps({"url": url, "etag": headers.get("ETag"),
                                             "last_modified": headers.get("Last-Modified"), "total": total}) + "\n")
             read = getattr(response, "read1", response.read)
@@ -437,7 +441,8 @@ def download_dataset(name: str, data_dir: str | Path, url: str | None = None, *,
     part = partial_path(data_dir / f"{archive.extract_to}.{Path(urllib.parse.urlparse(url).path).name or 'archive'}")
     digest = fetch(url, part, pinned, label=f"{name} {Path(url).name}", fix=fix, pinned_in=yaml_key,
                    progress=progress)
-    work = Path(tempfile.mkdtemp(dir=dest.parent, prefix=f".{dest.name}.extract-"))
+    remove_stale_temporaries(dest.parent, [dest.name])  # extraction folders of killed runs
+    work = Path(tempfile.mkdtemp(dir=dest.parent, prefix=f".{dest.name}.", suffix=".tmp-extract"))
     try:
         out = work / dest.name
         out.mkdir()

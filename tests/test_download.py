@@ -219,6 +219,20 @@ def test_a_server_that_ignores_range_restarts_cleanly(tmp_path, capsys):
     assert installed(data / "KIDS") == kids_members() and os.listdir(data) == ["KIDS"]
 
 
+def test_a_file_changed_upstream_is_fetched_again_not_appended(tmp_path, capsys):
+    """The partial file's ETag goes out as If-Range: a server whose file changed sends it whole."""
+    old, new = zip_bytes(kids_members()), zip_bytes({**kids_members(), "off/README.txt": b"version 2"})
+    data = tmp_path / "data"
+    with ArchiveServer({"kids.zip": old}, drop_at=len(old) // 2) as server:
+        with pytest.raises(DownloadError, match="run again: it resumes"):
+            download_dataset("kids", data, server.url("kids.zip"), progress=False)
+        server.files["kids.zip"], server.drop_at = new, None
+        result = download_dataset("kids", data, server.url("kids.zip"), progress=False)
+        assert [(r.range, r.status) for r in server.requests] == [(None, 200), (f"bytes={len(old) // 2}-", 200)]
+    assert "ignored the resume request" in capsys.readouterr().err
+    assert result["sha256"] == sha(new) and (data / "KIDS" / "off" / "README.txt").read_bytes() == b"version 2"
+
+
 # --- layout and unsafe archives --------------------------------------------------------------------
 def test_wrong_layout_is_a_clear_error_and_leaves_nothing(tmp_path):
     data = tmp_path / "data"
@@ -262,6 +276,16 @@ def test_unsafe_members_are_refused_and_nothing_is_written(tmp_path, kind, capsy
         err = capsys.readouterr().err.strip()
         assert err.startswith(f"becos download-dataset: {server.url('kids.zip')}: member ") and "Traceback" not in err
         assert os.listdir(data) == []
+
+
+def test_a_killed_extraction_leaves_no_folder_under_the_final_name_and_is_cleaned_up(tmp_path):
+    data = tmp_path / "data"
+    stale = data / ".KIDS.k1ll3d.tmp-extract" / "KIDS" / "off"  # what a run killed while extracting leaves
+    stale.mkdir(parents=True)
+    (stale / "0001.null.0.off").write_bytes(b"OFF\n4 4 0\n")
+    with ArchiveServer({"kids.zip": zip_bytes(kids_members())}) as server:
+        download_dataset("kids", data, server.url("kids.zip"), progress=False)
+    assert os.listdir(data) == ["KIDS"] and installed(data / "KIDS") == kids_members()
 
 
 def test_an_existing_folder_is_used_or_left_alone(tmp_path):
@@ -342,6 +366,12 @@ def test_missing_manual_datasets_say_where_to_get_them_and_where_to_put_them(tmp
         assert spec.source["licence"].rstrip(".") in text
         assert f"Put it there: create {data / spec.folder}" in text             # where to put it
         assert f"place the {spec.file_type.upper()} files in it" in text
+        assert "download" not in text.split("Put it there")[1]  # no automatic download offered
+    # KIDS can be downloaded: its message says how
+    with pytest.raises(DatasetCheckError) as info:
+        check_datasets(["kids"], data, None, read_meshes=False)
+    assert f"add 'kids' to the config key `download`" in info.value.problems[0]
+    assert f"becos download-dataset kids --data-dir {data}" in info.value.problems[0]
 
 
 # --- the workflow ----------------------------------------------------------------------------------
