@@ -55,7 +55,8 @@ from pathlib import Path
 import numpy as np
 
 from becos.atomic import remove_stale_temporaries, write_text
-from becos.download import RECORD_NAME, discard_partial, extract_archive, fetch, partial_path
+from becos.download import (RECORD_NAME, CorruptArchiveError, UnsafeArchiveError, discard_partial, extract_archive,
+                            fetch, partial_path)
 from becos.errors import BecosError, ConfigError, InputFileError
 
 MAX_LISTED_MESHES = 20
@@ -775,7 +776,7 @@ def fetch_annotations(url: str, sha256: str, dest: str | Path) -> Path:
         label = f"annotation archive {url}"
         try:
             extract_archive(part, out, label)
-        except BecosError:
+        except (UnsafeArchiveError, CorruptArchiveError):
             discard_partial(part)  # complete but unusable: a rerun must fetch it again
             raise
         discard_partial(part)

@@ -83,6 +83,10 @@ class ArchiveLayoutError(DownloadError):
     """The archive does not yield the files the dataset needs."""
 
 
+class CorruptArchiveError(DownloadError):
+    """The downloaded file is not a readable zip or tar archive."""
+
+
 # --- download --------------------------------------------------------------------------------------
 def partial_path(target: str | Path) -> Path:
     """The partial file of a download whose result belongs at ``target``: ``.<name>.part`` beside it."""
@@ -249,6 +253,7 @@ def fetch(url: str, part: str | Path, sha256: str | None = None, *, label: str |
 
 # --- extraction ------------------------------------------------------------------------------------
 _UNSAFE_FIX = "the archive is unsafe and nothing was extracted; check the URL and its pinned SHA-256"
+_EXTRACT_OS_FIX = "check the free space and permissions there, then run again (the downloaded archive is kept)"
 
 
 def _safe_member_name(name: str, archive: str) -> str:
@@ -266,7 +271,7 @@ def _extract_tar(path: Path, out: Path, label: str) -> None:
     try:
         tar = tarfile.open(path, "r:*")
     except (tarfile.TarError, OSError) as exc:
-        raise DownloadError(label, f"not a readable zip or tar archive ({exc})", "check the URL") from None
+        raise CorruptArchiveError(label, f"not a readable zip or tar archive ({exc})", "check the URL") from None
     with tar:
         members = tar.getmembers()
         for m in members:
@@ -284,9 +289,11 @@ def _extract_tar(path: Path, out: Path, label: str) -> None:
                 raise UnsafeArchiveError(label, f"member '{m.name}' is a device or pipe", _UNSAFE_FIX)
         try:
             tar.extractall(out, members=members, filter="data")
-        except (tarfile.TarError, OSError) as exc:
-            raise DownloadError(label, f"extraction failed ({exc})", "the archive is corrupt; download it again") \
-                from None
+        except tarfile.TarError as exc:
+            raise CorruptArchiveError(label, f"extraction failed ({exc})", "the archive is corrupt; download it "
+                                      "again") from None
+        except OSError as exc:
+            raise DownloadError(label, f"extraction into {out} failed ({exc})", _EXTRACT_OS_FIX) from None
 
 
 def _extract_zip(path: Path, out: Path, label: str) -> None:
@@ -297,9 +304,11 @@ def _extract_zip(path: Path, out: Path, label: str) -> None:
                 if stat.S_ISLNK(info.external_attr >> 16):
                     raise UnsafeArchiveError(label, f"member '{info.filename}' is a symbolic link", _UNSAFE_FIX)
             zf.extractall(out)
-    except (zipfile.BadZipFile, OSError) as exc:
-        raise DownloadError(label, f"not a readable zip archive ({exc})",
-                            "the archive is corrupt; download it again") from None
+    except (zipfile.BadZipFile, zipfile.LargeZipFile, EOFError) as exc:
+        raise CorruptArchiveError(label, f"not a readable zip archive ({exc})",
+                                  "the archive is corrupt; download it again") from None
+    except OSError as exc:
+        raise DownloadError(label, f"extraction into {out} failed ({exc})", _EXTRACT_OS_FIX) from None
 
 
 def extract_archive(path: str | Path, out: str | Path, label: str) -> None:
@@ -309,7 +318,8 @@ def extract_archive(path: str | Path, out: str | Path, label: str) -> None:
     zips, links leaving a tar archive, devices). ``label`` names the archive in errors (its URL).
 
     Raises:
-        UnsafeArchiveError: a refused member. DownloadError: unreadable archive.
+        UnsafeArchiveError: a refused member. CorruptArchiveError: unreadable archive. DownloadError: the
+            files cannot be written (disk full, permissions).
     """
     path, out = Path(path), Path(out)
     if zipfile.is_zipfile(path):
@@ -455,14 +465,13 @@ def download_dataset(name: str, data_dir: str | Path, url: str | None = None, *,
                                          f"check that the URL points at the {spec.title} archive (download_urls / "
                                          f"source.archive.url in {spec.path}); becos expects "
                                          f"{archive.extract_to}/{expected} below the data root")
-        except DownloadError:
+        except (UnsafeArchiveError, CorruptArchiveError, ArchiveLayoutError):
             discard_partial(part)  # complete but unusable: a rerun must fetch it again
             raise
         result = {"dataset": name, "folder": str(dest), "url": url, "sha256": digest,
                   "sha256_pinned": pinned is not None, "downloaded": True, "files": len(found),
                   "bytes": part.stat().st_size, "downloaded_at": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
         write_text(out / RECORD_NAME, json.dumps(result, indent=2) + "\n")
-        os.chmod(out, 0o755)
         if dest.exists():  # an empty folder, or our own earlier download that lost its files: swap it out
             os.rename(dest, work / "previous")
         os.rename(out, dest)

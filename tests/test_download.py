@@ -27,8 +27,8 @@ from archive_server import ArchiveServer
 from becos.check import DatasetCheckError, check_datasets
 from becos.cli import main as becos_main
 from becos.datasets import CONFIG_DIR, DatasetSpec
-from becos.download import (RECORD_NAME, ArchiveLayoutError, ChecksumMismatchError, DownloadError,
-                            UnsafeArchiveError, download_dataset, partial_path)
+from becos.download import (RECORD_NAME, ArchiveLayoutError, ChecksumMismatchError, CorruptArchiveError,
+                            DownloadError, UnsafeArchiveError, download_dataset, partial_path)
 from becos.errors import ConfigError
 from becos.workflow import resolve_config
 
@@ -234,7 +234,7 @@ def test_a_file_changed_upstream_is_fetched_again_not_appended(tmp_path, capsys)
 
 
 # --- layout and unsafe archives --------------------------------------------------------------------
-def test_wrong_layout_is_a_clear_error_and_leaves_nothing(tmp_path):
+def test_wrong_layout_or_no_archive_is_a_clear_error_and_leaves_nothing(tmp_path):
     data = tmp_path / "data"
     nested = {f"KIDS/{name}": body for name, body in kids_members().items()}  # one folder level too many
     with ArchiveServer({"kids.zip": zip_bytes(nested), "other.zip": zip_bytes(shrec_members())}) as server:
@@ -246,6 +246,10 @@ def test_wrong_layout_is_a_clear_error_and_leaves_nothing(tmp_path):
         assert os.listdir(data) == []
         with pytest.raises(ArchiveLayoutError, match=r"no off/\*\.off inside .*\['SHREC20b_hires/'\]"):
             download_dataset("kids", data, server.url("other.zip"), progress=False)
+        assert os.listdir(data) == []
+        server.files["page.zip"] = b"<html>Please log in</html>"  # what a login wall serves
+        with pytest.raises(CorruptArchiveError, match="not a readable zip or tar archive"):
+            download_dataset("kids", data, server.url("page.zip"), progress=False)
         assert os.listdir(data) == []
 
 
