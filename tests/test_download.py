@@ -148,6 +148,18 @@ def test_pinned_checksum_mismatch_names_both_digests_and_installs_nothing(tmp_pa
         assert result["sha256_pinned"] is True and installed(data / "KIDS") == kids_members()
 
 
+def test_a_local_copy_is_installed_from_a_file_url(tmp_path):
+    """``download_urls: {shrec20: file:///...}``: an archive the user already has, checked and unpacked."""
+    archive = tmp_path / "SHREC20b_hires.zip"
+    archive.write_bytes(zip_bytes(shrec_members()))
+    data = tmp_path / "data"
+    partial_path(data / "Shrec20.SHREC20b_hires.zip").parent.mkdir(parents=True)
+    partial_path(data / "Shrec20.SHREC20b_hires.zip").write_bytes(b"stale bytes of another URL")
+    result = download_dataset("shrec20", data, archive.as_uri(), progress=False)
+    assert result["sha256"] == sha(archive.read_bytes()) and result["url"] == archive.as_uri()
+    assert installed(data / "Shrec20") == shrec_members() and os.listdir(data) == ["Shrec20"]
+
+
 # --- resume ----------------------------------------------------------------------------------------
 def test_download_resumes_after_a_kill(tmp_path):
     """`becos download-dataset` in a subprocess is SIGKILLed mid-transfer; the rerun asks for the rest."""
