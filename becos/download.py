@@ -57,6 +57,9 @@ RECORD_NAME = ".becos-download.json"
 CHUNK_BYTES = 1 << 20
 """Largest block read from the network and written to the partial file at a time."""
 
+ARCHIVE_SCHEMES = ("http", "https", "file")
+"""URL schemes an archive may be fetched from."""
+
 TIMEOUT_S = 60.0
 """Seconds without data before a connection counts as broken."""
 
@@ -200,7 +203,7 @@ def fetch(url: str, part: str | Path, sha256: str | None = None, *, label: str |
 
     part = Path(part)
     scheme = urllib.parse.urlparse(url).scheme.lower()
-    if scheme not in ("http", "https", "file"):
+    if scheme not in ARCHIVE_SCHEMES:
         raise DownloadError(url, "is not an http(s):// or file:// URL", "give the full URL")
     part.parent.mkdir(parents=True, exist_ok=True)
     sidecar = _sidecar(part)

@@ -13,6 +13,7 @@ import hashlib
 import io
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -29,7 +30,7 @@ from becos.cli import main as becos_main
 from becos.datasets import CONFIG_DIR, DatasetSpec
 from becos.download import (RECORD_NAME, ArchiveLayoutError, ChecksumMismatchError, CorruptArchiveError,
                             DownloadError, UnsafeArchiveError, download_dataset, partial_path)
-from becos.errors import ConfigError
+from becos.errors import ConfigError, InputFileError
 from becos.workflow import resolve_config
 
 REPO = Path(__file__).resolve().parents[1]
@@ -388,6 +389,22 @@ def test_missing_manual_datasets_say_where_to_get_them_and_where_to_put_them(tmp
         check_datasets(["kids"], data, None, read_meshes=False)
     assert f"add 'kids' to the config key `download`" in info.value.problems[0]
     assert f"becos download-dataset kids --data-dir {data}" in info.value.problems[0]
+
+
+@pytest.mark.parametrize("archive, problem", [
+    ({"url": "kids.zip", "sha256": None, "extract_to": "KIDS"}, "is not an http(s):// or file:// URL"),
+    ({"url": "https://h/kids.zip", "sha256": "abc", "extract_to": "KIDS"}, "is not 64 hex digits"),
+    ({"url": "https://h/kids.zip", "sha256": None, "extract_to": "../KIDS"}, "is not a folder below the data root"),
+    ({"url": "https://h/kids.zip", "sha256": None, "extract_to": "Shrec20"}, "is not inside source.archive.extract_to"),
+    ({"url": "https://h/kids.zip", "sha256": None}, "must have exactly the keys url, sha256, extract_to"),
+])
+def test_a_bad_archive_entry_in_a_dataset_yaml_names_the_file(tmp_path, archive, problem):
+    raw = yaml.safe_load((CONFIG_DIR / "kids.yaml").read_text())
+    raw["source"]["archive"] = archive
+    (tmp_path / "kids.yaml").write_text(yaml.safe_dump(raw))
+    with pytest.raises(InputFileError, match=re.escape(problem)) as info:
+        DatasetSpec.load("kids", tmp_path)
+    assert info.value.path == tmp_path / "kids.yaml"
 
 
 # --- the workflow ----------------------------------------------------------------------------------
