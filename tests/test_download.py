@@ -14,6 +14,7 @@ import io
 import json
 import os
 import re
+import shutil
 import signal
 import subprocess
 import sys
@@ -78,11 +79,23 @@ def sha(data: bytes) -> str:
     return hashlib.sha256(data).hexdigest()
 
 
-def registry_with(tmp_path: Path, dataset: str, sha256: str | None) -> Path:
+@pytest.fixture(autouse=True)
+def unpinned_registry(tmp_path, monkeypatch) -> Path:
+    """The dataset registry with the KIDS and SHREC'20 archives unpinned (``$BECOS_DATASETS_DIR``, also
+    seen by subprocesses): the stand-in archives are not the real ones, whatever the repository pins."""
+    folder = tmp_path / "registry"
+    shutil.copytree(CONFIG_DIR, folder)
+    for dataset in ("kids", "shrec20"):
+        registry_with(tmp_path, dataset, None, folder)
+    monkeypatch.setenv("BECOS_DATASETS_DIR", str(folder))
+    return folder
+
+
+def registry_with(tmp_path: Path, dataset: str, sha256: str | None, folder: Path | None = None) -> Path:
     """A dataset registry folder holding ``dataset``'s YAML with ``source.archive.sha256`` set."""
     raw = yaml.safe_load((CONFIG_DIR / f"{dataset}.yaml").read_text())
     raw["source"]["archive"]["sha256"] = sha256
-    folder = tmp_path / f"registry-{(sha256 or 'null')[:8]}"
+    folder = folder or tmp_path / f"registry-{(sha256 or 'null')[:8]}"
     folder.mkdir(exist_ok=True)
     (folder / f"{dataset}.yaml").write_text(yaml.safe_dump(raw, sort_keys=False))
     return folder
@@ -100,7 +113,7 @@ def test_fresh_download_installs_the_archive_and_records_its_unpinned_digest(tmp
     members = kids_members() if dataset == "kids" else shrec_members()
     archive = zip_bytes(members)
     spec = DatasetSpec.load(dataset)
-    assert spec.archive.sha256 is None  # not pinned in the repository yet
+    assert spec.archive.sha256 is None  # unpinned (fixture unpinned_registry)
     data = tmp_path / "data"
     with ArchiveServer({"a.zip": archive}) as server:
         result = download_dataset(dataset, data, server.url("a.zip"), progress=False)
@@ -286,7 +299,7 @@ def test_unsafe_members_are_refused_and_nothing_is_written(tmp_path, kind, capsy
         with pytest.raises(UnsafeArchiveError, match=match):
             download_dataset("kids", data, server.url("kids.zip"), progress=False)
         assert os.listdir(data) == [] and not outside.exists()
-        assert sorted(p.name for p in tmp_path.iterdir()) == ["data"]
+        assert sorted(p.name for p in tmp_path.iterdir()) == ["data", "registry"]
         # the command line: one line naming the URL, exit 2
         assert becos_main(["download-dataset", "kids", "--data-dir", str(data), "--url", server.url("kids.zip"),
                            "--no-progress"]) == 2
