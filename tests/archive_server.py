@@ -4,7 +4,8 @@
 ``If-Range`` against its ``ETag``; HTTP 206 / 416) and records every request. Switches make it
 behave like the servers a download meets: ``ignore_range`` (answers every request with the whole
 file), ``stall_at`` (sends the bytes before that offset, then waits until :meth:`release`) and
-``drop_at`` (announces the whole length, sends the bytes before that offset, then closes).
+``drop_at`` (announces the whole length, sends the bytes before that offset, then closes) and
+``send_etag`` (False: no validator, so a resume cannot tell that the file changed).
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ class ArchiveServer:
     ignore_range: bool = False
     stall_at: int | None = None
     drop_at: int | None = None
+    send_etag: bool = True
     requests: list[Request] = field(default_factory=list)
 
     def __post_init__(self):
@@ -93,7 +95,8 @@ class ArchiveServer:
         handler.send_response(status)
         handler.send_header("Content-Type", "application/zip")
         handler.send_header("Content-Length", str(end - start))
-        handler.send_header("ETag", etag)
+        if self.send_etag:
+            handler.send_header("ETag", etag)
         handler.send_header("Accept-Ranges", "none" if self.ignore_range else "bytes")
         if status == 206:
             handler.send_header("Content-Range", f"bytes {start}-{end - 1}/{len(data)}")

@@ -259,6 +259,23 @@ def test_a_file_changed_upstream_is_fetched_again_not_appended(tmp_path, capsys)
     assert result["sha256"] == sha(new) and (data / "KIDS" / "off" / "README.txt").read_bytes() == b"version 2"
 
 
+def test_a_partial_file_longer_than_the_file_now_served_restarts(tmp_path, capsys):
+    """No ETag, and the file was replaced by a shorter one: the resume is refused (HTTP 416), the
+    download starts again."""
+    longer = zip_bytes({**kids_members(), "off/padding.bin": os.urandom(20000)})
+    shorter = zip_bytes(kids_members())
+    data = tmp_path / "data"
+    cut = len(shorter) + 1000
+    with ArchiveServer({"kids.zip": longer}, drop_at=cut, send_etag=False) as server:
+        with pytest.raises(DownloadError, match=f"after {cut} of {len(longer)} bytes"):
+            download_dataset("kids", data, server.url("kids.zip"), progress=False)
+        server.files["kids.zip"], server.drop_at = shorter, None
+        result = download_dataset("kids", data, server.url("kids.zip"), progress=False)
+        assert [(r.range, r.status) for r in server.requests] == [(None, 200), (f"bytes={cut}-", 416), (None, 200)]
+    assert f"the server cannot resume {server.url('kids.zip')} at byte {cut}" in capsys.readouterr().err
+    assert result["sha256"] == sha(shorter) and installed(data / "KIDS") == kids_members()
+
+
 # --- layout and unsafe archives --------------------------------------------------------------------
 def test_wrong_layout_or_no_archive_is_a_clear_error_and_leaves_nothing(tmp_path):
     data = tmp_path / "data"
