@@ -9,6 +9,7 @@ from snakemake.exceptions import IncompleteCheckpointException
 
 from becos import dt4d as bdt4d
 from becos import workflow as bw
+from becos.download import archive_url
 from becos.resources import RuleResources
 
 config.update(bw.resolve_config(config))
@@ -98,4 +99,5 @@ def generated_inputs(wildcards):
     if config["annotations_archive"]:
         inputs.append(config["annotations"])
     inputs += [str(job.stamp) for job in DT4D_JOBS.values()]  # DeformingThings4D preparation (data.smk)
+    inputs += [str(LAYOUT.downloaded(name)) for name in config["download"]]
     return inputs

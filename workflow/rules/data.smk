@@ -73,6 +73,30 @@ if DT4D_JOBS:
             "becos prepare-dt4d --data-dir {params.data_dir:q} --info {input.info:q} --kind {wildcards.kind}"
             " --classes {wildcards.cls:q} > {log} 2>&1"
 
+if config["download"]:
+
+    # opt-in downloads of the public dataset archives (kids, shrec20): one job per dataset, before the
+    # dataset check; on the machine that runs Snakemake (cluster nodes often have no internet)
+    localrules:
+        download_dataset,
+
+    rule download_dataset:
+        output:
+            str(LAYOUT.downloaded("{dataset}")),
+        wildcard_constraints:
+            dataset="|".join(config["download"]),
+        params:
+            data_dir=config["data_dir"],
+            url=lambda wildcards: archive_url(wildcards.dataset, config["download_urls"]),
+        resources:
+            mem_mb=RESOURCES.mem_mb("download_dataset"),
+            runtime=RESOURCES.runtime("download_dataset"),
+        log:
+            "logs/download/{dataset}.log",
+        shell:
+            "becos download-dataset {wildcards.dataset} --data-dir {params.data_dir:q} --url {params.url:q}"
+            " --out {output} > {log} 2>&1"
+
 
 checkpoint check_datasets:
     input:
