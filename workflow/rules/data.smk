@@ -73,6 +73,7 @@ if DT4D_JOBS:
             "becos prepare-dt4d --data-dir {params.data_dir:q} --info {input.info:q} --kind {wildcards.kind}"
             " --classes {wildcards.cls:q} > {log} 2>&1"
 
+
 if config["download"]:
 
     # opt-in downloads of the public dataset archives (kids, shrec20): one job per dataset, before the
