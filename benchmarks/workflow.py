@@ -11,9 +11,26 @@ Measures, on the TOSCA meshes of ``../shared`` (all 76 shapes, partial-to-partia
 - ``run_100``: the same for ~100 pairs (remesh files copied from the 1,000-pair run), for the peak-RSS
   ratio ``rss_ratio_1000_vs_100``.
 
+``--full-plan`` measures instead the plan of the whole published benchmark (issue 14, item 4), on the
+stand-in data root of ``tests/standin.py`` (2,537 small meshes at the published file paths; real
+template vertex counts): all 8 dataset entries, the three settings, default usage counts, no caps:
+
+- ``full_plan.setup``: seconds of ``snakemake --until manifest`` (dataset check, catalog, manifests
+  run for real, so the dry run knows every chunk job);
+- ``full_plan.dry_run``: seconds of ``snakemake -n`` and its job counts; ``dry_run_quiet``: the same
+  with ``--quiet`` (no per-job listing);
+- ``full_plan.plan_build``: where the plan's own time goes, measured in this process:
+  :meth:`becos.workflow.Plan.build` split into catalog and per-setting manifests, and the job lists;
+- ``full_plan.pairs``: pairs per split of each setting's manifest, next to the published
+  10,185 / 137 / 142 (train / val / test); ``original_settings``: the same for the published lists
+  imported by the manifest job's function.
+
+Every configuration key is written to the run's ``--configfile`` (the resolved config), so the
+figures do not depend on the repository's ``config/config.yaml``.
+
 Usage::
 
-    python benchmarks/workflow.py [--workdir /tmp/becos-bench] [--variants 1] [--skip-run]
+    python benchmarks/workflow.py [--workdir /tmp/becos-bench] [--variants 1] [--skip-run] [--full-plan]
 """
 
 from __future__ import annotations
@@ -34,6 +51,8 @@ import yaml
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED = REPO.parent / "shared"
+sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(REPO / "tests"))  # tests/standin.py: the stand-in data root
 
 
 def becos_code() -> Path:
@@ -85,7 +104,9 @@ def snakemake(workdir: Path, *args: str) -> tuple[float, str, dict]:
     cmd = [sys.executable, "-m", "snakemake", "-s", str(REPO / "Snakefile"), "-d", str(workdir),
            "--configfile", str(workdir / "config.yaml"), *args]
     start = time.perf_counter()
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    # the jobs' `becos` runs this checkout's code, whatever the environment installed
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in (str(REPO), os.environ.get("PYTHONPATH")) if p)}
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env)
     rss = PeakRss(proc.pid)
     out, _ = proc.communicate()
     seconds = time.perf_counter() - start
@@ -103,14 +124,85 @@ def n_pairs(workdir: Path) -> int:
     return sum(1 for _ in open(workdir / "results" / "partial_partial" / "manifest.csv")) - 1
 
 
+def split_counts(manifest) -> dict[str, int]:
+    return {s: int((manifest["split"] == s).sum()) for s in ("train", "val", "test")}
+
+
+def full_plan(workdir: Path, code: Path) -> dict:
+    """The ``full_plan`` figures (module docstring) for a stand-in tree built under ``workdir``."""
+    from becos.sampling import read_manifest
+    from becos.workflow import Plan, build_catalog, build_manifest, resolve_config, settings_of, write_manifest_stage
+    from standin import DATASETS, PUBLISHED_PAIRS, PUBLISHED_SETTINGS, build_standin_tree
+
+    shutil.rmtree(workdir, ignore_errors=True)
+    tree = build_standin_tree(workdir / "standin", code)
+    run = workdir / "run"
+    config = resolve_config({"synthetic": {"enabled": False}, "data_dir": str(tree.data_dir),
+                             "annotations": str(code), "datasets": list(DATASETS),
+                             "template_file": "templates_all.csv"})
+    run.mkdir(parents=True)
+    (run / "config.yaml").write_text(yaml.safe_dump(config, sort_keys=False))
+    out: dict = {"standin": {"files": len(tree.files), "published_shapes": len(tree.published),
+                             "real_size_templates": len(tree.template_vertices), "seconds": tree.seconds},
+                 "config": {k: config[k] for k in ("datasets", "setting", "template_file", "usage_scale", "caps",
+                                                   "remesh_variants", "n_chunks")}}
+    seconds, _, _ = snakemake(run, "--cores", "2", "--until", "manifest")
+    out["setup"] = {"command": "snakemake --cores 2 --until manifest", "seconds": round(seconds, 2)}
+    seconds, text, memory = snakemake(run, "-n", "--cores", "2")
+    out["dry_run"] = {"command": "snakemake -n --cores 2", "seconds": round(seconds, 2),
+                      "peak_rss_mb": memory["peak_rss_mb"], "jobs": job_counts(text)}
+    seconds, _, _ = snakemake(run, "-n", "--quiet", "--cores", "2")
+    out["dry_run_quiet"] = {"command": "snakemake -n --quiet --cores 2", "seconds": round(seconds, 2)}
+
+    # where the plan's own time goes (the Snakemake process does the same once per run)
+    local = {**config, "results": str(run / "results")}
+    timings: dict = {}
+    start = time.perf_counter()
+    catalog = build_catalog(local)
+    timings["catalog"] = round(time.perf_counter() - start, 2)
+    for setting in settings_of(local):
+        t = time.perf_counter()
+        build_manifest(local, setting, catalog)
+        timings[f"manifest_{setting}"] = round(time.perf_counter() - t, 2)
+    t = time.perf_counter()
+    plan = Plan.build(local)
+    timings["plan_build_total"] = round(time.perf_counter() - t, 2)
+    t = time.perf_counter()
+    n_chunk_inputs = sum(len(plan.chunk_inputs(s, c)) for s in plan.manifests for c in plan.chunks(s))
+    timings["chunk_inputs_all_chunks_once"] = round(time.perf_counter() - t, 2)
+    out["plan_build"] = {"seconds": timings, "shapes": len(plan.catalog), "remesh_jobs": len(plan.remesh_jobs),
+                         "chunk_jobs_per_stage": {s: len(plan.chunks(s)) for s in plan.manifests},
+                         "remesh_inputs_over_all_chunks": n_chunk_inputs}
+
+    published = {s: (PUBLISHED_PAIRS if s in PUBLISHED_SETTINGS else None) for s in settings_of(config)}
+    out["pairs"] = {s: {"sampled": split_counts(read_manifest(run / "results" / s / "manifest.csv")),
+                        "published": published[s]} for s in settings_of(config)}
+    original = {**local, "original_settings": True, "setting": list(PUBLISHED_SETTINGS),
+                "results": str(workdir / "original")}
+    catalog_path = run / "results" / "catalog.csv"
+    out["pairs_original_settings"] = {}
+    for setting in PUBLISHED_SETTINGS:
+        manifest = write_manifest_stage(original, setting, catalog_path, workdir / "original" / setting / "manifest.csv")
+        counts = split_counts(manifest)
+        out["pairs_original_settings"][setting] = {"imported": counts, "published": PUBLISHED_PAIRS,
+                                                   "equal": counts == PUBLISHED_PAIRS}
+    return out
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--workdir", type=Path, default=Path("/tmp/becos-bench"))
     parser.add_argument("--variants", type=int, default=1, help="remesh variants per shape (default 1)")
     parser.add_argument("--skip-run", action="store_true", help="only the 10k-pair dry run")
+    parser.add_argument("--full-plan", action="store_true",
+                        help="only the plan of the whole published benchmark on a stand-in data root")
     args = parser.parse_args()
     code = becos_code()
     result: dict = {"machine_cores": os.cpu_count()}
+    if args.full_plan:
+        result["full_plan"] = full_plan(args.workdir / "fullplan", code)
+        print(json.dumps(result, indent=1))
+        return
 
     dag = args.workdir / "dag10k"
     shutil.rmtree(dag, ignore_errors=True)
