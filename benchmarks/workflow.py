@@ -15,15 +15,15 @@ Measures, on the TOSCA meshes of ``../shared`` (all 76 shapes, partial-to-partia
 stand-in data root of ``tests/standin.py`` (2,537 small meshes at the published file paths; real
 template vertex counts): all 8 dataset entries, the three settings, default usage counts, no caps:
 
-- ``full_plan.setup``: seconds of ``snakemake --until manifest`` (dataset check, catalog, manifests
-  run for real, so the dry run knows every chunk job);
-- ``full_plan.dry_run``: seconds of ``snakemake -n`` and its job counts; ``dry_run_quiet``: the same
-  with ``--quiet`` (no per-job listing);
-- ``full_plan.plan_build``: where the plan's own time goes, measured in this process:
-  :meth:`becos.workflow.Plan.build` split into catalog and per-setting manifests, and the job lists;
-- ``full_plan.pairs``: pairs per split of each setting's manifest, next to the published
-  10,185 / 137 / 142 (train / val / test); ``original_settings``: the same for the published lists
-  imported by the manifest job's function.
+- ``default`` (sampled pairs) and ``original_settings`` (the published lists, full_full and
+  partial_partial), each with ``setup``: seconds of ``snakemake --until manifest`` (dataset check,
+  catalog, manifests run for real, so the dry run knows every chunk job); ``dry_run``: seconds of
+  ``snakemake -n`` and its job counts (``dry_run_quiet``: with ``--quiet``, no per-job listing);
+  ``pairs``: pairs per split of each setting's manifest, next to the published 10,185 / 137 / 142
+  (train / val / test). Wall and CPU seconds (the machine may be shared);
+- ``default.plan_build``: where the plan's own time goes, measured in this process:
+  :meth:`becos.workflow.Plan.build` split into catalog and per-setting manifests, and the chunk jobs'
+  input lists.
 
 Every configuration key is written to the run's ``--configfile`` (the resolved config), so the
 figures do not depend on the repository's ``config/config.yaml``.
@@ -39,6 +39,7 @@ import argparse
 import json
 import os
 import re
+import resource
 import shutil
 import subprocess
 import sys
@@ -100,10 +101,16 @@ class PeakRss:
         return {"peak_rss_mb": round(self.peak / 2**20, 1), "peak_process": self.peak_cmd}
 
 
+def _children_cpu() -> float:
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return usage.ru_utime + usage.ru_stime
+
+
 def snakemake(workdir: Path, *args: str) -> tuple[float, str, dict]:
     cmd = [sys.executable, "-m", "snakemake", "-s", str(REPO / "Snakefile"), "-d", str(workdir),
            "--configfile", str(workdir / "config.yaml"), *args]
     start = time.perf_counter()
+    cpu_start = _children_cpu()
     # the jobs' `becos` runs this checkout's code, whatever the environment installed
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in (str(REPO), os.environ.get("PYTHONPATH")) if p)}
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env)
@@ -111,6 +118,8 @@ def snakemake(workdir: Path, *args: str) -> tuple[float, str, dict]:
     out, _ = proc.communicate()
     seconds = time.perf_counter() - start
     memory = rss.stop()
+    # CPU of snakemake and its jobs: on a shared machine, wall time also counts other users' load
+    memory["cpu_seconds"] = round(_children_cpu() - cpu_start, 2)
     if proc.returncode != 0:
         raise SystemExit(f"snakemake {' '.join(args)} failed in {workdir}:\n{out[-5000:]}")
     return seconds, out, memory
@@ -128,64 +137,73 @@ def split_counts(manifest) -> dict[str, int]:
     return {s: int((manifest["split"] == s).sum()) for s in ("train", "val", "test")}
 
 
+def plan_run(run: Path, config: dict, quiet: bool = True) -> dict:
+    """Write ``config`` (every key) to ``run/config.yaml``; run the dataset check, catalog and manifests
+    (``--until manifest``), then time ``snakemake -n`` (and ``-n --quiet``); pairs per split."""
+    from becos.sampling import read_manifest
+    from becos.workflow import settings_of
+    from standin import PUBLISHED_PAIRS, PUBLISHED_SETTINGS
+
+    run.mkdir(parents=True)
+    (run / "config.yaml").write_text(yaml.safe_dump(config, sort_keys=False))
+    out: dict = {"config": {k: config[k] for k in ("original_settings", "setting", "usage_scale", "caps",
+                                                   "remesh_variants", "n_chunks")}}
+    seconds, _, memory = snakemake(run, "--cores", "2", "--until", "manifest")
+    out["setup"] = {"command": "snakemake --cores 2 --until manifest", "seconds": round(seconds, 2),
+                    "cpu_seconds": memory["cpu_seconds"]}
+    seconds, text, memory = snakemake(run, "-n", "--cores", "2")
+    out["dry_run"] = {"command": "snakemake -n --cores 2", "seconds": round(seconds, 2),
+                      "cpu_seconds": memory["cpu_seconds"], "peak_rss_mb": memory["peak_rss_mb"],
+                      "jobs": job_counts(text)}
+    if quiet:
+        seconds, _, memory = snakemake(run, "-n", "--quiet", "--cores", "2")
+        out["dry_run_quiet"] = {"command": "snakemake -n --quiet --cores 2", "seconds": round(seconds, 2),
+                                "cpu_seconds": memory["cpu_seconds"]}
+    out["pairs"] = {s: {"manifest": split_counts(read_manifest(run / "results" / s / "manifest.csv")),
+                        "published": PUBLISHED_PAIRS if s in PUBLISHED_SETTINGS else None}
+                    for s in settings_of(config)}
+    return out
+
+
+def plan_build_profile(config: dict) -> dict:
+    """Where the plan's own time goes, in this process (the Snakemake process does the same once)."""
+    from becos.workflow import Plan, build_catalog, build_manifest, settings_of
+
+    timings: dict = {}
+    start = time.perf_counter()
+    catalog = build_catalog(config)
+    timings["catalog"] = round(time.perf_counter() - start, 2)
+    for setting in settings_of(config):
+        t = time.perf_counter()
+        build_manifest(config, setting, catalog)
+        timings[f"manifest_{setting}"] = round(time.perf_counter() - t, 2)
+    t = time.perf_counter()
+    plan = Plan.build(config)
+    timings["plan_build_total"] = round(time.perf_counter() - t, 2)
+    t = time.perf_counter()
+    n_inputs = sum(len(plan.chunk_inputs(s, c)) for s in plan.manifests for c in plan.chunks(s))
+    timings["chunk_inputs_every_chunk_once"] = round(time.perf_counter() - t, 2)
+    return {"seconds": timings, "shapes": len(plan.catalog), "remesh_jobs": len(plan.remesh_jobs),
+            "chunks_per_stage": {s: len(plan.chunks(s)) for s in plan.manifests},
+            "remesh_inputs_over_all_chunks": n_inputs}
+
+
 def full_plan(workdir: Path, code: Path) -> dict:
     """The ``full_plan`` figures (module docstring) for a stand-in tree built under ``workdir``."""
-    from becos.sampling import read_manifest
-    from becos.workflow import Plan, build_catalog, build_manifest, resolve_config, settings_of, write_manifest_stage
-    from standin import DATASETS, PUBLISHED_PAIRS, PUBLISHED_SETTINGS, build_standin_tree
+    from becos.workflow import resolve_config
+    from standin import DATASETS, PUBLISHED_SETTINGS, build_standin_tree
 
     shutil.rmtree(workdir, ignore_errors=True)
     tree = build_standin_tree(workdir / "standin", code)
-    run = workdir / "run"
-    config = resolve_config({"synthetic": {"enabled": False}, "data_dir": str(tree.data_dir),
-                             "annotations": str(code), "datasets": list(DATASETS),
-                             "template_file": "templates_all.csv"})
-    run.mkdir(parents=True)
-    (run / "config.yaml").write_text(yaml.safe_dump(config, sort_keys=False))
     out: dict = {"standin": {"files": len(tree.files), "published_shapes": len(tree.published),
-                             "real_size_templates": len(tree.template_vertices), "seconds": tree.seconds},
-                 "config": {k: config[k] for k in ("datasets", "setting", "template_file", "usage_scale", "caps",
-                                                   "remesh_variants", "n_chunks")}}
-    seconds, _, _ = snakemake(run, "--cores", "2", "--until", "manifest")
-    out["setup"] = {"command": "snakemake --cores 2 --until manifest", "seconds": round(seconds, 2)}
-    seconds, text, memory = snakemake(run, "-n", "--cores", "2")
-    out["dry_run"] = {"command": "snakemake -n --cores 2", "seconds": round(seconds, 2),
-                      "peak_rss_mb": memory["peak_rss_mb"], "jobs": job_counts(text)}
-    seconds, _, _ = snakemake(run, "-n", "--quiet", "--cores", "2")
-    out["dry_run_quiet"] = {"command": "snakemake -n --quiet --cores 2", "seconds": round(seconds, 2)}
-
-    # where the plan's own time goes (the Snakemake process does the same once per run)
-    local = {**config, "results": str(run / "results")}
-    timings: dict = {}
-    start = time.perf_counter()
-    catalog = build_catalog(local)
-    timings["catalog"] = round(time.perf_counter() - start, 2)
-    for setting in settings_of(local):
-        t = time.perf_counter()
-        build_manifest(local, setting, catalog)
-        timings[f"manifest_{setting}"] = round(time.perf_counter() - t, 2)
-    t = time.perf_counter()
-    plan = Plan.build(local)
-    timings["plan_build_total"] = round(time.perf_counter() - t, 2)
-    t = time.perf_counter()
-    n_chunk_inputs = sum(len(plan.chunk_inputs(s, c)) for s in plan.manifests for c in plan.chunks(s))
-    timings["chunk_inputs_all_chunks_once"] = round(time.perf_counter() - t, 2)
-    out["plan_build"] = {"seconds": timings, "shapes": len(plan.catalog), "remesh_jobs": len(plan.remesh_jobs),
-                         "chunk_jobs_per_stage": {s: len(plan.chunks(s)) for s in plan.manifests},
-                         "remesh_inputs_over_all_chunks": n_chunk_inputs}
-
-    published = {s: (PUBLISHED_PAIRS if s in PUBLISHED_SETTINGS else None) for s in settings_of(config)}
-    out["pairs"] = {s: {"sampled": split_counts(read_manifest(run / "results" / s / "manifest.csv")),
-                        "published": published[s]} for s in settings_of(config)}
-    original = {**local, "original_settings": True, "setting": list(PUBLISHED_SETTINGS),
-                "results": str(workdir / "original")}
-    catalog_path = run / "results" / "catalog.csv"
-    out["pairs_original_settings"] = {}
-    for setting in PUBLISHED_SETTINGS:
-        manifest = write_manifest_stage(original, setting, catalog_path, workdir / "original" / setting / "manifest.csv")
-        counts = split_counts(manifest)
-        out["pairs_original_settings"][setting] = {"imported": counts, "published": PUBLISHED_PAIRS,
-                                                   "equal": counts == PUBLISHED_PAIRS}
+                             "real_size_templates": len(tree.template_vertices), "seconds": tree.seconds}}
+    base = {"synthetic": {"enabled": False}, "data_dir": str(tree.data_dir), "annotations": str(code),
+            "datasets": list(DATASETS), "template_file": "templates_all.csv"}
+    config = resolve_config(base)
+    out["default"] = plan_run(workdir / "default", config)
+    out["default"]["plan_build"] = plan_build_profile({**config, "results": str(workdir / "default" / "results")})
+    original = resolve_config({**base, "original_settings": True, "setting": list(PUBLISHED_SETTINGS)})
+    out["original_settings"] = plan_run(workdir / "original", original, quiet=False)
     return out
 
 
