@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from collections import defaultdict
 
+import numpy as np
 import pytest
 
 from becos.catalog import read_catalog
@@ -15,7 +16,9 @@ from becos.check import check_datasets
 from becos.published import load_published
 from becos.sampling import read_manifest
 from becos.workflow import resolve_config, write_catalog_stage, write_manifest_stage
-from standin import DATASETS, PUBLISHED_PAIRS, PUBLISHED_SETTINGS, PUBLISHED_SHAPES, build_standin_tree
+from becos.mesh import read_mesh
+from standin import (DATASETS, PUBLISHED_PAIRS, PUBLISHED_SETTINGS, PUBLISHED_SHAPES, bipyramid, build_standin_tree,
+                     mesh_bytes)
 
 
 @pytest.fixture(scope="module")
@@ -38,9 +41,27 @@ def full_config(tree, results, **overrides) -> dict:
                            "template_file": "templates_all.csv", "results": str(results), **overrides})
 
 
+@pytest.mark.parametrize("file_type", ["off", "obj", "ply"])
+def test_standin_mesh_is_a_closed_outward_surface_read_back_exactly(file_type, tmp_path):
+    vertices, faces = bipyramid(9)
+    assert faces.shape == (14, 3)
+    edges = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    directed = {tuple(e) for e in edges.tolist()}
+    assert len(directed) == len(edges) and all((b, a) in directed for a, b in directed)  # closed, oriented
+    a, b, c = (vertices[faces[:, i]] for i in range(3))
+    assert np.einsum("ij,ij->i", a, np.cross(b, c)).sum() > 0                            # outward
+    path = tmp_path / f"m.{file_type}"
+    path.write_bytes(mesh_bytes(vertices, faces, file_type))
+    mesh = read_mesh(path)
+    np.testing.assert_array_equal(mesh.faces, faces)
+    np.testing.assert_allclose(mesh.vertices, vertices, atol=1e-6)
+
+
 def test_standin_meshes_pass_the_dataset_check(tree):
     assert len(tree.files) == PUBLISHED_SHAPES + 4 and tree.published <= set(tree.files)
     assert tree.template_vertices[("faust", "tr_reg_000")] == 6890
+    faust = read_mesh(tree.files[("faust", "tr_reg_000")])     # real template faces (default faces)
+    assert (faust.n_vertices, faust.n_faces) == (6890, 13776)
     report = check_datasets(list(DATASETS), tree.data_dir, tree.annotations)
     assert report["ok"]
     assert all(report[d]["found"] == report[d]["expected"] and not report[d]["bad_meshes"] for d in DATASETS)
