@@ -23,14 +23,16 @@ template vertex counts): all 8 dataset entries, the three settings, default usag
   (train / val / test). Wall and CPU seconds (the machine may be shared);
 - ``default.plan_build``: where the plan's own time goes, measured in this process:
   :meth:`becos.workflow.Plan.build` split into catalog and per-setting manifests, and the chunk jobs'
-  input lists.
+  input lists; with ``--profile``, ``default.dry_run_profile``: the dry run under cProfile, the share
+  of its time in Snakemake's DAG building, its checkpoint update, the dry-run job listing and becos's
+  plan functions.
 
 Every configuration key is written to the run's ``--configfile`` (the resolved config), so the
 figures do not depend on the repository's ``config/config.yaml``.
 
 Usage::
 
-    python benchmarks/workflow.py [--workdir /tmp/becos-bench] [--variants 1] [--skip-run] [--full-plan]
+    python benchmarks/workflow.py [--workdir /tmp/becos-bench] [--variants 1] [--skip-run] [--full-plan [--profile]]
 """
 
 from __future__ import annotations
@@ -165,6 +167,37 @@ def plan_run(run: Path, config: dict, quiet: bool = True) -> dict:
     return out
 
 
+PROFILED = {
+    "snakemake_build_dag": ("snakemake/workflow.py", "_build_dag"),
+    "snakemake_checkpoint_update": ("snakemake/dag.py", "update_checkpoint_dependencies"),
+    "snakemake_dry_run_job_listing": ("snakemake/executors/dryrun.py", "printjob"),
+    "becos_plan_build": ("becos/workflow.py", "build"),
+    "becos_chunk_inputs": ("becos/workflow.py", "chunk_inputs"),
+    "becos_plan_calls": ("rules/common.smk", "plan"),
+}
+"""Functions whose cumulative time ``--profile`` reports: (file path ending, function name)."""
+
+
+def profile_dry_run(run: Path) -> dict:
+    """``snakemake -n`` under cProfile: cumulative seconds of :data:`PROFILED` (cProfile slows
+    everything ~3x; compare the shares, not the seconds, with the plain dry run)."""
+    import pstats
+
+    out = run / "dry_run.prof"
+    cmd = [sys.executable, "-m", "cProfile", "-o", str(out), "-m", "snakemake", "-s", str(REPO / "Snakefile"),
+           "-d", str(run), "--configfile", str(run / "config.yaml"), "-n", "--cores", "2"]
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in (str(REPO), os.environ.get("PYTHONPATH")) if p)}
+    subprocess.run(cmd, check=True, capture_output=True, env=env)
+    stats = pstats.Stats(str(out)).stats
+    total = max(ct for (_, _, _, ct, _) in stats.values())
+    found = {"total": round(total, 1)}
+    for label, (path_end, name) in PROFILED.items():
+        found[label] = round(sum(ct for (file, _, fn), (_, _, _, ct, _) in stats.items()
+                                 if fn == name and file.endswith(path_end)), 1)
+    return {"cumulative_seconds_under_cprofile": found,
+            "share": {k: round(v / total, 3) for k, v in found.items() if k != "total"}}
+
+
 def plan_build_profile(config: dict) -> dict:
     """Where the plan's own time goes, in this process (the Snakemake process does the same once)."""
     from becos.workflow import Plan, build_catalog, build_manifest, settings_of
@@ -188,7 +221,7 @@ def plan_build_profile(config: dict) -> dict:
             "remesh_inputs_over_all_chunks": n_inputs}
 
 
-def full_plan(workdir: Path, code: Path) -> dict:
+def full_plan(workdir: Path, code: Path, profile: bool = False) -> dict:
     """The ``full_plan`` figures (module docstring) for a stand-in tree built under ``workdir``."""
     from becos.workflow import resolve_config
     from standin import DATASETS, PUBLISHED_SETTINGS, build_standin_tree
@@ -202,6 +235,8 @@ def full_plan(workdir: Path, code: Path) -> dict:
     config = resolve_config(base)
     out["default"] = plan_run(workdir / "default", config)
     out["default"]["plan_build"] = plan_build_profile({**config, "results": str(workdir / "default" / "results")})
+    if profile:
+        out["default"]["dry_run_profile"] = profile_dry_run(workdir / "default")
     original = resolve_config({**base, "original_settings": True, "setting": list(PUBLISHED_SETTINGS)})
     out["original_settings"] = plan_run(workdir / "original", original, quiet=False)
     return out
@@ -214,11 +249,13 @@ def main() -> None:
     parser.add_argument("--skip-run", action="store_true", help="only the 10k-pair dry run")
     parser.add_argument("--full-plan", action="store_true",
                         help="only the plan of the whole published benchmark on a stand-in data root")
+    parser.add_argument("--profile", action="store_true",
+                        help="with --full-plan: also profile the dry run (cProfile; ~2 min more)")
     args = parser.parse_args()
     code = becos_code()
     result: dict = {"machine_cores": os.cpu_count()}
     if args.full_plan:
-        result["full_plan"] = full_plan(args.workdir / "fullplan", code)
+        result["full_plan"] = full_plan(args.workdir / "fullplan", code, profile=args.profile)
         print(json.dumps(result, indent=1))
         return
 
