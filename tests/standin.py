@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import json
 import os
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -209,13 +210,13 @@ class StandinTree:
     seconds: float = 0.0
 
 
-def standin_shapes(annotations: Path) -> dict[tuple[str, str], str]:
+def standin_shapes(annotations: Path, published: dict[tuple[str, str], str] | None = None) -> dict[tuple[str, str], str]:
     """``(dataset, name) -> path relative to the reference checkout`` of every stand-in shape: the
-    published ones, plus DT4D frames of the info files that no published pair uses (at the path the
-    registry lists them)."""
+    published ones (``published``: :func:`published_file_paths`, read if not given), plus DT4D frames
+    of the info files that no published pair uses (at the path the registry lists them)."""
     from becos.datasets import DatasetSpec
 
-    shapes = published_file_paths(annotations)
+    shapes = dict(published_file_paths(annotations) if published is None else published)
     for dataset in ("dt4d_animal", "dt4d_human"):
         spec = DatasetSpec.load(dataset)
         info = json.loads((Path(annotations) / "data" / spec.info_file).read_text(encoding="utf-8"))
@@ -233,12 +234,10 @@ def build_standin_tree(out: str | Path, annotations: str | Path, cache_dir: str 
     ``annotations``: the BeCoS annotation folder (``../shared/unpack`` prints it). ``cache_dir``: the
     edge-file cache (:class:`becos.annotations.AnnotationSource`). Existing files are overwritten.
     """
-    import time
-
     start = time.perf_counter()
     out, annotations = Path(out), Path(annotations)
-    shapes = standin_shapes(annotations)
-    published = frozenset(published_file_paths(annotations))
+    published = published_file_paths(annotations)
+    shapes = standin_shapes(annotations, published)
     needs = template_needs(annotations, cache_dir)
     small: dict[str, bytes] = {}
     files: dict[tuple[str, str], Path] = {}
@@ -261,5 +260,5 @@ def build_standin_tree(out: str | Path, annotations: str | Path, cache_dir: str 
             folders.add(path.parent)
         path.write_bytes(data)
         files[key] = path
-    return StandinTree(out / "data", annotations, files, published, written_counts,
+    return StandinTree(out / "data", annotations, files, frozenset(published), written_counts,
                        round(time.perf_counter() - start, 2))
