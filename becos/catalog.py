@@ -47,11 +47,11 @@ def natural_key(text: str) -> tuple:
     """Sort key that orders digit runs by value: ``a2 < a10``, ``0001.isometry.4 < 0001.isometry.10``.
 
     ``re.split`` with a capturing group alternates text (even positions) and digits (odd positions),
-    so the key compares like with like at every position; the raw text breaks remaining ties
-    (``a01`` vs ``a1``).
+    so the key compares like with like at every position; a name that is a prefix of another sorts
+    first (SMAL ``cow_alph`` < ``cow_alph5``); the raw text breaks remaining ties (``a01`` vs ``a1``).
     """
     parts = re.split(r"(\d+)", str(text))
-    return tuple(int(p) if i % 2 else p.lower() for i, p in enumerate(parts)) + (str(text),)
+    return tuple(int(p) if i % 2 else p.lower() for i, p in enumerate(parts)), str(text)
 
 
 def sort_catalog(df: pd.DataFrame) -> pd.DataFrame:

@@ -8,8 +8,8 @@ all, with, for a missing dataset, where to get it, its licence, the folder to cr
 to change (``data_dir``, ``datasets``, ``annotations``).
 
 :func:`fetch_annotations` downloads a pinned annotation archive (``.tar.gz``/``.tgz``/``.tar``/``.zip``,
-``http(s)://`` or ``file://``), verifies its SHA-256, extracts it safely and moves it into place
-atomically; a second call with the same digest does nothing.
+``http(s)://`` or ``file://``) with :mod:`becos.download` (resumable, SHA-256 checked, extracted
+safely), and moves it into place atomically; a second call with the same digest does nothing.
 
 Mesh check (default, cheap): the file is non-empty; for OFF and ASCII PLY the header's vertex and face
 counts are compared with the number of non-blank data lines, and the last vertex line and the first and
@@ -42,31 +42,27 @@ Report layout (``check_datasets`` return value)::
 from __future__ import annotations
 
 import argparse
-import hashlib
 import json
 import os
-import posixpath
 import re
 import shutil
-import stat
 import sys
-import tarfile
 import tempfile
 import time
-import urllib.error
-import urllib.request
-import zipfile
+import urllib.parse
 from pathlib import Path
 
 import numpy as np
 
-from becos.atomic import write_text
+from becos.atomic import remove_stale_temporaries, write_text
+from becos.download import (RECORD_NAME, CorruptArchiveError, UnsafeArchiveError, discard_partial, extract_archive,
+                            fetch, partial_path)
 from becos.errors import BecosError, ConfigError, InputFileError
 
 MAX_LISTED_MESHES = 20
 """At most this many bad mesh files are named per dataset in the error message (the report has all)."""
 
-MARKER_NAME = ".becos-download.json"
+MARKER_NAME = RECORD_NAME
 """File written into a fetched annotation folder: ``{"url", "sha256", "fetched_at"}``."""
 
 _WHITESPACE = np.array([9, 10, 11, 12, 13, 32], dtype=np.uint8)
@@ -411,8 +407,25 @@ def _missing_dataset_text(spec, folder: Path, data_dir: Path) -> str:
         parts.append(f"Site: {s['url']} .")
     if s.get("licence"):
         parts.append(f"Licence: {s['licence'].strip().rstrip('.')}.")
-    parts.append(f"Put it there: create {folder} (data_dir {data_dir} + '{spec.folder}') and place the "
-                 f"{spec.file_type.upper()} files in it.")
+    if spec.layout == "dt4d":
+        from becos.dt4d import dataset_kind, source_folder
+
+        kind = dataset_kind(spec)
+        source = source_folder(data_dir, kind)
+        parts.append(f"Put it there: unpack the download into {data_dir / 'DeformingThings4D'} (data_dir + "
+                     f"'DeformingThings4D'); the workflow then prepares {folder} from {source} "
+                     f"(`becos prepare-dt4d`).")
+        if source.is_dir():
+            parts.append(f"{source} is present but not prepared yet: run the workflow (it plans one preparation "
+                         f"job per class once the annotation folder's data/{spec.info_file} exists), or "
+                         f"`becos prepare-dt4d --data-dir {data_dir} --info <annotations>/data/{spec.info_file} "
+                         f"--kind {kind}`.")
+    else:
+        parts.append(f"Put it there: create {folder} (data_dir {data_dir} + '{spec.folder}') and place the "
+                     f"{spec.file_type.upper()} files in it.")
+    if spec.archive is not None:
+        parts.append(f"Or let the workflow download it: add '{spec.name}' to the config key `download` (you accept "
+                     f"its licence), or run `becos download-dataset {spec.name} --data-dir {data_dir}`.")
     parts.append(f"Or change the config: set `data_dir` to the folder that holds '{spec.folder}', or remove "
                  f"'{spec.name}' from `datasets`.")
     return " ".join(parts)
@@ -727,89 +740,6 @@ def check_datasets(datasets: list[str], data_dir: str | Path, annotations_dir: s
 
 
 # --- fetching the annotation folder ----------------------------------------------------------------
-def _download(url: str, out: Path, timeout: float = 60.0) -> str:
-    """Stream ``url`` into ``out`` with progress on stderr; return the SHA-256 hex digest."""
-    h = hashlib.sha256()
-    try:
-        response = urllib.request.urlopen(url, timeout=timeout)  # noqa: S310 - http(s)/file only, checked below
-    except (urllib.error.URLError, OSError, ValueError) as exc:
-        raise ConfigError(f"cannot download the annotation archive {url} ({exc}). Fix: check the URL and the network "
-                          f"connection, or download it by hand and pass a file:// URL") from None
-    with response, open(out, "wb") as fh:
-        total = int(response.headers.get("Content-Length") or 0)
-        done, next_report, start = 0, 0, time.monotonic()
-        step = max(total // 10, 1) if total else 8 << 20
-        try:
-            for chunk in iter(lambda: response.read(1 << 20), b""):
-                fh.write(chunk)
-                h.update(chunk)
-                done += len(chunk)
-                if done >= next_report:
-                    pct = f" ({100 * done / total:.0f}%)" if total else ""
-                    print(f"fetch-annotations: {done / 1e6:.1f} MB{f' of {total / 1e6:.1f} MB' if total else ''}{pct}",
-                          file=sys.stderr)
-                    next_report = done + step
-        except (urllib.error.URLError, OSError) as exc:
-            raise ConfigError(f"the download of {url} broke off after {done} bytes ({exc}). Fix: retry") from None
-        if total and done != total:
-            raise ConfigError(f"the download of {url} ended after {done} of {total} bytes. Fix: retry")
-    print(f"fetch-annotations: {done / 1e6:.1f} MB in {time.monotonic() - start:.1f} s", file=sys.stderr)
-    return h.hexdigest()
-
-
-def _safe_member_name(name: str, archive: str) -> str:
-    norm = name.replace("\\", "/")
-    if norm.startswith("/") or re.match(r"^[A-Za-z]:", norm):
-        raise ConfigError(f"{archive}: member '{name}' has an absolute path. Fix: the archive is unsafe; use the "
-                          f"pinned BeCoS annotation archive")
-    parts = [p for p in norm.split("/") if p not in ("", ".")]
-    if ".." in parts:
-        raise ConfigError(f"{archive}: member '{name}' points outside the archive ('..'). Fix: the archive is "
-                          f"unsafe; use the pinned BeCoS annotation archive")
-    return "/".join(parts)
-
-
-def _extract_tar(path: Path, out: Path, label: str) -> None:
-    try:
-        tar = tarfile.open(path, "r:*")
-    except (tarfile.TarError, OSError) as exc:
-        raise ConfigError(f"{label}: not a readable tar archive ({exc}). Fix: check the URL") from None
-    with tar:
-        members = tar.getmembers()
-        for m in members:
-            name = _safe_member_name(m.name, label)
-            if m.issym() or m.islnk():
-                target = m.linkname.replace("\\", "/")
-                if target.startswith("/"):
-                    raise ConfigError(f"{label}: link '{m.name}' -> '{m.linkname}' is absolute. Fix: the archive is "
-                                      f"unsafe; use the pinned BeCoS annotation archive")
-                base = posixpath.dirname(name) if m.issym() else ""
-                resolved = posixpath.normpath(posixpath.join(base, target))
-                if resolved == ".." or resolved.startswith("../"):
-                    raise ConfigError(f"{label}: link '{m.name}' -> '{m.linkname}' escapes the archive. Fix: the "
-                                      f"archive is unsafe; use the pinned BeCoS annotation archive")
-            elif not (m.isfile() or m.isdir()):
-                raise ConfigError(f"{label}: member '{m.name}' is a device or pipe. Fix: the archive is unsafe")
-        try:
-            tar.extractall(out, members=members, filter="data")
-        except (tarfile.TarError, OSError) as exc:
-            raise ConfigError(f"{label}: extraction failed ({exc}). Fix: the archive is corrupt; re-download it") \
-                from None
-
-
-def _extract_zip(path: Path, out: Path, label: str) -> None:
-    try:
-        with zipfile.ZipFile(path) as zf:
-            for info in zf.infolist():
-                _safe_member_name(info.filename, label)
-                if stat.S_ISLNK(info.external_attr >> 16):
-                    raise ConfigError(f"{label}: member '{info.filename}' is a symbolic link. Fix: the archive is "
-                                      f"unsafe; use the pinned BeCoS annotation archive")
-            zf.extractall(out)
-    except zipfile.BadZipFile as exc:
-        raise ConfigError(f"{label}: not a readable zip archive ({exc}). Fix: check the URL") from None
-
-
 def _read_marker(dest: Path) -> dict | None:
     try:
         return json.loads((dest / MARKER_NAME).read_text(encoding="utf-8"))
@@ -820,7 +750,8 @@ def _read_marker(dest: Path) -> dict | None:
 def fetch_annotations(url: str, sha256: str, dest: str | Path) -> Path:
     """Download the pinned annotation archive ``url`` and install it as folder ``dest``.
 
-    Steps: stream to a temporary file beside ``dest`` (progress on stderr), compare its SHA-256 with
+    Steps: stream to a partial file beside ``dest`` (:func:`becos.download.fetch`: progress bar, an
+    interrupted download resumes), compare its SHA-256 with
     ``sha256``, extract it (tar, tar.gz/tgz, tar.bz2/xz or zip; absolute paths, ``..`` members, links
     leaving the archive and device files are rejected), drop a single top-level folder, write
     ``dest/.becos-download.json`` (url, digest) and rename the result to ``dest``. If ``dest`` already
@@ -839,9 +770,6 @@ def fetch_annotations(url: str, sha256: str, dest: str | Path) -> Path:
     if not re.fullmatch(r"[0-9a-f]{64}", expected):
         raise ConfigError(f"'{sha256}' is not a SHA-256 digest (64 hex digits). Fix: pin the archive's digest "
                           f"(sha256sum ARCHIVE)")
-    scheme = urllib.request.urlparse(url).scheme.lower()
-    if scheme not in ("http", "https", "file"):
-        raise ConfigError(f"annotation archive URL {url!r} must be http(s):// or file://. Fix: give a full URL")
     marker = _read_marker(dest) if dest.is_dir() else None
     if marker is not None and marker.get("sha256") == expected:
         print(f"fetch-annotations: {dest} already holds {expected[:12]}...; nothing to do", file=sys.stderr)
@@ -850,22 +778,22 @@ def fetch_annotations(url: str, sha256: str, dest: str | Path) -> Path:
         raise ConfigError(f"{dest} already exists and was not made by `becos fetch-annotations` (no {MARKER_NAME}). "
                           f"Fix: choose another --dest, or remove {dest} yourself")
     dest.parent.mkdir(parents=True, exist_ok=True)
-    work = Path(tempfile.mkdtemp(dir=dest.parent, prefix=f".{dest.name}.fetch-"))
+    part = partial_path(dest.parent / f"{dest.name}.{Path(urllib.parse.urlparse(url).path).name or 'archive'}")
+    fetch(url, part, expected, label="annotations",
+          fix="check the URL and the network connection, or download it by hand and pass a file:// URL",
+          pinned_in="the annotations_archive config / --sha256")
+    remove_stale_temporaries(dest.parent, [dest.name])  # extraction folders of killed fetches
+    work = Path(tempfile.mkdtemp(dir=dest.parent, prefix=f".{dest.name}.", suffix=".tmp-fetch"))
     try:
-        archive = work / "archive"
-        actual = _download(url, archive)
-        if actual != expected:
-            raise ConfigError(f"the annotation archive {url} has SHA-256 {actual}, expected {expected}; nothing was "
-                              f"installed at {dest}. Fix: check that the URL and the pinned digest belong together "
-                              f"(the file may have changed upstream or the download may be corrupt)")
         out = work / "extract"
         out.mkdir()
         label = f"annotation archive {url}"
-        if zipfile.is_zipfile(archive):
-            _extract_zip(archive, out, label)
-        else:
-            _extract_tar(archive, out, label)
-        archive.unlink()
+        try:
+            extract_archive(part, out, label)
+        except (UnsafeArchiveError, CorruptArchiveError):
+            discard_partial(part)  # complete but unusable: a rerun must fetch it again
+            raise
+        discard_partial(part)
         entries = [p for p in out.iterdir() if p.name != "__MACOSX"]
         if not entries:
             raise ConfigError(f"{label} is empty. Fix: check the URL")

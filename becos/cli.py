@@ -45,6 +45,8 @@ SUBCOMMANDS: tuple[tuple[str, str, str], ...] = (
     ("synthetic", "becos.synthetic", "generate the built-in synthetic shape collection"),
     ("check", "becos.check", "check that the enabled datasets and the annotation folder are present"),
     ("fetch-annotations", "becos.check", "download the annotation folder from a pinned archive"),
+    ("prepare-dt4d", "becos.dt4d", "write DeformingThings4D frames (.anime) as the OBJ files BeCoS indexes"),
+    ("download-dataset", "becos.download", "download and unpack a dataset's public archive (kids, shrec20)"),
     ("write-config", "becos.workflow", "validate a configuration and write it with defaults filled in"),
     ("catalog", "becos.workflow", "write the shape catalog of a workflow config"),
     ("manifest", "becos.workflow", "write the pair manifest of one setting"),

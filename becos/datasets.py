@@ -24,7 +24,8 @@ YAML keys (all datasets):
 ``layout``             ``flat`` (``<folder>/<name>.<type>``), ``class_folders``
                        (``<folder>/<class>/<stem>.<type>``, name ``<class>/<stem>``) or ``dt4d``
                        (names ``<class>/<action><frame:03d>`` from ``info_file`` of the annotation
-                       folder's ``data/``; files ``<folder>/<class>/<action><frame:03d>.obj``)
+                       folder's ``data/``; files ``<folder>/<class>/<action><frame:03d>.obj``, written
+                       by :mod:`becos.dt4d` from ``DeformingThings4D/<kind>``; folder ``dt4d_<kind>``)
 ``file_glob``          optional glob of the files to list (flat/class_folders), default ``*.<type>``
 ``expected_count``     number of used shapes (excluded ones not counted)
 ``expected_per_class`` optional ``{class: count}``
@@ -44,7 +45,9 @@ YAML keys (all datasets):
                        ``{rule: template_table}`` (the table's split column of the shape's key)
 ``excluded``           names listed with split ``excluded`` (never paired)
 ``usage``              train usage count (reference ``shape_usage_counts``)
-``source``             ``url``, ``licence``, ``citation``, ``instructions`` (quoted in errors)
+``source``             ``url``, ``licence``, ``citation``, ``instructions`` (quoted in errors), and for
+                       a public archive becos may download (config key ``download``) ``archive``:
+                       ``{url, sha256, extract_to}`` (:class:`DatasetArchive`)
 =====================  ============================================================================
 """
 
@@ -61,6 +64,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import yaml
 
+from becos.download import ARCHIVE_SCHEMES
 from becos.errors import BecosError, ConfigError, InputFileError
 from becos.geometry import surface_area
 from becos.mesh import MeshCache, TriMesh, read_mesh
@@ -200,6 +204,27 @@ def prepare_shape(entry: ShapeEntry, mesh_cache: MeshCache | None = None) -> Pre
 
 
 # --- specs -----------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class DatasetArchive:
+    """A public archive of a dataset that ``becos download-dataset`` fetches (``source.archive`` of its YAML).
+
+    Attributes:
+        url: where the archive is (``http``, ``https`` or ``file``); the workflow's ``download_urls``
+            replaces it (a mirror).
+        sha256: the pinned SHA-256 (64 lowercase hex digits), or None while unknown: the first download
+            then records its digest beside the data and warns.
+        extract_to: folder below the data root that the archive's members are extracted into (``KIDS``).
+        expected: glob, relative to ``extract_to``, that the archive must yield: the dataset ``folder``
+            below ``extract_to`` plus ``file_glob`` (KIDS: ``off/*.off``). Derived, not a YAML key, so
+            it cannot disagree with the folder the dataset check reads.
+    """
+
+    url: str
+    sha256: str | None
+    extract_to: str
+    expected: str
+
+
 def _config_dir(config_dir: Path | str | None) -> Path:
     if config_dir is not None:
         return Path(config_dir)
@@ -223,7 +248,8 @@ class DatasetSpec:
 
     Attributes:
         path: the YAML file; ``raw``: its content; plus ``name``, ``folder``, ``file_type``, ``layout``,
-        ``expected_count``, ``scale``, ``rotation_deg``, ``usage``, ``excluded``, ``split``, ``source``.
+        ``expected_count``, ``scale``, ``rotation_deg``, ``usage``, ``excluded``, ``split``, ``source``,
+        ``archive`` (:class:`DatasetArchive`, None when the dataset cannot be downloaded automatically).
     """
 
     def __init__(self, raw: dict, path: Path):
@@ -268,12 +294,41 @@ class DatasetSpec:
         self.excluded = tuple(str(n) for n in (raw.get("excluded") or ()))
         self.usage = int(raw["usage"])
         self.source = dict(raw["source"])
+        self.archive = self._archive(self.source.get("archive"))
 
     def __repr__(self) -> str:
         return f"DatasetSpec({self.name!r}, {str(self.path)!r})"
 
     def _fail(self, problem: str, fix: str):
         raise InputFileError(self.path, problem, fix)
+
+    def _archive(self, raw) -> DatasetArchive | None:
+        """``source.archive`` parsed and checked (None: the dataset cannot be downloaded automatically)."""
+        if raw is None:
+            return None
+        fix = "write source.archive as {url: ..., sha256: <64 hex digits or null>, extract_to: <folder>}"
+        if not isinstance(raw, dict) or set(raw) != {"url", "sha256", "extract_to"}:
+            self._fail(f"source.archive must have exactly the keys url, sha256, extract_to, got {raw!r}", fix)
+        url = str(raw["url"]).strip()
+        if url.split("://", 1)[0].lower() not in ARCHIVE_SCHEMES or "://" not in url:
+            self._fail(f"source.archive.url {url!r} is not an http(s):// or file:// URL", "give the full URL")
+        sha256 = raw["sha256"]
+        if sha256 is not None:
+            sha256 = str(sha256).strip().lower()
+            if not re.fullmatch(r"[0-9a-f]{64}", sha256):
+                self._fail(f"source.archive.sha256 {raw['sha256']!r} is not 64 hex digits",
+                           "pin the archive's digest (sha256sum ARCHIVE) or write null while it is unknown")
+        extract_to = str(raw["extract_to"]).strip("/")
+        parts = extract_to.split("/")
+        if not extract_to or ".." in parts or "" in parts:
+            self._fail(f"source.archive.extract_to {raw['extract_to']!r} is not a folder below the data root",
+                       "name a relative folder without '..' (e.g. KIDS)")
+        if self.folder != extract_to and not self.folder.startswith(extract_to + "/"):
+            self._fail(f"the dataset folder '{self.folder}' is not inside source.archive.extract_to '{extract_to}'",
+                       "extract the archive into a folder that holds the dataset folder")
+        inner = self.folder[len(extract_to):].strip("/")
+        expected = f"{inner}/{self.file_glob}" if inner else self.file_glob
+        return DatasetArchive(url=url, sha256=sha256, extract_to=extract_to, expected=expected)
 
     def _rules(self, key: str) -> list[_Rule]:
         value = self.raw[key]
@@ -429,9 +484,14 @@ class DatasetSpec:
             parts.append(f"cite: {s['citation']}")
         return " | ".join(parts)
 
+    def info_file_candidates(self, annotations_root: str | Path | None, data_root: str | Path) -> list[Path]:
+        """Where a ``dt4d`` dataset's ``info_file`` is looked for, in order: the annotation folder's
+        ``data/``, then the data root."""
+        return ([Path(annotations_root) / "data" / self.info_file] if annotations_root is not None else []) + \
+            [Path(data_root) / self.info_file]
+
     def _dt4d_names(self, annotations: "AnnotationSource | None", data_root: Path) -> tuple[list[str], Path]:
-        candidates = ([Path(annotations.root) / "data" / self.info_file] if annotations is not None else []) + \
-            [data_root / self.info_file]
+        candidates = self.info_file_candidates(annotations.root if annotations is not None else None, data_root)
         path = next((p for p in candidates if p.is_file()), None)
         if path is None:
             raise InputFileError(candidates[0], f"the DT4D class/frame list of {self.name} is missing",
@@ -466,7 +526,9 @@ class DatasetSpec:
             if missing:
                 raise InputFileError(folder, f"{len(missing)} of the {len(names)} shapes listed in {info_path} are "
                                      f"missing (e.g. {missing[0]}.{self.file_type})",
-                                     f"run the DT4D preprocessing (facts §5) on the full download. {self.download_help()}")
+                                     f"put the full DeformingThings4D download in "
+                                     f"{Path(data_root) / 'DeformingThings4D'} and run the workflow (or "
+                                     f"`becos prepare-dt4d`), which writes them. {self.download_help()}")
         return sorted(names, key=natural_key)
 
     def list_shapes(self, data_root: str | Path, annotations: "AnnotationSource | None" = None) -> list[ShapeEntry]:

@@ -128,6 +128,10 @@ def check_config(config: dict) -> None:
     unknown = [d for d in config["datasets"] if d not in known]
     if unknown:
         problems.append(f"datasets {unknown} are not in the registry (config/datasets/*.yaml: {sorted(known)})")
+    if config.get("download") or config.get("download_urls"):
+        from becos.download import download_config_problems
+
+        problems += download_config_problems(config)
     if config.get("original_settings") and "partial_full" in settings_of(config):
         problems.append("original_settings: the reference publishes no partial_full pair list; "
                         "use setting full_full / partial_partial or original_settings: false")
@@ -204,6 +208,10 @@ class Layout:
     @property
     def checks(self) -> Path:
         return self.results / "checks" / "datasets.json"
+
+    def downloaded(self, dataset: str) -> Path:
+        """Stamp of a dataset's download (``becos download-dataset --out``)."""
+        return self.results / "downloads" / f"{dataset}.json"
 
     @property
     def catalog(self) -> Path:

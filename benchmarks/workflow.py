@@ -11,9 +11,28 @@ Measures, on the TOSCA meshes of ``../shared`` (all 76 shapes, partial-to-partia
 - ``run_100``: the same for ~100 pairs (remesh files copied from the 1,000-pair run), for the peak-RSS
   ratio ``rss_ratio_1000_vs_100``.
 
+``--full-plan`` measures instead the plan of the whole published benchmark (issue 14, item 4), on the
+stand-in data root of ``tests/standin.py`` (2,537 small meshes at the published file paths; real
+template vertex counts): all 8 dataset entries, the three settings, default usage counts, no caps:
+
+- ``default`` (sampled pairs) and ``original_settings`` (the published lists, full_full and
+  partial_partial), each with ``setup``: seconds of ``snakemake --until manifest`` (dataset check,
+  catalog, manifests run for real, so the dry run knows every chunk job); ``dry_run``: seconds of
+  ``snakemake -n`` and its job counts (``dry_run_quiet``: with ``--quiet``, no per-job listing);
+  ``pairs``: pairs per split of each setting's manifest, next to the published 10,185 / 137 / 142
+  (train / val / test). Wall and CPU seconds (the machine may be shared);
+- ``default.plan_build``: where the plan's own time goes, measured in this process:
+  :meth:`becos.workflow.Plan.build` split into catalog and per-setting manifests, and the chunk jobs'
+  input lists; with ``--profile``, ``default.dry_run_profile``: the dry run under cProfile, the share
+  of its time in Snakemake's DAG building, its checkpoint update, the dry-run job listing and becos's
+  plan functions.
+
+Every configuration key is written to the run's ``--configfile`` (the resolved config), so the
+figures do not depend on the repository's ``config/config.yaml``.
+
 Usage::
 
-    python benchmarks/workflow.py [--workdir /tmp/becos-bench] [--variants 1] [--skip-run]
+    python benchmarks/workflow.py [--workdir /tmp/becos-bench] [--variants 1] [--skip-run] [--full-plan [--profile]]
 """
 
 from __future__ import annotations
@@ -22,6 +41,7 @@ import argparse
 import json
 import os
 import re
+import resource
 import shutil
 import subprocess
 import sys
@@ -34,6 +54,8 @@ import yaml
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED = REPO.parent / "shared"
+sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(REPO / "tests"))  # tests/standin.py: the stand-in data root
 
 
 def becos_code() -> Path:
@@ -81,15 +103,25 @@ class PeakRss:
         return {"peak_rss_mb": round(self.peak / 2**20, 1), "peak_process": self.peak_cmd}
 
 
+def _children_cpu() -> float:
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return usage.ru_utime + usage.ru_stime
+
+
 def snakemake(workdir: Path, *args: str) -> tuple[float, str, dict]:
     cmd = [sys.executable, "-m", "snakemake", "-s", str(REPO / "Snakefile"), "-d", str(workdir),
            "--configfile", str(workdir / "config.yaml"), *args]
     start = time.perf_counter()
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    cpu_start = _children_cpu()
+    # the jobs' `becos` runs this checkout's code, whatever the environment installed
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in (str(REPO), os.environ.get("PYTHONPATH")) if p)}
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env)
     rss = PeakRss(proc.pid)
     out, _ = proc.communicate()
     seconds = time.perf_counter() - start
     memory = rss.stop()
+    # CPU of snakemake and its jobs: on a shared machine, wall time also counts other users' load
+    memory["cpu_seconds"] = round(_children_cpu() - cpu_start, 2)
     if proc.returncode != 0:
         raise SystemExit(f"snakemake {' '.join(args)} failed in {workdir}:\n{out[-5000:]}")
     return seconds, out, memory
@@ -103,14 +135,129 @@ def n_pairs(workdir: Path) -> int:
     return sum(1 for _ in open(workdir / "results" / "partial_partial" / "manifest.csv")) - 1
 
 
+def split_counts(manifest) -> dict[str, int]:
+    return {s: int((manifest["split"] == s).sum()) for s in ("train", "val", "test")}
+
+
+def plan_run(run: Path, config: dict, quiet: bool = True) -> dict:
+    """Write ``config`` (every key) to ``run/config.yaml``; run the dataset check, catalog and manifests
+    (``--until manifest``), then time ``snakemake -n`` (and ``-n --quiet``); pairs per split."""
+    from becos.sampling import read_manifest
+    from becos.workflow import settings_of
+    from standin import PUBLISHED_PAIRS, PUBLISHED_SETTINGS
+
+    run.mkdir(parents=True)
+    (run / "config.yaml").write_text(yaml.safe_dump(config, sort_keys=False))
+    out: dict = {"config": {k: config[k] for k in ("original_settings", "setting", "usage_scale", "caps",
+                                                   "remesh_variants", "n_chunks")}}
+    seconds, _, memory = snakemake(run, "--cores", "2", "--until", "manifest")
+    out["setup"] = {"command": "snakemake --cores 2 --until manifest", "seconds": round(seconds, 2),
+                    "cpu_seconds": memory["cpu_seconds"]}
+    seconds, text, memory = snakemake(run, "-n", "--cores", "2")
+    out["dry_run"] = {"command": "snakemake -n --cores 2", "seconds": round(seconds, 2),
+                      "cpu_seconds": memory["cpu_seconds"], "peak_rss_mb": memory["peak_rss_mb"],
+                      "jobs": job_counts(text)}
+    if quiet:
+        seconds, _, memory = snakemake(run, "-n", "--quiet", "--cores", "2")
+        out["dry_run_quiet"] = {"command": "snakemake -n --quiet --cores 2", "seconds": round(seconds, 2),
+                                "cpu_seconds": memory["cpu_seconds"]}
+    out["pairs"] = {s: {"manifest": split_counts(read_manifest(run / "results" / s / "manifest.csv")),
+                        "published": PUBLISHED_PAIRS if s in PUBLISHED_SETTINGS else None}
+                    for s in settings_of(config)}
+    return out
+
+
+PROFILED = {
+    "snakemake_build_dag": ("snakemake/workflow.py", "_build_dag"),
+    "snakemake_checkpoint_update": ("snakemake/dag.py", "update_checkpoint_dependencies"),
+    "snakemake_dry_run_job_listing": ("snakemake/executors/dryrun.py", "printjob"),
+    "becos_plan_build": ("becos/workflow.py", "build"),
+    "becos_chunk_inputs": ("becos/workflow.py", "chunk_inputs"),
+    "becos_plan_calls": ("rules/common.smk", "plan"),
+}
+"""Functions whose cumulative time ``--profile`` reports: (file path ending, function name)."""
+
+
+def profile_dry_run(run: Path) -> dict:
+    """``snakemake -n`` under cProfile: cumulative seconds of :data:`PROFILED` (cProfile slows
+    everything ~3x; compare the shares, not the seconds, with the plain dry run)."""
+    import pstats
+
+    out = run / "dry_run.prof"
+    cmd = [sys.executable, "-m", "cProfile", "-o", str(out), "-m", "snakemake", "-s", str(REPO / "Snakefile"),
+           "-d", str(run), "--configfile", str(run / "config.yaml"), "-n", "--cores", "2"]
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in (str(REPO), os.environ.get("PYTHONPATH")) if p)}
+    subprocess.run(cmd, check=True, capture_output=True, env=env)
+    stats = pstats.Stats(str(out)).stats
+    total = max(ct for (_, _, _, ct, _) in stats.values())
+    found = {"total": round(total, 1)}
+    for label, (path_end, name) in PROFILED.items():
+        found[label] = round(sum(ct for (file, _, fn), (_, _, _, ct, _) in stats.items()
+                                 if fn == name and file.endswith(path_end)), 1)
+    return {"cumulative_seconds_under_cprofile": found,
+            "share": {k: round(v / total, 3) for k, v in found.items() if k != "total"}}
+
+
+def plan_build_profile(config: dict) -> dict:
+    """Where the plan's own time goes, in this process (the Snakemake process does the same once)."""
+    from becos.workflow import Plan, build_catalog, build_manifest, settings_of
+
+    timings: dict = {}
+    start = time.perf_counter()
+    catalog = build_catalog(config)
+    timings["catalog"] = round(time.perf_counter() - start, 2)
+    for setting in settings_of(config):
+        t = time.perf_counter()
+        build_manifest(config, setting, catalog)
+        timings[f"manifest_{setting}"] = round(time.perf_counter() - t, 2)
+    t = time.perf_counter()
+    plan = Plan.build(config)
+    timings["plan_build_total"] = round(time.perf_counter() - t, 2)
+    t = time.perf_counter()
+    n_inputs = sum(len(plan.chunk_inputs(s, c)) for s in plan.manifests for c in plan.chunks(s))
+    timings["chunk_inputs_every_chunk_once"] = round(time.perf_counter() - t, 2)
+    return {"seconds": timings, "shapes": len(plan.catalog), "remesh_jobs": len(plan.remesh_jobs),
+            "chunks_per_stage": {s: len(plan.chunks(s)) for s in plan.manifests},
+            "remesh_inputs_over_all_chunks": n_inputs}
+
+
+def full_plan(workdir: Path, code: Path, profile: bool = False) -> dict:
+    """The ``full_plan`` figures (module docstring) for a stand-in tree built under ``workdir``."""
+    from becos.workflow import resolve_config
+    from standin import DATASETS, PUBLISHED_SETTINGS, build_standin_tree
+
+    shutil.rmtree(workdir, ignore_errors=True)
+    tree = build_standin_tree(workdir / "standin", code)
+    out: dict = {"standin": {"files": len(tree.files), "published_shapes": len(tree.published),
+                             "real_size_templates": len(tree.template_vertices), "seconds": tree.seconds}}
+    base = {"synthetic": {"enabled": False}, "data_dir": str(tree.data_dir), "annotations": str(code),
+            "datasets": list(DATASETS), "template_file": "templates_all.csv"}
+    config = resolve_config(base)
+    out["default"] = plan_run(workdir / "default", config)
+    out["default"]["plan_build"] = plan_build_profile({**config, "results": str(workdir / "default" / "results")})
+    if profile:
+        out["default"]["dry_run_profile"] = profile_dry_run(workdir / "default")
+    original = resolve_config({**base, "original_settings": True, "setting": list(PUBLISHED_SETTINGS)})
+    out["original_settings"] = plan_run(workdir / "original", original, quiet=False)
+    return out
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--workdir", type=Path, default=Path("/tmp/becos-bench"))
     parser.add_argument("--variants", type=int, default=1, help="remesh variants per shape (default 1)")
     parser.add_argument("--skip-run", action="store_true", help="only the 10k-pair dry run")
+    parser.add_argument("--full-plan", action="store_true",
+                        help="only the plan of the whole published benchmark on a stand-in data root")
+    parser.add_argument("--profile", action="store_true",
+                        help="with --full-plan: also profile the dry run (cProfile; ~2 min more)")
     args = parser.parse_args()
     code = becos_code()
     result: dict = {"machine_cores": os.cpu_count()}
+    if args.full_plan:
+        result["full_plan"] = full_plan(args.workdir / "fullplan", code, profile=args.profile)
+        print(json.dumps(result, indent=1))
+        return
 
     dag = args.workdir / "dag10k"
     shutil.rmtree(dag, ignore_errors=True)

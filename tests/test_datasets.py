@@ -193,7 +193,7 @@ def test_dt4d_listing_uses_the_info_json_and_the_template_table(becos_code, anno
     template = annotations.template_row("dt4d_human_crypto").template
     assert any(e.name == template for e in entries)  # the class template is one of the listed frames
     next(folder.glob("*/*.obj")).unlink()
-    with pytest.raises(InputFileError, match="1 of the 248 shapes.*missing.*preprocess"):
+    with pytest.raises(InputFileError, match="1 of the 248 shapes.*missing.*prepare-dt4d"):
         spec.list_shapes(tmp_path, annotations)
 
 

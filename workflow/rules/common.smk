@@ -5,7 +5,11 @@ import os
 import sys
 from pathlib import Path
 
+from snakemake.exceptions import IncompleteCheckpointException
+
+from becos import dt4d as bdt4d
 from becos import workflow as bw
+from becos.download import archive_url
 from becos.resources import RuleResources
 
 config.update(bw.resolve_config(config))
@@ -53,10 +57,14 @@ def chunk_pairs(wildcards):
 
 def setting_pairs(wildcards):
     """Pairs of a setting (the run time of its store, export and evaluation jobs grows with them);
-    0 while the dataset check has not run (a dry run before it), then the real count."""
+    0 while the dataset check has not run (a dry run before it, or one after its inputs changed), then
+    the real count."""
     if not LAYOUT.checks.exists():
         return 0  # calling plan() from a resource before the checkpoint crashes Snakemake 9's dry run
-    return len(plan().manifests[wildcards.setting])
+    try:
+        return len(plan().manifests[wildcards.setting])
+    except IncompleteCheckpointException:  # the check reruns (e.g. a DT4D class was added): same crash
+        return 0
 
 
 def chunk_files(setting, kind):
@@ -90,4 +98,6 @@ def generated_inputs(wildcards):
         inputs.append(config["synthetic"]["out"])
     if config["annotations_archive"]:
         inputs.append(config["annotations"])
+    inputs += [str(job.stamp) for job in DT4D_JOBS.values()]  # DeformingThings4D preparation (data.smk)
+    inputs += [str(LAYOUT.downloaded(name)) for name in config["download"]]
     return inputs

@@ -43,6 +43,62 @@ if config["annotations_archive"]:
             "becos fetch-annotations --url {params.url:q} --sha256 {params.sha256} --dest {output} > {log} 2>&1"
 
 
+# DeformingThings4D: one job per class of each enabled dt4d dataset whose DATA/DeformingThings4D/<kind>
+# and info file exist at planning time (becos.dt4d.preparation_plan). Output: the class's stamp, which
+# records each .anime's size, mtime and sha256 (update(): Snakemake must not delete it before the job,
+# so the job rewrites only the OBJs whose .anime changed). The info file is ancient() and the class's
+# own entry a parameter: editing one class's entry (or adding a class) reruns that class only.
+DT4D_JOBS = {(job.kind, job.cls): job for job in bdt4d.preparation_plan(config)}
+
+if DT4D_JOBS:
+
+    rule prepare_dt4d:
+        input:
+            anime=lambda w: DT4D_JOBS[(w.kind, w.cls)].anime,
+            info=lambda w: ancient(DT4D_JOBS[(w.kind, w.cls)].info),
+        output:
+            update(str(Path(config["data_dir"]) / "dt4d_{kind}" / "{cls}" / bdt4d.STAMP_NAME)),
+        wildcard_constraints:
+            kind="animals|humanoids",
+            cls="[^/]+",
+        params:
+            data_dir=config["data_dir"],
+            listing=lambda w: DT4D_JOBS[(w.kind, w.cls)].listing,
+        resources:
+            mem_mb=RESOURCES.mem_mb("prepare_dt4d"),
+            runtime=RESOURCES.runtime("prepare_dt4d"),
+        log:
+            "logs/prepare_dt4d/{kind}/{cls}.log",
+        shell:
+            "becos prepare-dt4d --data-dir {params.data_dir:q} --info {input.info:q} --kind {wildcards.kind}"
+            " --classes {wildcards.cls:q} > {log} 2>&1"
+
+
+if config["download"]:
+
+    # opt-in downloads of the public dataset archives (kids, shrec20): one job per dataset, before the
+    # dataset check; on the machine that runs Snakemake (cluster nodes often have no internet)
+    localrules:
+        download_dataset,
+
+    rule download_dataset:
+        output:
+            str(LAYOUT.downloaded("{dataset}")),
+        wildcard_constraints:
+            dataset="|".join(config["download"]),
+        params:
+            data_dir=config["data_dir"],
+            url=lambda wildcards: archive_url(wildcards.dataset, config["download_urls"]),
+        resources:
+            mem_mb=RESOURCES.mem_mb("download_dataset"),
+            runtime=RESOURCES.runtime("download_dataset"),
+        log:
+            "logs/download/{dataset}.log",
+        shell:
+            "becos download-dataset {wildcards.dataset} --data-dir {params.data_dir:q} --url {params.url:q}"
+            " --out {output} > {log} 2>&1"
+
+
 checkpoint check_datasets:
     input:
         generated_inputs,
