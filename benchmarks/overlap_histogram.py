@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import sys
 from pathlib import Path
 
@@ -76,7 +77,9 @@ def main(argv=None) -> int:
                       "n_directions": int(published.sum())},
         "runs": [summarise(p) for p in args.stores],
     }
-    text = json.dumps(result, indent=1)
+    # one line per list of numbers, so the histograms read side by side
+    text = re.sub(r"\[\s+([^\[\]{}]*?)\s+\]", lambda m: "[" + re.sub(r"\s+", " ", m.group(1)) + "]",
+                  json.dumps(result, indent=1))
     print(text)
     if args.out:
         write_text(args.out, text + "\n")
