@@ -217,3 +217,14 @@ def test_regime_names_are_the_schema_enum():
 
     enum = yaml.safe_load(SCHEMA_PATH.read_text())["properties"]["cam_pos_regime"]["enum"]
     assert enum == list(CAMERA_REGIMES) and set(REFERENCE_REGIMES) <= set(enum)
+
+
+def test_reference_camera_looking_along_the_up_axis_keeps_a_valid_up():
+    """A reference camera straight above or below the shape (its up +y is then the view axis) gets e1."""
+    from becos.cameras import _camera_at
+
+    for direction in ([0.0, 1.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.6, 0.8]):
+        cam = _camera_at(np.array(direction), "y", 1.0)
+        assert np.linalg.norm(cam.up) == pytest.approx(1.0) and abs(cam.up @ cam.forward) < 1e-12
+        assert np.isfinite(cam.basis()).all()
+    np.testing.assert_array_equal(_camera_at(np.array([0.0, 1.0, 0.0]), "y", 1.0).up, [0.0, 0.0, 1.0])
