@@ -26,6 +26,9 @@ Report folder (:func:`write_report`)
 ------------------------------------
 ``counts.csv``, ``overlap_histogram.csv``, ``overlap_histogram.png``, ``summary.json``,
 ``renders/<pair_id>.png`` and ``index.html`` (static, relative links; opens without Snakemake).
+For a P2P store the overlap histogram is shown beside the published benchmark's
+(:data:`becos.published.P2P_OVERLAP_HISTOGRAM`), both as shares of all directions since the totals
+differ (:func:`published_overlap_comparison`).
 The captions for ``snakemake --report`` live in ``workflow/report/*.rst`` (one per output kind,
 :data:`CAPTIONS`).
 """
@@ -404,8 +407,43 @@ def overlap_histogram(table) -> dict:
     return result
 
 
-def plot_overlap_histogram(hist: Mapping, path: str | Path, *, title: str = "", size=(700, 420)) -> Path:
-    """Bar chart of :func:`overlap_histogram` (X->Y and Y->X stacked, counts on top) as a PNG."""
+def published_overlap_comparison(hist: Mapping) -> dict:
+    """Our P2P overlap histogram beside the published one (:data:`becos.published.P2P_OVERLAP_HISTOGRAM`).
+
+    ``hist``: :func:`overlap_histogram` of a P2P table. Returns ``{"bin_centre_percent": [10 ints],
+    "count": [10], "share": [10], "published_count": [10], "published_share": [10], "n_directions",
+    "n_published_directions", "total_variation", "source"}``; shares are fractions of all directions
+    (of ours, of the published benchmark's), ``total_variation`` = ½ Σ |share − published_share|
+    (0: same shape of histogram, 1: disjoint; ``None`` without pairs).
+    """
+    from becos.published import P2P_OVERLAP_HISTOGRAM
+
+    edges = np.asarray(hist["edges"], dtype=np.float64)
+    counts = np.asarray(hist["total"], dtype=np.int64)
+    published = np.asarray(P2P_OVERLAP_HISTOGRAM, dtype=np.int64)
+    if counts.shape != published.shape:
+        raise ValueError(f"the published histogram has {len(published)} bins, ours {len(counts)}")
+    n = int(counts.sum())
+    share = counts / n if n else np.zeros(len(counts))
+    published_share = published / published.sum()
+    return {
+        "bin_centre_percent": np.round(100 * (edges[:-1] + edges[1:]) / 2).astype(int).tolist(),
+        "count": counts.tolist(), "share": share.tolist(),
+        "published_count": published.tolist(), "published_share": published_share.tolist(),
+        "n_directions": n, "n_published_directions": int(published.sum()),
+        "total_variation": float(0.5 * np.abs(share - published_share).sum()) if n else None,
+        "source": "BeCoS paper (SGP 2025), P2P overlap histogram: becos.published.P2P_OVERLAP_HISTOGRAM",
+    }
+
+
+def plot_overlap_histogram(hist: Mapping, path: str | Path, *, title: str = "", size=(700, 420),
+                           published: Mapping | None = None) -> Path:
+    """Bar chart of :func:`overlap_histogram` (X->Y and Y->X stacked) as a PNG.
+
+    Without ``published``: counts, totals on top. With ``published``
+    (:func:`published_overlap_comparison`): shares of all directions, ours (stacked) and the published
+    benchmark's (grey) side by side in each bin, shares in per cent on top.
+    """
     from matplotlib.figure import Figure
 
     edges = np.asarray(hist["edges"])
@@ -413,15 +451,30 @@ def plot_overlap_histogram(hist: Mapping, path: str | Path, *, title: str = "", 
     fig = Figure(figsize=(size[0] / 100, size[1] / 100), dpi=100)
     ax = fig.add_axes((0.11, 0.13, 0.86, 0.75))
     x_counts, y_counts = np.asarray(hist["x"]), np.asarray(hist["y"])
-    ax.bar(centres, x_counts, width=9.0, color="#3b6fb6", label="x_overlap (share of X matched on Y)")
-    ax.bar(centres, y_counts, width=9.0, bottom=x_counts, color="#e08a2e", label="y_overlap (share of Y matched on X)")
-    for c, t in zip(centres, x_counts + y_counts):
-        ax.text(c, t, str(int(t)), ha="center", va="bottom", fontsize=8)
+    if published is None:
+        ax.bar(centres, x_counts, width=9.0, color="#3b6fb6", label="x_overlap (share of X matched on Y)")
+        ax.bar(centres, y_counts, width=9.0, bottom=x_counts, color="#e08a2e",
+               label="y_overlap (share of Y matched on X)")
+        for c, t in zip(centres, x_counts + y_counts):
+            ax.text(c, t, str(int(t)), ha="center", va="bottom", fontsize=8)
+        ax.set_ylabel("directions (pairs × 2)")
+    else:
+        n = max(int(hist["n_directions"]), 1)
+        ours, theirs = centres - 2.25, centres + 2.25
+        ax.bar(ours, 100 * x_counts / n, width=4.4, color="#3b6fb6", label="ours: x_overlap")
+        ax.bar(ours, 100 * y_counts / n, width=4.4, bottom=100 * x_counts / n, color="#e08a2e",
+               label="ours: y_overlap")
+        ax.bar(theirs, 100 * np.asarray(published["published_share"]), width=4.4, color="#8c8c8c",
+               label=f"published BeCoS ({published['n_published_directions']:,} directions)")
+        for c, t in zip(ours, published["share"]):
+            ax.text(c, 100 * t, f"{100 * t:.0f}", ha="center", va="bottom", fontsize=7)
+        for c, t in zip(theirs, published["published_share"]):
+            ax.text(c, 100 * t, f"{100 * t:.0f}", ha="center", va="bottom", fontsize=7, color="#555555")
+        ax.set_ylabel("share of directions (%)")
     ax.set_xticks(centres)
     ax.set_xticklabels([f"{int(round(c))}" for c in centres])
     ax.set_xlim(0, 100)
     ax.set_xlabel("overlap (%), 10 %-bins, centre shown")
-    ax.set_ylabel("directions (pairs × 2)")
     ax.margins(y=0.12)
     ax.legend(fontsize=8, loc="best", frameon=False)
     fig.suptitle(title or f"Overlap histogram ({hist['n_directions']} directions)", fontsize=11)
@@ -446,7 +499,8 @@ def write_report(records: Iterable[PairRecord], table, out_dir: str | Path, *, n
 
     Returns:
         The summary dict: ``setting``, ``n_pairs``, ``counts`` (group -> value -> split/total -> n),
-        ``overlap_histogram`` (:func:`overlap_histogram`), ``overlap`` (mean/min/max per direction),
+        ``overlap_histogram`` (:func:`overlap_histogram`), ``published_overlap_histogram`` (P2P:
+        :func:`published_overlap_comparison`, else ``None``), ``overlap`` (mean/min/max per direction),
         ``renders`` (list of {pair_id, split, file}), ``missing_renders``, ``files`` (kind -> path
         relative to ``out_dir``), ``metadata``.
     """
@@ -461,8 +515,6 @@ def write_report(records: Iterable[PairRecord], table, out_dir: str | Path, *, n
     counts = count_table(table)
     write_text(out / "counts.csv", counts.to_csv(index=False))
     hist = overlap_histogram(table)
-    hist_frame = _histogram_frame(hist)
-    write_text(out / "overlap_histogram.csv", hist_frame.to_csv(index=False))
 
     # renders
     chosen = select_render_ids(table, n_renders)
@@ -484,8 +536,12 @@ def write_report(records: Iterable[PairRecord], table, out_dir: str | Path, *, n
     setting = metadata.get("setting") or (settings.pop() if len(settings) == 1 else "mixed" if settings else None)
 
     label = SETTING_LABELS.get(setting or "", setting or "")
-    plot_overlap_histogram(hist, out / "overlap_histogram.png",
-                           title=f"{label} overlap histogram: {len(table)} pairs, {hist['n_directions']} directions")
+    published = published_overlap_comparison(hist) if setting == "partial_partial" else None
+    hist_frame = _histogram_frame(hist, published)
+    write_text(out / "overlap_histogram.csv", hist_frame.to_csv(index=False))
+    plot_overlap_histogram(hist, out / "overlap_histogram.png", published=published,
+                           title=f"{label} overlap histogram: {len(table)} pairs, {hist['n_directions']} directions"
+                           + (" vs published" if published else ""))
 
     summary = {
         "setting": setting,
@@ -493,6 +549,7 @@ def write_report(records: Iterable[PairRecord], table, out_dir: str | Path, *, n
         "splits": split_order(table["split"].astype(str)),
         "counts": _nested_counts(counts),
         "overlap_histogram": hist,
+        "published_overlap_histogram": published,
         "overlap": {s: _stats(table[f"{s}_overlap"]) for s in ("x", "y")},
         "renders": renders,
         "missing_renders": sorted(wanted),
@@ -512,13 +569,18 @@ def write_report(records: Iterable[PairRecord], table, out_dir: str | Path, *, n
     return summary
 
 
-def _histogram_frame(hist: Mapping):
+def _histogram_frame(hist: Mapping, published: Mapping | None = None):
+    """The histogram table; with ``published`` also ``share``, ``published_count``, ``published_share``."""
     import pandas as pd
 
     edges = np.asarray(hist["edges"])
-    return pd.DataFrame({"bin_low": edges[:-1], "bin_high": edges[1:],
-                         "bin_centre_percent": np.round(100 * (edges[:-1] + edges[1:]) / 2).astype(int),
-                         "x_overlap": hist["x"], "y_overlap": hist["y"], "total": hist["total"]})
+    frame = pd.DataFrame({"bin_low": edges[:-1], "bin_high": edges[1:],
+                          "bin_centre_percent": np.round(100 * (edges[:-1] + edges[1:]) / 2).astype(int),
+                          "x_overlap": hist["x"], "y_overlap": hist["y"], "total": hist["total"]})
+    if published is not None:
+        frame = frame.assign(share=np.round(published["share"], 6), published_count=published["published_count"],
+                             published_share=np.round(published["published_share"], 6))
+    return frame
 
 
 def _nested_counts(counts) -> dict:
@@ -563,6 +625,22 @@ def _index_html(summary: Mapping, counts, hist_frame) -> str:
     missing = ""
     if summary.get("missing_renders"):
         missing = f"<p class=warn>Not found among the records: {esc(', '.join(summary['missing_renders']))}</p>"
+    comparison = ""
+    published = summary.get("published_overlap_histogram")
+    if published:
+        tv = published["total_variation"]
+        rows_html = "\n".join(
+            f"<tr><td>{c} %</td><td>{n:,}</td><td>{100 * a:.1f} %</td><td>{m:,}</td><td>{100 * b:.1f} %</td></tr>"
+            for c, n, a, m, b in zip(published["bin_centre_percent"], published["count"], published["share"],
+                                     published["published_count"], published["published_share"]))
+        comparison = f"""<h3>Beside the published BeCoS P2P histogram</h3>
+<p>Shares of all directions (ours: {published['n_directions']:,}; published:
+{published['n_published_directions']:,} = 2 &times; 10,464 pairs, from the BeCoS paper).
+Total variation distance: {'n/a' if tv is None else f'{tv:.3f}'} (0 = same shape, 1 = disjoint).</p>
+<table class=published>
+<tr><th>bin centre</th><th>ours</th><th>ours share</th><th>published</th><th>published share</th></tr>
+{rows_html}
+</table>"""
     count_blocks = "\n".join(
         f"<h3>{esc(group)}</h3>\n" + block.drop(columns="group").to_html(index=False, border=0, escape=True)
         for group, block in counts.groupby("group", sort=False))
@@ -594,6 +672,7 @@ pre {{ background: #f5f5f8; padding: 1em; overflow-x: auto; }}
 every pair ({summary['overlap_histogram']['n_directions']} directions), in 10 % bins.</p>
 <img src="overlap_histogram.png" alt="overlap histogram">
 {hist_frame.to_html(index=False, border=0)}
+{comparison}
 <h2>Sample pairs</h2>
 <p>X (left) is coloured by its vertex positions; each Y vertex (right) takes the colour of its ground-truth
 X vertex; grey Y vertices have no counterpart on X. Random rotations undone, common y-up frame.</p>
@@ -643,5 +722,7 @@ def run_cli(args: argparse.Namespace) -> int:
           file=sys.stderr)
     print(json.dumps({"index": str(Path(args.out) / "index.html"), "n_pairs": summary["n_pairs"],
                       "renders": len(summary["renders"]),
-                      "overlap_directions": summary["overlap_histogram"]["n_directions"]}))
+                      "overlap_directions": summary["overlap_histogram"]["n_directions"],
+                      "published_overlap_total_variation":
+                          (summary["published_overlap_histogram"] or {}).get("total_variation")}))
     return 0

@@ -5,8 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from becos.cameras import (ELEVATION_MAX, ELEVATION_MIN, REGIMES, Camera, axis_frame, camera_angles,
-                           camera_from_angles, draw_camera, draw_camera_pair, normalise_to_unit_box)
+from becos.cameras import (CAMERA_REGIMES, ELEVATION_MAX, ELEVATION_MIN, REFERENCE_REGIMES, REGIMES, Camera,
+                           axis_frame, camera_angles, camera_from_angles, draw_camera, draw_camera_pair,
+                           normalise_to_unit_box)
 from becos.seeding import rng_for
 
 
@@ -147,3 +148,83 @@ def test_camera_transform_moves_eye_and_keeps_geometry():
     np.testing.assert_allclose(moved.up, rot @ cam.up)
     np.testing.assert_allclose(moved.forward, rot @ cam.forward)
     assert isinstance(moved, Camera) and moved.fov_deg == cam.fov_deg
+
+
+def _reference_pairs(regime: str, n: int, up_axis: str = "y") -> np.ndarray:
+    """(n, 2, 3) unit directions origin -> camera of ``n`` pairs drawn under a reference-like regime."""
+    out = np.empty((n, 2, 3))
+    for i in range(n):
+        cams = draw_camera_pair(rng_for(11, f"pair-{i}", "cameras", 0), regime, up_axis, distance=1.3)
+        for j, cam in enumerate(cams):
+            assert np.linalg.norm(cam.position) == pytest.approx(1.3)
+            np.testing.assert_allclose(cam.target, 0.0)
+            assert np.linalg.norm(cam.up) == pytest.approx(1.0) and abs(cam.up @ cam.forward) < 1e-9
+            out[i, j] = cam.position / 1.3
+    return out
+
+
+@pytest.mark.parametrize("regime, median_deg, max_deg", [("reference-high", 13.3, 47.0),
+                                                         ("reference-medium", 28.0, 92.0)])
+def test_reference_regimes_match_the_reference_pair_angles(regime, median_deg, max_deg):
+    """Pair angles over 2000 draws match those measured on the reference's cam_generator (facts §7.7)."""
+    d = _reference_pairs(regime, 2000)
+    angle = np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", d[:, 0], d[:, 1]), -1.0, 1.0)))
+    assert np.median(angle) == pytest.approx(median_deg, abs=1.0)
+    assert 0.85 * max_deg <= angle.max() <= 1.1 * max_deg
+    # the reference's elevation axis is z (horizontal for y-up shapes): elevations asin(z) of a pair
+    # differ by at most r and azimuths atan2(x, y) (about z) by at most 2r; measured towards the up
+    # axis y instead, the elevations differ by more; the cameras pass over the top and under the
+    # bottom of the shape (ours stay in -15°..+60°)
+    r = REFERENCE_REGIMES[regime]
+    elevation = np.arcsin(np.clip(d[..., 2], -1, 1))
+    assert np.abs(elevation[:, 0] - elevation[:, 1]).max() <= r + 1e-9
+    azimuth = np.arctan2(d[..., 0], d[..., 1])
+    assert _wrapped(azimuth[:, 0] - azimuth[:, 1]).max() <= 2 * r + 1e-9
+    elevation_towards_y = np.arcsin(np.clip(d[..., 1], -1, 1))
+    assert np.abs(elevation_towards_y[:, 0] - elevation_towards_y[:, 1]).max() > 1.5 * r
+    assert d[..., 1].max() > 0.95 and d[..., 1].min() < -0.95
+    assert d[..., 2].max() > 0.95 and d[..., 2].min() < -0.95
+
+
+def test_reference_regime_uses_seven_uniform_draws_per_pair():
+    """One pair consumes exactly the reference's 7 uniforms, in its order (a(2), b(2), c, coin, d)."""
+    rng, twin = rng_for(3, "cat0|cat3", "cameras", 0), rng_for(3, "cat0|cat3", "cameras", 0)
+    cams = draw_camera_pair(rng, "reference-high")
+    a0, a1, b0, b1, c, coin, dd = twin.random(7)
+    assert rng.random() == twin.random()       # both streams advanced by the same 7 draws
+    r = np.pi / 8
+    sign = 1.0 if coin < 0.5 else -1.0
+    for cam, a, b in zip(cams, (a0, a1), (b0, b1)):
+        alpha = a * 2 * r + c * 2 * (np.pi - r)
+        phi = b * r - r / 2 + sign * dd * (np.pi - r) / 2
+        np.testing.assert_allclose(cam.position, [np.cos(phi) * np.sin(alpha), np.cos(phi) * np.cos(alpha),
+                                                  np.sin(phi)], atol=1e-12)
+        # the reference's up is +y (made orthogonal to the view)
+        assert cam.up @ np.array([0.0, 1.0, 0.0]) > 0
+
+
+def test_reference_regime_follows_the_up_axis():
+    """For a z-up shape the reference's (x, y, z) axes become (y, z, x): same draws, permuted axes."""
+    y_up = _reference_pairs("reference-medium", 50, "y")
+    z_up = _reference_pairs("reference-medium", 50, "z")
+    np.testing.assert_allclose(z_up, y_up[..., [2, 0, 1]], atol=1e-12)
+
+
+def test_regime_names_are_the_schema_enum():
+    import yaml
+
+    from becos.workflow import SCHEMA_PATH
+
+    enum = yaml.safe_load(SCHEMA_PATH.read_text())["properties"]["cam_pos_regime"]["enum"]
+    assert enum == list(CAMERA_REGIMES) and set(REFERENCE_REGIMES) <= set(enum)
+
+
+def test_reference_camera_looking_along_the_up_axis_keeps_a_valid_up():
+    """A reference camera straight above or below the shape (its up +y is then the view axis) gets e1."""
+    from becos.cameras import _camera_at
+
+    for direction in ([0.0, 1.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.6, 0.8]):
+        cam = _camera_at(np.array(direction), "y", 1.0)
+        assert np.linalg.norm(cam.up) == pytest.approx(1.0) and abs(cam.up @ cam.forward) < 1e-12
+        assert np.isfinite(cam.basis()).all()
+    np.testing.assert_array_equal(_camera_at(np.array([0.0, 1.0, 0.0]), "y", 1.0).up, [0.0, 0.0, 1.0])

@@ -143,6 +143,16 @@ def test_write_report_counts_histogram_renders(records, tmp_path):
     for link in links:
         assert not link.startswith(("/", "http")) and (out / link).is_file(), link
     assert "abc123" in page
+    # not a P2P report: no published histogram beside it (table, page, plot)
+    assert summary["published_overlap_histogram"] is None and "published" not in rows[0]
+    assert "Beside the published" not in page
+    assert _published_grey_pixels(out / "overlap_histogram.png") < 1000  # anti-aliased text only
+
+
+def _published_grey_pixels(path: Path) -> int:
+    """Pixels of the published histogram's bar colour (#8c8c8c) in a histogram PNG."""
+    image = _image(path)
+    return int((np.abs(image - 0x8C / 255).max(axis=-1) < 0.01).sum())
 
 
 def test_write_report_single_setting_and_missing_records(records, tmp_path):
@@ -152,6 +162,24 @@ def test_write_report_single_setting_and_missing_records(records, tmp_path):
     summary = write_report([p2p[1]], table, tmp_path, n_renders=8)
     assert summary["setting"] == "partial_partial"
     assert summary["overlap_histogram"]["n_directions"] == sum(summary["overlap_histogram"]["total"]) == 4
+    # P2P: the published histogram beside ours, both as shares
+    published = summary["published_overlap_histogram"]
+    assert published["published_count"] == [20, 1850, 2391, 2321, 2828, 3163, 3391, 3247, 1715, 2]
+    assert published["n_published_directions"] == 20928 and published["n_directions"] == 4
+    assert published["bin_centre_percent"] == list(range(5, 100, 10))
+    assert published["count"] == summary["overlap_histogram"]["total"]
+    np.testing.assert_allclose(published["share"], np.array(published["count"]) / 4)
+    np.testing.assert_allclose(sum(published["published_share"]), 1.0)
+    assert published["published_share"][6] == pytest.approx(3391 / 20928)
+    expected_tv = 0.5 * np.abs(np.array(published["share"]) - np.array(published["published_share"])).sum()
+    assert published["total_variation"] == pytest.approx(expected_tv) and 0 < expected_tv <= 1
+    rows = (tmp_path / "overlap_histogram.csv").read_text().splitlines()
+    assert rows[0].endswith(",total,share,published_count,published_share")
+    assert rows[7].split(",")[-2:] == ["3391", str(round(3391 / 20928, 6))]
+    page = (tmp_path / "index.html").read_text()
+    assert "Beside the published BeCoS P2P histogram" in page and "3,391" in page and "16.2 %" in page
+    assert f"{expected_tv:.3f}" in page
+    assert _published_grey_pixels(tmp_path / "overlap_histogram.png") > 5000  # the published bars
     assert [r["pair_id"] for r in summary["renders"]] == [p2p[1].pair_id]
     assert summary["missing_renders"] == [p2p[0].pair_id]
     assert sorted(p.name for p in (tmp_path / "renders").iterdir()) == [f"{p2p[1].pair_id}.png"]
@@ -213,6 +241,7 @@ def test_cli_on_a_store(pair_record_files, tmp_path, capsys):
     assert main(["report", str(path), str(tmp_path / "out"), "--renders", "1"]) == 0
     printed = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     assert printed["n_pairs"] == 2 and printed["renders"] == 1 and printed["overlap_directions"] == 4
+    assert 0 < printed["published_overlap_total_variation"] <= 1
     summary = json.loads((tmp_path / "out" / "summary.json").read_text())
     assert summary["setting"] == "partial_partial"
     assert (tmp_path / "out" / summary["renders"][0]["file"]).is_file()
