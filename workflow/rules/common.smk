@@ -8,6 +8,7 @@ from pathlib import Path
 from snakemake.exceptions import IncompleteCheckpointException
 
 from becos import dt4d as bdt4d
+from becos import progress_panel
 from becos import workflow as bw
 from becos.download import archive_url
 from becos.resources import RuleResources
@@ -110,3 +111,7 @@ onerror:
     report = failure_report(snakemake_failed_jobs(workflow))
     if report:
         print(report, file=sys.stderr, flush=True)
+
+
+# in a terminal (profiles/default): done/total jobs and an ETA in the progress panel
+progress_panel.tune(workflow.logger_manager.get_log_handlers())
