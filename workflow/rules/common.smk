@@ -114,4 +114,4 @@ onerror:
 
 
 # in a terminal (profiles/default): done/total jobs and an ETA in the progress panel
-progress_panel.tune(workflow.logger_manager.get_log_handlers())
+progress_panel.tune(getattr(getattr(workflow, "logger_manager", None), "plugin_handlers", None) or [])
