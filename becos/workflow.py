@@ -109,7 +109,7 @@ def resolve_config(raw: dict) -> dict:
     validator = jsonschema.Draft202012Validator(schema)
     errors = sorted(validator.iter_errors(config), key=lambda e: [str(k) for k in e.absolute_path])
     if errors:
-        raise ConfigError("\n".join(line for e in errors for line in schema_problems(e, schema)))
+        raise ConfigError("\n".join(line for e in errors for line in schema_problems(e)))
     check_config(config)
     return config
 
@@ -148,7 +148,7 @@ def _accepts_type(schema: dict, value) -> bool:
     return kind in wanted or (kind == "integer" and "number" in wanted)
 
 
-def schema_problems(error, root_schema: dict | None = None) -> list[str]:
+def schema_problems(error) -> list[str]:
     """One line per problem of a jsonschema ``ValidationError``: ``<key>: <what is wrong>. Fix: <fix>``.
 
     ``oneOf``/``anyOf`` errors report the branch whose type fits the value (e.g. a bad ``sha256`` inside
@@ -206,10 +206,11 @@ def schema_problems(error, root_schema: dict | None = None) -> list[str]:
         fitting = [i for i, b in enumerate(branches) if _accepts_type(b, value)]
         if len(fitting) == 1:
             inner = [e for e in error.context if e.relative_schema_path and e.relative_schema_path[0] == fitting[0]]
-            lines = [line for e in inner for line in schema_problems(e, root_schema)]
+            lines = [line for e in inner for line in schema_problems(e)]
             if lines:
                 return lines
-        forms = " or ".join(_TYPE_NAMES.get(b.get("type"), b.get("type", "another form")) for b in branches)
+        kinds = [t for b in branches for t in ([b["type"]] if isinstance(b.get("type"), str) else b.get("type", []))]
+        forms = " or ".join(_TYPE_NAMES.get(t, t) for t in kinds) or "another form"
         return [f"{key}: {value!r} is {_TYPE_NAMES.get(_type_of(value), _type_of(value))}. Fix: give {forms} ({docs})"]
     message = " ".join(str(error.message).split())
     return [f"{key}: {message}. Fix: {docs}"]
