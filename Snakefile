@@ -3,8 +3,12 @@
 #   snakemake --cores 2 --configfile my.yaml  another configuration (keys: config/README.md)
 #   snakemake --profile profiles/local        the laptop profile
 import os
+import sys
 
-from snakemake.utils import min_version, validate
+from snakemake.utils import min_version
+
+from becos.errors import ConfigError
+from becos.workflow import resolve_config
 
 min_version("9.0")
 
@@ -13,7 +17,12 @@ min_version("9.0")
 configfile: os.path.join(workflow.basedir, "config", "config.yaml")
 
 
-validate(config, "config/schema.yaml")
+# config/schema.yaml and the checks across keys (defaults filled in); each problem is one console line
+# `becos config: <key>: <what is wrong>. Fix: <fix>`, without Snakemake's traceback header
+try:
+    config.update(resolve_config(config))
+except ConfigError as exc:
+    sys.exit("\n".join(f"becos config: {line}" for line in str(exc).splitlines()))
 
 
 include: "workflow/rules/common.smk"

@@ -113,7 +113,9 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return args.func(args)
     except BecosError as exc:
-        print(f"becos {args.command}: {exc}", file=sys.stderr)
+        # one problem per line, each prefixed (a config error lists several); indented lines continue one
+        for line in str(exc).splitlines() or [""]:
+            print(line if line[:1].isspace() else f"becos {args.command}: {line}", file=sys.stderr)
         return 2
 
 

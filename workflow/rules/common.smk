@@ -8,11 +8,11 @@ from pathlib import Path
 from snakemake.exceptions import IncompleteCheckpointException
 
 from becos import dt4d as bdt4d
+from becos import progress_panel
 from becos import workflow as bw
 from becos.download import archive_url
 from becos.resources import RuleResources
 
-config.update(bw.resolve_config(config))
 SETTINGS = bw.settings_of(config)
 LAYOUT = bw.Layout.of(config)
 RESULTS = str(LAYOUT.results)
@@ -101,3 +101,17 @@ def generated_inputs(wildcards):
     inputs += [str(job.stamp) for job in DT4D_JOBS.values()]  # DeformingThings4D preparation (data.smk)
     inputs += [str(LAYOUT.downloaded(name)) for name in config["download"]]
     return inputs
+
+
+# A failed job's own error lines (`becos <command>: <file>: <problem>. Fix: <fix>`) live in its log;
+# print them at the end of a failed run, so nobody has to open the log to learn what to fix.
+onerror:
+    from becos.joblog import failure_report, snakemake_failed_jobs
+
+    report = failure_report(snakemake_failed_jobs(workflow))
+    if report:
+        print(report, file=sys.stderr, flush=True)
+
+
+# in a terminal (profiles/default): done/total jobs and an ETA in the progress panel
+progress_panel.tune(getattr(getattr(workflow, "logger_manager", None), "plugin_handlers", None) or [])

@@ -1,0 +1,198 @@
+"""What a user sees (issue #17): config errors as one line each, a failed job's own error line on the
+console, the progress panel in a terminal. Real Snakemake runs of the real Snakefile (with its default
+workflow profile, profiles/default), in a pseudo-terminal where the terminal matters.
+"""
+
+from __future__ import annotations
+
+import os
+import pty
+import re
+import select
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+import yaml
+from tiny_tosca import tosca_config, write_config_file
+
+from becos.errors import ConfigError
+from becos.joblog import error_lines, failure_report
+from becos.workflow import check_config_files, resolve_config
+
+REPO = Path(__file__).resolve().parents[1]
+SNAKEMAKE = [sys.executable, "-m", "snakemake", "-s", str(REPO / "Snakefile")]
+NOT_SEEN = ("Traceback", "ConfigError in file", "WorkflowError in file", "Failed validating", "File \"")
+
+
+def run_snakemake(cwd: Path, *args: str, env: dict | None = None) -> subprocess.CompletedProcess:
+    """Snakemake from ``cwd`` (pipes: not a terminal, so plain output)."""
+    return subprocess.run([*SNAKEMAKE, *args], cwd=cwd, capture_output=True, text=True,
+                          env=dict(os.environ, PYTHONUNBUFFERED="1", **(env or {})))
+
+
+def run_in_terminal(cwd: Path, *args: str, env: dict | None = None, timeout: float = 120) -> tuple[int, str]:
+    """Snakemake with stdout and stderr on a pseudo-terminal (what a user at a terminal sees); returns
+    its exit status and everything it wrote (terminal control sequences removed)."""
+    master, slave = pty.openpty()
+    full_env = dict(os.environ, PYTHONUNBUFFERED="1", COLUMNS="120", LINES="40", TERM="xterm-256color", **(env or {}))
+    proc = subprocess.Popen([*SNAKEMAKE, *args], cwd=cwd, stdin=slave, stdout=slave, stderr=slave, env=full_env)
+    os.close(slave)
+    chunks, deadline = [], time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        ready, _, _ = select.select([master], [], [], 0.2)
+        if ready:
+            try:
+                data = os.read(master, 65536)
+            except OSError:  # the terminal closed: the process ended
+                break
+            if not data:
+                break
+            chunks.append(data)
+        elif proc.poll() is not None:
+            break
+    code = proc.wait(timeout=max(deadline - time.monotonic(), 1))
+    os.close(master)
+    text = b"".join(chunks).decode(errors="replace")
+    return code, re.sub(r"\x1b\[[0-9;?]*[A-Za-z]", "", text)  # without colours and cursor moves
+
+
+def problem_lines(text: str) -> list[str]:
+    return [line for line in text.splitlines() if line.startswith("becos config: ")]
+
+
+# --- config errors ---------------------------------------------------------------------------------
+KEY_KINDS = {  # kind: (override, key named in the line, words of the problem)
+    "unknown key": ({"min_overlapp": 0.2}, "min_overlapp", "did you mean 'min_overlap'"),
+    "wrong type": ({"n_cam_pos": "ten"}, "n_cam_pos", "not an integer"),
+    "enum": ({"cam_pos_regime": "hi"}, "cam_pos_regime", "one of high, medium, low"),
+    "negative cap": ({"caps": {"train": -1}}, "caps.train", "below the minimum 0"),
+    "n_chunks 0": ({"n_chunks": 0}, "n_chunks", "below the minimum 1"),
+    "reversed overlap range": ({"min_overlap": 0.8, "max_overlap": 0.2}, "min_overlap", "reversed"),
+    "unknown dataset": ({"datasets": ["toska"]}, "datasets", "did you mean 'tosca'"),
+    "unknown nested key": ({"exports": {"zar": True}}, "exports.zar", "did you mean 'zarr'"),
+    "duplicate list item": ({"setting": ["full_full", "full_full"]}, "setting", "more than once"),
+}
+
+
+@pytest.mark.parametrize("kind", sorted(KEY_KINDS))
+def test_each_config_problem_is_one_line_with_key_and_fix(kind):
+    override, key, words = KEY_KINDS[kind]
+    base = {"synthetic": {"enabled": False}, "data_dir": "data", "annotations": "ann", "datasets": ["tosca"]}
+    with pytest.raises(ConfigError) as info:
+        resolve_config({**base, **override})
+    lines = str(info.value).splitlines()
+    assert len(lines) == 1, lines
+    assert lines[0].startswith(f"{key}: ") and words in lines[0] and ". Fix: " in lines[0], lines[0]
+
+
+def test_a_bad_config_prints_one_line_per_problem_and_no_traceback(becos_code, tmp_path):
+    """One Snakemake run with five schema problems, one with the checks across keys (they run once the
+    schema passes), one with `results` naming a file: every problem is one `becos config:` line."""
+    schema_bad = {"min_overlapp": 0.2, "n_cam_pos": "ten", "cam_pos_regime": "hi", "caps": {"train": -1}, "n_chunks": 0}
+    cross_bad = {"min_overlap": 0.8, "max_overlap": 0.2, "datasets": ["tosca", "toska"], "results": "taken"}
+    for name, override, keys in (("schema", schema_bad, ["min_overlapp", "n_cam_pos", "cam_pos_regime", "caps.train",
+                                                         "n_chunks"]),
+                                 ("cross", cross_bad, ["min_overlap", "datasets", "results"])):
+        workdir = write_config_file(tmp_path / name, tosca_config(becos_code, **override))
+        (workdir / "taken").write_text("a file where the results folder should go\n")
+        result = run_snakemake(tmp_path, "-d", str(workdir), "--configfile", str(workdir / "config.yaml"),
+                               "--cores", "1")
+        text = result.stdout + result.stderr
+        assert result.returncode != 0
+        lines = problem_lines(text)
+        assert sorted(line.split(": ")[1] for line in lines) == sorted(keys), text
+        assert all(". Fix: " in line for line in lines), lines
+        assert not any(marker in text for marker in NOT_SEEN), text
+        assert not (workdir / "results").exists() and not (workdir / "logs").exists()
+
+
+def test_config_file_faults_are_one_line_naming_the_file(tmp_path):
+    """A YAML syntax error names file, line and column; a missing --configfile is one line (the default
+    workflow profile reads the files before Snakemake does)."""
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("seed: 3\ndatasets: [tosca\nn_chunks: 4\n")
+    result = run_snakemake(tmp_path, "--configfile", str(bad), "--cores", "1")
+    lines = problem_lines(result.stderr)
+    assert result.returncode != 0 and len(lines) == 1, result.stderr
+    assert lines[0].startswith(f"becos config: {bad}: line 3, column 9: not valid YAML") and "line 2" in lines[0]
+    assert not any(marker in result.stderr for marker in NOT_SEEN), result.stderr
+
+    result = run_snakemake(tmp_path, "--configfile=nothere.yaml", "--cores", "1")
+    assert result.returncode != 0
+    assert problem_lines(result.stderr) == [problem_lines(result.stderr)[0]]
+    assert "nothere.yaml: config file not found" in result.stderr and "Traceback" not in result.stderr
+    assert check_config_files(["--cores", "1", "--configfile", str(bad), "x.yaml", "--config", "a=1"])[1] \
+        .startswith("x.yaml: config file not found")
+    assert check_config_files(["--configfile", str(REPO / "config" / "tosca.yaml")]) == []
+
+
+# --- failed jobs ------------------------------------------------------------------------------------
+def test_error_lines_of_a_job_log():
+    check = ("check: tosca: 76 shapes in /data/tosca-off\n"
+             "becos check: the dataset check found 2 problem(s) (data_dir /data):\n"
+             "  1. /data/tosca-off/cat0.off: truncated. Fix: re-download\n  2. /data/x: y. Fix: z\n\n")
+    assert error_lines(check) == check.splitlines()[1:4]
+    report = "becos report: 6 pairs in s.zarr, rendering 2\nbecos report: s.zarr: no pairs. Fix: rebuild\n"
+    assert error_lines(report) == report.splitlines()  # the trailing lines of the command
+    bug = "becos remesh: note\nTraceback (most recent call last):\n  File \"x.py\", line 1\nKeyError: 'faces'\n"
+    assert error_lines(bug)[0] == "KeyError: 'faces'"
+    assert error_lines("step 1\nstep 2\nstep 3\nKilled\n") == ["step 2", "step 3", "Killed"]
+    assert error_lines("") == []
+    assert len(error_lines("becos x: a\n" + "  more\n" * 40)) == 12
+
+
+def test_a_failed_job_shows_its_becos_error_line_on_the_console(becos_code, tmp_path):
+    """A truncated TOSCA mesh in a copy of the data: the dataset check fails, and the console (not only
+    logs/check_datasets.log) carries its `becos check:` line naming the file and the fix."""
+    tosca = tmp_path / "data" / "tosca-off"
+    tosca.mkdir(parents=True)
+    for mesh in (becos_code / "data" / "tosca-off").glob("*.off"):
+        (tosca / mesh.name).symlink_to(mesh)
+    (tosca / "cat0.off").unlink()
+    (tosca / "cat0.off").write_bytes((becos_code / "data" / "tosca-off" / "cat0.off").read_bytes()[:5000])
+    workdir = write_config_file(tmp_path / "run", tosca_config(becos_code, data_dir=str(tmp_path / "data")))
+    result = run_snakemake(tmp_path, "-d", str(workdir), "--configfile", str(workdir / "config.yaml"),
+                           "--cores", "1", "results/checks/datasets.json")
+    assert result.returncode != 0
+    log = (workdir / "logs" / "check_datasets.log").read_text()
+    becos_lines = [line for line in log.splitlines() if line.startswith("becos check: ")]
+    assert becos_lines, log
+    console = result.stderr
+    assert "becos: job check_datasets failed (log: logs/check_datasets.log):" in console, console[-3000:]
+    for line in becos_lines:
+        assert line in console
+    assert "cat0.off" in console.split("becos: job check_datasets failed")[1]
+
+
+def test_failure_report_names_rule_log_and_error(tmp_path):
+    log = tmp_path / "remesh.log"
+    log.write_text("remesh tosca/cat0 v0\nbecos remesh: /d/cat0.off: 3 vertices. Fix: re-download it\n")
+    text = failure_report([("remesh", "dataset=tosca, name=cat0", [str(log)]),
+                           ("catalog", "", [str(tmp_path / "never.log")])])
+    assert text.splitlines() == [
+        f"becos: job remesh (dataset=tosca, name=cat0) failed (log: {log}):",
+        "becos remesh: /d/cat0.off: 3 vertices. Fix: re-download it",
+        f"becos: job catalog failed (log: {tmp_path / 'never.log'}):",
+        f"(no log: {tmp_path / 'never.log'} was not written)"]
+    assert failure_report([]) == ""
+
+
+# --- progress ---------------------------------------------------------------------------------------
+def test_a_terminal_shows_the_progress_panel_and_plain_output_stays_available(tmp_path):
+    """In a terminal the default profile draws the rich panel with done/total and an ETA; with
+    BECOS_PROGRESS=plain (and whenever stderr is not a terminal) Snakemake's plain lines remain."""
+    workdir = write_config_file(tmp_path / "run", {"seed": 7})
+    code, screen = run_in_terminal(tmp_path, "-d", str(workdir), "--cores", "1", "results/config.json")
+    assert code == 0, screen[-3000:]
+    assert "Workflow Progress" in screen and "Total Progress" in screen, screen[-3000:]
+    assert re.search(r"\b1/1\b", screen) and "ETA" in screen, screen[-3000:]
+    assert "steps (100%) done" not in screen
+
+    (workdir / "results" / "config.json").unlink()
+    code, screen = run_in_terminal(tmp_path, "-d", str(workdir), "--cores", "1", "results/config.json",
+                                   env={"BECOS_PROGRESS": "plain"})
+    assert code == 0, screen[-3000:]
+    assert "Workflow Progress" not in screen and "1 of 1 steps (100%) done" in screen, screen[-3000:]
