@@ -169,14 +169,23 @@ def _check_face_tokens(tokens: list[bytes], n_vertices: int, what: str) -> None:
                          f"outside [0, {n_vertices})")
 
 
-def _check_text_body(lines: _Lines, first: int, n_vertices: int, n_faces: int, fmt: str) -> None:
-    """Lines ``first ..`` hold ``n_vertices`` vertex lines then ``n_faces`` face lines."""
+def _check_text_body(lines: _Lines, first: int, n_vertices: int, n_faces: int, fmt: str, exact: bool = True) -> None:
+    """Lines ``first ..`` hold ``n_vertices`` vertex lines then ``n_faces`` face lines (and nothing else
+    when ``exact``: extra lines are an error, as readers drop them silently)."""
     if n_vertices <= 0 or n_faces <= 0:
         raise ValueError(f"the {fmt} header announces {n_vertices} vertices and {n_faces} faces (empty mesh)")
     have = len(lines) - first
     if have < n_vertices + n_faces:
         raise ValueError(f"the {fmt} header announces {n_vertices} vertices and {n_faces} faces but only {have} "
                          f"data lines follow (truncated file)")
+    if have > n_vertices + n_faces and exact:
+        raise _MeshProblem(f"the {fmt} header announces {n_vertices} vertices and {n_faces} faces but {have} data "
+                           f"lines follow, {have - n_vertices - n_faces} more than announced: a reader would silently "
+                           f"ignore the last {have - n_vertices - n_faces} lines (after the vertex block there are "
+                           f"{have - n_vertices} lines, not {n_faces})",
+                           f"if the file is otherwise intact, correct the header's counts (e.g. {n_vertices} "
+                           f"{have - n_vertices} for an OFF whose extra lines are faces); else re-download or "
+                           f"re-extract it")
     _check_vertex_line(lines, first, "the first vertex line")
     _check_vertex_line(lines, first + n_vertices - 1, "the last vertex line")
     _check_finite_text(lines.data, int(lines.starts[first]), int(lines.ends[first + n_vertices - 1]), first,
@@ -185,8 +194,8 @@ def _check_text_body(lines: _Lines, first: int, n_vertices: int, n_faces: int, f
     _check_face_tokens(lines.tokens(first + n_vertices + n_faces - 1), n_vertices, "the last face line")
 
 
-def _check_off(data: bytes) -> tuple[int, int]:
-    lines = _Lines(data)
+def _off_header(lines: _Lines) -> tuple[int, int, int]:
+    """(announced vertices, announced faces, index of the first data line) of an OFF file's lines."""
     words: list[bytes] = []
     header_end = -1
     for i in range(min(len(lines), 4)):
@@ -202,7 +211,24 @@ def _check_off(data: bytes) -> tuple[int, int]:
         n_vertices, n_faces = int(words[1]), int(words[2])
     except ValueError:
         raise ValueError(f"the OFF header {b' '.join(words[:4])!r} has no vertex and face counts") from None
-    _check_text_body(lines, header_end + 1, n_vertices, n_faces, "OFF")
+    return n_vertices, n_faces, header_end + 1
+
+
+def off_data_lines(data: bytes) -> tuple[int, int, int]:
+    """(announced vertices, announced faces, non-blank non-comment lines after the header) of OFF bytes.
+
+    Raises:
+        ValueError: no OFF header with counts.
+    """
+    lines = _Lines(data)
+    n_vertices, n_faces, first = _off_header(lines)
+    return n_vertices, n_faces, len(lines) - first
+
+
+def _check_off(data: bytes) -> tuple[int, int]:
+    lines = _Lines(data)
+    n_vertices, n_faces, first = _off_header(lines)
+    _check_text_body(lines, first, n_vertices, n_faces, "OFF")
     return n_vertices, n_faces
 
 
@@ -242,7 +268,7 @@ def _check_ply(path: Path, size: int) -> tuple[int, int]:
                 raise ValueError(f"the PLY header announces {total} element rows but only {len(lines)} data lines "
                                  "follow (truncated file)")
             return n_vertices, n_faces
-        _check_text_body(lines, 0, n_vertices, n_faces, "PLY")
+        _check_text_body(lines, 0, n_vertices, n_faces, "PLY", exact=len(elements) == 2)
         return n_vertices, n_faces
     if fmt not in ("binary_little_endian", "binary_big_endian"):
         raise ValueError(f"unknown PLY format {fmt!r}")
@@ -369,6 +395,102 @@ def inspect_mesh_file(path: str | Path):
     path = Path(path)
     check_mesh_file(path)
     return surface_for_remeshing(read_mesh(path), source=path)[1]
+
+
+# --- shapes of one class ---------------------------------------------------------------------------
+CLASS_EDGE_RATIO = 1.5
+"""Shapes that share their class template's triangulation (the network's identity hop: vertex i is
+vertex i) must have a median edge length within this factor of the template's (and its inverse).
+Measured on the 76 TOSCA meshes: every pose's median ratio to its class template is 1 ± 6e-5 (the
+poses are near-isometric), while a file in other units is off by its unit factor (10, 100, 1000,
+2.54...). 1.5 also leaves room for classes of different bodies on one template (FAUST subjects)."""
+
+
+def mesh_arrays(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    """(V, 3) float64 vertices and (F, 3) int64 faces of a mesh file that passed the cheap check.
+
+    Triangle OFF files are split with numpy (~4x faster than trimesh); other files are read with
+    :func:`becos.mesh.read_mesh`."""
+    path = Path(path)
+    if path.suffix.lower() == ".off":
+        data = path.read_bytes()
+        lines = _Lines(data)
+        n_vertices, n_faces, first = _off_header(lines)
+        v = np.array(data[lines.starts[first]:lines.ends[first + n_vertices - 1]].split(), dtype=np.float64)
+        last = first + n_vertices + n_faces - 1
+        f = np.array(data[lines.starts[first + n_vertices]:lines.ends[last]].split(), dtype=np.int64)
+        if v.size == 3 * n_vertices and f.size == 4 * n_faces and (f[::4] == 3).all():
+            return v.reshape(n_vertices, 3), f.reshape(n_faces, 4)[:, 1:]
+    from becos.mesh import read_mesh
+
+    mesh = read_mesh(path)
+    return mesh.vertices, mesh.faces
+
+
+def compare_with_class_template(path: Path, template_path: Path, shape_arrays, template_arrays) -> str | None:
+    """Why the mesh in ``path`` cannot share the triangulation of its class template, or None.
+
+    Faces are compared as vertex SETS (sorted triples; TOSCA poses of a class hold the same triples,
+    some rows with reversed winding); scale as the median ratio of the lengths of the template's edges
+    in the two meshes (:data:`CLASS_EDGE_RATIO`)."""
+    from becos.mesh import undirected_edges, vertex_set_keys
+
+    (v, f), (tv, tf) = shape_arrays, template_arrays
+    if len(v) != len(tv) or len(f) != len(tf):
+        return (f"has {len(v)} vertices and {len(f)} faces but its class template {template_path} has {len(tv)} "
+                f"and {len(tf)}; the shapes of a class share one triangulation (vertex i = vertex i)")
+    keys, template_keys = np.sort(vertex_set_keys(f, len(v))), np.sort(vertex_set_keys(tf, len(tv)))
+    if not np.array_equal(keys, template_keys):
+        differ = len(np.setdiff1d(keys, template_keys))
+        return (f"has the vertex and face counts of its class template {template_path} but {differ} of its "
+                f"{len(f)} faces name vertex triples the template has not: its vertex lines are re-ordered (or "
+                f"it was re-triangulated), so vertex i no longer corresponds to vertex i of the class")
+    edges, _ = undirected_edges(tf)
+    lengths = np.linalg.norm(v[edges[:, 0]] - v[edges[:, 1]], axis=1)
+    template_lengths = np.linalg.norm(tv[edges[:, 0]] - tv[edges[:, 1]], axis=1)
+    ratio = float(np.median(lengths[template_lengths > 0] / template_lengths[template_lengths > 0]))
+    if not 1 / CLASS_EDGE_RATIO <= ratio <= CLASS_EDGE_RATIO:
+        return (f"its edges are {ratio:.3g} times as long as those of its class template {template_path} "
+                f"(median; poses of a class keep edge lengths, within {CLASS_EDGE_RATIO}x): the file is "
+                f"scaled or in other units")
+    return None
+
+
+_CLASS_FIX = ("restore the original file (re-download or re-extract it); never rescale or re-order a dataset's "
+              "files: becos applies each dataset's scale itself (`scale` in config/datasets/<dataset>.yaml)")
+
+
+def _check_classes(shapes: list, annotations, skip: set[str]) -> list[dict]:
+    """``[{"path", "template", "problem", "fix"}]`` for shapes that differ from their class template.
+
+    Only shapes the ground truth joins to their template by vertex identity are compared: the
+    template is a shape of the same dataset (:meth:`becos.network.ShapeNetwork.hop`). Files in
+    ``skip`` (already reported) are left out."""
+    by_name = {e.name: e for e in shapes}
+    groups: dict[str, list] = {}
+    for e in shapes:
+        groups.setdefault(e.template_key, []).append(e)
+    bad = []
+    for key, members in groups.items():
+        try:
+            dataset, template_name = annotations.node_template(annotations.node_of_key(key))
+        except BecosError:
+            continue  # reported by the annotation check
+        template = by_name.get(template_name)
+        if template is None or template.dataset != members[0].dataset or str(template.path) in skip:
+            continue
+        others = [e for e in members if e.name != template_name and str(e.path) not in skip]
+        if not others:
+            continue
+        template_arrays = mesh_arrays(template.path)
+        for e in others:
+            try:
+                problem = compare_with_class_template(e.path, template.path, mesh_arrays(e.path), template_arrays)
+            except (BecosError, ValueError) as exc:
+                problem = f"could not be read to compare with its class template ({exc})"
+            if problem is not None:
+                bad.append({"path": str(e.path), "template": str(template.path), "problem": problem, "fix": _CLASS_FIX})
+    return bad
 
 
 # --- datasets --------------------------------------------------------------------------------------
@@ -518,6 +640,15 @@ def _check_one_dataset(name: str, data_dir: Path, annotations, read_meshes: bool
             shapes = spec.list_shapes(data_dir, annotations)
         except BecosError as exc:
             problems.append(f"dataset '{name}': {exc}")
+    if read_meshes and shapes and annotations is not None:
+        mismatched = _check_classes(shapes, annotations, {b["path"] for b in entry["bad_meshes"]})
+        entry["class_mismatches"] = mismatched
+        if mismatched:
+            listed = "; ".join(f"{b['path']}: {b['problem']}" for b in mismatched[:MAX_LISTED_MESHES])
+            more = (f"; and {len(mismatched) - MAX_LISTED_MESHES} more (all in the report)"
+                    if len(mismatched) > MAX_LISTED_MESHES else "")
+            problems.append(f"dataset '{name}': {len(mismatched)} mesh files do not fit their class template: "
+                            f"{listed}{more}. Fix: {_CLASS_FIX}")
     entry["problems"] = problems
     entry["ok"] = not problems
     return entry, problems, shapes

@@ -136,6 +136,16 @@ def _check_off_header(path: Path, n_vertices: int, n_faces: int) -> None:
         raise InputFileError(path, f"the OFF header announces {header_vertices} vertices and {header_faces} faces "
                              f"but {n_vertices} and {n_faces} were read (truncated or corrupt file)",
                              "re-download or re-extract the file")
+    from becos.check import off_data_lines
+
+    _, _, have = off_data_lines(path.read_bytes())
+    if have > n_vertices + n_faces:  # trimesh stops at the announced counts: the rest would be dropped silently
+        raise InputFileError(path, f"the OFF header announces {n_vertices} vertices and {n_faces} faces but "
+                             f"{have} data lines follow, {have - n_vertices - n_faces} more than announced (a "
+                             f"reader ignores them; after the vertex block there are {have - n_vertices} lines)",
+                             f"if the file is otherwise intact, correct the header's counts (e.g. '{n_vertices} "
+                             f"{have - n_vertices} 0' when the extra lines are faces); else re-download or "
+                             f"re-extract it")
 
 
 class MeshCache:
