@@ -655,12 +655,71 @@ def _check_one_dataset(name: str, data_dir: Path, annotations, read_meshes: bool
 
 
 # --- annotations -----------------------------------------------------------------------------------
+EDGE_MAX_RESIDUAL = 0.5
+"""Largest median Procrustes residual of a plausible edge file (see :func:`edge_plausibility`), in RMS
+radii of the scale-normalised point sets. Measured on the 8 TOSCA-TOSCA edge files of the BeCoS annotation
+folder (the only ones with both meshes here): 0.076-0.174; ``tosca_dog0_tosca_wolf0_corres.txt``
+holding the content of ``tosca_dog0_smal_dog2_corres.txt``: 1.12."""
+
+EDGE_MAX_STRETCH = 3.0
+"""Largest median stretch of a plausible edge file (see :func:`edge_plausibility`). Measured on the 17
+edge files into a TOSCA template whose source faces are known (mesh or default faces): 0.55-1.38; the
+swapped file above: 4.85."""
+
+
+def edge_plausibility(edge, target_vertices: np.ndarray, target_faces: np.ndarray, source_faces: np.ndarray | None,
+                      source_vertices: np.ndarray | None = None) -> dict:
+    """How well an edge map (:class:`becos.surface_map.SurfaceMap`, source template vertex -> point on
+    the target template) fits the two templates' geometry. Scale- and pose-free statistics over the
+    matched rows (``face >= 0``), ``P_i`` being the mapped point of source vertex ``i``:
+
+    - ``residual``: both point sets (source vertices, ``P``) centred and scaled to unit RMS radius,
+      the source rigidly aligned onto ``P`` (:func:`becos.align.procrustes`); the median distance
+      between an aligned vertex and its mapped point, in RMS radii. Needs ``source_vertices``.
+    - ``stretch``: the median length of ``P_i - P_j`` over the source's edges ``(i, j)``, divided by
+      ``sqrt(target area / source vertices)`` (the edge length of a uniform mesh with the source's
+      vertex count on the target surface). Neighbours stay neighbours under a real map (~1); a map
+      of other faces scatters them. Needs ``source_faces``.
+
+    Returns ``{"residual": float | None, "stretch": float | None, "matched": int}``.
+    """
+    from becos.align import procrustes
+    from becos.mesh import undirected_edges
+
+    ok = edge.face >= 0
+    points = np.full((len(edge.face), 3), np.nan)
+    points[ok] = np.einsum("ij,ijk->ik", edge.weights[ok], target_vertices[target_faces[edge.face[ok]]])
+    out: dict = {"residual": None, "stretch": None, "matched": int(ok.sum())}
+    if ok.sum() < 3:
+        return out
+    if source_vertices is not None and len(source_vertices) == len(edge.face):
+        a = source_vertices[ok] - source_vertices[ok].mean(axis=0)
+        p = points[ok] - points[ok].mean(axis=0)
+        a /= np.sqrt((a ** 2).sum(axis=1).mean())
+        p /= np.sqrt((p ** 2).sum(axis=1).mean())
+        out["residual"] = float(np.median(np.linalg.norm(procrustes(a, p).apply(a) - p, axis=1)))
+    if source_faces is not None and len(source_faces) and source_faces.max() < len(edge.face):
+        pairs, _ = undirected_edges(source_faces)
+        pairs = pairs[ok[pairs[:, 0]] & ok[pairs[:, 1]]]
+        tri = target_vertices[target_faces]
+        area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1).sum()
+        if len(pairs) and area > 0:
+            out["stretch"] = float(np.median(np.linalg.norm(points[pairs[:, 0]] - points[pairs[:, 1]], axis=1))
+                                   / np.sqrt(area / len(edge.face)))
+    return out
+
+
 def _check_edge_contents(source, edges: list[tuple[str, str]], present: dict[str, list]) -> tuple[dict, list[str]]:
     """Parse each needed edge file (non-numeric text, columns, face indices below -1...) and, where both
     templates' mesh files are present, compare its rows with the source template's vertex count and
-    its face indices with the target template's face count (counts from the file headers)."""
+    its face indices with the target template's face count (counts from the file headers); where the
+    target template's mesh is present, check that the map is geometrically plausible
+    (:func:`edge_plausibility`, :data:`EDGE_MAX_RESIDUAL`, :data:`EDGE_MAX_STRETCH`)."""
+    from becos.annotations import _FIX_FOLDER
+
     paths = {(e.dataset, e.name): e.path for entries in present.values() for e in entries}
     counts: dict = {}
+    arrays: dict = {}
 
     def mesh_counts(node: str):
         key = source.node_template(node)
@@ -673,20 +732,53 @@ def _check_edge_contents(source, edges: list[tuple[str, str]], present: dict[str
                     pass  # reported with the dataset's meshes
         return counts[key]
 
-    problems, bad, compared = [], [], 0
+    def mesh_of(node: str):
+        key = source.node_template(node)
+        if key not in arrays:
+            arrays[key] = mesh_arrays(paths[key]) if mesh_counts(node) is not None else None
+        return arrays[key]
+
+    problems, bad, compared, plausible = [], [], 0, {}
     for a, b in edges:
         try:
-            if source.edge_source(a, b).kind != "file":
+            edge_source = source.edge_source(a, b)
+            if edge_source.kind != "file":
                 continue
             source.edge_report(a, b)                      # parses (and validates) the file once
             ca, cb = mesh_counts(a), mesh_counts(b)
             if ca is not None and cb is not None:
                 source.check_edge(a, b, ca[0], cb[1])
                 compared += 1
+            if cb is None:
+                continue
+            target = mesh_of(b)
+            source_mesh = mesh_of(a) if ca is not None else None
+            source_faces = source_mesh[1] if source_mesh is not None else source.default_faces(
+                *source.node_template(a)[::-1])
+            edge = source.edge_map(a, b)
+            if len(edge) and edge.face.max() >= len(target[1]):
+                continue                                   # named by check_edge / the ground truth
+            stats = edge_plausibility(edge, target[0], target[1], source_faces,
+                                      source_mesh[0] if source_mesh is not None else None)
+            plausible[f"{a} -> {b}"] = stats
+            too_far = stats["residual"] is not None and stats["residual"] > EDGE_MAX_RESIDUAL
+            too_spread = stats["stretch"] is not None and stats["stretch"] > EDGE_MAX_STRETCH
+            if too_far or too_spread:
+                found = []
+                if stats["residual"] is not None:
+                    found.append(f"after the best rigid alignment (scale-normalised Procrustes) the vertices of "
+                                 f"template {a} lie a median {stats['residual']:.3g} RMS radii from their mapped "
+                                 f"points on {b} (real BeCoS edge files: at most 0.17; limit {EDGE_MAX_RESIDUAL})")
+                if stats["stretch"] is not None:
+                    found.append(f"neighbouring vertices land a median {stats['stretch']:.3g} mesh edges apart "
+                                 f"(real files: at most 1.38; limit {EDGE_MAX_STRETCH})")
+                raise InputFileError(edge_source.path, "the map does not land where its template belongs: "
+                                     + " and ".join(found) + "; the file probably holds another edge's map",
+                                     f"restore the annotation folder's original file; {_FIX_FOLDER}")
         except BecosError as exc:
             bad.append(f"{a} -> {b}")
             problems.append(f"annotation folder: {exc}")
-    return {"parsed": len(edges), "compared_with_meshes": compared, "bad": bad}, problems
+    return {"parsed": len(edges), "compared_with_meshes": compared, "bad": bad, "plausibility": plausible}, problems
 
 
 def _check_annotations(root: Path, template_table: str, enabled: list[str], present: dict[str, list],

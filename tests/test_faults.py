@@ -519,3 +519,32 @@ def test_off_header_announcing_fewer_faces_than_the_file_holds(tosca_dir, tmp_pa
                                              r"100 more than announced") as err:
         read_mesh(folder / "wolf1.off")
     assert err.value.path == folder / "wolf1.off" and "'4344 8684 0'" in err.value.fix
+
+
+def test_edge_file_holding_another_edges_map_is_named_by_the_dataset_check(becos_code, tmp_path, tosca_dir,
+                                                                            monkeypatch):
+    """BAD 4: tosca_dog0_tosca_wolf0_corres.txt holding tosca_dog0_smal_dog2_corres.txt (row count and face
+    range pass; before: ground truth off by a median of 0.65). The mapped template must land near the target
+    after alignment (real TOSCA edges: residual <= 0.17, stretch <= 1.38; this file: 1.12 and 4.85)."""
+    root = annotation_copy(becos_code, tmp_path)
+    edge_path = root / "precomputed_corr_templates" / "tosca_dog0_tosca_wolf0_corres.txt"
+    edge_path.unlink()
+    shutil.copy(becos_code / "precomputed_corr_templates" / "tosca_dog0_smal_dog2_corres.txt", edge_path)
+    folder = tmp_path / "data" / "tosca-off"
+    folder.mkdir(parents=True)
+    for name in ("dog0", "wolf0"):
+        (folder / f"{name}.off").symlink_to(tosca_dir / f"{name}.off")
+    registry = small_registry(tmp_path, {"dog": 1, "wolf": 1})
+    with pytest.raises(DatasetCheckError) as err:
+        check_datasets(["tosca"], tmp_path / "data", root, config_dir=registry)
+    text = str(err.value)
+    assert "1 problem(s)" in text
+    match = re.search(rf"annotation folder: {re.escape(str(edge_path))}: the map does not land where its template "
+                      r"belongs: .* a median ([0-9.]+) RMS radii .* a median ([0-9.]+) mesh edges apart", text)
+    assert match and float(match[1]) > 1.0 and float(match[2]) > 4.0, text
+    assert "Fix: restore the annotation folder's original file" in text
+    # the real folder passes, and its statistics are those documented
+    report = check_datasets(["tosca"], tmp_path / "data", becos_code, config_dir=registry)
+    stats = report["annotations"]["edge_contents"]["plausibility"]
+    assert set(stats) == {"tosca_dog0 -> tosca_wolf0", "tosca_wolf0 -> tosca_dog0"}
+    assert all(s["residual"] < 0.2 and s["stretch"] < 1.4 for s in stats.values()), stats
