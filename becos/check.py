@@ -709,14 +709,34 @@ def edge_plausibility(edge, target_vertices: np.ndarray, target_faces: np.ndarra
     return out
 
 
+def require_plausible_edge(path: Path, a: str, b: str, stats: dict) -> None:
+    """Raise :class:`InputFileError` naming the edge file ``path`` (edge ``a -> b``) when its
+    :func:`edge_plausibility` ``stats`` exceed :data:`EDGE_MAX_RESIDUAL` or :data:`EDGE_MAX_STRETCH`."""
+    from becos.annotations import _FIX_FOLDER
+
+    too_far = stats["residual"] is not None and stats["residual"] > EDGE_MAX_RESIDUAL
+    too_spread = stats["stretch"] is not None and stats["stretch"] > EDGE_MAX_STRETCH
+    if not (too_far or too_spread):
+        return
+    found = []
+    if stats["residual"] is not None:
+        found.append(f"after the best rigid alignment (scale-normalised Procrustes) the vertices of template {a} lie "
+                     f"a median {stats['residual']:.3g} RMS radii from their mapped points on {b} (real BeCoS edge "
+                     f"files: at most 0.17; limit {EDGE_MAX_RESIDUAL})")
+    if stats["stretch"] is not None:
+        found.append(f"neighbouring vertices land a median {stats['stretch']:.3g} mesh edges apart (real files: at "
+                     f"most 1.38; limit {EDGE_MAX_STRETCH})")
+    raise InputFileError(path, "the map does not land where its template belongs: " + " and ".join(found)
+                         + "; the file probably holds another edge's map",
+                         f"restore the annotation folder's original file; {_FIX_FOLDER}")
+
+
 def _check_edge_contents(source, edges: list[tuple[str, str]], present: dict[str, list]) -> tuple[dict, list[str]]:
     """Parse each needed edge file (non-numeric text, columns, face indices below -1...) and, where both
     templates' mesh files are present, compare its rows with the source template's vertex count and
     its face indices with the target template's face count (counts from the file headers); where the
     target template's mesh is present, check that the map is geometrically plausible
     (:func:`edge_plausibility`, :data:`EDGE_MAX_RESIDUAL`, :data:`EDGE_MAX_STRETCH`)."""
-    from becos.annotations import _FIX_FOLDER
-
     paths = {(e.dataset, e.name): e.path for entries in present.values() for e in entries}
     counts: dict = {}
     arrays: dict = {}
@@ -761,20 +781,7 @@ def _check_edge_contents(source, edges: list[tuple[str, str]], present: dict[str
             stats = edge_plausibility(edge, target[0], target[1], source_faces,
                                       source_mesh[0] if source_mesh is not None else None)
             plausible[f"{a} -> {b}"] = stats
-            too_far = stats["residual"] is not None and stats["residual"] > EDGE_MAX_RESIDUAL
-            too_spread = stats["stretch"] is not None and stats["stretch"] > EDGE_MAX_STRETCH
-            if too_far or too_spread:
-                found = []
-                if stats["residual"] is not None:
-                    found.append(f"after the best rigid alignment (scale-normalised Procrustes) the vertices of "
-                                 f"template {a} lie a median {stats['residual']:.3g} RMS radii from their mapped "
-                                 f"points on {b} (real BeCoS edge files: at most 0.17; limit {EDGE_MAX_RESIDUAL})")
-                if stats["stretch"] is not None:
-                    found.append(f"neighbouring vertices land a median {stats['stretch']:.3g} mesh edges apart "
-                                 f"(real files: at most 1.38; limit {EDGE_MAX_STRETCH})")
-                raise InputFileError(edge_source.path, "the map does not land where its template belongs: "
-                                     + " and ".join(found) + "; the file probably holds another edge's map",
-                                     f"restore the annotation folder's original file; {_FIX_FOLDER}")
+            require_plausible_edge(edge_source.path, a, b, stats)
         except BecosError as exc:
             bad.append(f"{a} -> {b}")
             problems.append(f"annotation folder: {exc}")

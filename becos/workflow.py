@@ -394,6 +394,30 @@ class Plan:
             return {"target_faces": int(token[1:])}
         return {"target_vertices": int(variant_target_vertices(self.config["seed"], dataset, name, int(token[1:])))}
 
+    def chunk_edge_files(self, setting: str, chunk: int) -> list[str]:
+        """The annotation folder's edge files the chunk's ground truth reads (both directions), so that
+        editing or restoring one reruns the chunk (:func:`edge_files_between`)."""
+        if not hasattr(self, "_annotations"):
+            self._annotations = annotation_source(self.config)
+        keys = self._catalog_rows
+        rows = self.chunk_rows(setting, chunk)
+        pairs = {(keys[(xd, xn)]["template_key"], keys[(yd, yn)]["template_key"])
+                 for xd, xn, yd, yn in zip(rows["x_dataset"], rows["x_name"], rows["y_dataset"], rows["y_name"])}
+        return sorted({str(p) for kx, ky in pairs for p in edge_files_between(self._annotations, kx, ky)})
+
+
+def edge_files_between(annotations, x_key: str, y_key: str) -> list[Path]:
+    """Edge files on the network path between the templates of template keys ``x_key`` and ``y_key``,
+    both directions (the ground truth both ways reads them); identity edges have none."""
+    nodes = annotations.path(annotations.node_of_key(x_key), annotations.node_of_key(y_key))
+    out = []
+    for a, b in zip(nodes, nodes[1:]):
+        for u, v in ((a, b), (b, a)):
+            source = annotations.edge_source(u, v)
+            if source.kind == "file":
+                out.append(Path(source.path))
+    return out
+
 
 # --------------------------------------------------------------------------------------------------
 # shapes as the jobs see them
@@ -481,6 +505,37 @@ class ShapeStore:
         if token == "original":
             return self.file_digest(self.entry(dataset, name).path)
         return self.file_digest(self.layout.remeshed(dataset, name, token))
+
+    def edge_digests(self, x, y) -> list[str]:
+        """Digests of the edge files the ground truth between entries ``x`` and ``y`` reads (both ways),
+        for its input key. Each file is checked once per job for geometric plausibility where its
+        target template's mesh is available (:func:`becos.check.edge_plausibility`), since a file
+        changed after the dataset check is only seen here."""
+        from becos.check import edge_plausibility, require_plausible_edge
+
+        annotations = self.network.annotations
+        out = []
+        nodes = annotations.path(annotations.node_of_key(x.template_key), annotations.node_of_key(y.template_key))
+        for a, b in zip(nodes, nodes[1:]):
+            for u, v in ((a, b), (b, a)):
+                source = annotations.edge_source(u, v)
+                if source.kind != "file":
+                    out.append("identity")
+                    continue
+                key = Path(source.path)
+                if key not in self._digests:
+                    target = self.mesh(*annotations.node_template(v))
+                    if target is not None:
+                        source_mesh = self.mesh(*annotations.node_template(u))
+                        edge = annotations.edge_map(u, v)
+                        if not len(edge) or edge.face.max() < target.n_faces:  # else ground_truth names it
+                            faces = (source_mesh.faces if source_mesh is not None
+                                     else annotations.default_faces(*annotations.node_template(u)[::-1]))
+                            stats = edge_plausibility(edge, target.vertices, target.faces, faces,
+                                                      None if source_mesh is None else source_mesh.vertices)
+                            require_plausible_edge(key, u, v, stats)
+                out.append(self.file_digest(key))
+        return out
 
     @property
     def network(self):
@@ -621,6 +676,8 @@ def ground_truth_stage(config: dict, setting: str, chunk: int, out_index: Path) 
                       "y": [row["y_dataset"], row["y_name"], ty],
                       "sources": [shapes.source_digest(row["x_dataset"], row["x_name"], tx),
                                   shapes.source_digest(row["y_dataset"], row["y_name"], ty)],
+                      "edges": shapes.edge_digests(shapes.entry(row["x_dataset"], row["x_name"]),
+                                                   shapes.entry(row["y_dataset"], row["y_name"])),
                       "options": stage_options(config, "ground_truth")})
         path = layout.ground_truth(setting, row["pair_id"])
         computed = _stored_key(path, "input_key") != key

@@ -47,6 +47,7 @@ rule ground_truth:
         manifest=f"{RESULTS}/{{setting}}/manifest.csv",
         catalog=LAYOUT.catalog,
         remeshed=lambda w: plan().chunk_inputs(w.setting, int(w.chunk)),
+        edges=lambda w: plan().chunk_edge_files(w.setting, int(w.chunk)),
     output:
         f"{RESULTS}/{{setting}}/ground_truth/chunk_{{chunk}}.json",
     params:
