@@ -250,14 +250,22 @@ def read_record_index(path: str | Path) -> list[Path]:
             if not isinstance(value, str):
                 raise InputFileError(path, f"entry {entry!r} names no record path",
                                      "each entry needs a 'path' (or be a path string)")
-            raw.append(value)
+            raw.append((value, entry.get("digest") if isinstance(entry, dict) else None))
     else:
-        raw = [line.strip() for line in text.splitlines() if line.strip() and not line.strip().startswith("#")]
+        raw = [(line.strip(), None) for line in text.splitlines()
+               if line.strip() and not line.strip().startswith("#")]
     out = []
-    for value in raw:
+    for value, recorded in raw:
         p = Path(value)
         if not p.is_absolute() and not p.exists() and (path.parent / p).exists():
             p = path.parent / p
+        if recorded is not None and p.is_file():
+            found = hashlib.sha256(p.read_bytes()).hexdigest()[:len(recorded)]
+            if found != recorded:
+                raise InputFileError(p, f"is not the file the pairs job wrote: its digest is {found}, {path} "
+                                        f"records {recorded} (edited or replaced after the job)",
+                                     "rebuild it: snakemake --forcerun pairs (becos rebuilds every record whose "
+                                     "content changed), then write the store again")
         out.append(p)
     return out
 

@@ -716,6 +716,7 @@ def pairs_stage(config: dict, setting: str, chunk: int, gt_index: Path, out_inde
     from becos.catalog import read_catalog
     from becos.pairs import build_pair
     from becos.partiality import Scanner
+    from becos.record import is_intact
 
     started = time.perf_counter()
     layout = Layout.of(config)
@@ -740,6 +741,10 @@ def pairs_stage(config: dict, setting: str, chunk: int, gt_index: Path, out_inde
                                   shapes.source_digest(row["y_dataset"], row["y_name"], ty)]})
         path = layout.record(setting, row["pair_id"])
         computed = _stored_key(path, "__meta__") != key
+        if not computed and not is_intact(path):
+            _log(f"{path}: its content no longer matches the digest becos recorded when writing it (edited or "
+                 f"replaced by hand?); rebuilding it")
+            computed = True
         if computed:
             x = shapes.instance(row["x_dataset"], row["x_name"], tx)
             y = shapes.instance(row["y_dataset"], row["y_name"], ty)
@@ -760,7 +765,7 @@ def pairs_stage(config: dict, setting: str, chunk: int, gt_index: Path, out_inde
                                chunk=int(row["chunk"]), x_token=tx, y_token=ty)
             record.save(path)
         entries.append({"pair_id": row["pair_id"], "path": str(path), "input_key": key, "computed": computed,
-                        "split": row["split"]})
+                        "split": row["split"], "digest": shapes.file_digest(path)})
         _progress("pairs", setting, chunk, entries, len(rows), started)
     return _write_index(Path(out_index), setting, chunk, entries, started)
 

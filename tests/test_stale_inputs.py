@@ -88,3 +88,35 @@ def test_an_edited_then_restored_edge_file_recomputes_the_ground_truth_that_read
     assert counts["computed"] == len(crossing)
     assert restored == before
     assert str(edge) in plan.chunk_edge_files("full_full", 0)        # a declared input of the ground_truth rule
+
+
+def test_a_hand_edited_pair_record_is_rebuilt_and_refused_by_the_store_writer(built, capsys, tmp_path):
+    work, config = built
+    layout = bw.Layout.of(config)
+    gt_index, pairs_index = layout.ground_truth_index("full_full", 0), layout.pairs_index("full_full", 0)
+    bw.pairs_stage(config, "full_full", 0, gt_index, pairs_index)     # up to date after the other test
+    entry = json.loads(pairs_index.read_text())["pairs"][0]
+    path = Path(entry["path"])
+    original = path.read_bytes()
+
+    def edit_by_hand():
+        with np.load(path) as data:
+            arrays = {k: data[k] for k in data.files}
+        arrays["corr_01"] = np.roll(arrays["corr_01"], 1)              # meta (and its input key) unchanged
+        np.savez(path, **arrays)
+
+    edit_by_hand()
+    capsys.readouterr()
+    counts = bw.pairs_stage(config, "full_full", 0, gt_index, pairs_index)   # what --forcerun pairs runs
+    err = capsys.readouterr().err
+    assert counts["computed"] == 1, err
+    assert f"{path}: its content no longer matches the digest becos recorded when writing it" in err
+    assert path.read_bytes() == original
+
+    edit_by_hand()                                                     # edited after the job: the store refuses
+    with pytest.raises(InputFileError, match=r"is not the file the pairs job wrote: its digest is") as exc:
+        read_record_index(pairs_index)
+    assert exc.value.path == path and "snakemake --forcerun pairs" in exc.value.fix
+    code = becos_main(["export-zarr", str(pairs_index), "--setting", "full_full", "--out", str(tmp_path / "s.zarr")])
+    assert code == 2 and "is not the file the pairs job wrote" in capsys.readouterr().err
+    path.write_bytes(original)
