@@ -431,20 +431,25 @@ def compare_with_class_template(path: Path, template_path: Path, shape_arrays, t
     """Why the mesh in ``path`` cannot share the triangulation of its class template, or None.
 
     Faces are compared as vertex SETS (sorted triples; TOSCA poses of a class hold the same triples,
-    some rows with reversed winding); scale as the median ratio of the lengths of the template's edges
+    some rows with reversed winding); faces the shape lacks, duplicates and rows with a repeated index
+    are left to the remesh's repairs, a triple the template lacks is an error. Scale as the median ratio of the lengths of the template's edges
     in the two meshes (:data:`CLASS_EDGE_RATIO`)."""
-    from becos.mesh import undirected_edges, vertex_set_keys
+    from becos.mesh import repeated_index_faces, undirected_edges, vertex_set_keys
 
     (v, f), (tv, tf) = shape_arrays, template_arrays
-    if len(v) != len(tv) or len(f) != len(tf):
-        return (f"has {len(v)} vertices and {len(f)} faces but its class template {template_path} has {len(tv)} "
-                f"and {len(tf)}; the shapes of a class share one triangulation (vertex i = vertex i)")
-    keys, template_keys = np.sort(vertex_set_keys(f, len(v))), np.sort(vertex_set_keys(tf, len(tv)))
-    if not np.array_equal(keys, template_keys):
-        differ = len(np.setdiff1d(keys, template_keys))
-        return (f"has the vertex and face counts of its class template {template_path} but {differ} of its "
-                f"{len(f)} faces name vertex triples the template has not: its vertex lines are re-ordered (or "
-                f"it was re-triangulated), so vertex i no longer corresponds to vertex i of the class")
+    if len(v) != len(tv):
+        return (f"has {len(v)} vertices but its class template {template_path} has {len(tv)}; the shapes of a class "
+                f"share one triangulation (vertex i = vertex i)")
+    # faces as vertex sets; rows that remeshing drops or ignores (a repeated index, duplicates) and faces
+    # the file lost (a subset) are repairs, a triple the template lacks is not
+    f = np.asarray(f, dtype=np.int64)
+    f = f[~repeated_index_faces(f)] if len(f) else f
+    keys, template_keys = np.unique(vertex_set_keys(f, len(v))), np.unique(vertex_set_keys(tf, len(tv)))
+    foreign = len(np.setdiff1d(keys, template_keys, assume_unique=True))
+    if foreign:
+        return (f"has the vertex count of its class template {template_path} but {foreign} of its {len(keys)} "
+                f"distinct faces name vertex triples the template has not: its vertex lines are re-ordered (or it "
+                f"was re-triangulated), so vertex i no longer corresponds to vertex i of the class")
     edges, _ = undirected_edges(tf)
     lengths = np.linalg.norm(v[edges[:, 0]] - v[edges[:, 1]], axis=1)
     template_lengths = np.linalg.norm(tv[edges[:, 0]] - tv[edges[:, 1]], axis=1)
