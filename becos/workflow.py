@@ -43,7 +43,7 @@ import numpy as np
 import pandas as pd
 
 from becos.atomic import remove_stale_temporaries, write_text
-from becos.errors import ConfigError
+from becos.errors import ConfigError, InputFileError
 
 SETTINGS = ("full_full", "partial_full", "partial_partial")
 SCHEMA_PATH = Path(__file__).resolve().parents[1] / "config" / "schema.yaml"
@@ -838,8 +838,42 @@ def configure_parser(parser: argparse.ArgumentParser, name: str) -> None:
     parser.add_argument("--out", required=True, type=Path)
 
 
+def parse_json_option(text: str, option: str, command: str) -> dict:
+    """The JSON object passed as ``option`` to ``becos <command>``.
+
+    Raises:
+        ConfigError: not JSON, or not a JSON object (names the option, the position and the fix).
+    """
+    fix = ("Fix: pass the JSON the workflow's rule writes (--options: becos.workflow.job_options, or the whole "
+           "resolved config for write-config and metadata; --shape: the shape's catalog row as a JSON object)")
+    try:
+        value = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise ConfigError(f"{option}: not valid JSON ({exc.msg} at line {exc.lineno} column "
+                          f"{exc.colno}: {text[max(0, exc.pos - 20):exc.pos + 20]!r}). {fix}") from None
+    if not isinstance(value, dict):
+        raise ConfigError(f"{option}: a JSON object {{...}} is needed, not a JSON "
+                          f"{type(value).__name__} ({text[:60]!r}). {fix}")
+    return value
+
+
 def run_cli(args: argparse.Namespace) -> int:
-    config = json.loads(args.options)
+    config = parse_json_option(args.options, "--options", args.command)
+    try:
+        return _run_stage(args, config)
+    except KeyError as exc:
+        raise ConfigError(f"--options: lacks the key {exc} (given keys: {sorted(config)}). Fix: "
+                          f"pass the JSON the workflow's rule writes (becos.workflow.job_options)") from None
+    except TypeError as exc:
+        raise ConfigError(f"--options: a value has the wrong type ({exc}). Fix: check the "
+                          f"values against config/schema.yaml, or pass the JSON the workflow's rule writes") from None
+    except FileNotFoundError as exc:
+        raise InputFileError(exc.filename or "?", "not found (an input of this stage)",
+                             f"run the stages before `becos {args.command}` (the workflow does), or check `results` "
+                             f"in --options ({config.get('results', 'results')!r})") from None
+
+
+def _run_stage(args: argparse.Namespace, config: dict) -> int:
     if args.command == "write-config":
         write_text(args.out, json.dumps(resolve_config(config), indent=1, sort_keys=True) + "\n")
         return 0
@@ -848,7 +882,7 @@ def run_cli(args: argparse.Namespace) -> int:
     elif args.command == "manifest":
         write_manifest_stage(config, args.setting, args.catalog, args.out)
     elif args.command == "remesh":
-        remesh_stage(config, json.loads(args.shape), args.token, args.out, args.ply)
+        remesh_stage(config, parse_json_option(args.shape, "--shape", args.command), args.token, args.out, args.ply)
     elif args.command == "ground-truth":
         ground_truth_stage(config, args.setting, args.chunk, args.out)
     elif args.command == "pairs":

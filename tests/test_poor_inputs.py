@@ -53,3 +53,24 @@ def test_a_store_rewritten_under_a_reader_is_a_named_error(store, pair_record_fi
     with pytest.raises(DamagedStoreError, match="was rewritten or removed"):
         bench.read_metas()
     assert open_benchmark(store).record(0).pair_id == records[1].pair_id != first.pair_id
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["catalog", "--options", "{bad"], "becos catalog: --options: not valid JSON (Expecting property name enclosed "
+                                       "in double quotes at line 1 column 2: '{bad'). Fix: pass the JSON"),
+    (["catalog", "--options", "[1, 2]"], "becos catalog: --options: a JSON object {...} is needed, not a JSON list"),
+    (["catalog", "--options", "{}"], "becos catalog: --options: lacks the key 'annotations' (given keys: []). Fix: "),
+    (["remesh", "--options", "{}", "--shape", "{x", "--token", "v0"], "becos remesh: --shape: not valid JSON"),
+    (["ground-truth", "--options", '{"results": "RESULTS", "annotations": "x", "template_file": "t"}', "--setting",
+      "full_full", "--chunk", "0"], "becos ground-truth: RESULTS/catalog.csv: not found (an input of this stage). "
+                                    "Fix: run the stages before `becos ground-truth`"),
+], ids=["not_json", "not_an_object", "missing_key", "bad_shape", "missing_input"])
+def test_bad_options_of_a_stage_command_are_one_line_errors(argv, message, tmp_path, capsys):
+    from becos.cli import main
+
+    results = str(tmp_path / "nothing")
+    argv = [a.replace("RESULTS", results) for a in argv] + ["--out", str(tmp_path / "out")]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(message.replace("RESULTS", results)), err
+    assert "Traceback" not in err and len(err.strip().splitlines()) == 1
