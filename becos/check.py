@@ -131,9 +131,35 @@ class _Lines:
         self.data = data
         self.starts = starts[keep]
         self.ends = ends[keep]
+        self._arr = arr
 
     def __len__(self) -> int:
         return len(self.starts)
+
+    def token_counts(self, lo: int, hi: int) -> np.ndarray:
+        """(hi - lo,) number of whitespace-separated tokens of lines ``lo..hi-1``."""
+        arr = self._arr[self.starts[lo]:self.ends[hi - 1]] if hi > lo else self._arr[:0]
+        solid = ~np.isin(arr, _WHITESPACE)
+        token_start = solid & np.concatenate(([True], ~solid[:-1])) if len(arr) else solid
+        cs = np.concatenate(([0], np.cumsum(token_start, dtype=np.int64)))
+        base = self.starts[lo]
+        return cs[self.ends[lo:hi] - base] - cs[self.starts[lo:hi] - base]
+
+    def first_token_is(self, lo: int, hi: int, word: bytes) -> np.ndarray:
+        """(hi - lo,) bool: the first token of lines ``lo..hi-1`` is ``word`` (a single byte, e.g. b"3")."""
+        arr = self._arr
+        starts = self.starts[lo:hi].copy()
+        # skip leading blanks (rare): advance each line start to its first non-blank byte
+        blank = np.isin(arr[np.minimum(starts, len(arr) - 1)], _WHITESPACE)
+        while blank.any():
+            starts[blank] += 1
+            blank = np.isin(arr[np.minimum(starts, len(arr) - 1)], _WHITESPACE)
+        after = np.minimum(starts + len(word), len(arr) - 1)
+        return (arr[starts] == word[0]) & ((starts + len(word) >= len(arr)) | np.isin(arr[after], _WHITESPACE))
+
+    def file_line(self, i: int) -> int:
+        """1-based line number in the file of data line ``i``."""
+        return self.data.count(b"\n", 0, int(self.starts[i])) + 1
 
     def tokens(self, i: int) -> list[bytes]:
         return self.data[self.starts[i]:self.ends[i]].split()
@@ -188,6 +214,24 @@ def _check_text_body(lines: _Lines, first: int, n_vertices: int, n_faces: int, f
                            f"re-extract it")
     _check_vertex_line(lines, first, "the first vertex line")
     _check_vertex_line(lines, first + n_vertices - 1, "the last vertex line")
+    short = np.flatnonzero(lines.token_counts(first, first + n_vertices) < 3)
+    if len(short):
+        i = first + int(short[0])
+        raise _MeshProblem(f"vertex line {short[0] + 1} (line {lines.file_line(i)} of the file: "
+                           f"{b' '.join(lines.tokens(i))[:80]!r}) holds {len(lines.tokens(i))} values instead of x y z"
+                           + (f" ({len(short)} such lines)" if len(short) > 1 else ""),
+                           "re-export or re-download the mesh; becos cannot guess the missing coordinate")
+    not_triangles = np.flatnonzero(~lines.first_token_is(first + n_vertices, first + n_vertices + n_faces, b"3"))
+    if len(not_triangles):
+        i = first + n_vertices + int(not_triangles[0])
+        tokens = lines.tokens(i)
+        raise _MeshProblem(f"face line {not_triangles[0] + 1} (line {lines.file_line(i)} of the file: "
+                           f"{b' '.join(tokens)[:80]!r}) has {tokens[0].decode(errors='replace')} corners, not 3"
+                           + (f" ({len(not_triangles)} such faces)" if len(not_triangles) > 1 else "")
+                           + "; becos needs triangle meshes",
+                           "use the dataset's original triangle mesh (re-download it); a polygon mesh must be "
+                           "triangulated, the same way for every shape of its class, e.g. MeshLab: Filters > "
+                           "Polygonal and Quad Mesh > Turn into a Pure-Triangular mesh")
     _check_finite_text(lines.data, int(lines.starts[first]), int(lines.ends[first + n_vertices - 1]), first,
                        lines.starts, "vertex line")
     _check_face_tokens(lines.tokens(first + n_vertices), n_vertices, "the first face line")
@@ -587,6 +631,25 @@ def _check_one_dataset(name: str, data_dir: Path, annotations, read_meshes: bool
         names = spec.list_names(data_dir, annotations)
     except BecosError as exc:
         return stop(f"dataset '{name}': {exc}")
+    dangling = sorted(p for p in folder.glob(spec.file_glob) if p.is_symlink() and not p.exists())
+    for p in dangling:
+        problems.append(f"{p}: is a symbolic link to {os.readlink(p)}, which does not exist (a dangling link). Fix: "
+                        f"point the link at the real file, or put the file itself there")
+    stray = []
+    for n in names:
+        try:
+            spec.class_of(n)
+            spec.category_of(n)
+        except BecosError:
+            stray.append(n)
+    if stray:
+        shown = ", ".join(f"{n}.{spec.file_type}" for n in stray[:MAX_LISTED_MESHES])
+        problems.append(f"{folder}: {len(stray)} file(s) there are not shapes of dataset '{name}': {shown} (their names "
+                        f"match no class rule of the dataset registry {spec.path}). Fix: move them out of {folder} "
+                        f"(stray files); only if they are shapes of '{name}', add class and category rules for them "
+                        f"to {spec.path}")
+        entry["stray_files"] = [f"{n}.{spec.file_type}" for n in stray]
+        names = [n for n in names if n not in stray]
     used = [n for n in names if n not in spec.excluded]
     entry.update(found=len(used), excluded_found=len(names) - len(used))
     counts_ok = True
@@ -640,7 +703,7 @@ def _check_one_dataset(name: str, data_dir: Path, annotations, read_meshes: bool
             problems.append(f"dataset '{name}': {len(bad)} of {len(names)} mesh files are empty, truncated or corrupt: "
                             f"{listed}{more}. Fix: re-download or re-extract them ({spec.download_help()})")
     shapes: list = []
-    if counts_ok:
+    if counts_ok and not stray:
         try:
             shapes = spec.list_shapes(data_dir, annotations)
         except BecosError as exc:

@@ -110,12 +110,25 @@ def read_mesh(path: str | Path) -> TriMesh:
         vertices = np.asarray(loaded.vertices, dtype=np.float64)
         faces = np.asarray(loaded.faces, dtype=np.int64)
     except Exception as exc:  # trimesh raises many types on corrupt input
+        _raise_precise(path, exc)
         raise InputFileError(path, f"could not be parsed as a mesh ({type(exc).__name__}: {exc})",
                              "the file is truncated or corrupt: re-download or re-extract it") from exc
     check_mesh_arrays(path, vertices, faces)
     if path.suffix.lower() == ".off":
         _check_off_header(path, len(vertices), len(faces))
     return TriMesh(vertices, faces)
+
+
+def _raise_precise(path: Path, exc: Exception) -> None:
+    """When the cheap check of :func:`becos.check.check_mesh_file` names a line at fault that is not a
+    cut file (a vertex line with 2 values, a quad face), raise its error instead of the parser's."""
+    from becos.check import _TRUNCATED_FIX, check_mesh_file
+
+    try:
+        check_mesh_file(path)
+    except InputFileError as precise:
+        if precise.fix != _TRUNCATED_FIX:
+            raise precise from exc
 
 
 def _check_off_header(path: Path, n_vertices: int, n_faces: int) -> None:
@@ -133,6 +146,7 @@ def _check_off_header(path: Path, n_vertices: int, n_faces: int) -> None:
         raise InputFileError(path, "the OFF header has no vertex and face counts",
                              "the file is corrupt: re-download or re-extract it") from None
     if (header_vertices, header_faces) != (n_vertices, n_faces):
+        _raise_precise(path, None)  # e.g. a quad that trimesh split into two triangles
         raise InputFileError(path, f"the OFF header announces {header_vertices} vertices and {header_faces} faces "
                              f"but {n_vertices} and {n_faces} were read (truncated or corrupt file)",
                              "re-download or re-extract the file")

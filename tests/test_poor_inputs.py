@@ -74,3 +74,72 @@ def test_bad_options_of_a_stage_command_are_one_line_errors(argv, message, tmp_p
     err = capsys.readouterr().err
     assert err.startswith(message.replace("RESULTS", results)), err
     assert "Traceback" not in err and len(err.strip().splitlines()) == 1
+
+
+# --- the dataset check and read_mesh -------------------------------------------------------------------
+def _wolves(tmp_path: Path, tosca_dir: Path, edit) -> tuple[Path, str]:
+    """data/tosca-off with links to wolf0/1/2, ``edit(folder)`` applied; the dataset check's message."""
+    from test_faults import small_registry
+
+    from becos.check import DatasetCheckError, check_datasets
+
+    folder = tmp_path / "data" / "tosca-off"
+    folder.mkdir(parents=True)
+    for name in ("wolf0", "wolf1", "wolf2"):
+        (folder / f"{name}.off").symlink_to(tosca_dir / f"{name}.off")
+    edit(folder)
+    with pytest.raises(DatasetCheckError) as err:
+        check_datasets(["tosca"], tmp_path / "data", tosca_dir.parents[1],
+                       config_dir=small_registry(tmp_path, {"wolf": 3}))
+    return folder, str(err.value)
+
+
+def _edit_wolf1(folder: Path, tosca_dir: Path, edit_lines) -> None:
+    lines = (tosca_dir / "wolf1.off").read_text().splitlines()
+    edit_lines(lines)
+    (folder / "wolf1.off").unlink()
+    (folder / "wolf1.off").write_text("\n".join(lines) + "\n")
+
+
+def test_a_stray_file_is_named_as_stray_not_blamed_on_the_registry(tosca_dir, tmp_path):
+    folder, text = _wolves(tmp_path, tosca_dir, lambda f: shutil.copy(tosca_dir / "cat0.off", f / "teapot.off"))
+    assert "1 problem(s)" in text
+    assert (f"{folder}: 1 file(s) there are not shapes of dataset 'tosca': teapot.off (their names match no class "
+            f"rule of the dataset registry ") in text
+    assert f"Fix: move them out of {folder} (stray files)" in text
+
+
+def test_a_dangling_symlink_is_named_as_such(tosca_dir, tmp_path):
+    def edit(folder):
+        (folder / "wolf2.off").unlink()
+        (folder / "wolf2.off").symlink_to(tmp_path / "gone" / "wolf2.off")
+    folder, text = _wolves(tmp_path, tosca_dir, edit)
+    assert (f"{folder / 'wolf2.off'}: is a symbolic link to {tmp_path / 'gone' / 'wolf2.off'}, which does not exist "
+            f"(a dangling link). Fix: point the link at the real file") in text
+
+
+def test_a_quad_face_is_named_not_called_truncated(tosca_dir, tmp_path):
+    from becos.mesh import read_mesh
+
+    def quad(lines):
+        a, b, c, d = lines[-1].split()
+        lines[-1] = f"4 {b} {c} {d} 7"
+    folder, text = _wolves(tmp_path, tosca_dir, lambda f: _edit_wolf1(f, tosca_dir, quad))
+    expected = f"{folder / 'wolf1.off'}: face line 8684 (line 13030 of the file: b'4 "
+    assert expected in text and "has 4 corners, not 3; becos needs triangle meshes" in text
+    assert "truncated" not in text.split(expected)[1].split("Fix:")[0]
+    with pytest.raises(InputFileError, match=r"face line 8684 \(line 13030 of the file: .*has 4 corners, not 3"):
+        read_mesh(folder / "wolf1.off")
+
+
+def test_a_vertex_line_with_two_coordinates_is_named_with_its_line(tosca_dir, tmp_path):
+    from becos.mesh import read_mesh
+
+    def two(lines):
+        lines[2 + 100] = " ".join(lines[2 + 100].split()[:2])
+    folder, text = _wolves(tmp_path, tosca_dir, lambda f: _edit_wolf1(f, tosca_dir, two))
+    assert f"{folder / 'wolf1.off'}: vertex line 101 (line 103 of the file: " in text
+    assert "holds 2 values instead of x y z" in text
+    with pytest.raises(InputFileError, match=r"vertex line 101 \(line 103 of the file: .*\) holds 2 values instead "
+                                             r"of x y z\. Fix: re-export or re-download"):
+        read_mesh(folder / "wolf1.off")                                  # what the remesh job reads
