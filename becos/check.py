@@ -478,9 +478,12 @@ def compare_with_class_template(path: Path, template_path: Path, shape_arrays, t
     some rows with reversed winding); faces the shape lacks, duplicates and rows with a repeated index
     are left to the remesh's repairs, a triple the template lacks is an error. Scale as the median ratio of the lengths of the template's edges
     in the two meshes (:data:`CLASS_EDGE_RATIO`)."""
-    from becos.mesh import repeated_index_faces, undirected_edges, vertex_set_keys
+    from becos.mesh import FLAT_RTOL, flatness, repeated_index_faces, undirected_edges, vertex_set_keys
 
     (v, f), (tv, tf) = shape_arrays, template_arrays
+    if flatness(v) <= FLAT_RTOL:
+        return (f"all its {len(v)} vertices lie in one plane (thickness {flatness(v):.2g} of its largest extent): a "
+                f"flattened or 2-D mesh, and becos matches 3-D surfaces")
     if len(v) != len(tv):
         return (f"has {len(v)} vertices but its class template {template_path} has {len(tv)}; the shapes of a class "
                 f"share one triangulation (vertex i = vertex i)")

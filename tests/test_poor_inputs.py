@@ -7,6 +7,7 @@ import json
 import shutil
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from becos.errors import BecosError, InputFileError
@@ -143,3 +144,38 @@ def test_a_vertex_line_with_two_coordinates_is_named_with_its_line(tosca_dir, tm
     with pytest.raises(InputFileError, match=r"vertex line 101 \(line 103 of the file: .*\) holds 2 values instead "
                                              r"of x y z\. Fix: re-export or re-download"):
         read_mesh(folder / "wolf1.off")                                  # what the remesh job reads
+
+
+def test_a_flattened_mesh_is_refused(tosca_dir, tmp_path):
+    from test_faults import write_off
+
+    from becos.mesh import read_mesh
+
+    wolf = read_mesh(tosca_dir / "wolf1.off")
+    flat = wolf.vertices.copy()
+    flat[:, 2] = 0.0
+    folder, text = _wolves(tmp_path, tosca_dir, lambda f: (f / "wolf1.off").unlink() or write_off(f / "wolf1.off", flat,
+                                                                                                   wolf.faces))
+    assert f"{folder / 'wolf1.off'}: all its 4344 vertices lie in one plane (thickness 0 of its largest extent)" in text
+    with pytest.raises(InputFileError, match=r"all its 4344 vertices lie in one plane .*\. Fix: use the dataset's "
+                                             r"original 3-D mesh"):
+        read_mesh(folder / "wolf1.off")                                  # the remesh job and `check --full-parse`
+
+
+def test_a_non_manifold_vertex_is_refused(tosca_dir, tmp_path):
+    """Two far-apart vertices of wolf1 welded into one: its two fans touch only there (a bow-tie)."""
+    from becos.mesh import non_manifold_vertices, read_mesh, surface_for_remeshing
+    from becos.remesh import remesh
+
+    wolf = read_mesh(tosca_dir / "wolf1.off")
+    a, b = 100, int(np.argmax(np.linalg.norm(wolf.vertices - wolf.vertices[100], axis=1)))
+    faces = np.where(wolf.faces == b, a, wolf.faces)
+    assert non_manifold_vertices(wolf.faces, wolf.n_vertices).size == 0
+    assert non_manifold_vertices(faces, wolf.n_vertices).tolist() == [a]
+    welded = type(wolf)(wolf.vertices, faces)
+    with pytest.raises(InputFileError, match=r"wolf1.off: 1 vertices are non-manifold \(their faces form several fans "
+                                             r"that touch only at the vertex, e.g. vertex 100 of the file\)") as err:
+        surface_for_remeshing(welded, source=tosca_dir / "wolf1.off")
+    assert "Repair non Manifold Vertices" in err.value.fix
+    with pytest.raises(InputFileError, match="1 vertices are non-manifold"):
+        remesh(welded, target_vertices=2000, source=tosca_dir / "wolf1.off")
