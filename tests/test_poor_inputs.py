@@ -179,3 +179,37 @@ def test_a_non_manifold_vertex_is_refused(tosca_dir, tmp_path):
     assert "Repair non Manifold Vertices" in err.value.fix
     with pytest.raises(InputFileError, match="1 vertices are non-manifold"):
         remesh(welded, target_vertices=2000, source=tosca_dir / "wolf1.off")
+
+
+# --- the workflow's rules ------------------------------------------------------------------------------
+def test_every_path_in_a_rules_shell_command_is_quoted():
+    """A results folder with a space must not split a job's command line: every {input}, {output}, {log}
+    (and {params.out}) in the rules' shell commands is written ``{x:q}``."""
+    import re
+
+    rules = sorted((Path(__file__).resolve().parents[1] / "workflow" / "rules").glob("*.smk"))
+    shell = re.compile(r'^\s*"(?:becos |\s*-)[^"]*"|^\s*" [^"]*"', re.MULTILINE)
+    found, unquoted = 0, []
+    for path in rules:
+        for command in shell.findall(path.read_text()):
+            for placeholder in re.findall(r"\{(input|output|log|params\.out)(\.[A-Za-z_]+)?(:q)?\}", command):
+                found += 1
+                if not placeholder[2]:
+                    unquoted.append(f"{path.name}: {command.strip()}")
+    assert found >= 40 and not unquoted, unquoted
+
+
+def test_a_results_path_with_a_space_is_quoted_in_the_jobs(becos_code, tmp_path):
+    import subprocess
+    import sys
+
+    from tiny_tosca import tosca_config, write_config_file
+
+    repo = Path(__file__).resolve().parents[1]
+    workdir = write_config_file(tmp_path / "run", tosca_config(becos_code, results="my results"))
+    dry = subprocess.run([sys.executable, "-m", "snakemake", "-s", str(repo / "Snakefile"), "-d", str(workdir),
+                          "--configfile", str(workdir / "config.yaml"), "-n", "-p", "--cores", "1"],
+                         capture_output=True, text=True)
+    assert dry.returncode == 0, dry.stderr[-3000:]
+    assert "--out 'my results/checks/datasets.json'" in dry.stdout, dry.stdout[-3000:]
+    assert "--out 'my results/config.json'" in dry.stdout
