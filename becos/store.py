@@ -59,6 +59,7 @@ from __future__ import annotations
 
 import argparse
 import ast
+import errno
 import hashlib
 import json
 import math
@@ -78,7 +79,7 @@ from typing import Iterable, Iterator, Mapping
 import numpy as np
 
 from becos.atomic import remove_stale_temporaries
-from becos.errors import BecosError, InputFileError
+from becos.errors import BecosError, DiskFullError, InputFileError
 from becos.record import PAIR_KEYS, SCHEMA_VERSION, SETTINGS, SHAPE_KEYS, PairRecord
 
 STORE_FORMAT = 1
@@ -620,8 +621,11 @@ def write_store(record_paths: Iterable[str | Path], out: str | Path, *, setting:
         root.attrs.update(attrs)
         os.chmod(tmp, 0o755)
         _replace_dir(tmp, out)
-    except BaseException:
+    except BaseException as exc:
         shutil.rmtree(tmp, ignore_errors=True)
+        full = exc if isinstance(exc, OSError) else exc.__cause__ or exc.__context__
+        if isinstance(full, OSError) and full.errno in (errno.ENOSPC, errno.EDQUOT):
+            raise DiskFullError(out, full) from exc
         raise
     if progress:
         _progress(f"{n} pairs -> {out} ({time.perf_counter() - started:.1f} s)")

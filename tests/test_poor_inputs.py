@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import shutil
+import subprocess
 from pathlib import Path
 
 import numpy as np
@@ -213,3 +214,48 @@ def test_a_results_path_with_a_space_is_quoted_in_the_jobs(becos_code, tmp_path)
     assert dry.returncode == 0, dry.stderr[-3000:]
     assert "--out 'my results/checks/datasets.json'" in dry.stdout, dry.stdout[-3000:]
     assert "--out 'my results/config.json'" in dry.stdout
+
+
+# --- a full disk -----------------------------------------------------------------------------------------
+def _in_a_full_filesystem(tmp_path: Path, script: str) -> subprocess.CompletedProcess:
+    """Run ``script`` (Python; ``FULL`` is a folder on a real, full 64 KiB tmpfs) in a private user and mount
+    namespace (``unshare``: no root needed, nothing is mounted outside the child)."""
+    import os
+    import sys
+
+    mount = tmp_path / "tiny"
+    mount.mkdir()
+    runner = tmp_path / "full.py"
+    runner.write_text(f"FULL = {str(mount)!r}\n" + script)
+    shell = (f"mount -t tmpfs -o size=64k none {mount} && head -c 1000000 /dev/zero > {mount}/filler 2>/dev/null; "
+             f"exec {sys.executable} {runner}")
+    env = dict(os.environ, PYTHONPATH=str(Path(__file__).resolve().parents[1]))
+    result = subprocess.run(["unshare", "--user", "--map-root-user", "--mount", "sh", "-c", shell],
+                            capture_output=True, text=True, env=env)
+    if "mount:" in result.stderr or "unshare:" in result.stderr:
+        pytest.skip(f"cannot mount a private tmpfs here: {result.stderr.strip()[:200]}")
+    return result
+
+
+def test_a_full_disk_is_a_named_error(tmp_path):
+    script = """
+import sys
+from becos.cli import main
+from becos.errors import DiskFullError
+from becos.atomic import save_npz
+import numpy as np
+try:
+    save_npz(FULL + "/gt.npz", a=np.zeros(100000))
+except DiskFullError as exc:
+    print("LIBRARY", exc)
+sys.exit(main(["write-config", "--options", '{"data_dir": "d", "annotations": "a", "datasets": ["tosca"]}',
+                "--out", FULL + "/config.json"]))
+"""
+    result = _in_a_full_filesystem(tmp_path, script)
+    mount = tmp_path / "tiny"
+    assert f"LIBRARY {mount}/gt.npz: cannot be written: No space left on device (" in result.stdout, result
+    assert result.returncode == 2, result.stderr
+    assert result.stderr.startswith(f"becos write-config: {mount}/config.json: cannot be written: No space left on "
+                                    f"device ("), result.stderr
+    assert "Fix: free disk space, or set `results` to a folder on a larger disk, and run again" in result.stderr
+    assert "Traceback" not in result.stderr
