@@ -76,6 +76,8 @@ def chunk_files(setting, kind):
 
 def all_targets(wildcards):
     targets = [str(LAYOUT.config)]
+    # every remesh output is a target, so a deleted one (e.g. the PLY nothing else reads) is rebuilt
+    targets += [str(LAYOUT.remeshed(*job).with_suffix(".ply")) for job in plan().remesh_jobs]
     for setting in SETTINGS:
         base = f"{RESULTS}/{setting}"
         targets.append(f"{base}/validation.json")
