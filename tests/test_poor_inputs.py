@@ -259,3 +259,21 @@ sys.exit(main(["write-config", "--options", '{"data_dir": "d", "annotations": "a
                                     f"device ("), result.stderr
     assert "Fix: free disk space, or set `results` to a folder on a larger disk, and run again" in result.stderr
     assert "Traceback" not in result.stderr
+
+
+def test_an_ascii_ply_header_announcing_fewer_faces_than_the_file_holds(tosca_dir, tmp_path):
+    """BAD 2 for ASCII PLY: the header says one face fewer than the file holds."""
+    from becos.check import check_mesh_file
+    from becos.mesh import read_mesh
+
+    wolf = read_mesh(tosca_dir / "wolf0.off")
+    header = ["ply", "format ascii 1.0", f"element vertex {wolf.n_vertices}", "property float x", "property float y",
+              "property float z", f"element face {wolf.n_faces - 1}", "property list uchar int vertex_indices",
+              "end_header"]
+    body = [f"{x} {y} {z}" for x, y, z in wolf.vertices.tolist()] + [f"3 {a} {b} {c}" for a, b, c in wolf.faces.tolist()]
+    path = tmp_path / "wolf0.ply"
+    path.write_text("\n".join(header + body) + "\n")
+    with pytest.raises(InputFileError, match=rf"the PLY header announces 4344 vertices and 8683 faces but 13028 data "
+                                             rf"lines follow, 1 more than announced") as err:
+        check_mesh_file(path)
+    assert err.value.path == path and "correct the header's counts" in err.value.fix
