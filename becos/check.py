@@ -24,17 +24,24 @@ will apply to a copy (:func:`inspect_mesh_file`: faces with a repeated index, ze
 faces, unreferenced vertices, small extra components, inconsistent winding); a mesh whose extra
 components are too large to drop is a problem. With mesh checks on, the edge files the enabled datasets
 need are parsed, and where both templates' files are present their row counts and face indices are
-compared with the meshes' header counts.
+compared with the meshes' header counts; an edge file into a present template must also be
+geometrically plausible (:func:`edge_plausibility`). With mesh checks on, every shape that shares its
+class template's triangulation is compared with the template (:func:`compare_with_class_template`:
+faces as vertex sets, median edge-length ratio, flatness), every vertex line must hold 3 values and
+every face line be a triangle, a header may not announce fewer lines than the file holds, and stray
+files (names no class rule matches) and dangling symbolic links are named.
 
 Report layout (``check_datasets`` return value)::
 
     {<dataset>: {"ok", "path", "folder", "found", "expected", "excluded_found", "meshes_checked",
                  "bad_meshes": [{"path", "problem", "fix"}], "repairs": [{"path", "repair", <counts>}],
+                 "class_mismatches": [{"path", "template", "problem", "fix"}], "stray_files": [...],
                  "problems": [...]},
      ...,
      "annotations": {"ok", "path", "found", "nodes", "edges", "template_rows", "files": {rel: bool},
                      "edge_files": {"needed", "missing"}, "default_faces": {"needed", "missing"},
-                     "edge_contents": {"parsed", "compared_with_meshes", "bad"},
+                     "edge_contents": {"parsed", "compared_with_meshes", "bad",
+                                       "plausibility": {"a -> b": {"residual", "stretch", "matched"}}},
                      "unresolved_template_keys", "problems", "notes"},
      "ok": bool, "data_dir": str}
 """
