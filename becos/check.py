@@ -483,8 +483,8 @@ def compare_with_class_template(path: Path, template_path: Path, shape_arrays, t
 
     Faces are compared as vertex SETS (sorted triples; TOSCA poses of a class hold the same triples,
     some rows with reversed winding); faces the shape lacks, duplicates and rows with a repeated index
-    are left to the remesh's repairs, a triple the template lacks is an error. Scale as the median ratio of the lengths of the template's edges
-    in the two meshes (:data:`CLASS_EDGE_RATIO`)."""
+    are left to the remesh's repairs, a triple the template lacks is an error. Scale as the median
+    ratio of the lengths of the template's edges in the two meshes (:data:`CLASS_EDGE_RATIO`)."""
     from becos.mesh import FLAT_RTOL, flatness, repeated_index_faces, undirected_edges, vertex_set_keys
 
     (v, f), (tv, tf) = shape_arrays, template_arrays
@@ -654,8 +654,8 @@ def _check_one_dataset(name: str, data_dir: Path, annotations, read_meshes: bool
             stray.append(n)
     if stray:
         shown = ", ".join(f"{n}.{spec.file_type}" for n in stray[:MAX_LISTED_MESHES])
-        problems.append(f"{folder}: {len(stray)} file(s) there are not shapes of dataset '{name}': {shown} (their names "
-                        f"match no class rule of the dataset registry {spec.path}). Fix: move them out of {folder} "
+        problems.append(f"{folder}: {len(stray)} file(s) there are not shapes of dataset '{name}': {shown} (their "
+                        f"names match no class rule of the dataset registry {spec.path}). Fix: move them out of {folder} "
                         f"(stray files); only if they are shapes of '{name}', add class and category rules for them "
                         f"to {spec.path}")
         entry["stray_files"] = [f"{n}.{spec.file_type}" for n in stray]
