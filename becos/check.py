@@ -613,7 +613,7 @@ def _missing_dataset_text(spec, folder: Path, data_dir: Path) -> str:
 
 
 def _check_one_dataset(name: str, data_dir: Path, annotations, read_meshes: bool, full_parse: bool,
-                       config_dir) -> tuple[dict, list[str], list]:
+                       config_dir, compare_geometry: bool = True) -> tuple[dict, list[str], list]:
     """Report entry, problem texts and the listed ShapeEntry rows (empty unless the listing succeeded)."""
     from becos.catalog import natural_key
     from becos.datasets import DatasetSpec
@@ -718,7 +718,7 @@ def _check_one_dataset(name: str, data_dir: Path, annotations, read_meshes: bool
             shapes = spec.list_shapes(data_dir, annotations)
         except BecosError as exc:
             problems.append(f"dataset '{name}': {exc}")
-    if read_meshes and shapes and annotations is not None:
+    if read_meshes and compare_geometry and shapes and annotations is not None:
         mismatched = _check_classes(shapes, annotations, {b["path"] for b in entry["bad_meshes"]})
         entry["class_mismatches"] = mismatched
         if mismatched:
@@ -809,7 +809,8 @@ def require_plausible_edge(path: Path, a: str, b: str, stats: dict) -> None:
                          f"restore the annotation folder's original file; {_FIX_FOLDER}")
 
 
-def _check_edge_contents(source, edges: list[tuple[str, str]], present: dict[str, list]) -> tuple[dict, list[str]]:
+def _check_edge_contents(source, edges: list[tuple[str, str]], present: dict[str, list],
+                         compare_geometry: bool = True) -> tuple[dict, list[str]]:
     """Parse each needed edge file (non-numeric text, columns, face indices below -1...) and, where both
     templates' mesh files are present, compare its rows with the source template's vertex count and
     its face indices with the target template's face count (counts from the file headers); where the
@@ -847,7 +848,7 @@ def _check_edge_contents(source, edges: list[tuple[str, str]], present: dict[str
             if ca is not None and cb is not None:
                 source.check_edge(a, b, ca[0], cb[1])
                 compared += 1
-            if cb is None:
+            if cb is None or not compare_geometry:
                 continue
             target = mesh_of(b)
             source_mesh = mesh_of(a) if ca is not None else None
@@ -867,7 +868,7 @@ def _check_edge_contents(source, edges: list[tuple[str, str]], present: dict[str
 
 
 def _check_annotations(root: Path, template_table: str, enabled: list[str], present: dict[str, list],
-                       specs: dict, check_edges: bool = True) -> tuple[dict, list[str]]:
+                       specs: dict, check_edges: bool = True, compare_geometry: bool = True) -> tuple[dict, list[str]]:
     """Annotation-folder part of the report; ``present`` maps found datasets to their ShapeEntry rows.
     ``check_edges`` also parses the needed edge files and compares them with the present meshes."""
     from becos.annotations import (ADJACENCY_CSV, CHIRALITY_CSV, DEFAULT_FACES_DIR, EDGE_DIR, AnnotationSource,
@@ -947,7 +948,7 @@ def _check_annotations(root: Path, template_table: str, enabled: list[str], pres
     if check_edges:
         missing = {tuple(m.split(" -> ")) for m in missing_edges}
         needed = [(a, b) for u, v in sorted(sub.edges) for a, b in ((u, v), (v, u)) if (a, b) not in missing]
-        report["edge_contents"], edge_problems = _check_edge_contents(source, needed, present)
+        report["edge_contents"], edge_problems = _check_edge_contents(source, needed, present, compare_geometry)
         problems += edge_problems
     missing_faces = []
     n_faces = 0
@@ -979,7 +980,7 @@ def _check_annotations(root: Path, template_table: str, enabled: list[str], pres
 
 def check_datasets(datasets: list[str], data_dir: str | Path, annotations_dir: str | Path | None, *,
                    read_meshes: bool = True, full_parse: bool = False, template_table: str = "templates_all.csv",
-                   config_dir: str | Path | None = None) -> dict:
+                   config_dir: str | Path | None = None, compare_geometry: bool = True) -> dict:
     """Check the enabled datasets and the annotation folder; return the report (module docstring).
 
     Args:
@@ -993,6 +994,9 @@ def check_datasets(datasets: list[str], data_dir: str | Path, annotations_dir: s
             repairs remeshing will apply (``<dataset>["repairs"]``; slow).
         template_table: the template table in ``<annotations>/config`` (config key ``template_file``).
         config_dir: dataset registry folder (default ``config/datasets`` or ``$BECOS_DATASETS_DIR``).
+        compare_geometry: compare each shape with its class template (:func:`compare_with_class_template`)
+            and check edge files for plausibility (:func:`edge_plausibility`); False only for stand-in
+            meshes without real geometry (config key ``check_geometry``).
 
     Raises:
         DatasetCheckError (a ConfigError): one message listing every problem; ``.report`` holds the report.
@@ -1023,7 +1027,8 @@ def check_datasets(datasets: list[str], data_dir: str | Path, annotations_dir: s
     specs = {}
     present: dict[str, list] = {}
     for name in enabled:
-        entry, ds_problems, shapes = _check_one_dataset(name, data_dir, source, read_meshes, full_parse, config_dir)
+        entry, ds_problems, shapes = _check_one_dataset(name, data_dir, source, read_meshes, full_parse, config_dir,
+                                                        compare_geometry)
         report[name] = entry
         problems += ds_problems
         try:
@@ -1036,7 +1041,8 @@ def check_datasets(datasets: list[str], data_dir: str | Path, annotations_dir: s
         report["annotations"] = {"ok": None, "path": None, "notes": ["not checked (no annotation folder given)"]}
     else:
         report["annotations"], ann_problems = _check_annotations(root, template_table, enabled, present, specs,
-                                                                 check_edges=read_meshes)
+                                                                 check_edges=read_meshes,
+                                                                 compare_geometry=compare_geometry)
         problems += ann_problems
     report["ok"] = not problems
     report["data_dir"] = str(data_dir)
@@ -1140,6 +1146,9 @@ def configure_parser(parser: argparse.ArgumentParser, name: str = "check") -> ar
         parser.add_argument("--out", type=Path, help="write the JSON report here (also on failure)")
         parser.add_argument("--no-mesh-check", dest="read_meshes", action="store_false",
                             help="only check folders and counts, not the mesh files")
+        parser.add_argument("--no-geometry-check", dest="compare_geometry", action="store_false",
+                            help="do not compare shapes with their class template nor check edge files for "
+                                 "plausibility (only for stand-in meshes; config key `check_geometry`)")
         parser.add_argument("--full-parse", action="store_true",
                             help="also parse every mesh completely with read_mesh and list the repairs remeshing "
                                  "applies to a copy (slow: ~35 s for TOSCA)")
@@ -1164,7 +1173,8 @@ def run_cli(args: argparse.Namespace) -> int:
     start = time.perf_counter()
     try:
         report = check_datasets(args.datasets, args.data_dir, args.annotations, read_meshes=args.read_meshes,
-                                full_parse=args.full_parse, template_table=args.template_table)
+                                full_parse=args.full_parse, template_table=args.template_table,
+                                compare_geometry=args.compare_geometry)
     except DatasetCheckError as exc:
         if args.out is not None:
             write_text(args.out, json.dumps(exc.report, indent=2) + "\n")

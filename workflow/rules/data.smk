@@ -109,11 +109,12 @@ checkpoint check_datasets:
         data_dir=config["data_dir"],
         annotations=config["annotations"],
         template_file=config["template_file"],
+        geometry="" if config["check_geometry"] else "--no-geometry-check",
     log:
         "logs/check_datasets.log",
     shell:
         "becos check --datasets {params.datasets} --data-dir {params.data_dir:q}"
-        " --annotations {params.annotations:q} --template-table {params.template_file:q}"
+        " --annotations {params.annotations:q} --template-table {params.template_file:q} {params.geometry}"
         " --out {output:q} > {log:q} 2>&1"
 
 
