@@ -24,17 +24,24 @@ will apply to a copy (:func:`inspect_mesh_file`: faces with a repeated index, ze
 faces, unreferenced vertices, small extra components, inconsistent winding); a mesh whose extra
 components are too large to drop is a problem. With mesh checks on, the edge files the enabled datasets
 need are parsed, and where both templates' files are present their row counts and face indices are
-compared with the meshes' header counts.
+compared with the meshes' header counts; an edge file into a present template must also be
+geometrically plausible (:func:`edge_plausibility`). With mesh checks on, every shape that shares its
+class template's triangulation is compared with the template (:func:`compare_with_class_template`:
+faces as vertex sets, median edge-length ratio, flatness), every vertex line must hold 3 values and
+every face line be a triangle, a header may not announce fewer lines than the file holds, and stray
+files (names no class rule matches) and dangling symbolic links are named.
 
 Report layout (``check_datasets`` return value)::
 
     {<dataset>: {"ok", "path", "folder", "found", "expected", "excluded_found", "meshes_checked",
                  "bad_meshes": [{"path", "problem", "fix"}], "repairs": [{"path", "repair", <counts>}],
+                 "class_mismatches": [{"path", "template", "problem", "fix"}], "stray_files": [...],
                  "problems": [...]},
      ...,
      "annotations": {"ok", "path", "found", "nodes", "edges", "template_rows", "files": {rel: bool},
                      "edge_files": {"needed", "missing"}, "default_faces": {"needed", "missing"},
-                     "edge_contents": {"parsed", "compared_with_meshes", "bad"},
+                     "edge_contents": {"parsed", "compared_with_meshes", "bad",
+                                       "plausibility": {"a -> b": {"residual", "stretch", "matched"}}},
                      "unresolved_template_keys", "problems", "notes"},
      "ok": bool, "data_dir": str}
 """
@@ -131,9 +138,35 @@ class _Lines:
         self.data = data
         self.starts = starts[keep]
         self.ends = ends[keep]
+        self._arr = arr
 
     def __len__(self) -> int:
         return len(self.starts)
+
+    def token_counts(self, lo: int, hi: int) -> np.ndarray:
+        """(hi - lo,) number of whitespace-separated tokens of lines ``lo..hi-1``."""
+        arr = self._arr[self.starts[lo]:self.ends[hi - 1]] if hi > lo else self._arr[:0]
+        solid = ~np.isin(arr, _WHITESPACE)
+        token_start = solid & np.concatenate(([True], ~solid[:-1])) if len(arr) else solid
+        cs = np.concatenate(([0], np.cumsum(token_start, dtype=np.int64)))
+        base = self.starts[lo]
+        return cs[self.ends[lo:hi] - base] - cs[self.starts[lo:hi] - base]
+
+    def first_token_is(self, lo: int, hi: int, word: bytes) -> np.ndarray:
+        """(hi - lo,) bool: the first token of lines ``lo..hi-1`` is ``word`` (a single byte, e.g. b"3")."""
+        arr = self._arr
+        starts = self.starts[lo:hi].copy()
+        # skip leading blanks (rare): advance each line start to its first non-blank byte
+        blank = np.isin(arr[np.minimum(starts, len(arr) - 1)], _WHITESPACE)
+        while blank.any():
+            starts[blank] += 1
+            blank = np.isin(arr[np.minimum(starts, len(arr) - 1)], _WHITESPACE)
+        after = np.minimum(starts + len(word), len(arr) - 1)
+        return (arr[starts] == word[0]) & ((starts + len(word) >= len(arr)) | np.isin(arr[after], _WHITESPACE))
+
+    def file_line(self, i: int) -> int:
+        """1-based line number in the file of data line ``i``."""
+        return self.data.count(b"\n", 0, int(self.starts[i])) + 1
 
     def tokens(self, i: int) -> list[bytes]:
         return self.data[self.starts[i]:self.ends[i]].split()
@@ -169,24 +202,51 @@ def _check_face_tokens(tokens: list[bytes], n_vertices: int, what: str) -> None:
                          f"outside [0, {n_vertices})")
 
 
-def _check_text_body(lines: _Lines, first: int, n_vertices: int, n_faces: int, fmt: str) -> None:
-    """Lines ``first ..`` hold ``n_vertices`` vertex lines then ``n_faces`` face lines."""
+def _check_text_body(lines: _Lines, first: int, n_vertices: int, n_faces: int, fmt: str, exact: bool = True) -> None:
+    """Lines ``first ..`` hold ``n_vertices`` vertex lines then ``n_faces`` face lines (and nothing else
+    when ``exact``: extra lines are an error, as readers drop them silently)."""
     if n_vertices <= 0 or n_faces <= 0:
         raise ValueError(f"the {fmt} header announces {n_vertices} vertices and {n_faces} faces (empty mesh)")
     have = len(lines) - first
     if have < n_vertices + n_faces:
         raise ValueError(f"the {fmt} header announces {n_vertices} vertices and {n_faces} faces but only {have} "
                          f"data lines follow (truncated file)")
+    if have > n_vertices + n_faces and exact:
+        raise _MeshProblem(f"the {fmt} header announces {n_vertices} vertices and {n_faces} faces but {have} data "
+                           f"lines follow, {have - n_vertices - n_faces} more than announced: a reader would silently "
+                           f"ignore the last {have - n_vertices - n_faces} lines (after the vertex block there are "
+                           f"{have - n_vertices} lines, not {n_faces})",
+                           f"if the file is otherwise intact, correct the header's counts (e.g. {n_vertices} "
+                           f"{have - n_vertices} for an OFF whose extra lines are faces); else re-download or "
+                           f"re-extract it")
     _check_vertex_line(lines, first, "the first vertex line")
     _check_vertex_line(lines, first + n_vertices - 1, "the last vertex line")
+    short = np.flatnonzero(lines.token_counts(first, first + n_vertices) < 3)
+    if len(short):
+        i = first + int(short[0])
+        raise _MeshProblem(f"vertex line {short[0] + 1} (line {lines.file_line(i)} of the file: "
+                           f"{b' '.join(lines.tokens(i))[:80]!r}) holds {len(lines.tokens(i))} values instead of x y z"
+                           + (f" ({len(short)} such lines)" if len(short) > 1 else ""),
+                           "re-export or re-download the mesh; becos cannot guess the missing coordinate")
+    not_triangles = np.flatnonzero(~lines.first_token_is(first + n_vertices, first + n_vertices + n_faces, b"3"))
+    if len(not_triangles):
+        i = first + n_vertices + int(not_triangles[0])
+        tokens = lines.tokens(i)
+        raise _MeshProblem(f"face line {not_triangles[0] + 1} (line {lines.file_line(i)} of the file: "
+                           f"{b' '.join(tokens)[:80]!r}) has {tokens[0].decode(errors='replace')} corners, not 3"
+                           + (f" ({len(not_triangles)} such faces)" if len(not_triangles) > 1 else "")
+                           + "; becos needs triangle meshes",
+                           "use the dataset's original triangle mesh (re-download it); a polygon mesh must be "
+                           "triangulated, the same way for every shape of its class, e.g. MeshLab: Filters > "
+                           "Polygonal and Quad Mesh > Turn into a Pure-Triangular mesh")
     _check_finite_text(lines.data, int(lines.starts[first]), int(lines.ends[first + n_vertices - 1]), first,
                        lines.starts, "vertex line")
     _check_face_tokens(lines.tokens(first + n_vertices), n_vertices, "the first face line")
     _check_face_tokens(lines.tokens(first + n_vertices + n_faces - 1), n_vertices, "the last face line")
 
 
-def _check_off(data: bytes) -> tuple[int, int]:
-    lines = _Lines(data)
+def _off_header(lines: _Lines) -> tuple[int, int, int]:
+    """(announced vertices, announced faces, index of the first data line) of an OFF file's lines."""
     words: list[bytes] = []
     header_end = -1
     for i in range(min(len(lines), 4)):
@@ -202,7 +262,24 @@ def _check_off(data: bytes) -> tuple[int, int]:
         n_vertices, n_faces = int(words[1]), int(words[2])
     except ValueError:
         raise ValueError(f"the OFF header {b' '.join(words[:4])!r} has no vertex and face counts") from None
-    _check_text_body(lines, header_end + 1, n_vertices, n_faces, "OFF")
+    return n_vertices, n_faces, header_end + 1
+
+
+def off_data_lines(data: bytes) -> tuple[int, int, int]:
+    """(announced vertices, announced faces, non-blank non-comment lines after the header) of OFF bytes.
+
+    Raises:
+        ValueError: no OFF header with counts.
+    """
+    lines = _Lines(data)
+    n_vertices, n_faces, first = _off_header(lines)
+    return n_vertices, n_faces, len(lines) - first
+
+
+def _check_off(data: bytes) -> tuple[int, int]:
+    lines = _Lines(data)
+    n_vertices, n_faces, first = _off_header(lines)
+    _check_text_body(lines, first, n_vertices, n_faces, "OFF")
     return n_vertices, n_faces
 
 
@@ -242,7 +319,7 @@ def _check_ply(path: Path, size: int) -> tuple[int, int]:
                 raise ValueError(f"the PLY header announces {total} element rows but only {len(lines)} data lines "
                                  "follow (truncated file)")
             return n_vertices, n_faces
-        _check_text_body(lines, 0, n_vertices, n_faces, "PLY")
+        _check_text_body(lines, 0, n_vertices, n_faces, "PLY", exact=len(elements) == 2)
         return n_vertices, n_faces
     if fmt not in ("binary_little_endian", "binary_big_endian"):
         raise ValueError(f"unknown PLY format {fmt!r}")
@@ -371,6 +448,110 @@ def inspect_mesh_file(path: str | Path):
     return surface_for_remeshing(read_mesh(path), source=path)[1]
 
 
+# --- shapes of one class ---------------------------------------------------------------------------
+CLASS_EDGE_RATIO = 1.5
+"""Shapes that share their class template's triangulation (the network's identity hop: vertex i is
+vertex i) must have a median edge length within this factor of the template's (and its inverse).
+Measured on the 76 TOSCA meshes: every pose's median ratio to its class template is 1 ± 6e-5 (the
+poses are near-isometric), while a file in other units is off by its unit factor (10, 100, 1000,
+2.54...). 1.5 also leaves room for classes of different bodies on one template (FAUST subjects)."""
+
+
+def mesh_arrays(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    """(V, 3) float64 vertices and (F, 3) int64 faces of a mesh file that passed the cheap check.
+
+    Triangle OFF files are split with numpy (~4x faster than trimesh); other files are read with
+    :func:`becos.mesh.read_mesh`."""
+    path = Path(path)
+    if path.suffix.lower() == ".off":
+        data = path.read_bytes()
+        lines = _Lines(data)
+        n_vertices, n_faces, first = _off_header(lines)
+        v = np.array(data[lines.starts[first]:lines.ends[first + n_vertices - 1]].split(), dtype=np.float64)
+        last = first + n_vertices + n_faces - 1
+        f = np.array(data[lines.starts[first + n_vertices]:lines.ends[last]].split(), dtype=np.int64)
+        if v.size == 3 * n_vertices and f.size == 4 * n_faces and (f[::4] == 3).all():
+            return v.reshape(n_vertices, 3), f.reshape(n_faces, 4)[:, 1:]
+    from becos.mesh import read_mesh
+
+    mesh = read_mesh(path)
+    return mesh.vertices, mesh.faces
+
+
+def compare_with_class_template(path: Path, template_path: Path, shape_arrays, template_arrays) -> str | None:
+    """Why the mesh in ``path`` cannot share the triangulation of its class template, or None.
+
+    Faces are compared as vertex SETS (sorted triples; TOSCA poses of a class hold the same triples,
+    some rows with reversed winding); faces the shape lacks, duplicates and rows with a repeated index
+    are left to the remesh's repairs, a triple the template lacks is an error. Scale as the median
+    ratio of the lengths of the template's edges in the two meshes (:data:`CLASS_EDGE_RATIO`)."""
+    from becos.mesh import FLAT_RTOL, flatness, repeated_index_faces, undirected_edges, vertex_set_keys
+
+    (v, f), (tv, tf) = shape_arrays, template_arrays
+    if flatness(v) <= FLAT_RTOL:
+        return (f"all its {len(v)} vertices lie in one plane (thickness {flatness(v):.2g} of its largest extent): a "
+                f"flattened or 2-D mesh, and becos matches 3-D surfaces")
+    if len(v) != len(tv):
+        return (f"has {len(v)} vertices but its class template {template_path} has {len(tv)}; the shapes of a class "
+                f"share one triangulation (vertex i = vertex i)")
+    # faces as vertex sets; rows that remeshing drops or ignores (a repeated index, duplicates) and faces
+    # the file lost (a subset) are repairs, a triple the template lacks is not
+    f = np.asarray(f, dtype=np.int64)
+    f = f[~repeated_index_faces(f)] if len(f) else f
+    keys, template_keys = np.unique(vertex_set_keys(f, len(v))), np.unique(vertex_set_keys(tf, len(tv)))
+    foreign = len(np.setdiff1d(keys, template_keys, assume_unique=True))
+    if foreign:
+        return (f"has the vertex count of its class template {template_path} but {foreign} of its {len(keys)} "
+                f"distinct faces name vertex triples the template has not: its vertex lines are re-ordered (or it "
+                f"was re-triangulated), so vertex i no longer corresponds to vertex i of the class")
+    edges, _ = undirected_edges(tf)
+    lengths = np.linalg.norm(v[edges[:, 0]] - v[edges[:, 1]], axis=1)
+    template_lengths = np.linalg.norm(tv[edges[:, 0]] - tv[edges[:, 1]], axis=1)
+    ratio = float(np.median(lengths[template_lengths > 0] / template_lengths[template_lengths > 0]))
+    if not 1 / CLASS_EDGE_RATIO <= ratio <= CLASS_EDGE_RATIO:
+        return (f"its edges are {ratio:.3g} times as long as those of its class template {template_path} "
+                f"(median; poses of a class keep edge lengths, within {CLASS_EDGE_RATIO}x): the file is "
+                f"scaled or in other units")
+    return None
+
+
+_CLASS_FIX = ("restore the original file (re-download or re-extract it); never rescale or re-order a dataset's "
+              "files: becos applies each dataset's scale itself (`scale` in config/datasets/<dataset>.yaml)")
+
+
+def _check_classes(shapes: list, annotations, skip: set[str]) -> list[dict]:
+    """``[{"path", "template", "problem", "fix"}]`` for shapes that differ from their class template.
+
+    Only shapes the ground truth joins to their template by vertex identity are compared: the
+    template is a shape of the same dataset (:meth:`becos.network.ShapeNetwork.hop`). Files in
+    ``skip`` (already reported) are left out."""
+    by_name = {e.name: e for e in shapes}
+    groups: dict[str, list] = {}
+    for e in shapes:
+        groups.setdefault(e.template_key, []).append(e)
+    bad = []
+    for key, members in groups.items():
+        try:
+            dataset, template_name = annotations.node_template(annotations.node_of_key(key))
+        except BecosError:
+            continue  # reported by the annotation check
+        template = by_name.get(template_name)
+        if template is None or template.dataset != members[0].dataset or str(template.path) in skip:
+            continue
+        others = [e for e in members if e.name != template_name and str(e.path) not in skip]
+        if not others:
+            continue
+        template_arrays = mesh_arrays(template.path)
+        for e in others:
+            try:
+                problem = compare_with_class_template(e.path, template.path, mesh_arrays(e.path), template_arrays)
+            except (BecosError, ValueError) as exc:
+                problem = f"could not be read to compare with its class template ({exc})"
+            if problem is not None:
+                bad.append({"path": str(e.path), "template": str(template.path), "problem": problem, "fix": _CLASS_FIX})
+    return bad
+
+
 # --- datasets --------------------------------------------------------------------------------------
 _PUBLISHED_CACHE: dict[str, dict[str, set[str]]] = {}
 
@@ -432,7 +613,7 @@ def _missing_dataset_text(spec, folder: Path, data_dir: Path) -> str:
 
 
 def _check_one_dataset(name: str, data_dir: Path, annotations, read_meshes: bool, full_parse: bool,
-                       config_dir) -> tuple[dict, list[str], list]:
+                       config_dir, compare_geometry: bool = True) -> tuple[dict, list[str], list]:
     """Report entry, problem texts and the listed ShapeEntry rows (empty unless the listing succeeded)."""
     from becos.catalog import natural_key
     from becos.datasets import DatasetSpec
@@ -460,6 +641,25 @@ def _check_one_dataset(name: str, data_dir: Path, annotations, read_meshes: bool
         names = spec.list_names(data_dir, annotations)
     except BecosError as exc:
         return stop(f"dataset '{name}': {exc}")
+    dangling = sorted(p for p in folder.glob(spec.file_glob) if p.is_symlink() and not p.exists())
+    for p in dangling:
+        problems.append(f"{p}: is a symbolic link to {os.readlink(p)}, which does not exist (a dangling link). Fix: "
+                        f"point the link at the real file, or put the file itself there")
+    stray = []
+    for n in names:
+        try:
+            spec.class_of(n)
+            spec.category_of(n)
+        except BecosError:
+            stray.append(n)
+    if stray:
+        shown = ", ".join(f"{n}.{spec.file_type}" for n in stray[:MAX_LISTED_MESHES])
+        problems.append(f"{folder}: {len(stray)} file(s) there are not shapes of dataset '{name}': {shown} (their "
+                        f"names match no class rule of the dataset registry {spec.path}). Fix: move them out of {folder} "
+                        f"(stray files); only if they are shapes of '{name}', add class and category rules for them "
+                        f"to {spec.path}")
+        entry["stray_files"] = [f"{n}.{spec.file_type}" for n in stray]
+        names = [n for n in names if n not in stray]
     used = [n for n in names if n not in spec.excluded]
     entry.update(found=len(used), excluded_found=len(names) - len(used))
     counts_ok = True
@@ -513,23 +713,112 @@ def _check_one_dataset(name: str, data_dir: Path, annotations, read_meshes: bool
             problems.append(f"dataset '{name}': {len(bad)} of {len(names)} mesh files are empty, truncated or corrupt: "
                             f"{listed}{more}. Fix: re-download or re-extract them ({spec.download_help()})")
     shapes: list = []
-    if counts_ok:
+    if counts_ok and not stray:
         try:
             shapes = spec.list_shapes(data_dir, annotations)
         except BecosError as exc:
             problems.append(f"dataset '{name}': {exc}")
+    if read_meshes and compare_geometry and shapes and annotations is not None:
+        mismatched = _check_classes(shapes, annotations, {b["path"] for b in entry["bad_meshes"]})
+        entry["class_mismatches"] = mismatched
+        if mismatched:
+            listed = "; ".join(f"{b['path']}: {b['problem']}" for b in mismatched[:MAX_LISTED_MESHES])
+            more = (f"; and {len(mismatched) - MAX_LISTED_MESHES} more (all in the report)"
+                    if len(mismatched) > MAX_LISTED_MESHES else "")
+            problems.append(f"dataset '{name}': {len(mismatched)} mesh files do not fit their class template: "
+                            f"{listed}{more}. Fix: {_CLASS_FIX}")
     entry["problems"] = problems
     entry["ok"] = not problems
     return entry, problems, shapes
 
 
 # --- annotations -----------------------------------------------------------------------------------
-def _check_edge_contents(source, edges: list[tuple[str, str]], present: dict[str, list]) -> tuple[dict, list[str]]:
+EDGE_MAX_RESIDUAL = 0.5
+"""Largest median Procrustes residual of a plausible edge file (see :func:`edge_plausibility`), in RMS
+radii of the scale-normalised point sets. Measured on the 8 TOSCA-TOSCA edge files of the BeCoS annotation
+folder (the only ones with both meshes here): 0.076-0.174; ``tosca_dog0_tosca_wolf0_corres.txt``
+holding the content of ``tosca_dog0_smal_dog2_corres.txt``: 1.12."""
+
+EDGE_MAX_STRETCH = 3.0
+"""Largest median stretch of a plausible edge file (see :func:`edge_plausibility`). Measured on the 17
+edge files into a TOSCA template whose source faces are known (mesh or default faces): 0.55-1.38; the
+swapped file above: 4.85."""
+
+
+def edge_plausibility(edge, target_vertices: np.ndarray, target_faces: np.ndarray, source_faces: np.ndarray | None,
+                      source_vertices: np.ndarray | None = None) -> dict:
+    """How well an edge map (:class:`becos.surface_map.SurfaceMap`, source template vertex -> point on
+    the target template) fits the two templates' geometry. Scale- and pose-free statistics over the
+    matched rows (``face >= 0``), ``P_i`` being the mapped point of source vertex ``i``:
+
+    - ``residual``: both point sets (source vertices, ``P``) centred and scaled to unit RMS radius,
+      the source rigidly aligned onto ``P`` (:func:`becos.align.procrustes`); the median distance
+      between an aligned vertex and its mapped point, in RMS radii. Needs ``source_vertices``.
+    - ``stretch``: the median length of ``P_i - P_j`` over the source's edges ``(i, j)``, divided by
+      ``sqrt(target area / source vertices)`` (the edge length of a uniform mesh with the source's
+      vertex count on the target surface). Neighbours stay neighbours under a real map (~1); a map
+      of other faces scatters them. Needs ``source_faces``.
+
+    Returns ``{"residual": float | None, "stretch": float | None, "matched": int}``.
+    """
+    from becos.align import procrustes
+    from becos.mesh import undirected_edges
+
+    ok = edge.face >= 0
+    points = np.full((len(edge.face), 3), np.nan)
+    points[ok] = np.einsum("ij,ijk->ik", edge.weights[ok], target_vertices[target_faces[edge.face[ok]]])
+    out: dict = {"residual": None, "stretch": None, "matched": int(ok.sum())}
+    if ok.sum() < 3:
+        return out
+    if source_vertices is not None and len(source_vertices) == len(edge.face):
+        a = source_vertices[ok] - source_vertices[ok].mean(axis=0)
+        p = points[ok] - points[ok].mean(axis=0)
+        a /= np.sqrt((a ** 2).sum(axis=1).mean())
+        p /= np.sqrt((p ** 2).sum(axis=1).mean())
+        out["residual"] = float(np.median(np.linalg.norm(procrustes(a, p).apply(a) - p, axis=1)))
+    if source_faces is not None and len(source_faces) and source_faces.max() < len(edge.face):
+        pairs, _ = undirected_edges(source_faces)
+        pairs = pairs[ok[pairs[:, 0]] & ok[pairs[:, 1]]]
+        tri = target_vertices[target_faces]
+        area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1).sum()
+        if len(pairs) and area > 0:
+            out["stretch"] = float(np.median(np.linalg.norm(points[pairs[:, 0]] - points[pairs[:, 1]], axis=1))
+                                   / np.sqrt(area / len(edge.face)))
+    return out
+
+
+def require_plausible_edge(path: Path, a: str, b: str, stats: dict) -> None:
+    """Raise :class:`InputFileError` naming the edge file ``path`` (edge ``a -> b``) when its
+    :func:`edge_plausibility` ``stats`` exceed :data:`EDGE_MAX_RESIDUAL` or :data:`EDGE_MAX_STRETCH`."""
+    from becos.annotations import _FIX_FOLDER
+
+    too_far = stats["residual"] is not None and stats["residual"] > EDGE_MAX_RESIDUAL
+    too_spread = stats["stretch"] is not None and stats["stretch"] > EDGE_MAX_STRETCH
+    if not (too_far or too_spread):
+        return
+    found = []
+    if stats["residual"] is not None:
+        found.append(f"after the best rigid alignment (scale-normalised Procrustes) the vertices of template {a} lie "
+                     f"a median {stats['residual']:.3g} RMS radii from their mapped points on {b} (real BeCoS edge "
+                     f"files: at most 0.17; limit {EDGE_MAX_RESIDUAL})")
+    if stats["stretch"] is not None:
+        found.append(f"neighbouring vertices land a median {stats['stretch']:.3g} mesh edges apart (real files: at "
+                     f"most 1.38; limit {EDGE_MAX_STRETCH})")
+    raise InputFileError(path, "the map does not land where its template belongs: " + " and ".join(found)
+                         + "; the file probably holds another edge's map",
+                         f"restore the annotation folder's original file; {_FIX_FOLDER}")
+
+
+def _check_edge_contents(source, edges: list[tuple[str, str]], present: dict[str, list],
+                         compare_geometry: bool = True) -> tuple[dict, list[str]]:
     """Parse each needed edge file (non-numeric text, columns, face indices below -1...) and, where both
     templates' mesh files are present, compare its rows with the source template's vertex count and
-    its face indices with the target template's face count (counts from the file headers)."""
+    its face indices with the target template's face count (counts from the file headers); where the
+    target template's mesh is present, check that the map is geometrically plausible
+    (:func:`edge_plausibility`, :data:`EDGE_MAX_RESIDUAL`, :data:`EDGE_MAX_STRETCH`)."""
     paths = {(e.dataset, e.name): e.path for entries in present.values() for e in entries}
     counts: dict = {}
+    arrays: dict = {}
 
     def mesh_counts(node: str):
         key = source.node_template(node)
@@ -542,24 +831,44 @@ def _check_edge_contents(source, edges: list[tuple[str, str]], present: dict[str
                     pass  # reported with the dataset's meshes
         return counts[key]
 
-    problems, bad, compared = [], [], 0
+    def mesh_of(node: str):
+        key = source.node_template(node)
+        if key not in arrays:
+            arrays[key] = mesh_arrays(paths[key]) if mesh_counts(node) is not None else None
+        return arrays[key]
+
+    problems, bad, compared, plausible = [], [], 0, {}
     for a, b in edges:
         try:
-            if source.edge_source(a, b).kind != "file":
+            edge_source = source.edge_source(a, b)
+            if edge_source.kind != "file":
                 continue
             source.edge_report(a, b)                      # parses (and validates) the file once
             ca, cb = mesh_counts(a), mesh_counts(b)
             if ca is not None and cb is not None:
                 source.check_edge(a, b, ca[0], cb[1])
                 compared += 1
+            if cb is None or not compare_geometry:
+                continue
+            target = mesh_of(b)
+            source_mesh = mesh_of(a) if ca is not None else None
+            source_faces = source_mesh[1] if source_mesh is not None else source.default_faces(
+                *source.node_template(a)[::-1])
+            edge = source.edge_map(a, b)
+            if len(edge) and edge.face.max() >= len(target[1]):
+                continue                                   # named by check_edge / the ground truth
+            stats = edge_plausibility(edge, target[0], target[1], source_faces,
+                                      source_mesh[0] if source_mesh is not None else None)
+            plausible[f"{a} -> {b}"] = stats
+            require_plausible_edge(edge_source.path, a, b, stats)
         except BecosError as exc:
             bad.append(f"{a} -> {b}")
             problems.append(f"annotation folder: {exc}")
-    return {"parsed": len(edges), "compared_with_meshes": compared, "bad": bad}, problems
+    return {"parsed": len(edges), "compared_with_meshes": compared, "bad": bad, "plausibility": plausible}, problems
 
 
 def _check_annotations(root: Path, template_table: str, enabled: list[str], present: dict[str, list],
-                       specs: dict, check_edges: bool = True) -> tuple[dict, list[str]]:
+                       specs: dict, check_edges: bool = True, compare_geometry: bool = True) -> tuple[dict, list[str]]:
     """Annotation-folder part of the report; ``present`` maps found datasets to their ShapeEntry rows.
     ``check_edges`` also parses the needed edge files and compares them with the present meshes."""
     from becos.annotations import (ADJACENCY_CSV, CHIRALITY_CSV, DEFAULT_FACES_DIR, EDGE_DIR, AnnotationSource,
@@ -639,7 +948,7 @@ def _check_annotations(root: Path, template_table: str, enabled: list[str], pres
     if check_edges:
         missing = {tuple(m.split(" -> ")) for m in missing_edges}
         needed = [(a, b) for u, v in sorted(sub.edges) for a, b in ((u, v), (v, u)) if (a, b) not in missing]
-        report["edge_contents"], edge_problems = _check_edge_contents(source, needed, present)
+        report["edge_contents"], edge_problems = _check_edge_contents(source, needed, present, compare_geometry)
         problems += edge_problems
     missing_faces = []
     n_faces = 0
@@ -671,7 +980,7 @@ def _check_annotations(root: Path, template_table: str, enabled: list[str], pres
 
 def check_datasets(datasets: list[str], data_dir: str | Path, annotations_dir: str | Path | None, *,
                    read_meshes: bool = True, full_parse: bool = False, template_table: str = "templates_all.csv",
-                   config_dir: str | Path | None = None) -> dict:
+                   config_dir: str | Path | None = None, compare_geometry: bool = True) -> dict:
     """Check the enabled datasets and the annotation folder; return the report (module docstring).
 
     Args:
@@ -685,6 +994,9 @@ def check_datasets(datasets: list[str], data_dir: str | Path, annotations_dir: s
             repairs remeshing will apply (``<dataset>["repairs"]``; slow).
         template_table: the template table in ``<annotations>/config`` (config key ``template_file``).
         config_dir: dataset registry folder (default ``config/datasets`` or ``$BECOS_DATASETS_DIR``).
+        compare_geometry: compare each shape with its class template (:func:`compare_with_class_template`)
+            and check edge files for plausibility (:func:`edge_plausibility`); False only for stand-in
+            meshes without real geometry (config key ``check_geometry``).
 
     Raises:
         DatasetCheckError (a ConfigError): one message listing every problem; ``.report`` holds the report.
@@ -715,7 +1027,8 @@ def check_datasets(datasets: list[str], data_dir: str | Path, annotations_dir: s
     specs = {}
     present: dict[str, list] = {}
     for name in enabled:
-        entry, ds_problems, shapes = _check_one_dataset(name, data_dir, source, read_meshes, full_parse, config_dir)
+        entry, ds_problems, shapes = _check_one_dataset(name, data_dir, source, read_meshes, full_parse, config_dir,
+                                                        compare_geometry)
         report[name] = entry
         problems += ds_problems
         try:
@@ -728,7 +1041,8 @@ def check_datasets(datasets: list[str], data_dir: str | Path, annotations_dir: s
         report["annotations"] = {"ok": None, "path": None, "notes": ["not checked (no annotation folder given)"]}
     else:
         report["annotations"], ann_problems = _check_annotations(root, template_table, enabled, present, specs,
-                                                                 check_edges=read_meshes)
+                                                                 check_edges=read_meshes,
+                                                                 compare_geometry=compare_geometry)
         problems += ann_problems
     report["ok"] = not problems
     report["data_dir"] = str(data_dir)
@@ -832,6 +1146,9 @@ def configure_parser(parser: argparse.ArgumentParser, name: str = "check") -> ar
         parser.add_argument("--out", type=Path, help="write the JSON report here (also on failure)")
         parser.add_argument("--no-mesh-check", dest="read_meshes", action="store_false",
                             help="only check folders and counts, not the mesh files")
+        parser.add_argument("--no-geometry-check", dest="compare_geometry", action="store_false",
+                            help="do not compare shapes with their class template nor check edge files for "
+                                 "plausibility (only for stand-in meshes; config key `check_geometry`)")
         parser.add_argument("--full-parse", action="store_true",
                             help="also parse every mesh completely with read_mesh and list the repairs remeshing "
                                  "applies to a copy (slow: ~35 s for TOSCA)")
@@ -856,7 +1173,8 @@ def run_cli(args: argparse.Namespace) -> int:
     start = time.perf_counter()
     try:
         report = check_datasets(args.datasets, args.data_dir, args.annotations, read_meshes=args.read_meshes,
-                                full_parse=args.full_parse, template_table=args.template_table)
+                                full_parse=args.full_parse, template_table=args.template_table,
+                                compare_geometry=args.compare_geometry)
     except DatasetCheckError as exc:
         if args.out is not None:
             write_text(args.out, json.dumps(exc.report, indent=2) + "\n")

@@ -24,3 +24,18 @@ class InputFileError(BecosError):
 
 class ConfigError(BecosError):
     """A configuration value is missing, of the wrong type or inconsistent."""
+
+
+class DiskFullError(InputFileError):
+    """A file could not be written because its disk (or quota) is full."""
+
+    def __init__(self, path: str | Path, exc: OSError):
+        import shutil
+
+        try:
+            free = f"{shutil.disk_usage(Path(path).parent).free} bytes free"
+        except OSError:
+            free = "free space unknown"
+        super().__init__(path, f"cannot be written: {exc.strerror or 'no space left on device'} ({free} on its disk)",
+                         "free disk space, or set `results` to a folder on a larger disk, and run again: finished "
+                         "files are kept, so the run resumes where it stopped")

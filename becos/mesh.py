@@ -89,6 +89,11 @@ def check_mesh_arrays(path: str | Path, vertices: np.ndarray, faces: np.ndarray)
     if faces.min() < 0 or faces.max() >= len(vertices):
         raise InputFileError(path, f"face indices span [{faces.min()}, {faces.max()}] but the file has "
                              f"{len(vertices)} vertices", "the file is truncated or corrupt: re-download it")
+    flat = flatness(vertices)
+    if flat <= FLAT_RTOL:
+        raise InputFileError(path, f"all its {len(vertices)} vertices lie in one plane (thickness {flat:.2g} of its "
+                             f"largest extent): a flattened or 2-D mesh, and becos matches 3-D surfaces",
+                             "use the dataset's original 3-D mesh (re-download or re-extract it)")
 
 
 def read_mesh(path: str | Path) -> TriMesh:
@@ -110,12 +115,25 @@ def read_mesh(path: str | Path) -> TriMesh:
         vertices = np.asarray(loaded.vertices, dtype=np.float64)
         faces = np.asarray(loaded.faces, dtype=np.int64)
     except Exception as exc:  # trimesh raises many types on corrupt input
+        _raise_precise(path, exc)
         raise InputFileError(path, f"could not be parsed as a mesh ({type(exc).__name__}: {exc})",
                              "the file is truncated or corrupt: re-download or re-extract it") from exc
     check_mesh_arrays(path, vertices, faces)
     if path.suffix.lower() == ".off":
         _check_off_header(path, len(vertices), len(faces))
     return TriMesh(vertices, faces)
+
+
+def _raise_precise(path: Path, exc: Exception) -> None:
+    """When the cheap check of :func:`becos.check.check_mesh_file` names a line at fault that is not a
+    cut file (a vertex line with 2 values, a quad face), raise its error instead of the parser's."""
+    from becos.check import _TRUNCATED_FIX, check_mesh_file
+
+    try:
+        check_mesh_file(path)
+    except InputFileError as precise:
+        if precise.fix != _TRUNCATED_FIX:
+            raise precise from exc
 
 
 def _check_off_header(path: Path, n_vertices: int, n_faces: int) -> None:
@@ -133,9 +151,20 @@ def _check_off_header(path: Path, n_vertices: int, n_faces: int) -> None:
         raise InputFileError(path, "the OFF header has no vertex and face counts",
                              "the file is corrupt: re-download or re-extract it") from None
     if (header_vertices, header_faces) != (n_vertices, n_faces):
+        _raise_precise(path, None)  # e.g. a quad that trimesh split into two triangles
         raise InputFileError(path, f"the OFF header announces {header_vertices} vertices and {header_faces} faces "
                              f"but {n_vertices} and {n_faces} were read (truncated or corrupt file)",
                              "re-download or re-extract the file")
+    from becos.check import off_data_lines
+
+    _, _, have = off_data_lines(path.read_bytes())
+    if have > n_vertices + n_faces:  # trimesh stops at the announced counts: the rest would be dropped silently
+        raise InputFileError(path, f"the OFF header announces {n_vertices} vertices and {n_faces} faces but "
+                             f"{have} data lines follow, {have - n_vertices - n_faces} more than announced (a "
+                             f"reader ignores them; after the vertex block there are {have - n_vertices} lines)",
+                             f"if the file is otherwise intact, correct the header's counts (e.g. '{n_vertices} "
+                             f"{have - n_vertices} 0' when the extra lines are faces); else re-download or "
+                             f"re-extract it")
 
 
 class MeshCache:
@@ -267,6 +296,44 @@ def face_components(faces: np.ndarray, n_vertices: int) -> tuple[np.ndarray, int
     return face_label.ravel().astype(np.int64), len(ids)
 
 
+def non_manifold_vertices(faces: np.ndarray, n_vertices: int) -> np.ndarray:
+    """(K,) int64 vertices whose faces form more than one fan (they touch only at the vertex, a
+    "bow-tie"): the link of each vertex (the edges opposite it) is split into connected parts."""
+    import scipy.sparse as sp
+    from scipy.sparse.csgraph import connected_components
+
+    f = np.asarray(faces, dtype=np.int64)
+    if len(f) == 0:
+        return np.zeros(0, dtype=np.int64)
+    # spokes (v, w): vertex v seen along its edge to w; each face joins, around each corner v, the
+    # spokes to its two other corners
+    centre = f.ravel()
+    left, right = f[:, [1, 2, 0]].ravel(), f[:, [2, 0, 1]].ravel()
+    spokes, index = np.unique(np.concatenate([centre * n_vertices + left, centre * n_vertices + right]),
+                              return_inverse=True)
+    k = len(centre)
+    graph = sp.coo_matrix((np.ones(k), (index[:k], index[k:])), shape=(len(spokes), len(spokes)))
+    _, label = connected_components(graph, directed=False)
+    fans = np.unique((spokes // n_vertices) * (int(label.max()) + 1) + label) // (int(label.max()) + 1)
+    vertex, count = np.unique(fans, return_counts=True)
+    return vertex[count > 1]
+
+
+FLAT_RTOL = 1e-6
+"""A mesh whose vertices lie within ``FLAT_RTOL × its largest extent`` of one plane is flat (a 2-D or
+flattened mesh); the thinnest of the 76 TOSCA meshes is 0.165 of its largest extent."""
+
+
+def flatness(vertices: np.ndarray) -> float:
+    """Thickness of the point set along its thinnest principal direction over its largest extent
+    (0 for points in one plane)."""
+    v = np.asarray(vertices, dtype=np.float64)
+    centred = v - v.mean(axis=0)
+    _, _, vt = np.linalg.svd(centred.T @ centred)
+    extent = np.ptp(centred @ vt.T, axis=0)
+    return float(extent[-1] / extent[0]) if extent[0] > 0 else 0.0
+
+
 @dataclass(frozen=True, eq=False)
 class MeshRepair:
     """What :func:`surface_for_remeshing` changed on its copy, and how the copy maps back.
@@ -376,8 +443,9 @@ def surface_for_remeshing(mesh: TriMesh, *, source: str | Path | None = None,
 
     Raises:
         InputFileError: no usable face is left, the extra components hold more than
-            ``max_dropped_area_share`` of the area (the file holds several shapes), or edges are
-            shared by more than two faces (non-manifold; the remesher cannot orient such a surface).
+            ``max_dropped_area_share`` of the area (the file holds several shapes), edges are
+            shared by more than two faces, or a vertex joins several fans of faces (non-manifold; the
+            remesher cannot orient such a surface).
     """
     n, faces = mesh.n_vertices, mesh.faces
     where = Path(source) if source is not None else Path(f"<mesh with {n} vertices and {len(faces)} faces>")
@@ -422,6 +490,13 @@ def surface_for_remeshing(mesh: TriMesh, *, source: str | Path | None = None,
                              f"dropping duplicate and repeated-index faces; becos cannot remesh such a surface",
                              "repair the mesh (e.g. MeshLab: Filters > Cleaning and Repairing > Repair non Manifold "
                              "Edges) or leave the shape out")
+    bow_ties = non_manifold_vertices(kept, n)
+    if len(bow_ties):
+        raise InputFileError(where, f"{len(bow_ties)} vertices are non-manifold (their faces form several fans that "
+                             f"touch only at the vertex, e.g. vertex {int(bow_ties[0])} of the file) after dropping "
+                             f"duplicate and repeated-index faces; becos cannot remesh such a surface",
+                             "use the dataset's original mesh (re-download it), or repair it (e.g. MeshLab: Filters > "
+                             "Cleaning and Repairing > Repair non Manifold Vertices) or leave the shape out")
     used = np.zeros(n, dtype=bool)
     used[kept.ravel()] = True
     dropped_vertices = int((clean_used & ~used).sum())

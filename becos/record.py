@@ -47,6 +47,7 @@ accepted, area_normalised, and per shape name, dataset, category, class.
 
 from __future__ import annotations
 
+import hashlib
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -86,7 +87,9 @@ class PairRecord:
         return self.meta["pair_id"]
 
     def save(self, path: str | Path) -> None:
-        """Write one .npz (arrays + ``meta`` as JSON), atomically."""
+        """Write one .npz (arrays + ``meta`` as JSON), atomically. ``meta["content_digest"]`` is set to
+        :func:`content_digest` of the record, so an edit of the file is noticed (:func:`is_intact`)."""
+        self.meta["content_digest"] = content_digest(self.arrays, self.meta)
         save_npz(path, __meta__=np.array(json.dumps(self.meta, sort_keys=True)), **self.arrays)
 
     @classmethod
@@ -95,6 +98,27 @@ class PairRecord:
             meta = json.loads(str(data["__meta__"]))
             arrays = {k: data[k] for k in data.files if k != "__meta__"}
         return cls(arrays, meta)
+
+
+def content_digest(arrays: dict[str, np.ndarray], meta: dict) -> str:
+    """SHA-256 (hex, 16 digits) of a record's arrays (name, dtype, shape, bytes; sorted by name) and of
+    its meta without ``content_digest``."""
+    h = hashlib.sha256(json.dumps({k: v for k, v in meta.items() if k != "content_digest"}, sort_keys=True).encode())
+    for key in sorted(arrays):
+        a = np.ascontiguousarray(arrays[key])
+        h.update(f"|{key}|{a.dtype.str}|{a.shape}|".encode())
+        h.update(a.tobytes())
+    return h.hexdigest()[:16]
+
+
+def is_intact(path: str | Path) -> bool:
+    """True when the record file at ``path`` still holds what :meth:`PairRecord.save` wrote (its content
+    digest matches); False for an edited, unreadable or digest-less file."""
+    try:
+        record = PairRecord.load(path)
+    except Exception:
+        return False
+    return record.meta.get("content_digest") == content_digest(record.arrays, record.meta)
 
 
 def full_shape(record: PairRecord, side: str) -> tuple[np.ndarray, np.ndarray]:

@@ -59,6 +59,7 @@ from __future__ import annotations
 
 import argparse
 import ast
+import errno
 import hashlib
 import json
 import math
@@ -78,7 +79,7 @@ from typing import Iterable, Iterator, Mapping
 import numpy as np
 
 from becos.atomic import remove_stale_temporaries
-from becos.errors import BecosError, InputFileError
+from becos.errors import BecosError, DiskFullError, InputFileError
 from becos.record import PAIR_KEYS, SCHEMA_VERSION, SETTINGS, SHAPE_KEYS, PairRecord
 
 STORE_FORMAT = 1
@@ -250,14 +251,22 @@ def read_record_index(path: str | Path) -> list[Path]:
             if not isinstance(value, str):
                 raise InputFileError(path, f"entry {entry!r} names no record path",
                                      "each entry needs a 'path' (or be a path string)")
-            raw.append(value)
+            raw.append((value, entry.get("digest") if isinstance(entry, dict) else None))
     else:
-        raw = [line.strip() for line in text.splitlines() if line.strip() and not line.strip().startswith("#")]
+        raw = [(line.strip(), None) for line in text.splitlines()
+               if line.strip() and not line.strip().startswith("#")]
     out = []
-    for value in raw:
+    for value, recorded in raw:
         p = Path(value)
         if not p.is_absolute() and not p.exists() and (path.parent / p).exists():
             p = path.parent / p
+        if recorded is not None and p.is_file():
+            found = hashlib.sha256(p.read_bytes()).hexdigest()[:len(recorded)]
+            if found != recorded:
+                raise InputFileError(p, f"is not the file the pairs job wrote: its digest is {found}, {path} "
+                                        f"records {recorded} (edited or replaced after the job)",
+                                     "rebuild it: snakemake --forcerun pairs (becos rebuilds every record whose "
+                                     "content changed), then write the store again")
         out.append(p)
     return out
 
@@ -612,8 +621,11 @@ def write_store(record_paths: Iterable[str | Path], out: str | Path, *, setting:
         root.attrs.update(attrs)
         os.chmod(tmp, 0o755)
         _replace_dir(tmp, out)
-    except BaseException:
+    except BaseException as exc:
         shutil.rmtree(tmp, ignore_errors=True)
+        full = exc if isinstance(exc, OSError) else exc.__cause__ or exc.__context__
+        if isinstance(full, OSError) and full.errno in (errno.ENOSPC, errno.EDQUOT):
+            raise DiskFullError(out, full) from exc
         raise
     if progress:
         _progress(f"{n} pairs -> {out} ({time.perf_counter() - started:.1f} s)")
@@ -675,6 +687,10 @@ class Block:
         return PairRecord(arrays, self.metas[i])
 
 
+class PairKeyError(BecosError, TypeError):
+    """A pair asked for by something that is neither a row index (int) nor a pair_id (str)."""
+
+
 class DamagedStoreError(InputFileError):
     """A store whose root opens but one of whose arrays, offsets or pair tables is missing or unreadable."""
 
@@ -707,12 +723,22 @@ class Benchmark:
         except Exception as exc:  # zarr raises several types for unreadable metadata
             raise InputFileError(self.path, f"cannot be opened as a Zarr store ({exc})", fix) from exc
         info = attrs.get("becos_store")
-        if not isinstance(info, dict) or info.get("format") != STORE_FORMAT:
+        newer = "upgrade becos (pip install -U the becos checkout) to read it, or re-export the store with this becos"
+        found = info.get("format") if isinstance(info, dict) else None
+        if isinstance(found, int) and not isinstance(found, bool) and found > STORE_FORMAT:
+            raise InputFileError(self.path, f"was written by a newer becos: store format {found}, this becos reads "
+                                            f"format {STORE_FORMAT}", newer)
+        if not isinstance(info, dict) or found != STORE_FORMAT:
             raise InputFileError(self.path, f"is not a becos benchmark store of format {STORE_FORMAT}", fix)
+        schema = attrs.get("schema_version")
+        if isinstance(schema, int) and not isinstance(schema, bool) and schema > SCHEMA_VERSION:
+            raise InputFileError(self.path, f"was written by a newer becos: record schema {schema}, this becos reads "
+                                            f"{SCHEMA_VERSION}", newer)
         if attrs.get("schema_version") != SCHEMA_VERSION:
             raise InputFileError(self.path, f"holds record schema {attrs.get('schema_version')}, this becos reads "
                                             f"{SCHEMA_VERSION}", "re-export the store with this becos version")
         self._root = root
+        self._stamp = self._identity()
         self.metadata = {k: v for k, v in attrs.items() if k != "becos_store"}
         self.setting = attrs["setting"]
         self.layout: dict[str, str | None] = dict(info["layout"])
@@ -750,6 +776,23 @@ class Benchmark:
     def __repr__(self) -> str:
         return f"Benchmark({str(self.path)!r}, setting={self.setting!r}, pairs={len(self)})"
 
+    def _identity(self) -> tuple[int, int, int]:
+        """(inode, size, mtime) of the store's root metadata: :func:`write_store` replaces the whole
+        folder, so a rewrite changes it."""
+        try:
+            st = (self.path / "zarr.json").stat()
+        except OSError:
+            return (-1, -1, -1)
+        return (st.st_ino, st.st_size, st.st_mtime_ns)
+
+    def _check_unchanged(self, what: str) -> None:
+        """Raise :class:`DamagedStoreError` when the store was rewritten (or removed) since it was opened:
+        its offsets no longer fit the files, so a read would return another pair's bytes."""
+        if self._identity() != self._stamp:
+            raise DamagedStoreError(self.path, f"was rewritten or removed while this reader had it open (reading "
+                                               f"{what})", "open it again (open_benchmark) once the writer has "
+                                                           "finished")
+
     def __len__(self) -> int:
         return len(self.table)
 
@@ -761,11 +804,16 @@ class Benchmark:
         return sorted(set(self.table["split"]), key=lambda split: store_order_key(split, ""))
 
     def row(self, key: int | str) -> int:
-        """Store row of a row index or pair_id (KeyError/IndexError if absent)."""
+        """Store row of a row index or pair_id (KeyError/IndexError if absent; :class:`PairKeyError`, a
+        TypeError, for anything else, e.g. ``1.5`` or ``True``)."""
         if isinstance(key, str):
             if key not in self._row_of:
                 raise KeyError(f"{self.path}: no pair {key!r}")
             return self._row_of[key]
+        if isinstance(key, (bool, np.bool_)) or not isinstance(key, (int, np.integer)):
+            raise PairKeyError(f"{self.path}: a pair is chosen by its row (an int) or its pair_id (a str), not "
+                               f"{key!r} ({type(key).__name__}). Fix: pass an integer row, e.g. "
+                               f"bench.record(0), or a pair_id from bench.table['pair_id']")
         i = int(key)
         if not -len(self) <= i < len(self):
             raise IndexError(f"{self.path}: row {i} out of range for {len(self)} pairs")
@@ -843,23 +891,35 @@ class Benchmark:
         async def read_all():   # every array's slice concurrently: one round trip, not one per key
             return await asyncio.gather(*(array.async_array.getitem(slice(a, b)) for array, a, b in ranges))
 
+        self._check_unchanged(f"pairs {start}:{stop}")
         try:
             values = sync(read_all())
         except Exception as exc:  # a chunk that does not decode: zarr and the codecs raise several types
+            self._check_unchanged(f"pairs {start}:{stop}")
             raise DamagedStoreError(self.path, f"pairs {start}:{stop} cannot be read ({type(exc).__name__}: {exc})",
                                     DAMAGED_STORE_FIX) from exc
+        self._check_unchanged(f"pairs {start}:{stop}")
         arrays = {key: np.asarray(v) for key, v in zip(keys, values)}
         offsets = {g: o[start:stop + 1] - o[start] for g, o in self.offsets.items()}
         blob = bytes(np.asarray(values[-1]))
         local = mo[start:stop + 1] - mo[start]
-        metas = [json.loads(blob[local[i]:local[i + 1]].decode("utf-8")) for i in range(stop - start)]
+        metas = self._decode_metas(blob, local, f"pairs {start}:{stop}")
         return Block(start, stop, arrays, offsets, self.layout, metas)
+
+    def _decode_metas(self, blob: bytes, offsets: np.ndarray, what: str) -> list[dict]:
+        try:
+            return [json.loads(blob[offsets[i]:offsets[i + 1]].decode("utf-8")) for i in range(len(offsets) - 1)]
+        except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+            self._check_unchanged(what)
+            raise DamagedStoreError(self.path, f"the metadata of {what} does not decode ({exc})",
+                                    DAMAGED_STORE_FIX) from exc
 
     def read_metas(self) -> list[dict]:
         """Every pair's meta, in store order."""
+        self._check_unchanged("the pair metadata")
         blob = bytes(np.asarray(self._meta_json[:]))
-        mo = self._meta_offsets
-        return [json.loads(blob[mo[i]:mo[i + 1]].decode("utf-8")) for i in range(len(self))]
+        self._check_unchanged("the pair metadata")
+        return self._decode_metas(blob, self._meta_offsets, "the pair metadata")
 
 
 def open_benchmark(path: str | Path) -> Benchmark:

@@ -43,7 +43,7 @@ import numpy as np
 import pandas as pd
 
 from becos.atomic import remove_stale_temporaries, write_text
-from becos.errors import ConfigError
+from becos.errors import ConfigError, InputFileError
 
 SETTINGS = ("full_full", "partial_full", "partial_partial")
 SCHEMA_PATH = Path(__file__).resolve().parents[1] / "config" / "schema.yaml"
@@ -572,6 +572,30 @@ class Plan:
             return {"target_faces": int(token[1:])}
         return {"target_vertices": int(variant_target_vertices(self.config["seed"], dataset, name, int(token[1:])))}
 
+    def chunk_edge_files(self, setting: str, chunk: int) -> list[str]:
+        """The annotation folder's edge files the chunk's ground truth reads (both directions), so that
+        editing or restoring one reruns the chunk (:func:`edge_files_between`)."""
+        if not hasattr(self, "_annotations"):
+            self._annotations = annotation_source(self.config)
+        keys = self._catalog_rows
+        rows = self.chunk_rows(setting, chunk)
+        pairs = {(keys[(xd, xn)]["template_key"], keys[(yd, yn)]["template_key"])
+                 for xd, xn, yd, yn in zip(rows["x_dataset"], rows["x_name"], rows["y_dataset"], rows["y_name"])}
+        return sorted({str(p) for kx, ky in pairs for p in edge_files_between(self._annotations, kx, ky)})
+
+
+def edge_files_between(annotations, x_key: str, y_key: str) -> list[Path]:
+    """Edge files on the network path between the templates of template keys ``x_key`` and ``y_key``,
+    both directions (the ground truth both ways reads them); identity edges have none."""
+    nodes = annotations.path(annotations.node_of_key(x_key), annotations.node_of_key(y_key))
+    out = []
+    for a, b in zip(nodes, nodes[1:]):
+        for u, v in ((a, b), (b, a)):
+            source = annotations.edge_source(u, v)
+            if source.kind == "file":
+                out.append(Path(source.path))
+    return out
+
 
 # --------------------------------------------------------------------------------------------------
 # shapes as the jobs see them
@@ -659,6 +683,37 @@ class ShapeStore:
         if token == "original":
             return self.file_digest(self.entry(dataset, name).path)
         return self.file_digest(self.layout.remeshed(dataset, name, token))
+
+    def edge_digests(self, x, y) -> list[str]:
+        """Digests of the edge files the ground truth between entries ``x`` and ``y`` reads (both ways),
+        for its input key. Each file is checked once per job for geometric plausibility where its
+        target template's mesh is available (:func:`becos.check.edge_plausibility`), since a file
+        changed after the dataset check is only seen here."""
+        from becos.check import edge_plausibility, require_plausible_edge
+
+        annotations = self.network.annotations
+        out = []
+        nodes = annotations.path(annotations.node_of_key(x.template_key), annotations.node_of_key(y.template_key))
+        for a, b in zip(nodes, nodes[1:]):
+            for u, v in ((a, b), (b, a)):
+                source = annotations.edge_source(u, v)
+                if source.kind != "file":
+                    out.append("identity")
+                    continue
+                key = Path(source.path)
+                if key not in self._digests:
+                    target = self.mesh(*annotations.node_template(v))
+                    if target is not None:
+                        source_mesh = self.mesh(*annotations.node_template(u))
+                        edge = annotations.edge_map(u, v)
+                        if not len(edge) or edge.face.max() < target.n_faces:  # else ground_truth names it
+                            faces = (source_mesh.faces if source_mesh is not None
+                                     else annotations.default_faces(*annotations.node_template(u)[::-1]))
+                            stats = edge_plausibility(edge, target.vertices, target.faces, faces,
+                                                      None if source_mesh is None else source_mesh.vertices)
+                            require_plausible_edge(key, u, v, stats)
+                out.append(self.file_digest(key))
+        return out
 
     @property
     def network(self):
@@ -807,6 +862,8 @@ def ground_truth_stage(config: dict, setting: str, chunk: int, out_index: Path) 
                       "y": [row["y_dataset"], row["y_name"], ty],
                       "sources": [shapes.source_digest(row["x_dataset"], row["x_name"], tx),
                                   shapes.source_digest(row["y_dataset"], row["y_name"], ty)],
+                      "edges": shapes.edge_digests(shapes.entry(row["x_dataset"], row["x_name"]),
+                                                   shapes.entry(row["y_dataset"], row["y_name"])),
                       "options": stage_options(config, "ground_truth")})
         path = layout.ground_truth(setting, row["pair_id"])
         computed = _stored_key(path, "input_key") != key
@@ -845,6 +902,7 @@ def pairs_stage(config: dict, setting: str, chunk: int, gt_index: Path, out_inde
     from becos.catalog import read_catalog
     from becos.pairs import build_pair
     from becos.partiality import Scanner
+    from becos.record import is_intact
 
     started = time.perf_counter()
     layout = Layout.of(config)
@@ -869,6 +927,10 @@ def pairs_stage(config: dict, setting: str, chunk: int, gt_index: Path, out_inde
                                   shapes.source_digest(row["y_dataset"], row["y_name"], ty)]})
         path = layout.record(setting, row["pair_id"])
         computed = _stored_key(path, "__meta__") != key
+        if not computed and not is_intact(path):
+            _log(f"{path}: its content no longer matches the digest becos recorded when writing it (edited or "
+                 f"replaced by hand?); rebuilding it")
+            computed = True
         if computed:
             x = shapes.instance(row["x_dataset"], row["x_name"], tx)
             y = shapes.instance(row["y_dataset"], row["y_name"], ty)
@@ -890,7 +952,7 @@ def pairs_stage(config: dict, setting: str, chunk: int, gt_index: Path, out_inde
                                chunk=int(row["chunk"]), x_token=tx, y_token=ty)
             record.save(path)
         entries.append({"pair_id": row["pair_id"], "path": str(path), "input_key": key, "computed": computed,
-                        "split": row["split"]})
+                        "split": row["split"], "digest": shapes.file_digest(path)})
         _progress("pairs", setting, chunk, entries, len(rows), started)
     return _write_index(Path(out_index), setting, chunk, entries, started)
 
@@ -992,8 +1054,42 @@ def configure_parser(parser: argparse.ArgumentParser, name: str) -> None:
     parser.add_argument("--out", required=True, type=Path)
 
 
+def parse_json_option(text: str, option: str, command: str) -> dict:
+    """The JSON object passed as ``option`` to ``becos <command>``.
+
+    Raises:
+        ConfigError: not JSON, or not a JSON object (names the option, the position and the fix).
+    """
+    fix = ("Fix: pass the JSON the workflow's rule writes (--options: becos.workflow.job_options, or the whole "
+           "resolved config for write-config and metadata; --shape: the shape's catalog row as a JSON object)")
+    try:
+        value = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise ConfigError(f"{option}: not valid JSON ({exc.msg} at line {exc.lineno} column "
+                          f"{exc.colno}: {text[max(0, exc.pos - 20):exc.pos + 20]!r}). {fix}") from None
+    if not isinstance(value, dict):
+        raise ConfigError(f"{option}: a JSON object {{...}} is needed, not a JSON "
+                          f"{type(value).__name__} ({text[:60]!r}). {fix}")
+    return value
+
+
 def run_cli(args: argparse.Namespace) -> int:
-    config = json.loads(args.options)
+    config = parse_json_option(args.options, "--options", args.command)
+    try:
+        return _run_stage(args, config)
+    except KeyError as exc:
+        raise ConfigError(f"--options: lacks the key {exc} (given keys: {sorted(config)}). Fix: "
+                          f"pass the JSON the workflow's rule writes (becos.workflow.job_options)") from None
+    except TypeError as exc:
+        raise ConfigError(f"--options: a value has the wrong type ({exc}). Fix: check the "
+                          f"values against config/schema.yaml, or pass the JSON the workflow's rule writes") from None
+    except FileNotFoundError as exc:
+        raise InputFileError(exc.filename or "?", "not found (an input of this stage)",
+                             f"run the stages before `becos {args.command}` (the workflow does), or check `results` "
+                             f"in --options ({config.get('results', 'results')!r})") from None
+
+
+def _run_stage(args: argparse.Namespace, config: dict) -> int:
     if args.command == "write-config":
         write_text(args.out, json.dumps(resolve_config(config), indent=1, sort_keys=True) + "\n")
         return 0
@@ -1002,7 +1098,7 @@ def run_cli(args: argparse.Namespace) -> int:
     elif args.command == "manifest":
         write_manifest_stage(config, args.setting, args.catalog, args.out)
     elif args.command == "remesh":
-        remesh_stage(config, json.loads(args.shape), args.token, args.out, args.ply)
+        remesh_stage(config, parse_json_option(args.shape, "--shape", args.command), args.token, args.out, args.ply)
     elif args.command == "ground-truth":
         ground_truth_stage(config, args.setting, args.chunk, args.out)
     elif args.command == "pairs":

@@ -231,7 +231,8 @@ def full_plan(workdir: Path, code: Path, profile: bool = False) -> dict:
     out: dict = {"standin": {"files": len(tree.files), "published_shapes": len(tree.published),
                              "real_size_templates": len(tree.template_vertices), "seconds": tree.seconds}}
     base = {"synthetic": {"enabled": False}, "data_dir": str(tree.data_dir), "annotations": str(code),
-            "datasets": list(DATASETS), "template_file": "templates_all.csv"}
+            "datasets": list(DATASETS), "template_file": "templates_all.csv",
+            "check_geometry": False}                      # stand-in meshes have no real geometry
     config = resolve_config(base)
     out["default"] = plan_run(workdir / "default", config)
     out["default"]["plan_build"] = plan_build_profile({**config, "results": str(workdir / "default" / "results")})

@@ -453,3 +453,98 @@ def test_template_table_naming_a_missing_template(becos_code, tmp_path, tosca_di
         check_datasets(["tosca"], becos_code / "data", root, read_meshes=False)
     assert "shapes of 'tosca' use template key 'tosca_wolf'" in str(err.value) and "'wolf9'" in str(err.value)
     assert err.value.report["annotations"]["unresolved_template_keys"] == ["tosca_wolf"]
+
+
+# --- issue #21: bad input that used to give a silently wrong ground truth ------------------------------
+def _wolf_folder(tmp_path: Path, tosca_dir: Path, wolf1_text: str) -> Path:
+    """data/tosca-off with wolf0 and wolf2 (links to the real files) and the given wolf1.off text."""
+    folder = tmp_path / "data" / "tosca-off"
+    folder.mkdir(parents=True)
+    for name in ("wolf0", "wolf2"):
+        (folder / f"{name}.off").symlink_to(tosca_dir / f"{name}.off")
+    (folder / "wolf1.off").write_text(wolf1_text)
+    return folder
+
+
+def _check_wolves(tmp_path: Path, becos_code: Path) -> str:
+    with pytest.raises(DatasetCheckError) as err:
+        check_datasets(["tosca"], tmp_path / "data", becos_code, config_dir=small_registry(tmp_path, {"wolf": 3}))
+    return str(err.value)
+
+
+def test_scaled_shape_is_named_by_the_dataset_check(wolves, tosca_dir, tmp_path, becos_code):
+    """BAD 1: wolf1 with every coordinate x1e6 (before: the check passed and the pair's extents were 1.4e6
+    against 1.4). Its edges are compared with its class template's (same triangulation)."""
+    folder = tmp_path / "data" / "tosca-off"
+    folder.mkdir(parents=True)
+    for name in ("wolf0", "wolf2"):
+        (folder / f"{name}.off").symlink_to(tosca_dir / f"{name}.off")
+    write_off(folder / "wolf1.off", wolves["wolf1"].vertices * 1e6, wolves["wolf1"].faces)
+    text = _check_wolves(tmp_path, becos_code)
+    assert "1 problem(s)" in text and "1 mesh files do not fit their class template" in text
+    assert re.search(rf"{re.escape(str(folder / 'wolf1.off'))}: its edges are 1e\+06 times as long as those of its "
+                     rf"class template {re.escape(str(folder / 'wolf0.off'))} .*scaled or in other units", text)
+    assert "Fix: restore the original file" in text
+
+
+def test_permuted_vertex_lines_are_named_by_the_dataset_check(wolves, tosca_dir, tmp_path, becos_code):
+    """BAD 3: wolf1's vertex lines permuted and its faces remapped: the same surface, but vertex i is no
+    longer vertex i of the class (before: the check passed; ground truth off by a median of 0.56)."""
+    mesh = wolves["wolf1"]
+    order = np.random.default_rng(3).permutation(mesh.n_vertices)   # new vertex j = old vertex order[j]
+    new_index = np.argsort(order)
+    folder = tmp_path / "data" / "tosca-off"
+    folder.mkdir(parents=True)
+    for name in ("wolf0", "wolf2"):
+        (folder / f"{name}.off").symlink_to(tosca_dir / f"{name}.off")
+    write_off(folder / "wolf1.off", mesh.vertices[order], new_index[mesh.faces])
+    assert np.allclose(read_mesh(folder / "wolf1.off").vertices[new_index], mesh.vertices)   # same surface
+    text = _check_wolves(tmp_path, becos_code)
+    assert f"{folder / 'wolf1.off'}: has the vertex count of its class template {folder / 'wolf0.off'}" in text
+    assert "its vertex lines are re-ordered" in text and "vertex i no longer corresponds" in text
+
+
+def test_off_header_announcing_fewer_faces_than_the_file_holds(tosca_dir, tmp_path, becos_code):
+    """BAD 2: the header says 8584 faces, the file holds 8684 (before: the last 100 were silently ignored).
+    Both the dataset check and read_mesh name the file, the counts and the fix."""
+    lines = (tosca_dir / "wolf1.off").read_text().splitlines()
+    assert lines[1].split()[:2] == ["4344", "8684"]
+    lines[1] = "4344 8584 0"
+    folder = _wolf_folder(tmp_path, tosca_dir, "\n".join(lines) + "\n")
+    text = _check_wolves(tmp_path, becos_code)
+    assert (f"{folder / 'wolf1.off'}: the OFF header announces 4344 vertices and 8584 faces but 13028 data lines "
+            f"follow, 100 more than announced") in text
+    assert "correct the header's counts (e.g. 4344 8684" in text
+    with pytest.raises(InputFileError, match=r"announces 4344 vertices and 8584 faces but 13028 data lines follow, "
+                                             r"100 more than announced") as err:
+        read_mesh(folder / "wolf1.off")
+    assert err.value.path == folder / "wolf1.off" and "'4344 8684 0'" in err.value.fix
+
+
+def test_edge_file_holding_another_edges_map_is_named_by_the_dataset_check(becos_code, tmp_path, tosca_dir,
+                                                                            monkeypatch):
+    """BAD 4: tosca_dog0_tosca_wolf0_corres.txt holding tosca_dog0_smal_dog2_corres.txt (row count and face
+    range pass; before: ground truth off by a median of 0.65). The mapped template must land near the target
+    after alignment (real TOSCA edges: residual <= 0.17, stretch <= 1.38; this file: 1.12 and 4.85)."""
+    root = annotation_copy(becos_code, tmp_path)
+    edge_path = root / "precomputed_corr_templates" / "tosca_dog0_tosca_wolf0_corres.txt"
+    edge_path.unlink()
+    shutil.copy(becos_code / "precomputed_corr_templates" / "tosca_dog0_smal_dog2_corres.txt", edge_path)
+    folder = tmp_path / "data" / "tosca-off"
+    folder.mkdir(parents=True)
+    for name in ("dog0", "wolf0"):
+        (folder / f"{name}.off").symlink_to(tosca_dir / f"{name}.off")
+    registry = small_registry(tmp_path, {"dog": 1, "wolf": 1})
+    with pytest.raises(DatasetCheckError) as err:
+        check_datasets(["tosca"], tmp_path / "data", root, config_dir=registry)
+    text = str(err.value)
+    assert "1 problem(s)" in text
+    match = re.search(rf"annotation folder: {re.escape(str(edge_path))}: the map does not land where its template "
+                      r"belongs: .* a median ([0-9.]+) RMS radii .* a median ([0-9.]+) mesh edges apart", text)
+    assert match and float(match[1]) > 1.0 and float(match[2]) > 4.0, text
+    assert "Fix: restore the annotation folder's original file" in text
+    # the real folder passes, and its statistics are those documented
+    report = check_datasets(["tosca"], tmp_path / "data", becos_code, config_dir=registry)
+    stats = report["annotations"]["edge_contents"]["plausibility"]
+    assert set(stats) == {"tosca_dog0 -> tosca_wolf0", "tosca_wolf0 -> tosca_dog0"}
+    assert all(s["residual"] < 0.2 and s["stretch"] < 1.4 for s in stats.values()), stats

@@ -98,6 +98,24 @@ def test_rerun_of_a_finished_run_does_nothing(tiny_tosca_run):
     assert "Nothing to be done" in result.stdout + result.stderr, result.stdout[-2000:]
 
 
+def test_a_deleted_remesh_output_is_rebuilt(tiny_tosca_run):
+    """Issue #21: every remesh output (the .ply nothing else reads included) is a target of the run."""
+    import shutil
+
+    ply = sorted((tiny_tosca_run / "results" / "remeshed").rglob("*.ply"))[0]
+    kept = ply.with_name(ply.name + ".kept")
+    shutil.copy2(ply, kept)
+    ply.unlink()
+    try:
+        dry = snakemake(tiny_tosca_run, "-n").stdout
+        assert jobs_planned(dry).get("remesh") == 1, dry[-3000:]
+        assert str(ply.relative_to(tiny_tosca_run)) in dry
+    finally:
+        shutil.move(kept, ply)                                          # the other tests read the finished run
+    after = snakemake(tiny_tosca_run, "-n")
+    assert "Nothing to be done" in after.stdout + after.stderr
+
+
 def test_a_dry_run_before_any_job_lists_the_first_stages(becos_code, tmp_path):
     """A first ``snakemake -n`` evaluates every job's resources before the dataset check has run."""
     workdir = write_config(tmp_path / "fresh", becos_code, shapes=TINY_SHAPES)

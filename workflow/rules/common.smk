@@ -89,6 +89,10 @@ def all_targets(wildcards):
             targets.append(f"{base}/report")
         if BASELINES:
             targets.append(f"{base}/evaluation/summary.csv")
+    # every remesh output is a target once the dataset check has run, so a deleted one (e.g. the PLY that no
+    # job reads) is rebuilt; before the check the targets above are listed (a first dry run shows them all)
+    if LAYOUT.checks.exists():
+        targets += [str(LAYOUT.remeshed(*job).with_suffix(".ply")) for job in plan().remesh_jobs]
     return targets
 
 

@@ -9,7 +9,7 @@ rule resolved_config:
     log:
         "logs/resolved_config.log",
     shell:
-        "becos write-config --options {params.config:q} --out {output} > {log} 2>&1"
+        "becos write-config --options {params.config:q} --out {output:q} > {log:q} 2>&1"
 
 
 if config["synthetic"]["enabled"]:
@@ -26,7 +26,7 @@ if config["synthetic"]["enabled"]:
         log:
             "logs/synthetic_collection.log",
         shell:
-            "becos synthetic {output} --seed {params.seed} --poses {params.poses} > {log} 2>&1"
+            "becos synthetic {output:q} --seed {params.seed} --poses {params.poses} > {log:q} 2>&1"
 
 
 if config["annotations_archive"]:
@@ -40,7 +40,7 @@ if config["annotations_archive"]:
         log:
             "logs/fetch_annotations.log",
         shell:
-            "becos fetch-annotations --url {params.url:q} --sha256 {params.sha256} --dest {output} > {log} 2>&1"
+            "becos fetch-annotations --url {params.url:q} --sha256 {params.sha256} --dest {output:q} > {log:q} 2>&1"
 
 
 # DeformingThings4D: one job per class of each enabled dt4d dataset whose DATA/DeformingThings4D/<kind>
@@ -71,7 +71,7 @@ if DT4D_JOBS:
             "logs/prepare_dt4d/{kind}/{cls}.log",
         shell:
             "becos prepare-dt4d --data-dir {params.data_dir:q} --info {input.info:q} --kind {wildcards.kind}"
-            " --classes {wildcards.cls:q} > {log} 2>&1"
+            " --classes {wildcards.cls:q} > {log:q} 2>&1"
 
 
 if config["download"]:
@@ -96,7 +96,7 @@ if config["download"]:
             "logs/download/{dataset}.log",
         shell:
             "becos download-dataset {wildcards.dataset} --data-dir {params.data_dir:q} --url {params.url:q}"
-            " --out {output} > {log} 2>&1"
+            " --out {output:q} > {log:q} 2>&1"
 
 
 checkpoint check_datasets:
@@ -109,12 +109,13 @@ checkpoint check_datasets:
         data_dir=config["data_dir"],
         annotations=config["annotations"],
         template_file=config["template_file"],
+        geometry="" if config["check_geometry"] else "--no-geometry-check",
     log:
         "logs/check_datasets.log",
     shell:
         "becos check --datasets {params.datasets} --data-dir {params.data_dir:q}"
-        " --annotations {params.annotations:q} --template-table {params.template_file:q}"
-        " --out {output} > {log} 2>&1"
+        " --annotations {params.annotations:q} --template-table {params.template_file:q} {params.geometry}"
+        " --out {output:q} > {log:q} 2>&1"
 
 
 rule catalog:
@@ -127,4 +128,4 @@ rule catalog:
     log:
         "logs/catalog.log",
     shell:
-        "becos catalog --options {params.options:q} --out {output} > {log} 2>&1"
+        "becos catalog --options {params.options:q} --out {output:q} > {log:q} 2>&1"

@@ -17,7 +17,7 @@ rule baseline:
     log:
         "logs/baseline/{setting}/{baseline}.log",
     shell:
-        "becos baseline {wildcards.baseline} {input.store} --out {output} --split {params.split} > {log} 2>&1"
+        "becos baseline {wildcards.baseline} {input.store:q} --out {output:q} --split {params.split} > {log:q} 2>&1"
 
 
 rule evaluate:
@@ -38,5 +38,5 @@ rule evaluate:
     log:
         "logs/evaluate/{setting}.log",
     shell:
-        "becos evaluate {input.store} {input.predictions} --out {params.out} --split {params.split}"
-        " --geodesics {params.geodesics} > {log} 2>&1"
+        "becos evaluate {input.store:q} {input.predictions:q} --out {params.out:q} --split {params.split}"
+        " --geodesics {params.geodesics} > {log:q} 2>&1"

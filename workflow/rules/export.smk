@@ -9,7 +9,7 @@ rule store_metadata:
     log:
         "logs/store_metadata/{setting}.log",
     shell:
-        "becos metadata --options {params.config:q} --setting {wildcards.setting} --out {output} > {log} 2>&1"
+        "becos metadata --options {params.config:q} --setting {wildcards.setting} --out {output:q} > {log:q} 2>&1"
 
 
 rule zarr_store:
@@ -24,8 +24,8 @@ rule zarr_store:
     log:
         "logs/zarr_store/{setting}.log",
     shell:
-        "becos export-zarr --setting {wildcards.setting} --out {output} --metadata {input.metadata}"
-        " {input.pairs} > {log} 2>&1"
+        "becos export-zarr --setting {wildcards.setting} --out {output:q} --metadata {input.metadata:q}"
+        " {input.pairs:q} > {log:q} 2>&1"
 
 
 rule validate_store:
@@ -39,7 +39,7 @@ rule validate_store:
     log:
         "logs/validate_store/{setting}.log",
     shell:
-        "becos validate {input} --json {output} > {log} 2>&1"
+        "becos validate {input:q} --json {output:q} > {log:q} 2>&1"
 
 
 rule released_layout:
@@ -54,7 +54,7 @@ rule released_layout:
     log:
         "logs/released_layout/{setting}.log",
     shell:
-        "becos export-released {input.store} {output} > {log} 2>&1"
+        "becos export-released {input.store:q} {output:q} > {log:q} 2>&1"
 
 
 rule psmal_layout:
@@ -71,7 +71,7 @@ rule psmal_layout:
     log:
         "logs/psmal_layout/{setting}.log",
     shell:
-        "becos export-psmal {input.store} {output} {params.geodesics} > {log} 2>&1"
+        "becos export-psmal {input.store:q} {output:q} {params.geodesics} > {log:q} 2>&1"
 
 
 rule published_pairings:
@@ -85,7 +85,7 @@ rule published_pairings:
     log:
         "logs/published_pairings/{setting}.log",
     shell:
-        "becos export-pairings --options {params.options:q} --setting {wildcards.setting} --out {output} > {log} 2>&1"
+        "becos export-pairings --options {params.options:q} --setting {wildcards.setting} --out {output:q} > {log:q} 2>&1"
 
 
 rule report:
@@ -102,4 +102,4 @@ rule report:
     log:
         "logs/report/{setting}.log",
     shell:
-        "becos report {input.store} {output} --renders {params.renders} > {log} 2>&1"
+        "becos report {input.store:q} {output:q} --renders {params.renders} > {log:q} 2>&1"

@@ -15,7 +15,7 @@ rule manifest:
         "logs/manifest/{setting}.log",
     shell:
         "becos manifest --options {params.options:q} --setting {wildcards.setting}"
-        " --catalog {input.catalog} --out {output} > {log} 2>&1"
+        " --catalog {input.catalog:q} --out {output:q} > {log:q} 2>&1"
 
 
 rule remesh:
@@ -39,7 +39,7 @@ rule remesh:
         "logs/remesh/{dataset}/{name}/{token}.log",
     shell:
         "becos remesh --options {params.options:q} --shape {params.shape:q}"
-        " --token {wildcards.token} --out {output.npz} --ply {output.ply} > {log} 2>&1"
+        " --token {wildcards.token} --out {output.npz:q} --ply {output.ply:q} > {log:q} 2>&1"
 
 
 rule ground_truth:
@@ -47,6 +47,7 @@ rule ground_truth:
         manifest=f"{RESULTS}/{{setting}}/manifest.csv",
         catalog=LAYOUT.catalog,
         remeshed=lambda w: plan().chunk_inputs(w.setting, int(w.chunk)),
+        edges=lambda w: plan().chunk_edge_files(w.setting, int(w.chunk)),
     output:
         f"{RESULTS}/{{setting}}/ground_truth/chunk_{{chunk}}.json",
     params:
@@ -60,7 +61,7 @@ rule ground_truth:
         "logs/ground_truth/{setting}/{chunk}.log",
     shell:
         "becos ground-truth --options {params.options:q} --setting {wildcards.setting} --chunk {wildcards.chunk}"
-        " --out {output} > {log} 2>&1"
+        " --out {output:q} > {log:q} 2>&1"
 
 
 rule pairs:
@@ -82,4 +83,4 @@ rule pairs:
         "logs/pairs/{setting}/{chunk}.log",
     shell:
         "becos pairs --options {params.options:q} --setting {wildcards.setting} --chunk {wildcards.chunk}"
-        " --ground-truth {input.ground_truth} --out {output} > {log} 2>&1"
+        " --ground-truth {input.ground_truth:q} --out {output:q} > {log:q} 2>&1"

@@ -1,0 +1,279 @@
+"""Clear one-line messages for the POOR cases of issue #21 (each case: the fault, injected into real
+files or real calls, and the message that names the file, the problem and the fix)."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from becos.errors import BecosError, InputFileError
+from becos.record import PairRecord
+from becos.store import DamagedStoreError, PairKeyError, open_benchmark, write_store
+
+
+@pytest.fixture
+def store(pair_record_files, tmp_path) -> Path:
+    return write_store(pair_record_files["full_full"], tmp_path / "full_full.zarr", setting="full_full",
+                       progress=False)
+
+
+@pytest.mark.parametrize("key", [1.5, True, None, [0]])
+def test_a_pair_key_that_is_no_row_nor_pair_id_is_refused(store, key):
+    bench = open_benchmark(store)
+    with pytest.raises(PairKeyError, match=r"a pair is chosen by its row \(an int\) or its pair_id \(a str\), not") as err:
+        bench.record(key)
+    assert isinstance(err.value, TypeError) and isinstance(err.value, BecosError)
+    assert bench.record(1).pair_id == bench.table["pair_id"][1]          # an int still works
+
+
+def test_a_store_of_a_newer_format_says_so(store):
+    meta = json.loads((store / "zarr.json").read_text())
+    meta["attributes"]["becos_store"]["format"] += 1
+    (store / "zarr.json").write_text(json.dumps(meta))
+    with pytest.raises(InputFileError, match=r"was written by a newer becos: store format 2, this becos reads format 1"
+                                             r"\. Fix: upgrade becos"):
+        open_benchmark(store)
+
+
+def test_a_store_rewritten_under_a_reader_is_a_named_error(store, pair_record_files):
+    bench = open_benchmark(store)
+    first = bench.record(0)
+    records = [PairRecord.load(p) for p in pair_record_files["full_full"]]
+    folder = store.parent / "one"
+    folder.mkdir()
+    records[1].save(folder / "only.npz")
+    write_store([folder / "only.npz"], store, setting="full_full", progress=False)   # another store, same path
+    with pytest.raises(DamagedStoreError, match=r"was rewritten or removed while this reader had it open \(reading "
+                                                r"pairs 0:1\)\. Fix: open it again") as err:
+        bench.record(0)
+    assert err.value.path == store
+    with pytest.raises(DamagedStoreError, match="was rewritten or removed"):
+        bench.read_metas()
+    assert open_benchmark(store).record(0).pair_id == records[1].pair_id != first.pair_id
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["catalog", "--options", "{bad"], "becos catalog: --options: not valid JSON (Expecting property name enclosed "
+                                       "in double quotes at line 1 column 2: '{bad'). Fix: pass the JSON"),
+    (["catalog", "--options", "[1, 2]"], "becos catalog: --options: a JSON object {...} is needed, not a JSON list"),
+    (["catalog", "--options", "{}"], "becos catalog: --options: lacks the key 'annotations' (given keys: []). Fix: "),
+    (["remesh", "--options", "{}", "--shape", "{x", "--token", "v0"], "becos remesh: --shape: not valid JSON"),
+    (["ground-truth", "--options", '{"results": "RESULTS", "annotations": "x", "template_file": "t"}', "--setting",
+      "full_full", "--chunk", "0"], "becos ground-truth: RESULTS/catalog.csv: not found (an input of this stage). "
+                                    "Fix: run the stages before `becos ground-truth`"),
+], ids=["not_json", "not_an_object", "missing_key", "bad_shape", "missing_input"])
+def test_bad_options_of_a_stage_command_are_one_line_errors(argv, message, tmp_path, capsys):
+    from becos.cli import main
+
+    results = str(tmp_path / "nothing")
+    argv = [a.replace("RESULTS", results) for a in argv] + ["--out", str(tmp_path / "out")]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(message.replace("RESULTS", results)), err
+    assert "Traceback" not in err and len(err.strip().splitlines()) == 1
+
+
+# --- the dataset check and read_mesh -------------------------------------------------------------------
+def _wolves(tmp_path: Path, tosca_dir: Path, edit) -> tuple[Path, str]:
+    """data/tosca-off with links to wolf0/1/2, ``edit(folder)`` applied; the dataset check's message."""
+    from test_faults import small_registry
+
+    from becos.check import DatasetCheckError, check_datasets
+
+    folder = tmp_path / "data" / "tosca-off"
+    folder.mkdir(parents=True)
+    for name in ("wolf0", "wolf1", "wolf2"):
+        (folder / f"{name}.off").symlink_to(tosca_dir / f"{name}.off")
+    edit(folder)
+    with pytest.raises(DatasetCheckError) as err:
+        check_datasets(["tosca"], tmp_path / "data", tosca_dir.parents[1],
+                       config_dir=small_registry(tmp_path, {"wolf": 3}))
+    return folder, str(err.value)
+
+
+def _edit_wolf1(folder: Path, tosca_dir: Path, edit_lines) -> None:
+    lines = (tosca_dir / "wolf1.off").read_text().splitlines()
+    edit_lines(lines)
+    (folder / "wolf1.off").unlink()
+    (folder / "wolf1.off").write_text("\n".join(lines) + "\n")
+
+
+def test_a_stray_file_is_named_as_stray_not_blamed_on_the_registry(tosca_dir, tmp_path):
+    folder, text = _wolves(tmp_path, tosca_dir, lambda f: shutil.copy(tosca_dir / "cat0.off", f / "teapot.off"))
+    assert "1 problem(s)" in text
+    assert (f"{folder}: 1 file(s) there are not shapes of dataset 'tosca': teapot.off (their names match no class "
+            f"rule of the dataset registry ") in text
+    assert f"Fix: move them out of {folder} (stray files)" in text
+
+
+def test_a_dangling_symlink_is_named_as_such(tosca_dir, tmp_path):
+    def edit(folder):
+        (folder / "wolf2.off").unlink()
+        (folder / "wolf2.off").symlink_to(tmp_path / "gone" / "wolf2.off")
+    folder, text = _wolves(tmp_path, tosca_dir, edit)
+    assert (f"{folder / 'wolf2.off'}: is a symbolic link to {tmp_path / 'gone' / 'wolf2.off'}, which does not exist "
+            f"(a dangling link). Fix: point the link at the real file") in text
+
+
+def test_a_quad_face_is_named_not_called_truncated(tosca_dir, tmp_path):
+    from becos.mesh import read_mesh
+
+    def quad(lines):
+        a, b, c, d = lines[-1].split()
+        lines[-1] = f"4 {b} {c} {d} 7"
+    folder, text = _wolves(tmp_path, tosca_dir, lambda f: _edit_wolf1(f, tosca_dir, quad))
+    expected = f"{folder / 'wolf1.off'}: face line 8684 (line 13030 of the file: b'4 "
+    assert expected in text and "has 4 corners, not 3; becos needs triangle meshes" in text
+    assert "truncated" not in text.split(expected)[1].split("Fix:")[0]
+    with pytest.raises(InputFileError, match=r"face line 8684 \(line 13030 of the file: .*has 4 corners, not 3"):
+        read_mesh(folder / "wolf1.off")
+
+
+def test_a_vertex_line_with_two_coordinates_is_named_with_its_line(tosca_dir, tmp_path):
+    from becos.mesh import read_mesh
+
+    def two(lines):
+        lines[2 + 100] = " ".join(lines[2 + 100].split()[:2])
+    folder, text = _wolves(tmp_path, tosca_dir, lambda f: _edit_wolf1(f, tosca_dir, two))
+    assert f"{folder / 'wolf1.off'}: vertex line 101 (line 103 of the file: " in text
+    assert "holds 2 values instead of x y z" in text
+    with pytest.raises(InputFileError, match=r"vertex line 101 \(line 103 of the file: .*\) holds 2 values instead "
+                                             r"of x y z\. Fix: re-export or re-download"):
+        read_mesh(folder / "wolf1.off")                                  # what the remesh job reads
+
+
+def test_a_flattened_mesh_is_refused(tosca_dir, tmp_path):
+    from test_faults import write_off
+
+    from becos.mesh import read_mesh
+
+    wolf = read_mesh(tosca_dir / "wolf1.off")
+    flat = wolf.vertices.copy()
+    flat[:, 2] = 0.0
+    folder, text = _wolves(tmp_path, tosca_dir, lambda f: (f / "wolf1.off").unlink() or write_off(f / "wolf1.off", flat,
+                                                                                                   wolf.faces))
+    assert f"{folder / 'wolf1.off'}: all its 4344 vertices lie in one plane (thickness 0 of its largest extent)" in text
+    with pytest.raises(InputFileError, match=r"all its 4344 vertices lie in one plane .*\. Fix: use the dataset's "
+                                             r"original 3-D mesh"):
+        read_mesh(folder / "wolf1.off")                                  # the remesh job and `check --full-parse`
+
+
+def test_a_non_manifold_vertex_is_refused(tosca_dir, tmp_path):
+    """Two far-apart vertices of wolf1 welded into one: its two fans touch only there (a bow-tie)."""
+    from becos.mesh import non_manifold_vertices, read_mesh, surface_for_remeshing
+    from becos.remesh import remesh
+
+    wolf = read_mesh(tosca_dir / "wolf1.off")
+    a, b = 100, int(np.argmax(np.linalg.norm(wolf.vertices - wolf.vertices[100], axis=1)))
+    faces = np.where(wolf.faces == b, a, wolf.faces)
+    assert non_manifold_vertices(wolf.faces, wolf.n_vertices).size == 0
+    assert non_manifold_vertices(faces, wolf.n_vertices).tolist() == [a]
+    welded = type(wolf)(wolf.vertices, faces)
+    with pytest.raises(InputFileError, match=r"wolf1.off: 1 vertices are non-manifold \(their faces form several fans "
+                                             r"that touch only at the vertex, e.g. vertex 100 of the file\)") as err:
+        surface_for_remeshing(welded, source=tosca_dir / "wolf1.off")
+    assert "Repair non Manifold Vertices" in err.value.fix
+    with pytest.raises(InputFileError, match="1 vertices are non-manifold"):
+        remesh(welded, target_vertices=2000, source=tosca_dir / "wolf1.off")
+
+
+# --- the workflow's rules ------------------------------------------------------------------------------
+def test_every_path_in_a_rules_shell_command_is_quoted():
+    """A results folder with a space must not split a job's command line: every {input}, {output}, {log}
+    (and {params.out}) in the rules' shell commands is written ``{x:q}``."""
+    import re
+
+    rules = sorted((Path(__file__).resolve().parents[1] / "workflow" / "rules").glob("*.smk"))
+    shell = re.compile(r'^\s*"(?:becos |\s*-)[^"]*"|^\s*" [^"]*"', re.MULTILINE)
+    found, unquoted = 0, []
+    for path in rules:
+        for command in shell.findall(path.read_text()):
+            for placeholder in re.findall(r"\{(input|output|log|params\.out)(\.[A-Za-z_]+)?(:q)?\}", command):
+                found += 1
+                if not placeholder[2]:
+                    unquoted.append(f"{path.name}: {command.strip()}")
+    assert found >= 40 and not unquoted, unquoted
+
+
+def test_a_results_path_with_a_space_is_quoted_in_the_jobs(becos_code, tmp_path):
+    import subprocess
+    import sys
+
+    from tiny_tosca import tosca_config, write_config_file
+
+    repo = Path(__file__).resolve().parents[1]
+    workdir = write_config_file(tmp_path / "run", tosca_config(becos_code, results="my results"))
+    dry = subprocess.run([sys.executable, "-m", "snakemake", "-s", str(repo / "Snakefile"), "-d", str(workdir),
+                          "--configfile", str(workdir / "config.yaml"), "-n", "-p", "--cores", "1"],
+                         capture_output=True, text=True)
+    assert dry.returncode == 0, dry.stderr[-3000:]
+    assert "--out 'my results/checks/datasets.json'" in dry.stdout, dry.stdout[-3000:]
+    assert "--out 'my results/config.json'" in dry.stdout
+
+
+# --- a full disk -----------------------------------------------------------------------------------------
+def _in_a_full_filesystem(tmp_path: Path, script: str) -> subprocess.CompletedProcess:
+    """Run ``script`` (Python; ``FULL`` is a folder on a real, full 64 KiB tmpfs) in a private user and mount
+    namespace (``unshare``: no root needed, nothing is mounted outside the child)."""
+    import os
+    import sys
+
+    mount = tmp_path / "tiny"
+    mount.mkdir()
+    runner = tmp_path / "full.py"
+    runner.write_text(f"FULL = {str(mount)!r}\n" + script)
+    shell = (f"mount -t tmpfs -o size=64k none {mount} && head -c 1000000 /dev/zero > {mount}/filler 2>/dev/null; "
+             f"exec {sys.executable} {runner}")
+    env = dict(os.environ, PYTHONPATH=str(Path(__file__).resolve().parents[1]))
+    result = subprocess.run(["unshare", "--user", "--map-root-user", "--mount", "sh", "-c", shell],
+                            capture_output=True, text=True, env=env)
+    if "mount:" in result.stderr or "unshare:" in result.stderr:
+        pytest.skip(f"cannot mount a private tmpfs here: {result.stderr.strip()[:200]}")
+    return result
+
+
+def test_a_full_disk_is_a_named_error(tmp_path):
+    script = """
+import sys
+from becos.cli import main
+from becos.errors import DiskFullError
+from becos.atomic import save_npz
+import numpy as np
+try:
+    save_npz(FULL + "/gt.npz", a=np.zeros(100000))
+except DiskFullError as exc:
+    print("LIBRARY", exc)
+sys.exit(main(["write-config", "--options", '{"data_dir": "d", "annotations": "a", "datasets": ["tosca"]}',
+                "--out", FULL + "/config.json"]))
+"""
+    result = _in_a_full_filesystem(tmp_path, script)
+    mount = tmp_path / "tiny"
+    assert f"LIBRARY {mount}/gt.npz: cannot be written: No space left on device (" in result.stdout, result
+    assert result.returncode == 2, result.stderr
+    assert result.stderr.startswith(f"becos write-config: {mount}/config.json: cannot be written: No space left on "
+                                    f"device ("), result.stderr
+    assert "Fix: free disk space, or set `results` to a folder on a larger disk, and run again" in result.stderr
+    assert "Traceback" not in result.stderr
+
+
+def test_an_ascii_ply_header_announcing_fewer_faces_than_the_file_holds(tosca_dir, tmp_path):
+    """BAD 2 for ASCII PLY: the header says one face fewer than the file holds."""
+    from becos.check import check_mesh_file
+    from becos.mesh import read_mesh
+
+    wolf = read_mesh(tosca_dir / "wolf0.off")
+    header = ["ply", "format ascii 1.0", f"element vertex {wolf.n_vertices}", "property float x", "property float y",
+              "property float z", f"element face {wolf.n_faces - 1}", "property list uchar int vertex_indices",
+              "end_header"]
+    body = [f"{x} {y} {z}" for x, y, z in wolf.vertices.tolist()] + [f"3 {a} {b} {c}" for a, b, c in wolf.faces.tolist()]
+    path = tmp_path / "wolf0.ply"
+    path.write_text("\n".join(header + body) + "\n")
+    with pytest.raises(InputFileError, match=rf"the PLY header announces 4344 vertices and 8683 faces but 13028 data "
+                                             rf"lines follow, 1 more than announced") as err:
+        check_mesh_file(path)
+    assert err.value.path == path and "correct the header's counts" in err.value.fix

@@ -1,0 +1,122 @@
+"""Edits the workflow must notice (issue #21, BAD 5 and 6), on the workflow's own stage functions (the
+work of the ``ground_truth``, ``pairs`` and ``zarr_store`` jobs) over 4 real TOSCA shapes:
+
+- an edge file of the annotation folder changed, then restored: the ground truth of every pair whose
+  network path reads it is recomputed both times (the input key covers the edge files' digests; the
+  Snakemake rule declares them as inputs), and the restored run gives the original files back;
+- a pair record edited by hand: the pairs job rebuilds it (its content digest no longer matches),
+  and the store writer refuses a record that differs from what its chunk index records.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+from tiny_tosca import tosca_config
+
+from becos import workflow as bw
+from becos.cli import main as becos_main
+from becos.errors import InputFileError
+from becos.store import read_record_index
+
+SHAPES = ["tosca/wolf0", "tosca/wolf1", "tosca/horse0", "tosca/horse5"]   # train classes; path wolf0-dog0-horse0
+EDGE = "tosca_dog0_tosca_wolf0_corres.txt"
+
+
+@pytest.fixture(scope="module")
+def built(becos_code, tmp_path_factory):
+    """(workdir, config): catalog, manifest, remeshes, ground truth and pair records of full_full, one chunk,
+    with an annotation folder whose edge files are copies (so a test may edit them)."""
+    work = tmp_path_factory.mktemp("stale-inputs")
+    ann = work / "annotations"
+    ann.mkdir()
+    for p in becos_code.iterdir():
+        (ann / p.name).symlink_to(p)
+    (ann / "precomputed_corr_templates").unlink()
+    shutil.copytree(becos_code / "precomputed_corr_templates", ann / "precomputed_corr_templates")
+    config = bw.resolve_config(tosca_config(becos_code, annotations=str(ann), shapes=SHAPES, setting="full_full",
+                                            n_chunks=1, caps={"train": 6, "val": 1, "test": 1},
+                                            results=str(work / "results")))
+    layout = bw.Layout.of(config)
+    bw.write_catalog_stage(config, layout.catalog)
+    bw.write_manifest_stage(config, "full_full", layout.catalog, layout.manifest("full_full"))
+    plan = bw.Plan.build(config)
+    rows = {(r["dataset"], r["name"]): r for r in plan.catalog.to_dict("records")}
+    for dataset, name, token in plan.remesh_jobs:
+        bw.remesh_stage(config, rows[(dataset, name)], token, layout.remeshed(dataset, name, token))
+    bw.ground_truth_stage(config, "full_full", 0, layout.ground_truth_index("full_full", 0))
+    bw.pairs_stage(config, "full_full", 0, layout.ground_truth_index("full_full", 0), layout.pairs_index("full_full", 0))
+    return work, config
+
+
+def _ground_truth(config) -> tuple[dict, dict]:
+    """pair_id -> ground-truth file bytes, and pair_id -> whether the last run computed it (from its log)."""
+    layout = bw.Layout.of(config)
+    index = json.loads(layout.ground_truth_index("full_full", 0).read_text())
+    return {e["pair_id"]: Path(e["path"]).read_bytes() for e in index["pairs"]}, index
+
+
+def test_an_edited_then_restored_edge_file_recomputes_the_ground_truth_that_reads_it(built, capsys):
+    work, config = built
+    layout = bw.Layout.of(config)
+    plan = bw.Plan.build(config)
+    edge = Path(config["annotations"]) / "precomputed_corr_templates" / EDGE
+    manifest = plan.manifests["full_full"]
+    crossing = set(manifest["pair_id"][manifest["x_name"].str[:3] != manifest["y_name"].str[:3]])
+    assert crossing and len(crossing) < len(manifest)
+    before, _ = _ground_truth(config)
+
+    original = edge.read_text()
+    lines = original.splitlines()
+    for i in range(0, len(lines), 7):                                 # a plausible edit: weights rotated
+        f, a, b, c = lines[i].split()
+        lines[i] = f"{f} {c} {a} {b}"
+    edge.write_text("\n".join(lines) + "\n")
+    capsys.readouterr()
+    counts = bw.ground_truth_stage(config, "full_full", 0, layout.ground_truth_index("full_full", 0))
+    edited, _ = _ground_truth(config)
+    assert counts["computed"] == len(crossing), (counts, capsys.readouterr().err)
+    assert {p for p in before if edited[p] != before[p]} == crossing   # the pairs across wolf and horse changed
+
+    edge.write_text(original)                                        # restored: recomputed, as before
+    counts = bw.ground_truth_stage(config, "full_full", 0, layout.ground_truth_index("full_full", 0))
+    restored, _ = _ground_truth(config)
+    assert counts["computed"] == len(crossing)
+    assert restored == before
+    assert str(edge) in plan.chunk_edge_files("full_full", 0)        # a declared input of the ground_truth rule
+
+
+def test_a_hand_edited_pair_record_is_rebuilt_and_refused_by_the_store_writer(built, capsys, tmp_path):
+    work, config = built
+    layout = bw.Layout.of(config)
+    gt_index, pairs_index = layout.ground_truth_index("full_full", 0), layout.pairs_index("full_full", 0)
+    bw.pairs_stage(config, "full_full", 0, gt_index, pairs_index)     # up to date after the other test
+    entry = json.loads(pairs_index.read_text())["pairs"][0]
+    path = Path(entry["path"])
+    original = path.read_bytes()
+
+    def edit_by_hand():
+        with np.load(path) as data:
+            arrays = {k: data[k] for k in data.files}
+        arrays["corr_01"] = np.roll(arrays["corr_01"], 1)              # meta (and its input key) unchanged
+        np.savez(path, **arrays)
+
+    edit_by_hand()
+    capsys.readouterr()
+    counts = bw.pairs_stage(config, "full_full", 0, gt_index, pairs_index)   # what --forcerun pairs runs
+    err = capsys.readouterr().err
+    assert counts["computed"] == 1, err
+    assert f"{path}: its content no longer matches the digest becos recorded when writing it" in err
+    assert path.read_bytes() == original
+
+    edit_by_hand()                                                     # edited after the job: the store refuses
+    with pytest.raises(InputFileError, match=r"is not the file the pairs job wrote: its digest is") as exc:
+        read_record_index(pairs_index)
+    assert exc.value.path == path and "snakemake --forcerun pairs" in exc.value.fix
+    code = becos_main(["export-zarr", str(pairs_index), "--setting", "full_full", "--out", str(tmp_path / "s.zarr")])
+    assert code == 2 and "is not the file the pairs job wrote" in capsys.readouterr().err
+    path.write_bytes(original)
