@@ -60,7 +60,7 @@ STAGE_KEYS: dict[str, tuple[str, ...]] = {
     "manifest": ("data_dir", "annotations", "datasets", "shapes", "template_file", "combinations", "seed", "usage_scale",
                  "caps", "remesh", "remesh_variants", "n_chunks", "original_settings"),
     "remesh": ("seed", "remesh"),
-    "export": (),
+    "export": ("data_dir",),
     "ground_truth": ("annotations", "template_file", "remesh"),
     "pairs": ("one_axis_rotation", "up_axis", "area_normalised", "propagate_annotations", "annotations",
               "template_file"),
@@ -744,14 +744,20 @@ def store_metadata(config: dict, setting: str) -> dict:
             "datasets": datasets, "generator": "becos workflow"}
 
 
-def export_pairings_stage(config: dict, setting: str, out: Path) -> None:
-    """The manifest in the published pickle schema (share a benchmark as pair lists + code)."""
+def export_pairings_stage(config: dict, setting: str, out: Path, store: Path) -> None:
+    """The manifest in the published pickle schema (share a benchmark as pair lists + code), with the
+    random rotations, cameras and face counts the store's records actually used (docs/released-layout.md,
+    section "Published pair lists")."""
     from becos.catalog import read_catalog
-    from becos.published import write_published_pickle
+    from becos.published import store_pair_facts, write_published_pickle
     from becos.sampling import read_manifest
+    from becos.store import open_benchmark
 
     layout = Layout.of(config)
-    write_published_pickle(read_manifest(layout.manifest(setting)), out, read_catalog(layout.catalog))
+    facts = store_pair_facts(open_benchmark(store))
+    write_published_pickle(read_manifest(layout.manifest(setting)), out, read_catalog(layout.catalog),
+                           random_rotations=facts["random_rotations"], cameras=facts["cameras"],
+                           pair_face_targets=facts["face_targets"], data_root=config.get("data_dir"))
 
 
 # --------------------------------------------------------------------------------------------------
@@ -769,6 +775,8 @@ def configure_parser(parser: argparse.ArgumentParser, name: str) -> None:
         parser.add_argument("--ground-truth", required=True, type=Path, help="the chunk's ground-truth index")
     if name == "manifest":
         parser.add_argument("--catalog", required=True, type=Path)
+    if name == "export-pairings":
+        parser.add_argument("--store", required=True, type=Path, help="the setting's benchmark store")
     if name == "remesh":
         parser.add_argument("--shape", required=True, help="JSON: the shape's catalog row")
         parser.add_argument("--token", required=True, help="v<k> (variant k) or f<n> (target faces n)")
@@ -795,5 +803,5 @@ def run_cli(args: argparse.Namespace) -> int:
         write_text(args.out, json.dumps(store_metadata(config, args.setting), indent=1, sort_keys=True,
                                         default=str) + "\n")
     elif args.command == "export-pairings":
-        export_pairings_stage(config, args.setting, args.out)
+        export_pairings_stage(config, args.setting, args.out, args.store)
     return 0

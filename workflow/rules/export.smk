@@ -78,6 +78,7 @@ rule published_pairings:
     input:
         manifest=f"{RESULTS}/{{setting}}/manifest.csv",
         catalog=LAYOUT.catalog,
+        store=f"{RESULTS}/{{setting}}/benchmark.zarr",
     output:
         f"{RESULTS}/{{setting}}/pairings_{{setting}}.pkl",
     params:
@@ -85,7 +86,8 @@ rule published_pairings:
     log:
         "logs/published_pairings/{setting}.log",
     shell:
-        "becos export-pairings --options {params.options:q} --setting {wildcards.setting} --out {output} > {log} 2>&1"
+        "becos export-pairings --options {params.options:q} --setting {wildcards.setting} --store {input.store}"
+        " --out {output} > {log} 2>&1"
 
 
 rule report:
