@@ -137,6 +137,29 @@ def released_stem(name: str) -> str:
     return name.replace("/", "_")
 
 
+def released_file_stem(side: int, name: str, remesh_variant: int, scanned_in: str | None = None) -> str:
+    """``<side>_<name>`` (``/`` -> ``_``), plus ``_v<k>`` for remesh variant k >= 0 and, for a scanned
+    shape, ``_scan-<pair_id>``: loaders cache per-shape data by file name, and one name can stand for
+    several meshes (remesh variants; every scan is its own mesh). ``0_cat0_v2`` (full),
+    ``1_cat3_v0_scan-0123abcd...`` (scanned), ``0_cat0`` (not remeshed, or remeshed to a published face
+    target)."""
+    stem = f"{int(side)}_{released_stem(name)}"
+    if int(remesh_variant) >= 0:
+        stem += f"_v{int(remesh_variant)}"
+    return stem if scanned_in is None else f"{stem}_scan-{scanned_in}"
+
+
+def mesh_id(dataset: str, name: str, remesh_variant: int, scanned_in: str | None = None) -> str:
+    """The identity of a shape's mesh up to rigid motion: ``<dataset>/<name>``, ``/v<k>`` for remesh
+    variant k >= 0, and for a scanned (partial) shape ``/scan/<pair_id>/<x|y>`` (each scan is its own
+    mesh). Rotation-invariant data (geodesics, spectra) may be cached by it; vertex positions differ
+    per pair (random rotation, alignment) even for one mesh_id."""
+    out = f"{dataset}/{name}"
+    if int(remesh_variant) >= 0:
+        out += f"/v{int(remesh_variant)}"
+    return out if scanned_in is None else f"{out}/scan/{scanned_in}"
+
+
 def psmal_shape_id(index: int, side: int, dataset: str, name: str) -> str:
     """``<pair index>_<side>_<dataset>_<name>``: exactly four ``_``-separated fields, because PSMAL
     loaders split a map file name ``<A>_<B>.vts`` on ``_`` into fields 0-3 (A) and 4-7 (B); ``_``,
@@ -166,14 +189,16 @@ def released_infos(record: PairRecord) -> tuple[dict, dict]:
       remeshed full shape at dataset scale), ``surface_area_after_scaling`` (sqrt-area of the full
       shape in the units of the written vertices: ``surface_area``, or 1.0 for an area-normalised
       record), ``random_rotation`` (3, 3), ``align_rotation`` / ``align_translation`` (None for X;
-      (3, 3), (3,) for Y, row vectors: ``v @ R + t``), ``pair_id``, ``area_normalised``.
+      (3, 3), (3,) for Y, row vectors: ``v @ R + t``), ``pair_id``, ``area_normalised``,
+      ``remesh_variant`` (int, -1 = not a variant), ``mesh_id`` (:func:`mesh_id`).
     - every scanned (partial) shape: ``partial2full`` (V,) int64, ``cam_pos`` (3,) camera position,
       ``camera`` (3, 3) rows position / look-at target / up (the record's ``s_camera``: the shape's
       common frame, before alignment and random rotation).
-    - P2P and P2F, both shapes: ``overlap_mask`` (V,) bool over the shape's OWN vertices and
-      ``overlap_percentage`` its mean (the reference swaps these between the two files).
-    - P2P: ``found_faces_mask_yx`` in X's info = Y's mask, ``found_faces_mask`` in Y's info = X's
-      mask (the released convention, which DeepShapeMatchingKit swaps back); P2F: X's info
+    - every setting, both shapes: ``overlap_mask`` (V,) bool over the shape's OWN vertices and
+      ``overlap_percentage`` its mean (the reference swaps these between the two files, and has none
+      in F2F, where semantic missing parts also leave vertices without a counterpart).
+    - P2P and F2F: ``found_faces_mask_yx`` in X's info = Y's mask, ``found_faces_mask`` in Y's info =
+      X's mask (the released convention, which DeepShapeMatchingKit swaps back); P2F: X's info
       ``found_faces_mask`` = X's own mask over full X.
     """
     setting = record.meta["setting"]
@@ -193,18 +218,21 @@ def released_infos(record: PairRecord) -> tuple[dict, dict]:
             "align_translation": None if s == "x" else _f64(record["y_align_translation"]),
             "pair_id": str(record.pair_id),
             "area_normalised": normalised,
+            "remesh_variant": int(record[f"{s}_remesh_variant"]),
         }
     scanned = {"partial_partial": ("x", "y"), "partial_full": ("y",), "full_full": ()}[setting]
+    for s, _ in SIDES:
+        infos[s]["mesh_id"] = mesh_id(infos[s]["org_dataset"], infos[s]["name"], infos[s]["remesh_variant"],
+                                      f"{record.pair_id}/{s}" if s in scanned else None)
     for s in scanned:
         camera = _f64(record[f"{s}_camera"])
         infos[s]["partial2full"] = np.array(record[f"{s}_partial_to_full"], dtype=np.int64)
         infos[s]["cam_pos"] = camera[0].copy()
         infos[s]["camera"] = camera
-    if setting != "full_full":
-        for s, _ in SIDES:
-            infos[s]["overlap_mask"] = np.array(record[f"{s}_overlap_mask"], dtype=bool)
-            infos[s]["overlap_percentage"] = float(record[f"{s}_overlap"])
-    if setting == "partial_partial":
+    for s, _ in SIDES:
+        infos[s]["overlap_mask"] = np.array(record[f"{s}_overlap_mask"], dtype=bool)
+        infos[s]["overlap_percentage"] = float(np.mean(infos[s]["overlap_mask"])) if len(infos[s]["overlap_mask"]) else 0.0
+    if setting in ("partial_partial", "full_full"):
         infos["x"]["found_faces_mask_yx"] = np.array(record["y_overlap_mask"], dtype=bool)
         infos["y"]["found_faces_mask"] = np.array(record["x_overlap_mask"], dtype=bool)
     elif setting == "partial_full":
@@ -417,7 +445,8 @@ def write_released(records: Iterable[PairRecord], out_dir: str | Path, *, settin
 def _write_released_pair(folder: Path, record: PairRecord, setting: str) -> None:
     infos = released_infos(record)
     for (s, k), info in zip(SIDES, infos):
-        stem = f"{k}_{released_stem(info['name'])}"
+        stem = released_file_stem(k, info["name"], info["remesh_variant"],
+                                  record.pair_id if "partial2full" in info else None)
         (folder / f"{stem}.off").write_text(off_text(record[f"{s}_vertices"], record[f"{s}_faces"]),
                                             encoding="utf-8")
         (folder / f"{stem}_info.pkl").write_bytes(info_pickle_bytes(info))

@@ -137,7 +137,12 @@ def test_released_round_trip(setting, records, tmp_path):
         r = by_id[pair["row"]["pair_id"]]
         assert r.meta["split"] == split
         assert pair["row"]["x"] == r.meta["x"]["name"] and pair["row"]["y"] == r.meta["y"]["name"]
-        assert pair["file0"] == f"0_{r.meta['x']['name']}.off" and pair["file1"] == f"1_{r.meta['y']['name']}.off"
+        variants = int(r["x_remesh_variant"]), int(r["y_remesh_variant"])
+        assert variants == (0, 0)  # remesh variant 0 of cat0 and cat3: "_v0" in the file names
+        scanned = {"full_full": (), "partial_full": ("y",), "partial_partial": ("x", "y")}[setting]
+        for k, s in ((0, "x"), (1, "y")):  # each scan is its own mesh: the pair id in its file name
+            scan = f"_scan-{r.pair_id}" if s in scanned else ""
+            assert pair[f"file{k}"] == f"{k}_{r.meta[s]['name']}_v0{scan}.off"
         for k, s in ((0, "x"), (1, "y")):
             v, f = pair[f"off{k}"]
             assert v.dtype == np.float64 and np.array_equal(v, r[f"{s}_vertices"])  # exact
@@ -156,6 +161,7 @@ def test_released_round_trip(setting, records, tmp_path):
             assert type(info["surface_area"]) is float and info["pair_id"] == r.pair_id
             assert np.array_equal(info["random_rotation"], r[f"{s}_random_rotation"])
             assert info["random_rotation"].flags.writeable
+            assert info["remesh_variant"] == 0 and info["mesh_id"].startswith(f"tosca/{info['name']}/v0")
         assert i0["align_rotation"] is None and i0["align_translation"] is None
         assert np.array_equal(i1["align_rotation"], r["y_align_rotation"])
         assert np.array_equal(i1["align_translation"], r["y_align_translation"])
@@ -168,13 +174,13 @@ def test_released_round_trip(setting, records, tmp_path):
                 assert np.array_equal(info["cam_pos"], r[f"{s}_camera"][0]) and info["cam_pos"].shape == (3,)
             else:
                 assert "partial2full" not in info and "cam_pos" not in info
-            if setting == "full_full":
-                assert not {"overlap_mask", "found_faces_mask", "found_faces_mask_yx"} & set(info)
-            else:  # each shape's OWN mask under the reference's key (the reference swaps them in P2P)
-                assert info["overlap_mask"].dtype == bool and np.array_equal(info["overlap_mask"], r[f"{s}_overlap_mask"])
-                assert len(info["overlap_mask"]) == len(r[f"{s}_vertices"])
-                assert info["overlap_percentage"] == pytest.approx(info["overlap_mask"].mean())
-        if setting == "partial_partial":  # released placement: the other shape's mask
+            # every setting: each shape's OWN mask under the reference's key (the reference swaps them in
+            # P2P and has none in F2F)
+            assert info["overlap_mask"].dtype == bool and np.array_equal(info["overlap_mask"], r[f"{s}_overlap_mask"])
+            assert len(info["overlap_mask"]) == len(r[f"{s}_vertices"])
+            assert info["overlap_percentage"] == pytest.approx(info["overlap_mask"].mean())
+            assert info["mesh_id"].endswith(f"/scan/{r.pair_id}/{s}") == (s in scanned)
+        if setting in ("partial_partial", "full_full"):  # released placement: the other shape's mask
             assert np.array_equal(i0["found_faces_mask_yx"], r["y_overlap_mask"]) and "found_faces_mask" not in i0
             assert np.array_equal(i1["found_faces_mask"], r["x_overlap_mask"]) and "found_faces_mask_yx" not in i1
         if setting == "partial_full":
@@ -402,3 +408,78 @@ def test_cli_exports_a_store(records, pair_record_files, small_record, tmp_path,
     (row,) = read_ids(tmp_path / "psmal")
     d = np.load(tmp_path / "psmal" / "test" / "geodesics" / f"{row['y_id']}.npy")
     assert d.shape == (len(small_record["y_vertices"]),) * 2
+
+
+# --------------------------------------------------------------------------------------------------
+# one name, several remesh variants; F2F masks (semantic missing parts)
+
+
+def _ball_records(setting: str) -> list[PairRecord]:
+    """"ball" remeshed twice (variant 0: 162 vertices, variant 1: 642) paired with "egg"; egg vertices
+    with y > 0.25 are a semantic missing part (no counterpart on the ball). Pairs ball0a, ball0b
+    (variant 0, two seeds) and ball1 (variant 1)."""
+    import trimesh
+    from scipy.spatial import cKDTree
+
+    from becos.mesh import TriMesh
+    from becos.pairs import PairOptions, ShapeInstance, build_pair
+    from becos.surface_map import SurfaceMap
+
+    coarse, fine = trimesh.creation.icosphere(subdivisions=2), trimesh.creation.icosphere(subdivisions=3)
+    fv, ff = np.asarray(fine.vertices), np.asarray(fine.faces)
+    egg = ShapeInstance("synthetic", "egg", "blob", "egg", TriMesh(fv * [0.6, 0.5, 0.45], ff), remesh_variant=0)
+    out = []
+    for pair_id, variant, sphere, seed in (("ball0a", 0, coarse, 1), ("ball0b", 0, coarse, 2), ("ball1", 1, fine, 3)):
+        v, f = np.asarray(sphere.vertices), np.asarray(sphere.faces)
+        assert np.allclose(v, fv[:len(v)])  # icosphere levels share their first vertices
+        ball = ShapeInstance("synthetic", "ball", "blob", "ball", TriMesh(v * 0.5, f), remesh_variant=variant)
+        from_egg = cKDTree(v).query(fv)[1]
+        from_egg[fv[:, 1] > 0.5] = -1  # the missing part
+        gt_xy = SurfaceMap.from_vertex_indices(np.arange(len(v)), ff)
+        gt_yx = SurfaceMap.from_vertex_indices(from_egg, f)
+        out.append(build_pair(ball, egg, gt_xy, gt_yx, pair_id=pair_id, seed=seed, split="test",
+                              options=PairOptions(setting=setting)))
+    return out
+
+
+def _distances(vertices: np.ndarray) -> np.ndarray:
+    """A rotation-invariant per-shape quantity (stands in for a geodesic matrix)."""
+    return np.linalg.norm(vertices[:, None] - vertices[None], axis=2)
+
+
+@pytest.mark.parametrize("setting", ["full_full", "partial_full"])
+def test_name_keyed_cache_and_f2f_masks(setting, tmp_path):
+    """A loader that caches a per-shape matrix under the OFF file's stem (as geo-lora caches geodesics
+    under ``<off stem>.npy``) gets each variant's own mesh; masks are read where DSMK would assume ones."""
+    import trimesh
+
+    recs = _ball_records(setting)
+    out = write_released(recs, tmp_path / setting, setting=setting)
+    cache: dict[str, np.ndarray] = {}
+    hits = 0
+    by_name: dict[str, int] = {}
+    for row in read_ids(out):
+        folder = out / row["split"] / row["index"]
+        offs = sorted(folder.glob("*.off"))
+        for k, off in enumerate(offs):
+            vertices = np.asarray(trimesh.load(off, process=False, maintain_order=True).vertices)
+            info = read_info(off.with_name(off.stem + "_info.pkl"))
+            if off.stem in cache:
+                hits += 1
+                # a cache hit must be the same mesh (up to the pair's rigid motion)
+                np.testing.assert_allclose(cache[off.stem], _distances(vertices), atol=1e-9)
+            else:
+                cache[off.stem] = _distances(vertices)
+            by_name.setdefault(info["name"], len(vertices))
+            if k == 0:  # the ball: one name, two meshes, told apart by file name and info
+                assert info["name"] == "ball" and off.stem == f"0_ball_v{info['remesh_variant']}"
+                assert info["mesh_id"] == f"synthetic/ball/v{info['remesh_variant']}"
+        # masks: both shapes carry their own; where corres is -1 the mask is 0 (not the all-ones default)
+        mask_egg = read_info(offs[1].with_name(offs[1].stem + "_info.pkl"))["overlap_mask"]
+        corr = np.load(folder / "corres_10.npy")
+        assert np.array_equal(mask_egg, corr != -1) and 0 < (~mask_egg).sum() < len(mask_egg)
+    eggs = ["1_egg_v0"] if setting == "full_full" else [f"1_egg_v0_scan-{r.pair_id}" for r in recs]
+    assert sorted(cache) == sorted(["0_ball_v0", "0_ball_v1", *eggs])
+    assert hits == (3 if setting == "full_full" else 1)  # ball v0 again (+ the full egg twice in F2F)
+    # keyed by name alone, the cache would have served ball v0's 162 vertices to ball v1 (642)
+    assert by_name["ball"] == 162 and len(cache["0_ball_v1"]) == 642
