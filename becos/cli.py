@@ -59,6 +59,7 @@ SUBCOMMANDS: tuple[tuple[str, str, str], ...] = (
     ("validate", "becos.validate", "check a benchmark store; non-zero exit with a list of problems"),
     ("export-released", "becos.export", "write a store in the released BeCoS folder layout"),
     ("export-psmal", "becos.export", "write a store as PSMAL-style shapes/*.off + maps/*.vts"),
+    ("export-geodesics", "becos.export", "write geodesic matrices of a store's shapes in the loaders' layout"),
     ("report", "becos.report", "counts, overlap histogram and renders of a store"),
     ("evaluate", "becos.evaluate", "score predictions against a benchmark store"),
     ("baseline", "becos.baselines", "run a baseline matcher on a benchmark store"),

@@ -548,15 +548,125 @@ def _symmetrise(d: np.ndarray, block: int) -> None:
             d[j:j + block, i:i + block] = mean.T
 
 
-def write_geodesics(records: Iterable[PairRecord], out_dir: str | Path, method: str = "heat", *,
-                    overwrite: bool = False, progress: bool = False) -> Path:
-    """Write ``<out>/<split>/geodesics/<shape id>.npy``: :func:`geodesic_matrix` of both shapes of
-    every pair, with the shape ids of :func:`write_psmal` (pass the same records).
+GEODESIC_FOLDER = "geodesic_dist_matrices"
+"""Folder of the loaders' geodesic layout (:func:`write_geodesic_matrices`)."""
+_GEODESIC_TASK_ROWS = 1024
+"""Distance rows per parallel task (one solver factorisation each: ~0.2 s against ~5 s of rows)."""
 
-    Expensive (heat: a few ms per kept vertex; a 10k-vertex shape takes about a minute on 2 cores and
-    400 MB on disk), so it only runs when asked. ``out_dir`` may already hold a PSMAL export; each
-    ``<split>/geodesics`` folder appears whole (built aside, renamed in). Existing geodesics folders
-    are an error unless ``overwrite``.
+
+@dataclass(frozen=True)
+class _GeodesicShape:
+    """One shape of one pair whose matrix is to be written."""
+
+    split: str
+    pair_id: str
+    side: int          # 0 = X, 1 = Y
+    dataset: str
+    name: str
+    stem: str          # released file stem (:func:`released_file_stem`)
+    mesh_id: str
+    key: str           # the full mesh up to rigid motion (cache key of its rows)
+    p2f: np.ndarray    # (V,) its vertices on the full mesh
+    sqrt_area: float   # the full shape's sqrt-area in the units of the record's vertices
+
+
+def _full_mesh_key(vertices: np.ndarray, faces: np.ndarray, dataset: str, name: str, variant: int) -> str:
+    """A file-name-safe key of a full mesh up to rigid motion (:func:`becos.geodesics.shape_key`)."""
+    import hashlib
+
+    from becos.geodesics import shape_key
+    from becos.mesh import TriMesh
+
+    digest = hashlib.sha1(repr(shape_key(TriMesh(vertices, faces))).encode()).hexdigest()[:16]
+    return f"{_id_field(dataset)}_{_id_field(name)}_v{int(variant)}_{digest}"
+
+
+def _geodesic_plan(records: Iterable[PairRecord], splits) -> tuple[list[_GeodesicShape], dict, dict, dict]:
+    """Shapes to write, unique full meshes ``{key: (vertices, faces)}``, the rows each needs
+    ``{key: sorted unique full vertices}`` (the union of its shapes' ``partial_to_full``) and the pair
+    numbers ``{(split, pair_id): index}`` of ALL records (ascending pair_id per split, as every export
+    numbers pairs; so a split subset keeps the whole export's numbering). Streams the records."""
+    keep = None if splits is None else {str(s) for s in splits}
+    shapes, meshes, needed, ids = [], {}, {}, {}
+    for record in records:
+        _check_record(record, None)
+        ids.setdefault(str(record.meta["split"]), []).append(str(record.pair_id))
+        if keep is not None and str(record.meta["split"]) not in keep:
+            continue
+        infos = released_infos(record)
+        normalised = bool(record.meta.get("area_normalised", False))
+        for (s, k), info in zip(SIDES, infos):
+            vertices, faces = full_shape(record, s)
+            key = _full_mesh_key(vertices, faces, info["org_dataset"], info["name"], info["remesh_variant"])
+            meshes.setdefault(key, (np.array(vertices, dtype=np.float64), np.array(faces, dtype=np.int64)))
+            p2f = np.asarray(record[f"{s}_partial_to_full"], dtype=np.int64)
+            needed.setdefault(key, []).append(p2f)
+            scanned = "partial2full" in info
+            shapes.append(_GeodesicShape(
+                str(record.meta["split"]), str(record.pair_id), k, info["org_dataset"], info["name"],
+                released_file_stem(k, info["name"], info["remesh_variant"], record.pair_id if scanned else None),
+                info["mesh_id"], key, p2f, 1.0 if normalised else float(record[f"{s}_full_sqrt_area"])))
+    numbers = {}
+    for split, pair_ids in ids.items():
+        pair_ids.sort()
+        dup = sorted({a for a, b in zip(pair_ids, pair_ids[1:]) if a == b})
+        if dup:
+            raise ExportError(f"split {split}: pair ids {dup[:5]} occur more than once. Fix: pass each pair once")
+        numbers.update({(split, pid): i for i, pid in enumerate(pair_ids)})
+    return shapes, meshes, {key: np.unique(np.concatenate(v)) for key, v in needed.items()}, numbers
+
+
+def _geodesic_task(args):
+    from becos.geodesics import distance_rows
+
+    key, start, vertices, faces, sources, method = args
+    return key, start, distance_rows(vertices, faces, sources, method)
+
+
+def _compute_geodesic_rows(meshes: dict, needed: dict, method: str, jobs: int, folder: Path,
+                           progress: bool) -> dict[str, np.ndarray]:
+    """``{key: (len(needed[key]), V) float32 memmap}`` of distance rows, computed in tasks of
+    :data:`_GEODESIC_TASK_ROWS` rows by ``jobs`` processes (1: in this process), in ``folder``."""
+    import time
+    from concurrent.futures import ProcessPoolExecutor
+
+    out = {key: np.lib.format.open_memmap(folder / f"{key}.npy", mode="w+", dtype=np.float32,
+                                          shape=(len(needed[key]), len(meshes[key][0])))
+           for key in meshes}
+    tasks = [(key, start, *meshes[key], needed[key][start:start + _GEODESIC_TASK_ROWS], method)
+             for key in sorted(meshes, key=lambda k: -len(needed[k]))
+             for start in range(0, len(needed[key]), _GEODESIC_TASK_ROWS)]
+    started, done, total = time.monotonic(), 0, sum(len(r) for r in needed.values())
+    results = (map(_geodesic_task, tasks) if jobs <= 1
+               else ProcessPoolExecutor(max_workers=jobs).map(_geodesic_task, tasks))
+    for key, start, rows in results:
+        out[key][start:start + len(rows)] = rows
+        done += len(rows)
+        if progress:
+            print(f"geodesics ({method}, {jobs} jobs): {done}/{total} rows of {len(meshes)} meshes, "
+                  f"{time.monotonic() - started:.0f} s", file=sys.stderr, flush=True)
+    return out
+
+
+def _shape_matrix(shape: _GeodesicShape, rows: np.ndarray, matrix: np.ndarray) -> np.ndarray:
+    """(V, V) float32 symmetrised matrix of a shape's vertices from its full mesh's rows."""
+    sub = np.asarray(matrix[np.searchsorted(rows, shape.p2f)][:, shape.p2f], dtype=np.float64)
+    sym = (0.5 * (sub + sub.T)).astype(np.float32)
+    np.fill_diagonal(sym, 0.0)
+    return sym
+
+
+def write_geodesics(records: Iterable[PairRecord], out_dir: str | Path, method: str = "heat", *,
+                    overwrite: bool = False, progress: bool = False, splits=None, jobs: int = 1) -> Path:
+    """Write ``<out>/<split>/geodesics/<shape id>.npy``: (V, V) float32 geodesic distances of both
+    shapes of every pair (units of the record's vertices), with the shape ids of :func:`write_psmal`
+    (pass the same records).
+
+    Each distinct full mesh (up to rigid motion: a remesh variant recurring across pairs) is solved
+    once, for the union of the vertices its shapes keep, by ``jobs`` processes; ``splits`` limits the
+    export to those splits (numbering stays that of the whole split). ``out_dir`` may already hold a
+    PSMAL export; each ``<split>/geodesics`` folder appears whole (built aside, renamed in). Existing
+    geodesics folders are an error unless ``overwrite``.
     """
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
@@ -568,25 +678,16 @@ def write_geodesics(records: Iterable[PairRecord], out_dir: str | Path, method: 
     out.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(dir=out, prefix=".geodesics.tmp-"))
     try:
-        staging = _Staging(tmp, f"geodesics ({method})", progress)
-        for record in records:
-            _check_record(record, None)
-            folder = staging.add(record)
-            for s, k in SIDES:
-                n = len(record[f"{s}_partial_to_full"])
-                matrix = np.lib.format.open_memmap(folder / f"{k}.npy", mode="w+", dtype=np.float32, shape=(n, n))
-                geodesic_matrix(record, s, method, out=matrix)
-                matrix.flush()
-                del matrix
+        shapes, meshes, needed, numbers = _geodesic_plan(records, splits)
+        rows = _compute_geodesic_rows(meshes, needed, method, jobs, tmp, progress)
         built = {}
-        for split, entries in staging.by_split().items():
-            target = tmp / split / "geodesics"
-            target.mkdir(parents=True)
-            for i, e in enumerate(entries):
-                os.replace(e.folder / "0.npy", target / f"{psmal_shape_id(i, 0, e.x_dataset, e.x_name)}.npy")
-                os.replace(e.folder / "1.npy", target / f"{psmal_shape_id(i, 1, e.y_dataset, e.y_name)}.npy")
-            built[split] = target
-        staging.finish()
+        for sh in shapes:
+            target = tmp / sh.split / "geodesics"
+            target.mkdir(parents=True, exist_ok=True)
+            built[sh.split] = target
+            shape_id = psmal_shape_id(numbers[(sh.split, sh.pair_id)], sh.side, sh.dataset, sh.name)
+            np.save(target / f"{shape_id}.npy", _shape_matrix(sh, needed[sh.key], rows[sh.key]))
+        del rows
         for split, target in built.items():
             final = out / split / "geodesics"
             final.parent.mkdir(exist_ok=True)
@@ -604,12 +705,56 @@ def write_geodesics(records: Iterable[PairRecord], out_dir: str | Path, method: 
     return out
 
 
+def write_geodesic_matrices(records: Iterable[PairRecord], out_dir: str | Path, method: str = "heat", *,
+                            splits=None, jobs: int = 1, metadata: Mapping | None = None,
+                            overwrite: bool = False, progress: bool = False) -> Path:
+    """Geodesic matrices in the layout loaders read (``docs/released-layout.md``, section 3):
+
+    ``<out>/geodesic_dist_matrices/<stem>.npy``: (V, V) float32 distances between the vertices of the
+    released file ``<stem>.off`` (:func:`released_file_stem`; measured on the shape's FULL mesh),
+    divided by the full shape's sqrt-area (the released ``surface_area_after_scaling``): the file
+    geo-lora's ``BecosDataset`` loads from ``./geodesic_dist_matrices/<off stem>.npy`` instead of
+    computing it. ``<out>/geodesic_dist_matrices/index.csv`` lists every matrix with its split, pair
+    index, pair_id, mesh_id, vertex count and the sqrt-area (multiply to get the record's units);
+    ``<out>/logs/config.yaml`` as the other exports.
+
+    Each distinct full mesh is solved once for the union of the vertices its shapes keep, by ``jobs``
+    processes; ``splits`` (e.g. ``["test"]``) limits the export to those splits.
+    """
+    out = Path(out_dir)
+    with _staged_dir(out, overwrite) as tmp:
+        shapes, meshes, needed, numbers = _geodesic_plan(records, splits)
+        work = tmp / ".rows"
+        work.mkdir()
+        rows = _compute_geodesic_rows(meshes, needed, method, jobs, work, progress)
+        folder = tmp / GEODESIC_FOLDER
+        folder.mkdir()
+        table, written = [], {}
+        for sh in shapes:
+            table.append([sh.split, numbers[(sh.split, sh.pair_id)], sh.pair_id, sh.side, sh.stem, sh.mesh_id,
+                          len(sh.p2f), repr(sh.sqrt_area)])
+            if sh.stem in written:  # one full mesh in several pairs: one file
+                continue
+            written[sh.stem] = sh.key
+            matrix = _shape_matrix(sh, needed[sh.key], rows[sh.key]) / np.float32(sh.sqrt_area)
+            np.save(folder / f"{sh.stem}.npy", matrix.astype(np.float32, copy=False))
+        del rows
+        shutil.rmtree(work)
+        _write_ids(folder / "index.csv", ["split", "index", "pair_id", "side", "stem", "mesh_id", "n_vertices",
+                                          "sqrt_area"], table)
+        counts = {split: len({r[2] for r in table if r[0] == split}) for split in dict.fromkeys(r[0] for r in table)}
+        _write_log(tmp, "becos.export.write_geodesic_matrices",
+                   f"becos geodesic matrices ({method}, divided by sqrt-area)", counts, None, metadata)
+    return out
+
+
 # --------------------------------------------------------------------------------------------------
 # command line
 
 
 def configure_parser(parser: argparse.ArgumentParser, name: str) -> argparse.ArgumentParser:
-    """Arguments of ``becos export-released STORE OUT`` and ``becos export-psmal STORE OUT [--geodesics]``."""
+    """Arguments of ``becos export-released STORE OUT``, ``becos export-psmal STORE OUT [--geodesics]``
+    and ``becos export-geodesics STORE OUT``."""
     from becos.geodesics import METHODS
 
     parser.add_argument("store", type=Path, help="benchmark store written by `becos export-zarr`")
@@ -617,13 +762,18 @@ def configure_parser(parser: argparse.ArgumentParser, name: str) -> argparse.Arg
         parser.add_argument("out", type=Path, help="output folder, best named after the setting "
                                                    "(e.g. BeCoS/partial_partial): some loaders read the setting "
                                                    "from the path")
-    else:
+    elif name == "export-psmal":
         parser.add_argument("out", type=Path, help="output folder (<out>/<split>/shapes, maps)")
         parser.add_argument("--geodesics", action="store_true",
-                            help="also write (V, V) float32 geodesic matrices per shape (slow: ~1 min and "
-                                 "400 MB per 10k-vertex shape)")
+                            help="also write (V, V) float32 geodesic matrices per shape (<split>/geodesics)")
+    else:
+        parser.add_argument("out", type=Path, help="output folder (<out>/geodesic_dist_matrices/<stem>.npy)")
+    if name in ("export-psmal", "export-geodesics"):
         parser.add_argument("--geodesic-method", choices=METHODS, default="heat",
                             help="geodesic estimator (default: heat)")
+        parser.add_argument("--splits", nargs="+", metavar="SPLIT",
+                            help="geodesics of these splits only (e.g. test); default: every split")
+        parser.add_argument("--jobs", type=int, default=1, help="processes computing distance rows (default 1)")
     parser.add_argument("--force", action="store_true", help="replace OUT if it exists")
     parser.set_defaults(export_kind=name)
     return parser
@@ -634,6 +784,17 @@ def run_cli(args: argparse.Namespace) -> int:
 
     bench = open_benchmark(args.store)
     out = Path(args.out)
+    if getattr(args, "jobs", 1) < 1:
+        raise ExportError(f"--jobs must be at least 1, got {args.jobs}")
+    if args.export_kind == "export-geodesics":
+        write_geodesic_matrices(bench.records(), out, args.geodesic_method, splits=args.splits, jobs=args.jobs,
+                                metadata=bench.metadata, overwrite=args.force, progress=True)
+        with open(out / GEODESIC_FOLDER / "index.csv", encoding="utf-8", newline="") as fh:
+            rows = list(csv.DictReader(fh))
+        print(json.dumps({"out": str(out.resolve()), "setting": bench.setting, "method": args.geodesic_method,
+                          "splits": args.splits, "matrices": len({r["stem"] for r in rows}),
+                          "bytes": sum(p.stat().st_size for p in (out / GEODESIC_FOLDER).glob("*.npy"))}))
+        return 0
     if args.export_kind == "export-released":
         if bench.setting not in out.resolve().parts:
             print(f"becos export-released: note: DeepShapeMatchingKit's BeCoSDataset reads the setting from "
@@ -644,7 +805,8 @@ def run_cli(args: argparse.Namespace) -> int:
     else:
         write_psmal(bench.records(), out, metadata=bench.metadata, overwrite=args.force, progress=True)
         if args.geodesics:
-            write_geodesics(bench.records(), out, args.geodesic_method, overwrite=args.force, progress=True)
+            write_geodesics(bench.records(), out, args.geodesic_method, overwrite=args.force, progress=True,
+                            splits=args.splits, jobs=args.jobs)
     with open(out / IDS_FILE, encoding="utf-8", newline="") as fh:
         splits = [row["split"] for row in csv.DictReader(fh)]
     result = {"out": str(out.resolve()), "setting": bench.setting,

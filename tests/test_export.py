@@ -408,6 +408,13 @@ def test_cli_exports_a_store(records, pair_record_files, small_record, tmp_path,
     (row,) = read_ids(tmp_path / "psmal")
     d = np.load(tmp_path / "psmal" / "test" / "geodesics" / f"{row['y_id']}.npy")
     assert d.shape == (len(small_record["y_vertices"]),) * 2
+    assert main(["export-geodesics", str(small_store), str(tmp_path / "geo"), "--splits", "train"]) == 0
+    result = json.loads(capsys.readouterr().out)
+    assert result["matrices"] == 0 and result["splits"] == ["train"]   # the small pair is in "test"
+    assert main(["export-geodesics", str(small_store), str(tmp_path / "geo"), "--force", "--jobs", "2"]) == 0
+    result = json.loads(capsys.readouterr().out)
+    assert result["matrices"] == 2 and result["bytes"] > 4 * len(small_record["y_vertices"]) ** 2
+    assert main(["export-geodesics", str(small_store), str(tmp_path / "geo2"), "--jobs", "0"]) == 2
 
 
 # --------------------------------------------------------------------------------------------------
@@ -483,3 +490,54 @@ def test_name_keyed_cache_and_f2f_masks(setting, tmp_path):
     assert hits == (3 if setting == "full_full" else 1)  # ball v0 again (+ the full egg twice in F2F)
     # keyed by name alone, the cache would have served ball v0's 162 vertices to ball v1 (642)
     assert by_name["ball"] == 162 and len(cache["0_ball_v1"]) == 642
+
+
+def geolora_cached_geodesics_path(full_file: str) -> str:
+    """Where geo-lora's ``BecosDataset`` (P2F mode) loads a full shape's geodesic matrix instead of
+    computing it: ``./geodesic_dist_matrices/<OFF file name before ".off">.npy``, relative to the
+    working folder, for the first ``.off`` of the sorted pair folder (geo-lora ``utils/shape_dataset.py``,
+    ``BaseDataset.get_geodesic_distmat`` with ``loading=True``; licence not stated in our index). The
+    matrix it computes otherwise is divided by the shape's sqrt-area (``normalize=True``)."""
+    return "./geodesic_dist_matrices/" + full_file.split(".off")[0] + ".npy"
+
+
+def test_geodesic_matrices_where_loaders_read_them(tmp_path, monkeypatch):
+    import trimesh
+
+    from becos.export import GEODESIC_FOLDER, write_geodesic_matrices
+
+    recs = _ball_records("partial_full")
+    recs[2] = _copy(recs[2], recs[2].pair_id, "train")     # ball v1 in train: left out by splits=["test"]
+    released = write_released(recs, tmp_path / "BeCoS" / "partial_full", setting="partial_full")
+    out = write_geodesic_matrices(recs, tmp_path / "geodesics", splits=["test"], jobs=2)
+    with open(out / GEODESIC_FOLDER / "index.csv", encoding="utf-8", newline="") as fh:
+        index = list(csv.DictReader(fh))
+    assert {row["split"] for row in index} == {"test"} and len(index) == 4   # 2 test pairs x 2 shapes
+    files = sorted(p.name for p in (out / GEODESIC_FOLDER).glob("*.npy"))
+    assert len(files) == 3   # ball v0 once (two pairs), two scans of the egg
+    monkeypatch.chdir(out)   # geo-lora reads ./geodesic_dist_matrices relative to its working folder
+    by_id = {r.pair_id: r for r in recs}
+    for row in read_ids(released):
+        if row["split"] != "test":
+            continue
+        r = by_id[row["pair_id"]]
+        folder = released / row["split"] / row["index"]
+        offs = sorted(p.name for p in folder.glob("*.off"))
+        for k, (s, off) in enumerate(zip(("x", "y"), offs)):
+            d = np.load(geolora_cached_geodesics_path(off))
+            info = read_info(folder / off.replace(".off", "_info.pkl"))
+            vertices = np.asarray(trimesh.load(folder / off, process=False, maintain_order=True).vertices)
+            assert d.dtype == np.float32 and d.shape == (len(vertices),) * 2
+            assert np.array_equal(d, d.T) and not np.diag(d).any()
+            (entry,) = [e for e in index if e["pair_id"] == r.pair_id and e["side"] == str(k)]
+            assert float(entry["sqrt_area"]) == info["surface_area_after_scaling"] and entry["mesh_id"] == info["mesh_id"]
+            if s == "x":  # the ball: a sphere of radius 0.5, geodesics are great-circle arcs
+                unit = vertices / np.linalg.norm(vertices, axis=1, keepdims=True)
+                arc = 0.5 * np.arccos(np.clip(unit @ unit.T, -1, 1)) / info["surface_area_after_scaling"]
+                far = arc > 0.05
+                assert abs(np.median(d[far] / arc[far]) - 1) < 0.05
+            else:  # a scan: distances on the FULL egg between its kept vertices
+                p2f = info["partial2full"]
+                full = _edge_dijkstra(r["y_full_vertices"], r["y_full_faces"])[np.ix_(p2f, p2f)]
+                ratio = full[d > 0.05] / (d[d > 0.05] * info["surface_area_after_scaling"])
+                assert 1.0 < np.median(ratio) < 1.2   # edge paths a little longer than surface geodesics

@@ -63,15 +63,31 @@ rule psmal_layout:
         validation=f"{RESULTS}/{{setting}}/validation.json",
     output:
         directory(f"{RESULTS}/{{setting}}/psmal"),
-    params:
-        geodesics="--geodesics" if EXPORTS["geodesics"] else "",
     resources:
         mem_mb=RESOURCES.mem_mb("psmal_layout"),
         runtime=RESOURCES.runtime("psmal_layout", n_pairs=setting_pairs),
     log:
         "logs/psmal_layout/{setting}.log",
     shell:
-        "becos export-psmal {input.store} {output} {params.geodesics} > {log} 2>&1"
+        "becos export-psmal {input.store} {output} > {log} 2>&1"
+
+
+rule geodesics:
+    input:
+        store=f"{RESULTS}/{{setting}}/benchmark.zarr",
+        validation=f"{RESULTS}/{{setting}}/validation.json",
+    output:
+        directory(f"{RESULTS}/{{setting}}/geodesics"),
+    params:
+        splits=" ".join(["--splits", *EXPORTS["geodesic_splits"]]) if EXPORTS["geodesic_splits"] else "",
+    threads: max(1, workflow.cores)
+    resources:
+        mem_mb=RESOURCES.mem_mb("geodesics"),
+        runtime=RESOURCES.runtime("geodesics", n_pairs=setting_pairs),
+    log:
+        "logs/geodesics/{setting}.log",
+    shell:
+        "becos export-geodesics {input.store} {output} {params.splits} --jobs {threads} > {log} 2>&1"
 
 
 rule published_pairings:
