@@ -60,6 +60,8 @@ SUBCOMMANDS: tuple[tuple[str, str, str], ...] = (
     ("export-released", "becos.export", "write a store in the released BeCoS folder layout"),
     ("export-psmal", "becos.export", "write a store as PSMAL-style shapes/*.off + maps/*.vts"),
     ("export-geodesics", "becos.export", "write geodesic matrices of a store's shapes in the loaders' layout"),
+    ("export-ulrssm", "becos.export", "write a store ULRSSM style: one off/ corres/ [dist/] root per pair"),
+    ("export-dpfm", "becos.export", "write a store DPFM style: shapes/*.off + maps/<x>_<y>.map"),
     ("report", "becos.report", "counts, overlap histogram and renders of a store"),
     ("evaluate", "becos.evaluate", "score predictions against a benchmark store"),
     ("baseline", "becos.baselines", "run a baseline matcher on a benchmark store"),

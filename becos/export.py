@@ -468,9 +468,34 @@ def write_psmal(records: Iterable[PairRecord], out_dir: str | Path, *, metadata:
 
     Args: as :func:`write_released` (records of any setting; numbering per split by pair_id).
     """
+    return _write_shapes_and_maps(records, out_dir, psmal_shape_id, "vts", "write_psmal", "PSMAL-style",
+                                  metadata, overwrite, progress)
+
+
+def dpfm_shape_id(index: int, side: int, dataset: str, name: str) -> str:
+    """``<pair index>-<side>-<dataset>-<name>`` with no ``_`` at all (``_``, ``/``, ``\\`` and white
+    space become ``-``): DPFM's loader splits a map name ``<A>_<B>`` at its LAST ``_`` and others
+    (CP2P loaders) at every ``_``, so an id without ``_`` survives both."""
+    return "-".join([str(int(index)), str(int(side)), _id_field(dataset), _id_field(name)])
+
+
+def write_dpfm(records: Iterable[PairRecord], out_dir: str | Path, *, metadata: Mapping | None = None,
+               overwrite: bool = False, progress: bool = False) -> Path:
+    """Write the records DPFM style (``docs/released-layout.md``, section DPFM): per split
+    ``<out>/<split>/shapes/<id>.off`` and ``<out>/<split>/maps/<A>_<B>.map`` in both directions (one
+    line per vertex of A: the 0-based vertex of B, -1 = none, as DPFM's SHREC'16 maps), ids
+    :func:`dpfm_shape_id`; ``ids.csv`` and ``logs/config.yaml`` as :func:`write_psmal`."""
+    return _write_shapes_and_maps(records, out_dir, dpfm_shape_id, "map", "write_dpfm", "DPFM-style",
+                                  metadata, overwrite, progress)
+
+
+def _write_shapes_and_maps(records: Iterable[PairRecord], out_dir: str | Path, shape_id, map_ext: str,
+                           writer: str, layout: str, metadata: Mapping | None, overwrite: bool,
+                           progress: bool) -> Path:
+    """``<out>/<split>/shapes/<id>.off`` + ``<out>/<split>/maps/<A>_<B>.<map_ext>`` (both directions)."""
     out = Path(out_dir)
     with _staged_dir(out, overwrite) as tmp:
-        staging = _Staging(tmp, "export-psmal", progress)
+        staging = _Staging(tmp, f"export-{map_ext}", progress)
         settings = set()
         for record in records:
             _check_record(record, None)
@@ -479,26 +504,92 @@ def write_psmal(records: Iterable[PairRecord], out_dir: str | Path, *, metadata:
             for s, k in SIDES:
                 (folder / f"{k}.off").write_text(off_text(record[f"{s}_vertices"], record[f"{s}_faces"]),
                                                  encoding="utf-8")
-            (folder / "01.vts").write_text(vts_text(record["corr_01"]), encoding="utf-8")
-            (folder / "10.vts").write_text(vts_text(record["corr_10"]), encoding="utf-8")
+            (folder / "01.map").write_text(vts_text(record["corr_01"]), encoding="utf-8")
+            (folder / "10.map").write_text(vts_text(record["corr_10"]), encoding="utf-8")
         rows, counts = [], {}
         for split, entries in staging.by_split().items():
             shapes, maps = tmp / split / "shapes", tmp / split / "maps"
             shapes.mkdir(parents=True)
             maps.mkdir()
             for i, e in enumerate(entries):
-                a = psmal_shape_id(i, 0, e.x_dataset, e.x_name)
-                b = psmal_shape_id(i, 1, e.y_dataset, e.y_name)
+                a = shape_id(i, 0, e.x_dataset, e.x_name)
+                b = shape_id(i, 1, e.y_dataset, e.y_name)
                 os.replace(e.folder / "0.off", shapes / f"{a}.off")
                 os.replace(e.folder / "1.off", shapes / f"{b}.off")
-                os.replace(e.folder / "01.vts", maps / f"{a}_{b}.vts")
-                os.replace(e.folder / "10.vts", maps / f"{b}_{a}.vts")
+                os.replace(e.folder / "01.map", maps / f"{a}_{b}.{map_ext}")
+                os.replace(e.folder / "10.map", maps / f"{b}_{a}.{map_ext}")
                 rows.append([split, i, e.pair_id, e.x_name, e.y_name, a, b])
             counts[split] = len(entries)
         staging.finish()
         _write_ids(tmp / IDS_FILE, ["split", "index", "pair_id", "x", "y", "x_id", "y_id"], rows)
         setting = settings.pop() if len(settings) == 1 else None
-        _write_log(tmp, "becos.export.write_psmal", "becos PSMAL-style layout", counts, setting, metadata)
+        _write_log(tmp, f"becos.export.{writer}", f"becos {layout} layout", counts, setting, metadata)
+    return out
+
+
+def ulrssm_template_vts(record: PairRecord) -> tuple[str, str]:
+    """The two ``corres/<k>.vts`` texts of a pair in ULRSSM's template convention: line t of each file
+    is the 1-based vertex of that shape at template point t, so that point t pairs vertex
+    ``vts0[t] - 1`` of shape 0 with vertex ``vts1[t] - 1`` of shape 1. The template points are the
+    vertices of shape 1 that have a counterpart (record ``corr_10`` != -1, in vertex order): the pair's
+    ground truth Y -> X, the direction every setting has (P2F: partial Y -> full X). ULRSSM subtracts 1
+    and has no "none" value, hence only matched vertices."""
+    corr = np.asarray(record["corr_10"], dtype=np.int64)
+    matched = np.flatnonzero(corr >= 0)
+    return vts_text(corr[matched] + 1), vts_text(matched + 1)
+
+
+def write_ulrssm(records: Iterable[PairRecord], out_dir: str | Path, *, metadata: Mapping | None = None,
+                 overwrite: bool = False, progress: bool = False, geodesics: bool = False,
+                 method: str = "heat", splits=None, jobs: int = 1) -> Path:
+    """Write the records ULRSSM style (``docs/released-layout.md``, section ULRSSM): one data root per
+    pair, ``<out>/<split>/<i>/`` with ``off/0.off``, ``off/1.off``, ``corres/0.vts``, ``corres/1.vts``
+    (:func:`ulrssm_template_vts`) and, with ``geodesics``, ``dist/0.mat``, ``dist/1.mat`` (MATLAB files,
+    key ``dist``: (V, V) geodesic distances on the full shape divided by its sqrt-area, as
+    :func:`write_geodesic_matrices`; only for ``splits`` when given, by ``jobs`` processes).
+    ULRSSM's ``PairDataset`` pairs every two shapes of its data root, so one root per pair keeps our
+    pairs. ``ids.csv`` and ``logs/config.yaml`` as :func:`write_released`."""
+    import scipy.io
+
+    out = Path(out_dir)
+    with _staged_dir(out, overwrite) as tmp:
+        staging = _Staging(tmp, "export-ulrssm", progress)
+        settings = set()
+
+        def write_pair(record: PairRecord) -> None:
+            settings.add(record.meta["setting"])
+            folder = staging.add(record)
+            (folder / "off").mkdir()
+            (folder / "corres").mkdir()
+            for s, k in SIDES:
+                (folder / "off" / f"{k}.off").write_text(off_text(record[f"{s}_vertices"], record[f"{s}_faces"]),
+                                                         encoding="utf-8")
+            for k, text in enumerate(ulrssm_template_vts(record)):
+                (folder / "corres" / f"{k}.vts").write_text(text, encoding="utf-8")
+
+        shapes, meshes, needed, numbers = _geodesic_plan(records, splits if geodesics else [], each=write_pair)
+        rows, counts = [], {}
+        for split, entries in staging.by_split().items():
+            (tmp / split).mkdir()
+            for i, e in enumerate(entries):
+                os.replace(e.folder, tmp / split / str(i))
+                rows.append([split, i, e.pair_id, e.x_name, e.y_name])
+            counts[split] = len(entries)
+        staging.finish()
+        if geodesics and shapes:
+            work = tmp / ".rows"
+            work.mkdir()
+            matrices = _compute_geodesic_rows(meshes, needed, method, jobs, work, progress)
+            for sh in shapes:
+                folder = tmp / sh.split / str(numbers[(sh.split, sh.pair_id)]) / "dist"
+                folder.mkdir(exist_ok=True)
+                dist = _shape_matrix(sh, needed[sh.key], matrices[sh.key]) / np.float32(sh.sqrt_area)
+                scipy.io.savemat(folder / f"{sh.side}.mat", {"dist": dist.astype(np.float32, copy=False)})
+            del matrices
+            shutil.rmtree(work)
+        _write_ids(tmp / IDS_FILE, ["split", "index", "pair_id", "x", "y"], rows)
+        setting = settings.pop() if len(settings) == 1 else None
+        _write_log(tmp, "becos.export.write_ulrssm", "becos ULRSSM-style layout", counts, setting, metadata)
     return out
 
 
@@ -581,15 +672,18 @@ def _full_mesh_key(vertices: np.ndarray, faces: np.ndarray, dataset: str, name: 
     return f"{_id_field(dataset)}_{_id_field(name)}_v{int(variant)}_{digest}"
 
 
-def _geodesic_plan(records: Iterable[PairRecord], splits) -> tuple[list[_GeodesicShape], dict, dict, dict]:
+def _geodesic_plan(records: Iterable[PairRecord], splits, each=None) -> tuple[list[_GeodesicShape], dict, dict, dict]:
     """Shapes to write, unique full meshes ``{key: (vertices, faces)}``, the rows each needs
     ``{key: sorted unique full vertices}`` (the union of its shapes' ``partial_to_full``) and the pair
     numbers ``{(split, pair_id): index}`` of ALL records (ascending pair_id per split, as every export
-    numbers pairs; so a split subset keeps the whole export's numbering). Streams the records."""
+    numbers pairs; so a split subset keeps the whole export's numbering). Streams the records, calling
+    ``each(record)`` on every one (to write other files in the same pass)."""
     keep = None if splits is None else {str(s) for s in splits}
     shapes, meshes, needed, ids = [], {}, {}, {}
     for record in records:
         _check_record(record, None)
+        if each is not None:
+            each(record)
         ids.setdefault(str(record.meta["split"]), []).append(str(record.pair_id))
         if keep is not None and str(record.meta["split"]) not in keep:
             continue
@@ -762,13 +856,18 @@ def configure_parser(parser: argparse.ArgumentParser, name: str) -> argparse.Arg
         parser.add_argument("out", type=Path, help="output folder, best named after the setting "
                                                    "(e.g. BeCoS/partial_partial): some loaders read the setting "
                                                    "from the path")
-    elif name == "export-psmal":
+    elif name in ("export-psmal", "export-dpfm"):
         parser.add_argument("out", type=Path, help="output folder (<out>/<split>/shapes, maps)")
+        if name == "export-psmal":
+            parser.add_argument("--geodesics", action="store_true",
+                                help="also write (V, V) float32 geodesic matrices per shape (<split>/geodesics)")
+    elif name == "export-ulrssm":
+        parser.add_argument("out", type=Path, help="output folder (<out>/<split>/<i>/off, corres, dist)")
         parser.add_argument("--geodesics", action="store_true",
-                            help="also write (V, V) float32 geodesic matrices per shape (<split>/geodesics)")
+                            help="also write dist/<k>.mat (key dist: geodesics divided by the sqrt-area)")
     else:
         parser.add_argument("out", type=Path, help="output folder (<out>/geodesic_dist_matrices/<stem>.npy)")
-    if name in ("export-psmal", "export-geodesics"):
+    if name in ("export-psmal", "export-geodesics", "export-ulrssm"):
         parser.add_argument("--geodesic-method", choices=METHODS, default="heat",
                             help="geodesic estimator (default: heat)")
         parser.add_argument("--splits", nargs="+", metavar="SPLIT",
@@ -802,6 +901,11 @@ def run_cli(args: argparse.Namespace) -> int:
                   file=sys.stderr)
         write_released(bench.records(), out, setting=bench.setting, metadata=bench.metadata,
                        overwrite=args.force, progress=True)
+    elif args.export_kind == "export-ulrssm":
+        write_ulrssm(bench.records(), out, metadata=bench.metadata, overwrite=args.force, progress=True,
+                     geodesics=args.geodesics, method=args.geodesic_method, splits=args.splits, jobs=args.jobs)
+    elif args.export_kind == "export-dpfm":
+        write_dpfm(bench.records(), out, metadata=bench.metadata, overwrite=args.force, progress=True)
     else:
         write_psmal(bench.records(), out, metadata=bench.metadata, overwrite=args.force, progress=True)
         if args.geodesics:
@@ -811,7 +915,7 @@ def run_cli(args: argparse.Namespace) -> int:
         splits = [row["split"] for row in csv.DictReader(fh)]
     result = {"out": str(out.resolve()), "setting": bench.setting,
               "pairs": {s: splits.count(s) for s in dict.fromkeys(splits)}}
-    if args.export_kind == "export-psmal":
+    if args.export_kind in ("export-psmal", "export-ulrssm"):
         result["geodesics"] = args.geodesic_method if args.geodesics else None
     print(json.dumps(result))
     return 0

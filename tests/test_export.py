@@ -541,3 +541,130 @@ def test_geodesic_matrices_where_loaders_read_them(tmp_path, monkeypatch):
                 full = _edge_dijkstra(r["y_full_vertices"], r["y_full_faces"])[np.ix_(p2f, p2f)]
                 ratio = full[d > 0.05] / (d[d > 0.05] * info["surface_area_after_scaling"])
                 assert 1.0 < np.median(ratio) < 1.2   # edge paths a little longer than surface geodesics
+
+
+# --------------------------------------------------------------------------------------------------
+# ULRSSM and DPFM layouts, read with the loaders' own parsing logic (numpy in place of torch)
+
+
+def ulrssm_sort_list(paths: list[str]) -> list[str]:
+    """ULRSSM ``datasets/shape_dataset.py`` ``sort_list`` (MIT licence): sort by the first integer that
+    is followed by a ``.`` in the path, or lexicographically when some path has none."""
+    import re
+
+    try:
+        return sorted(paths, key=lambda x: int(re.search(r"\d+(?=\.)", x).group()))
+    except AttributeError:
+        return sorted(paths)
+
+
+def ulrssm_pair(data_root: Path, first: int, second: int, with_dist: bool) -> dict:
+    """ULRSSM ``SingleShapeDataset._init_data`` / ``__getitem__`` file logic for two shapes of a root:
+    ``off/*.off``, ``corres/*.vts`` (``np.loadtxt(..., dtype=np.int32) - 1``), ``dist/*.mat`` (key
+    ``dist``), each list sorted by ``sort_list``; a pair's ground truth is the template pairing
+    ``first['corr'][t] <-> second['corr'][t]``."""
+    import glob
+
+    import scipy.io
+    import trimesh
+
+    offs = ulrssm_sort_list(glob.glob(f"{data_root / 'off'}/*.off"))
+    corrs = ulrssm_sort_list(glob.glob(f"{data_root / 'corres'}/*.vts"))
+    dists = ulrssm_sort_list(glob.glob(f"{data_root / 'dist'}/*.mat")) if with_dist else []
+    assert len(offs) == len(corrs) and (not with_dist or len(dists) == len(offs))
+    items = []
+    for i in (first, second):
+        mesh = trimesh.load(offs[i], process=False, maintain_order=True)
+        item = {"name": Path(offs[i]).stem, "verts": np.asarray(mesh.vertices, np.float32),
+                "corr": np.loadtxt(corrs[i], dtype=np.int32) - 1}
+        if with_dist:
+            item["dist"] = scipy.io.loadmat(dists[i])["dist"].astype(np.float32)
+        items.append(item)
+    return {"first": items[0], "second": items[1]}
+
+
+@pytest.mark.parametrize("setting", SETTINGS)
+def test_ulrssm_layout_reads_like_ulrssm(setting, records, tmp_path):
+    from becos.export import write_ulrssm
+
+    recs = records[setting][:2]  # a train and a test pair (the OFF text of 9k-vertex shapes dominates)
+    out = write_ulrssm(_shuffled(recs, 2), tmp_path / "ulrssm")
+    by_id = {r.pair_id: r for r in recs}
+    rows = read_ids(out)
+    _check_numbering(out, rows, recs, set())
+    for row in rows:
+        r = by_id[row["pair_id"]]
+        root = out / row["split"] / row["index"]
+        pair = ulrssm_pair(root, 0, 1, with_dist=False)
+        first, second = pair["first"], pair["second"]
+        assert np.array_equal(first["verts"], r["x_vertices"].astype(np.float32))
+        assert np.array_equal(second["verts"], r["y_vertices"].astype(np.float32))
+        x_of_t, y_of_t = first["corr"], second["corr"]
+        assert len(x_of_t) == len(y_of_t) == int((r["corr_10"] >= 0).sum())  # one template point per matched Y vertex
+        assert x_of_t.min() >= 0 and y_of_t.min() >= 0                        # never the -1 ULRSSM cannot express
+        assert np.array_equal(r["corr_10"][y_of_t], x_of_t)                    # the ground truth Y -> X exactly
+        back = ulrssm_pair(root, 1, 0, with_dist=False)                        # the reversed pair: same points
+        assert np.array_equal(back["first"]["corr"], y_of_t)
+
+
+def dpfm_pairs(data_root: Path, name: str = "") -> dict:
+    """DPFM ``shrec_partial_dataset.py`` ``ShrecPartialDataset.__init__`` / ``__getitem__`` file logic
+    (MIT licence): shapes = sorted ``shapes/*`` stems containing ``name``; each ``maps/<x>_<y>.map``
+    (split at the LAST ``_``) whose two ids are shapes is the pair (shape1 = y, shape2 = x) with
+    ``map21 = loadtxt(int32)`` (one entry per vertex of x); partiality masks from it."""
+    import trimesh
+
+    used = sorted(p.stem for p in (data_root / "shapes").iterdir() if name in p.stem)
+    pairs = {}
+    for stem in (p.stem for p in (data_root / "maps").iterdir() if name in p.stem):
+        x, y = stem[:stem.rfind("_")], stem[stem.rfind("_") + 1:]
+        if x in used and y in used:
+            map21 = np.loadtxt(data_root / "maps" / f"{x}_{y}.map", dtype=np.int32)
+            n1 = len(trimesh.load(data_root / "shapes" / f"{y}.off", process=False).vertices)
+            mask12 = np.zeros(n1, dtype=np.int64)
+            mask12[map21[map21 != -1]] = 1
+            pairs[(x, y)] = {"map21": map21, "mask21": (map21 != -1).astype(np.int64), "mask12": mask12}
+    return pairs
+
+
+@pytest.mark.parametrize("setting", SETTINGS)
+def test_dpfm_layout_reads_like_dpfm(setting, records, tmp_path):
+    from becos.export import write_dpfm
+
+    recs = records[setting][:2]
+    out = write_dpfm(_shuffled(recs, 3), tmp_path / "dpfm")
+    rows = read_ids(out)
+    _check_numbering(out, rows, recs, {"shapes", "maps"})
+    by_id = {r.pair_id: r for r in recs}
+    for split in {row["split"] for row in rows}:
+        pairs = dpfm_pairs(out / split)
+        split_rows = [row for row in rows if row["split"] == split]
+        assert len(pairs) == 2 * len(split_rows)   # both directions of every pair survive the id parsing
+        for row in split_rows:
+            r = by_id[row["pair_id"]]
+            assert "_" not in row["x_id"] + row["y_id"]
+            for (x, y), corr, mask_x, mask_y in (((row["x_id"], row["y_id"]), r["corr_01"], "x", "y"),
+                                                 ((row["y_id"], row["x_id"]), r["corr_10"], "y", "x")):
+                got = pairs[(x, y)]
+                assert np.array_equal(got["map21"], corr)
+                assert np.array_equal(got["mask21"].astype(bool), r[f"{mask_x}_overlap_mask"])
+                hit = np.zeros(len(r[f"{mask_y}_vertices"]), bool)
+                hit[corr[corr >= 0]] = True
+                assert np.array_equal(got["mask12"].astype(bool), hit)
+
+
+def test_ulrssm_dist_matches_the_geodesic_export(small_record, tmp_path):
+    from becos.export import GEODESIC_FOLDER, write_geodesic_matrices, write_ulrssm
+
+    recs = [small_record, *_ball_records("partial_full")[:1]]
+    recs[1] = _copy(recs[1], recs[1].pair_id, "test")
+    out = write_ulrssm(recs, tmp_path / "ulrssm", geodesics=True, splits=["test"], jobs=1)
+    geo = write_geodesic_matrices(recs, tmp_path / "geo")
+    with open(geo / GEODESIC_FOLDER / "index.csv", encoding="utf-8", newline="") as fh:
+        index = {(row["pair_id"], int(row["side"])): row["stem"] for row in csv.DictReader(fh)}
+    for row in read_ids(out):
+        pair = ulrssm_pair(out / row["split"] / row["index"], 0, 1, with_dist=True)
+        for k, item in enumerate((pair["first"], pair["second"])):
+            d = item["dist"]
+            assert d.shape == (len(item["verts"]),) * 2 and d.dtype == np.float32
+            assert np.array_equal(d, np.load(geo / GEODESIC_FOLDER / f"{index[(row['pair_id'], k)]}.npy"))
