@@ -83,6 +83,30 @@ def _schema() -> dict:
     return yaml.safe_load(SCHEMA_PATH.read_text())
 
 
+def _typed_command_line_values(schema: dict, instance):
+    """Nested values given as ``snakemake --config 'exports={zarr: true, ...}'`` arrive as strings
+    (Snakemake reads them with YAML's BaseLoader): turn ``"true"``/``"false"`` and numbers into the
+    boolean / integer / number the schema asks for, recursively; anything else is left to the schema."""
+    kind = schema.get("type")
+    if isinstance(instance, dict) and kind == "object":
+        props = schema.get("properties", {})
+        return {k: _typed_command_line_values(props[k], v) if k in props else v for k, v in instance.items()}
+    if isinstance(instance, list) and kind == "array" and isinstance(schema.get("items"), dict):
+        return [_typed_command_line_values(schema["items"], v) for v in instance]
+    if isinstance(instance, str):
+        text = instance.strip()
+        if kind == "boolean" and text.lower() in ("true", "false"):
+            return text.lower() == "true"
+        try:
+            if kind == "integer" and text.lstrip("+-").isdigit():
+                return int(text)
+            if kind == "number":
+                return float(text)
+        except ValueError:
+            pass
+    return instance
+
+
 def _fill_defaults(schema: dict, instance):
     """Fill ``default`` values of object properties, recursively (like Snakemake's ``validate``)."""
     if not isinstance(instance, dict) or schema.get("type") != "object":
@@ -104,7 +128,7 @@ def resolve_config(raw: dict) -> dict:
     import jsonschema
 
     schema = _schema()
-    config = _fill_defaults(schema, deepcopy(dict(raw)))
+    config = _fill_defaults(schema, _typed_command_line_values(schema, deepcopy(dict(raw))))
     validator = jsonschema.Draft202012Validator(schema)
     errors = sorted(validator.iter_errors(config), key=lambda e: list(e.path))
     if errors:

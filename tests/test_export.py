@@ -668,3 +668,21 @@ def test_ulrssm_dist_matches_the_geodesic_export(small_record, tmp_path):
             d = item["dist"]
             assert d.shape == (len(item["verts"]),) * 2 and d.dtype == np.float32
             assert np.array_equal(d, np.load(geo / GEODESIC_FOLDER / f"{index[(row['pair_id'], k)]}.npy"))
+
+
+def test_nested_export_keys_on_the_snakemake_command_line():
+    """``--config 'exports={...}'``: Snakemake hands nested values over as strings; they are typed by
+    the schema instead of failing with "'true' is not of type 'boolean'"."""
+    from snakemake.cli import parse_config
+
+    from becos.errors import ConfigError
+    from becos.workflow import resolve_config
+
+    base = {"data_dir": "d", "annotations": "a", "datasets": ["tosca"]}
+    given = parse_config(["exports={zarr: true, psmal: True, geodesics: false, geodesic_splits: [test, val]}"])
+    assert given["exports"]["psmal"] == "True"   # what Snakemake passes on
+    exports = resolve_config({**base, **given})["exports"]
+    assert exports["zarr"] is True and exports["psmal"] is True and exports["geodesics"] is False
+    assert exports["geodesic_splits"] == ["test", "val"] and exports["released"] is True  # defaults kept
+    with pytest.raises(ConfigError, match="exports/psmal"):
+        resolve_config({**base, **parse_config(["exports={psmal: maybe}"])})
