@@ -1,6 +1,6 @@
 """Exports of a benchmark in layouts that existing matching code already reads.
 
-Three writers, each taking an iterable of :class:`~becos.record.PairRecord` (a store's
+Writers, each taking an iterable of :class:`~becos.record.PairRecord` (a store's
 ``Benchmark.records()``, or records loaded from ``.npz`` files), streaming them one at a time:
 
 - :func:`write_released` -- the folder layout of the released BeCoS benchmark (the reference
@@ -8,8 +8,13 @@ Three writers, each taking an iterable of :class:`~becos.record.PairRecord` (a s
   pickle per shape, as read by DeepShapeMatchingKit's ``BeCoSDataset`` and similar loaders.
 - :func:`write_psmal` -- PSMAL (partial SMAL) style: ``<out>/<split>/shapes/<shape id>.off`` and
   ``<out>/<split>/maps/<A>_<B>.vts`` in both directions.
-- :func:`write_geodesics` -- optional (V, V) float32 geodesic distance matrices, per shape, between
-  its kept vertices, measured on its FULL shape (``<out>/<split>/geodesics/<shape id>.npy``).
+- :func:`write_ulrssm` -- ULRSSM style: one ``off/``, ``corres/*.vts`` (template convention) and
+  optional ``dist/*.mat`` root per pair.
+- :func:`write_dpfm` -- DPFM style: ``shapes/*.off`` + ``maps/<A>_<B>.map`` with ids free of ``_``.
+- :func:`write_geodesic_matrices` -- (V, V) float32 geodesic matrices of every shape, measured on its
+  FULL shape, where loaders read them (``geodesic_dist_matrices/<released stem>.npy``, ÷ sqrt-area);
+  :func:`write_geodesics` the same for the PSMAL ids (``<out>/<split>/geodesics/<shape id>.npy``).
+  Each distinct full mesh is solved once, in parallel processes.
 
 The layouts, every file and key, which loader reads what, and where becos differs from the reference
 (the swapped P2P masks) are documented in ``docs/released-layout.md``; this module follows it.
