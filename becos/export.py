@@ -60,8 +60,6 @@ LOGS_DIR = "logs"
 SIDES = (("x", 0), ("y", 1))
 _STAGING = ".staging"
 _PROGRESS_EVERY = 200
-_GEODESIC_BLOCK_ELEMENTS = 1 << 22
-"""Largest number of float64 distances held at once while filling a geodesic matrix (32 MB)."""
 _SPLIT_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]*")
 
 
@@ -598,52 +596,6 @@ def write_ulrssm(records: Iterable[PairRecord], out_dir: str | Path, *, metadata
     return out
 
 
-def geodesic_matrix(record: PairRecord, side: str, method: str = "heat", out: np.ndarray | None = None) -> np.ndarray:
-    """(V, V) float32 geodesic distances between the vertices of shape ``side`` (``'x'`` or ``'y'``),
-    measured on its FULL (remeshed) shape, in the units of the record's vertices.
-
-    Entry [i, j] is the distance on the full surface between full vertices ``partial_to_full[i]`` and
-    ``partial_to_full[j]`` (for a full shape simply i and j), so a cut does not lengthen paths.
-    Symmetrised as (D + D.T) / 2 (the heat method is slightly asymmetric), zero diagonal; ``dijkstra``
-    gives ``inf`` between disconnected components. Rows are computed in blocks of bounded memory.
-
-    Args:
-        record: the pair.
-        side: ``'x'`` (shape 0) or ``'y'`` (shape 1).
-        method: ``'heat'`` or ``'dijkstra'`` (:class:`becos.geodesics.GeodesicDistances`).
-        out: optional preallocated (V, V) float32 array (e.g. a ``np.lib.format.open_memmap``).
-    """
-    from becos.geodesics import GeodesicDistances
-    from becos.mesh import TriMesh
-
-    full_vertices, full_faces = full_shape(record, side)
-    p2f = np.asarray(record[f"{side}_partial_to_full"], dtype=np.int64)
-    n = len(p2f)
-    if out is None:
-        out = np.empty((n, n), dtype=np.float32)
-    elif out.shape != (n, n):
-        raise ValueError(f"out must have shape {(n, n)}, got {out.shape}")
-    solver = GeodesicDistances(TriMesh(full_vertices, full_faces), method, cache_bytes=0)
-    block = max(1, _GEODESIC_BLOCK_ELEMENTS // max(len(full_vertices), 1))
-    for start in range(0, n, block):
-        rows = solver.from_vertices(p2f[start:start + block])
-        out[start:start + block] = rows[:, p2f]
-    _symmetrise(out, block)
-    return out
-
-
-def _symmetrise(d: np.ndarray, block: int) -> None:
-    """In place d <- (d + d.T) / 2, one pair of (block x block) tiles at a time."""
-    n = len(d)
-    for i in range(0, n, block):
-        for j in range(i, n, block):
-            upper = d[i:i + block, j:j + block].astype(np.float64)
-            lower = d[j:j + block, i:i + block].astype(np.float64)
-            mean = 0.5 * (upper + lower.T)
-            d[i:i + block, j:j + block] = mean
-            d[j:j + block, i:i + block] = mean.T
-
-
 GEODESIC_FOLDER = "geodesic_dist_matrices"
 """Folder of the loaders' geodesic layout (:func:`write_geodesic_matrices`)."""
 _GEODESIC_TASK_ROWS = 1024
@@ -736,14 +688,17 @@ def _compute_geodesic_rows(meshes: dict, needed: dict, method: str, jobs: int, f
              for key in sorted(meshes, key=lambda k: -len(needed[k]))
              for start in range(0, len(needed[key]), _GEODESIC_TASK_ROWS)]
     started, done, total = time.monotonic(), 0, sum(len(r) for r in needed.values())
-    results = (map(_geodesic_task, tasks) if jobs <= 1
-               else ProcessPoolExecutor(max_workers=jobs).map(_geodesic_task, tasks))
-    for key, start, rows in results:
-        out[key][start:start + len(rows)] = rows
-        done += len(rows)
-        if progress:
-            print(f"geodesics ({method}, {jobs} jobs): {done}/{total} rows of {len(meshes)} meshes, "
-                  f"{time.monotonic() - started:.0f} s", file=sys.stderr, flush=True)
+    pool = ProcessPoolExecutor(max_workers=jobs) if jobs > 1 and len(tasks) > 1 else None
+    try:
+        for key, start, rows in (pool.map(_geodesic_task, tasks) if pool else map(_geodesic_task, tasks)):
+            out[key][start:start + len(rows)] = rows
+            done += len(rows)
+            if progress:
+                print(f"geodesics ({method}, {jobs} jobs): {done}/{total} rows of {len(meshes)} meshes, "
+                      f"{time.monotonic() - started:.0f} s", file=sys.stderr, flush=True)
+    finally:
+        if pool is not None:
+            pool.shutdown(cancel_futures=True)
     return out
 
 
