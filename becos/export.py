@@ -1,6 +1,6 @@
 """Exports of a benchmark in layouts that existing matching code already reads.
 
-Three writers, each taking an iterable of :class:`~becos.record.PairRecord` (a store's
+Writers, each taking an iterable of :class:`~becos.record.PairRecord` (a store's
 ``Benchmark.records()``, or records loaded from ``.npz`` files), streaming them one at a time:
 
 - :func:`write_released` -- the folder layout of the released BeCoS benchmark (the reference
@@ -8,8 +8,13 @@ Three writers, each taking an iterable of :class:`~becos.record.PairRecord` (a s
   pickle per shape, as read by DeepShapeMatchingKit's ``BeCoSDataset`` and similar loaders.
 - :func:`write_psmal` -- PSMAL (partial SMAL) style: ``<out>/<split>/shapes/<shape id>.off`` and
   ``<out>/<split>/maps/<A>_<B>.vts`` in both directions.
-- :func:`write_geodesics` -- optional (V, V) float32 geodesic distance matrices, per shape, between
-  its kept vertices, measured on its FULL shape (``<out>/<split>/geodesics/<shape id>.npy``).
+- :func:`write_ulrssm` -- ULRSSM style: one ``off/``, ``corres/*.vts`` (template convention) and
+  optional ``dist/*.mat`` root per pair.
+- :func:`write_dpfm` -- DPFM style: ``shapes/*.off`` + ``maps/<A>_<B>.map`` with ids free of ``_``.
+- :func:`write_geodesic_matrices` -- (V, V) float32 geodesic matrices of every shape, measured on its
+  FULL shape, where loaders read them (``geodesic_dist_matrices/<released stem>.npy``, ÷ sqrt-area);
+  :func:`write_geodesics` the same for the PSMAL ids (``<out>/<split>/geodesics/<shape id>.npy``).
+  Each distinct full mesh is solved once, in parallel processes.
 
 The layouts, every file and key, which loader reads what, and where becos differs from the reference
 (the swapped P2P masks) are documented in ``docs/released-layout.md``; this module follows it.
@@ -55,8 +60,6 @@ LOGS_DIR = "logs"
 SIDES = (("x", 0), ("y", 1))
 _STAGING = ".staging"
 _PROGRESS_EVERY = 200
-_GEODESIC_BLOCK_ELEMENTS = 1 << 22
-"""Largest number of float64 distances held at once while filling a geodesic matrix (32 MB)."""
 _SPLIT_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]*")
 
 
@@ -137,6 +140,29 @@ def released_stem(name: str) -> str:
     return name.replace("/", "_")
 
 
+def released_file_stem(side: int, name: str, remesh_variant: int, scanned_in: str | None = None) -> str:
+    """``<side>_<name>`` (``/`` -> ``_``), plus ``_v<k>`` for remesh variant k >= 0 and, for a scanned
+    shape, ``_scan-<pair_id>``: loaders cache per-shape data by file name, and one name can stand for
+    several meshes (remesh variants; every scan is its own mesh). ``0_cat0_v2`` (full),
+    ``1_cat3_v0_scan-0123abcd...`` (scanned), ``0_cat0`` (not remeshed, or remeshed to a published face
+    target)."""
+    stem = f"{int(side)}_{released_stem(name)}"
+    if int(remesh_variant) >= 0:
+        stem += f"_v{int(remesh_variant)}"
+    return stem if scanned_in is None else f"{stem}_scan-{scanned_in}"
+
+
+def mesh_id(dataset: str, name: str, remesh_variant: int, scanned_in: str | None = None) -> str:
+    """The identity of a shape's mesh up to rigid motion: ``<dataset>/<name>``, ``/v<k>`` for remesh
+    variant k >= 0, and for a scanned (partial) shape ``/scan/<pair_id>/<x|y>`` (each scan is its own
+    mesh). Rotation-invariant data (geodesics, spectra) may be cached by it; vertex positions differ
+    per pair (random rotation, alignment) even for one mesh_id."""
+    out = f"{dataset}/{name}"
+    if int(remesh_variant) >= 0:
+        out += f"/v{int(remesh_variant)}"
+    return out if scanned_in is None else f"{out}/scan/{scanned_in}"
+
+
 def psmal_shape_id(index: int, side: int, dataset: str, name: str) -> str:
     """``<pair index>_<side>_<dataset>_<name>``: exactly four ``_``-separated fields, because PSMAL
     loaders split a map file name ``<A>_<B>.vts`` on ``_`` into fields 0-3 (A) and 4-7 (B); ``_``,
@@ -166,14 +192,16 @@ def released_infos(record: PairRecord) -> tuple[dict, dict]:
       remeshed full shape at dataset scale), ``surface_area_after_scaling`` (sqrt-area of the full
       shape in the units of the written vertices: ``surface_area``, or 1.0 for an area-normalised
       record), ``random_rotation`` (3, 3), ``align_rotation`` / ``align_translation`` (None for X;
-      (3, 3), (3,) for Y, row vectors: ``v @ R + t``), ``pair_id``, ``area_normalised``.
+      (3, 3), (3,) for Y, row vectors: ``v @ R + t``), ``pair_id``, ``area_normalised``,
+      ``remesh_variant`` (int, -1 = not a variant), ``mesh_id`` (:func:`mesh_id`).
     - every scanned (partial) shape: ``partial2full`` (V,) int64, ``cam_pos`` (3,) camera position,
       ``camera`` (3, 3) rows position / look-at target / up (the record's ``s_camera``: the shape's
       common frame, before alignment and random rotation).
-    - P2P and P2F, both shapes: ``overlap_mask`` (V,) bool over the shape's OWN vertices and
-      ``overlap_percentage`` its mean (the reference swaps these between the two files).
-    - P2P: ``found_faces_mask_yx`` in X's info = Y's mask, ``found_faces_mask`` in Y's info = X's
-      mask (the released convention, which DeepShapeMatchingKit swaps back); P2F: X's info
+    - every setting, both shapes: ``overlap_mask`` (V,) bool over the shape's OWN vertices and
+      ``overlap_percentage`` its mean (the reference swaps these between the two files, and has none
+      in F2F, where semantic missing parts also leave vertices without a counterpart).
+    - P2P and F2F: ``found_faces_mask_yx`` in X's info = Y's mask, ``found_faces_mask`` in Y's info =
+      X's mask (the released convention, which DeepShapeMatchingKit swaps back); P2F: X's info
       ``found_faces_mask`` = X's own mask over full X.
     """
     setting = record.meta["setting"]
@@ -193,18 +221,21 @@ def released_infos(record: PairRecord) -> tuple[dict, dict]:
             "align_translation": None if s == "x" else _f64(record["y_align_translation"]),
             "pair_id": str(record.pair_id),
             "area_normalised": normalised,
+            "remesh_variant": int(record[f"{s}_remesh_variant"]),
         }
     scanned = {"partial_partial": ("x", "y"), "partial_full": ("y",), "full_full": ()}[setting]
+    for s, _ in SIDES:
+        infos[s]["mesh_id"] = mesh_id(infos[s]["org_dataset"], infos[s]["name"], infos[s]["remesh_variant"],
+                                      f"{record.pair_id}/{s}" if s in scanned else None)
     for s in scanned:
         camera = _f64(record[f"{s}_camera"])
         infos[s]["partial2full"] = np.array(record[f"{s}_partial_to_full"], dtype=np.int64)
         infos[s]["cam_pos"] = camera[0].copy()
         infos[s]["camera"] = camera
-    if setting != "full_full":
-        for s, _ in SIDES:
-            infos[s]["overlap_mask"] = np.array(record[f"{s}_overlap_mask"], dtype=bool)
-            infos[s]["overlap_percentage"] = float(record[f"{s}_overlap"])
-    if setting == "partial_partial":
+    for s, _ in SIDES:
+        infos[s]["overlap_mask"] = np.array(record[f"{s}_overlap_mask"], dtype=bool)
+        infos[s]["overlap_percentage"] = float(np.mean(infos[s]["overlap_mask"])) if len(infos[s]["overlap_mask"]) else 0.0
+    if setting in ("partial_partial", "full_full"):
         infos["x"]["found_faces_mask_yx"] = np.array(record["y_overlap_mask"], dtype=bool)
         infos["y"]["found_faces_mask"] = np.array(record["x_overlap_mask"], dtype=bool)
     elif setting == "partial_full":
@@ -417,7 +448,8 @@ def write_released(records: Iterable[PairRecord], out_dir: str | Path, *, settin
 def _write_released_pair(folder: Path, record: PairRecord, setting: str) -> None:
     infos = released_infos(record)
     for (s, k), info in zip(SIDES, infos):
-        stem = f"{k}_{released_stem(info['name'])}"
+        stem = released_file_stem(k, info["name"], info["remesh_variant"],
+                                  record.pair_id if "partial2full" in info else None)
         (folder / f"{stem}.off").write_text(off_text(record[f"{s}_vertices"], record[f"{s}_faces"]),
                                             encoding="utf-8")
         (folder / f"{stem}_info.pkl").write_bytes(info_pickle_bytes(info))
@@ -439,9 +471,34 @@ def write_psmal(records: Iterable[PairRecord], out_dir: str | Path, *, metadata:
 
     Args: as :func:`write_released` (records of any setting; numbering per split by pair_id).
     """
+    return _write_shapes_and_maps(records, out_dir, psmal_shape_id, "vts", "write_psmal", "PSMAL-style",
+                                  metadata, overwrite, progress)
+
+
+def dpfm_shape_id(index: int, side: int, dataset: str, name: str) -> str:
+    """``<pair index>-<side>-<dataset>-<name>`` with no ``_`` at all (``_``, ``/``, ``\\`` and white
+    space become ``-``): DPFM's loader splits a map name ``<A>_<B>`` at its LAST ``_`` and others
+    (CP2P loaders) at every ``_``, so an id without ``_`` survives both."""
+    return "-".join([str(int(index)), str(int(side)), _id_field(dataset), _id_field(name)])
+
+
+def write_dpfm(records: Iterable[PairRecord], out_dir: str | Path, *, metadata: Mapping | None = None,
+               overwrite: bool = False, progress: bool = False) -> Path:
+    """Write the records DPFM style (``docs/released-layout.md``, section DPFM): per split
+    ``<out>/<split>/shapes/<id>.off`` and ``<out>/<split>/maps/<A>_<B>.map`` in both directions (one
+    line per vertex of A: the 0-based vertex of B, -1 = none, as DPFM's SHREC'16 maps), ids
+    :func:`dpfm_shape_id`; ``ids.csv`` and ``logs/config.yaml`` as :func:`write_psmal`."""
+    return _write_shapes_and_maps(records, out_dir, dpfm_shape_id, "map", "write_dpfm", "DPFM-style",
+                                  metadata, overwrite, progress)
+
+
+def _write_shapes_and_maps(records: Iterable[PairRecord], out_dir: str | Path, shape_id, map_ext: str,
+                           writer: str, layout: str, metadata: Mapping | None, overwrite: bool,
+                           progress: bool) -> Path:
+    """``<out>/<split>/shapes/<id>.off`` + ``<out>/<split>/maps/<A>_<B>.<map_ext>`` (both directions)."""
     out = Path(out_dir)
     with _staged_dir(out, overwrite) as tmp:
-        staging = _Staging(tmp, "export-psmal", progress)
+        staging = _Staging(tmp, f"export-{map_ext}", progress)
         settings = set()
         for record in records:
             _check_record(record, None)
@@ -450,84 +507,220 @@ def write_psmal(records: Iterable[PairRecord], out_dir: str | Path, *, metadata:
             for s, k in SIDES:
                 (folder / f"{k}.off").write_text(off_text(record[f"{s}_vertices"], record[f"{s}_faces"]),
                                                  encoding="utf-8")
-            (folder / "01.vts").write_text(vts_text(record["corr_01"]), encoding="utf-8")
-            (folder / "10.vts").write_text(vts_text(record["corr_10"]), encoding="utf-8")
+            (folder / "01.map").write_text(vts_text(record["corr_01"]), encoding="utf-8")
+            (folder / "10.map").write_text(vts_text(record["corr_10"]), encoding="utf-8")
         rows, counts = [], {}
         for split, entries in staging.by_split().items():
             shapes, maps = tmp / split / "shapes", tmp / split / "maps"
             shapes.mkdir(parents=True)
             maps.mkdir()
             for i, e in enumerate(entries):
-                a = psmal_shape_id(i, 0, e.x_dataset, e.x_name)
-                b = psmal_shape_id(i, 1, e.y_dataset, e.y_name)
+                a = shape_id(i, 0, e.x_dataset, e.x_name)
+                b = shape_id(i, 1, e.y_dataset, e.y_name)
                 os.replace(e.folder / "0.off", shapes / f"{a}.off")
                 os.replace(e.folder / "1.off", shapes / f"{b}.off")
-                os.replace(e.folder / "01.vts", maps / f"{a}_{b}.vts")
-                os.replace(e.folder / "10.vts", maps / f"{b}_{a}.vts")
+                os.replace(e.folder / "01.map", maps / f"{a}_{b}.{map_ext}")
+                os.replace(e.folder / "10.map", maps / f"{b}_{a}.{map_ext}")
                 rows.append([split, i, e.pair_id, e.x_name, e.y_name, a, b])
             counts[split] = len(entries)
         staging.finish()
         _write_ids(tmp / IDS_FILE, ["split", "index", "pair_id", "x", "y", "x_id", "y_id"], rows)
         setting = settings.pop() if len(settings) == 1 else None
-        _write_log(tmp, "becos.export.write_psmal", "becos PSMAL-style layout", counts, setting, metadata)
+        _write_log(tmp, f"becos.export.{writer}", f"becos {layout} layout", counts, setting, metadata)
     return out
 
 
-def geodesic_matrix(record: PairRecord, side: str, method: str = "heat", out: np.ndarray | None = None) -> np.ndarray:
-    """(V, V) float32 geodesic distances between the vertices of shape ``side`` (``'x'`` or ``'y'``),
-    measured on its FULL (remeshed) shape, in the units of the record's vertices.
+def ulrssm_template_vts(record: PairRecord) -> tuple[str, str]:
+    """The two ``corres/<k>.vts`` texts of a pair in ULRSSM's template convention: line t of each file
+    is the 1-based vertex of that shape at template point t, so that point t pairs vertex
+    ``vts0[t] - 1`` of shape 0 with vertex ``vts1[t] - 1`` of shape 1. The template points are the
+    vertices of shape 1 that have a counterpart (record ``corr_10`` != -1, in vertex order): the pair's
+    ground truth Y -> X, the direction every setting has (P2F: partial Y -> full X). ULRSSM subtracts 1
+    and has no "none" value, hence only matched vertices."""
+    corr = np.asarray(record["corr_10"], dtype=np.int64)
+    matched = np.flatnonzero(corr >= 0)
+    return vts_text(corr[matched] + 1), vts_text(matched + 1)
 
-    Entry [i, j] is the distance on the full surface between full vertices ``partial_to_full[i]`` and
-    ``partial_to_full[j]`` (for a full shape simply i and j), so a cut does not lengthen paths.
-    Symmetrised as (D + D.T) / 2 (the heat method is slightly asymmetric), zero diagonal; ``dijkstra``
-    gives ``inf`` between disconnected components. Rows are computed in blocks of bounded memory.
 
-    Args:
-        record: the pair.
-        side: ``'x'`` (shape 0) or ``'y'`` (shape 1).
-        method: ``'heat'`` or ``'dijkstra'`` (:class:`becos.geodesics.GeodesicDistances`).
-        out: optional preallocated (V, V) float32 array (e.g. a ``np.lib.format.open_memmap``).
-    """
-    from becos.geodesics import GeodesicDistances
+def write_ulrssm(records: Iterable[PairRecord], out_dir: str | Path, *, metadata: Mapping | None = None,
+                 overwrite: bool = False, progress: bool = False, geodesics: bool = False,
+                 method: str = "heat", splits=None, jobs: int = 1) -> Path:
+    """Write the records ULRSSM style (``docs/released-layout.md``, section ULRSSM): one data root per
+    pair, ``<out>/<split>/<i>/`` with ``off/0.off``, ``off/1.off``, ``corres/0.vts``, ``corres/1.vts``
+    (:func:`ulrssm_template_vts`) and, with ``geodesics``, ``dist/0.mat``, ``dist/1.mat`` (MATLAB files,
+    key ``dist``: (V, V) geodesic distances on the full shape divided by its sqrt-area, as
+    :func:`write_geodesic_matrices`; only for ``splits`` when given, by ``jobs`` processes).
+    ULRSSM's ``PairDataset`` pairs every two shapes of its data root, so one root per pair keeps our
+    pairs. ``ids.csv`` and ``logs/config.yaml`` as :func:`write_released`."""
+    import scipy.io
+
+    out = Path(out_dir)
+    with _staged_dir(out, overwrite) as tmp:
+        staging = _Staging(tmp, "export-ulrssm", progress)
+        settings = set()
+
+        def write_pair(record: PairRecord) -> None:
+            settings.add(record.meta["setting"])
+            folder = staging.add(record)
+            (folder / "off").mkdir()
+            (folder / "corres").mkdir()
+            for s, k in SIDES:
+                (folder / "off" / f"{k}.off").write_text(off_text(record[f"{s}_vertices"], record[f"{s}_faces"]),
+                                                         encoding="utf-8")
+            for k, text in enumerate(ulrssm_template_vts(record)):
+                (folder / "corres" / f"{k}.vts").write_text(text, encoding="utf-8")
+
+        shapes, meshes, needed, numbers = _geodesic_plan(records, splits if geodesics else [], each=write_pair)
+        rows, counts = [], {}
+        for split, entries in staging.by_split().items():
+            (tmp / split).mkdir()
+            for i, e in enumerate(entries):
+                os.replace(e.folder, tmp / split / str(i))
+                rows.append([split, i, e.pair_id, e.x_name, e.y_name])
+            counts[split] = len(entries)
+        staging.finish()
+        if geodesics and shapes:
+            work = tmp / ".rows"
+            work.mkdir()
+            matrices = _compute_geodesic_rows(meshes, needed, method, jobs, work, progress)
+            for sh in shapes:
+                folder = tmp / sh.split / str(numbers[(sh.split, sh.pair_id)]) / "dist"
+                folder.mkdir(exist_ok=True)
+                dist = _shape_matrix(sh, needed[sh.key], matrices[sh.key]) / np.float32(sh.sqrt_area)
+                scipy.io.savemat(folder / f"{sh.side}.mat", {"dist": dist.astype(np.float32, copy=False)})
+            del matrices
+            shutil.rmtree(work)
+        _write_ids(tmp / IDS_FILE, ["split", "index", "pair_id", "x", "y"], rows)
+        setting = settings.pop() if len(settings) == 1 else None
+        _write_log(tmp, "becos.export.write_ulrssm", "becos ULRSSM-style layout", counts, setting, metadata)
+    return out
+
+
+GEODESIC_FOLDER = "geodesic_dist_matrices"
+"""Folder of the loaders' geodesic layout (:func:`write_geodesic_matrices`)."""
+_GEODESIC_TASK_ROWS = 1024
+"""Distance rows per parallel task (one solver factorisation each: ~0.2 s against ~5 s of rows)."""
+
+
+@dataclass(frozen=True)
+class _GeodesicShape:
+    """One shape of one pair whose matrix is to be written."""
+
+    split: str
+    pair_id: str
+    side: int          # 0 = X, 1 = Y
+    dataset: str
+    name: str
+    stem: str          # released file stem (:func:`released_file_stem`)
+    mesh_id: str
+    key: str           # the full mesh up to rigid motion (cache key of its rows)
+    p2f: np.ndarray    # (V,) its vertices on the full mesh
+    sqrt_area: float   # the full shape's sqrt-area in the units of the record's vertices
+
+
+def _full_mesh_key(vertices: np.ndarray, faces: np.ndarray, dataset: str, name: str, variant: int) -> str:
+    """A file-name-safe key of a full mesh up to rigid motion (:func:`becos.geodesics.shape_key`)."""
+    import hashlib
+
+    from becos.geodesics import shape_key
     from becos.mesh import TriMesh
 
-    full_vertices, full_faces = full_shape(record, side)
-    p2f = np.asarray(record[f"{side}_partial_to_full"], dtype=np.int64)
-    n = len(p2f)
-    if out is None:
-        out = np.empty((n, n), dtype=np.float32)
-    elif out.shape != (n, n):
-        raise ValueError(f"out must have shape {(n, n)}, got {out.shape}")
-    solver = GeodesicDistances(TriMesh(full_vertices, full_faces), method, cache_bytes=0)
-    block = max(1, _GEODESIC_BLOCK_ELEMENTS // max(len(full_vertices), 1))
-    for start in range(0, n, block):
-        rows = solver.from_vertices(p2f[start:start + block])
-        out[start:start + block] = rows[:, p2f]
-    _symmetrise(out, block)
+    digest = hashlib.sha1(repr(shape_key(TriMesh(vertices, faces))).encode()).hexdigest()[:16]
+    return f"{_id_field(dataset)}_{_id_field(name)}_v{int(variant)}_{digest}"
+
+
+def _geodesic_plan(records: Iterable[PairRecord], splits, each=None) -> tuple[list[_GeodesicShape], dict, dict, dict]:
+    """Shapes to write, unique full meshes ``{key: (vertices, faces)}``, the rows each needs
+    ``{key: sorted unique full vertices}`` (the union of its shapes' ``partial_to_full``) and the pair
+    numbers ``{(split, pair_id): index}`` of ALL records (ascending pair_id per split, as every export
+    numbers pairs; so a split subset keeps the whole export's numbering). Streams the records, calling
+    ``each(record)`` on every one (to write other files in the same pass)."""
+    keep = None if splits is None else {str(s) for s in splits}
+    shapes, meshes, needed, ids = [], {}, {}, {}
+    for record in records:
+        _check_record(record, None)
+        if each is not None:
+            each(record)
+        ids.setdefault(str(record.meta["split"]), []).append(str(record.pair_id))
+        if keep is not None and str(record.meta["split"]) not in keep:
+            continue
+        infos = released_infos(record)
+        normalised = bool(record.meta.get("area_normalised", False))
+        for (s, k), info in zip(SIDES, infos):
+            vertices, faces = full_shape(record, s)
+            key = _full_mesh_key(vertices, faces, info["org_dataset"], info["name"], info["remesh_variant"])
+            meshes.setdefault(key, (np.array(vertices, dtype=np.float64), np.array(faces, dtype=np.int64)))
+            p2f = np.asarray(record[f"{s}_partial_to_full"], dtype=np.int64)
+            needed.setdefault(key, []).append(p2f)
+            scanned = "partial2full" in info
+            shapes.append(_GeodesicShape(
+                str(record.meta["split"]), str(record.pair_id), k, info["org_dataset"], info["name"],
+                released_file_stem(k, info["name"], info["remesh_variant"], record.pair_id if scanned else None),
+                info["mesh_id"], key, p2f, 1.0 if normalised else float(record[f"{s}_full_sqrt_area"])))
+    numbers = {}
+    for split, pair_ids in ids.items():
+        pair_ids.sort()
+        dup = sorted({a for a, b in zip(pair_ids, pair_ids[1:]) if a == b})
+        if dup:
+            raise ExportError(f"split {split}: pair ids {dup[:5]} occur more than once. Fix: pass each pair once")
+        numbers.update({(split, pid): i for i, pid in enumerate(pair_ids)})
+    return shapes, meshes, {key: np.unique(np.concatenate(v)) for key, v in needed.items()}, numbers
+
+
+def _geodesic_task(args):
+    from becos.geodesics import distance_rows
+
+    key, start, vertices, faces, sources, method = args
+    return key, start, distance_rows(vertices, faces, sources, method)
+
+
+def _compute_geodesic_rows(meshes: dict, needed: dict, method: str, jobs: int, folder: Path,
+                           progress: bool) -> dict[str, np.ndarray]:
+    """``{key: (len(needed[key]), V) float32 memmap}`` of distance rows, computed in tasks of
+    :data:`_GEODESIC_TASK_ROWS` rows by ``jobs`` processes (1: in this process), in ``folder``."""
+    import time
+    from concurrent.futures import ProcessPoolExecutor
+
+    out = {key: np.lib.format.open_memmap(folder / f"{key}.npy", mode="w+", dtype=np.float32,
+                                          shape=(len(needed[key]), len(meshes[key][0])))
+           for key in meshes}
+    tasks = [(key, start, *meshes[key], needed[key][start:start + _GEODESIC_TASK_ROWS], method)
+             for key in sorted(meshes, key=lambda k: -len(needed[k]))
+             for start in range(0, len(needed[key]), _GEODESIC_TASK_ROWS)]
+    started, done, total = time.monotonic(), 0, sum(len(r) for r in needed.values())
+    pool = ProcessPoolExecutor(max_workers=jobs) if jobs > 1 and len(tasks) > 1 else None
+    try:
+        for key, start, rows in (pool.map(_geodesic_task, tasks) if pool else map(_geodesic_task, tasks)):
+            out[key][start:start + len(rows)] = rows
+            done += len(rows)
+            if progress:
+                print(f"geodesics ({method}, {jobs} jobs): {done}/{total} rows of {len(meshes)} meshes, "
+                      f"{time.monotonic() - started:.0f} s", file=sys.stderr, flush=True)
+    finally:
+        if pool is not None:
+            pool.shutdown(cancel_futures=True)
     return out
 
 
-def _symmetrise(d: np.ndarray, block: int) -> None:
-    """In place d <- (d + d.T) / 2, one pair of (block x block) tiles at a time."""
-    n = len(d)
-    for i in range(0, n, block):
-        for j in range(i, n, block):
-            upper = d[i:i + block, j:j + block].astype(np.float64)
-            lower = d[j:j + block, i:i + block].astype(np.float64)
-            mean = 0.5 * (upper + lower.T)
-            d[i:i + block, j:j + block] = mean
-            d[j:j + block, i:i + block] = mean.T
+def _shape_matrix(shape: _GeodesicShape, rows: np.ndarray, matrix: np.ndarray) -> np.ndarray:
+    """(V, V) float32 symmetrised matrix of a shape's vertices from its full mesh's rows."""
+    sub = np.asarray(matrix[np.searchsorted(rows, shape.p2f)][:, shape.p2f], dtype=np.float64)
+    sym = (0.5 * (sub + sub.T)).astype(np.float32)
+    np.fill_diagonal(sym, 0.0)
+    return sym
 
 
 def write_geodesics(records: Iterable[PairRecord], out_dir: str | Path, method: str = "heat", *,
-                    overwrite: bool = False, progress: bool = False) -> Path:
-    """Write ``<out>/<split>/geodesics/<shape id>.npy``: :func:`geodesic_matrix` of both shapes of
-    every pair, with the shape ids of :func:`write_psmal` (pass the same records).
+                    overwrite: bool = False, progress: bool = False, splits=None, jobs: int = 1) -> Path:
+    """Write ``<out>/<split>/geodesics/<shape id>.npy``: (V, V) float32 geodesic distances of both
+    shapes of every pair (units of the record's vertices), with the shape ids of :func:`write_psmal`
+    (pass the same records).
 
-    Expensive (heat: a few ms per kept vertex; a 10k-vertex shape takes about a minute on 2 cores and
-    400 MB on disk), so it only runs when asked. ``out_dir`` may already hold a PSMAL export; each
-    ``<split>/geodesics`` folder appears whole (built aside, renamed in). Existing geodesics folders
-    are an error unless ``overwrite``.
+    Each distinct full mesh (up to rigid motion: a remesh variant recurring across pairs) is solved
+    once, for the union of the vertices its shapes keep, by ``jobs`` processes; ``splits`` limits the
+    export to those splits (numbering stays that of the whole split). ``out_dir`` may already hold a
+    PSMAL export; each ``<split>/geodesics`` folder appears whole (built aside, renamed in). Existing
+    geodesics folders are an error unless ``overwrite``.
     """
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
@@ -539,25 +732,16 @@ def write_geodesics(records: Iterable[PairRecord], out_dir: str | Path, method: 
     out.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(dir=out, prefix=".geodesics.tmp-"))
     try:
-        staging = _Staging(tmp, f"geodesics ({method})", progress)
-        for record in records:
-            _check_record(record, None)
-            folder = staging.add(record)
-            for s, k in SIDES:
-                n = len(record[f"{s}_partial_to_full"])
-                matrix = np.lib.format.open_memmap(folder / f"{k}.npy", mode="w+", dtype=np.float32, shape=(n, n))
-                geodesic_matrix(record, s, method, out=matrix)
-                matrix.flush()
-                del matrix
+        shapes, meshes, needed, numbers = _geodesic_plan(records, splits)
+        rows = _compute_geodesic_rows(meshes, needed, method, jobs, tmp, progress)
         built = {}
-        for split, entries in staging.by_split().items():
-            target = tmp / split / "geodesics"
-            target.mkdir(parents=True)
-            for i, e in enumerate(entries):
-                os.replace(e.folder / "0.npy", target / f"{psmal_shape_id(i, 0, e.x_dataset, e.x_name)}.npy")
-                os.replace(e.folder / "1.npy", target / f"{psmal_shape_id(i, 1, e.y_dataset, e.y_name)}.npy")
-            built[split] = target
-        staging.finish()
+        for sh in shapes:
+            target = tmp / sh.split / "geodesics"
+            target.mkdir(parents=True, exist_ok=True)
+            built[sh.split] = target
+            shape_id = psmal_shape_id(numbers[(sh.split, sh.pair_id)], sh.side, sh.dataset, sh.name)
+            np.save(target / f"{shape_id}.npy", _shape_matrix(sh, needed[sh.key], rows[sh.key]))
+        del rows
         for split, target in built.items():
             final = out / split / "geodesics"
             final.parent.mkdir(exist_ok=True)
@@ -575,12 +759,56 @@ def write_geodesics(records: Iterable[PairRecord], out_dir: str | Path, method: 
     return out
 
 
+def write_geodesic_matrices(records: Iterable[PairRecord], out_dir: str | Path, method: str = "heat", *,
+                            splits=None, jobs: int = 1, metadata: Mapping | None = None,
+                            overwrite: bool = False, progress: bool = False) -> Path:
+    """Geodesic matrices in the layout loaders read (``docs/released-layout.md``, section 3):
+
+    ``<out>/geodesic_dist_matrices/<stem>.npy``: (V, V) float32 distances between the vertices of the
+    released file ``<stem>.off`` (:func:`released_file_stem`; measured on the shape's FULL mesh),
+    divided by the full shape's sqrt-area (the released ``surface_area_after_scaling``): the file
+    geo-lora's ``BecosDataset`` loads from ``./geodesic_dist_matrices/<off stem>.npy`` instead of
+    computing it. ``<out>/geodesic_dist_matrices/index.csv`` lists every matrix with its split, pair
+    index, pair_id, mesh_id, vertex count and the sqrt-area (multiply to get the record's units);
+    ``<out>/logs/config.yaml`` as the other exports.
+
+    Each distinct full mesh is solved once for the union of the vertices its shapes keep, by ``jobs``
+    processes; ``splits`` (e.g. ``["test"]``) limits the export to those splits.
+    """
+    out = Path(out_dir)
+    with _staged_dir(out, overwrite) as tmp:
+        shapes, meshes, needed, numbers = _geodesic_plan(records, splits)
+        work = tmp / ".rows"
+        work.mkdir()
+        rows = _compute_geodesic_rows(meshes, needed, method, jobs, work, progress)
+        folder = tmp / GEODESIC_FOLDER
+        folder.mkdir()
+        table, written = [], {}
+        for sh in shapes:
+            table.append([sh.split, numbers[(sh.split, sh.pair_id)], sh.pair_id, sh.side, sh.stem, sh.mesh_id,
+                          len(sh.p2f), repr(sh.sqrt_area)])
+            if sh.stem in written:  # one full mesh in several pairs: one file
+                continue
+            written[sh.stem] = sh.key
+            matrix = _shape_matrix(sh, needed[sh.key], rows[sh.key]) / np.float32(sh.sqrt_area)
+            np.save(folder / f"{sh.stem}.npy", matrix.astype(np.float32, copy=False))
+        del rows
+        shutil.rmtree(work)
+        _write_ids(folder / "index.csv", ["split", "index", "pair_id", "side", "stem", "mesh_id", "n_vertices",
+                                          "sqrt_area"], table)
+        counts = {split: len({r[2] for r in table if r[0] == split}) for split in dict.fromkeys(r[0] for r in table)}
+        _write_log(tmp, "becos.export.write_geodesic_matrices",
+                   f"becos geodesic matrices ({method}, divided by sqrt-area)", counts, None, metadata)
+    return out
+
+
 # --------------------------------------------------------------------------------------------------
 # command line
 
 
 def configure_parser(parser: argparse.ArgumentParser, name: str) -> argparse.ArgumentParser:
-    """Arguments of ``becos export-released STORE OUT`` and ``becos export-psmal STORE OUT [--geodesics]``."""
+    """Arguments of ``becos export-released STORE OUT``, ``becos export-psmal STORE OUT [--geodesics]``
+    and ``becos export-geodesics STORE OUT``."""
     from becos.geodesics import METHODS
 
     parser.add_argument("store", type=Path, help="benchmark store written by `becos export-zarr`")
@@ -588,13 +816,23 @@ def configure_parser(parser: argparse.ArgumentParser, name: str) -> argparse.Arg
         parser.add_argument("out", type=Path, help="output folder, best named after the setting "
                                                    "(e.g. BeCoS/partial_partial): some loaders read the setting "
                                                    "from the path")
-    else:
+    elif name in ("export-psmal", "export-dpfm"):
         parser.add_argument("out", type=Path, help="output folder (<out>/<split>/shapes, maps)")
+        if name == "export-psmal":
+            parser.add_argument("--geodesics", action="store_true",
+                                help="also write (V, V) float32 geodesic matrices per shape (<split>/geodesics)")
+    elif name == "export-ulrssm":
+        parser.add_argument("out", type=Path, help="output folder (<out>/<split>/<i>/off, corres, dist)")
         parser.add_argument("--geodesics", action="store_true",
-                            help="also write (V, V) float32 geodesic matrices per shape (slow: ~1 min and "
-                                 "400 MB per 10k-vertex shape)")
+                            help="also write dist/<k>.mat (key dist: geodesics divided by the sqrt-area)")
+    else:
+        parser.add_argument("out", type=Path, help="output folder (<out>/geodesic_dist_matrices/<stem>.npy)")
+    if name in ("export-psmal", "export-geodesics", "export-ulrssm"):
         parser.add_argument("--geodesic-method", choices=METHODS, default="heat",
                             help="geodesic estimator (default: heat)")
+        parser.add_argument("--splits", nargs="+", metavar="SPLIT",
+                            help="geodesics of these splits only (e.g. test); default: every split")
+        parser.add_argument("--jobs", type=int, default=1, help="processes computing distance rows (default 1)")
     parser.add_argument("--force", action="store_true", help="replace OUT if it exists")
     parser.set_defaults(export_kind=name)
     return parser
@@ -605,6 +843,17 @@ def run_cli(args: argparse.Namespace) -> int:
 
     bench = open_benchmark(args.store)
     out = Path(args.out)
+    if getattr(args, "jobs", 1) < 1:
+        raise ExportError(f"--jobs must be at least 1, got {args.jobs}")
+    if args.export_kind == "export-geodesics":
+        write_geodesic_matrices(bench.records(), out, args.geodesic_method, splits=args.splits, jobs=args.jobs,
+                                metadata=bench.metadata, overwrite=args.force, progress=True)
+        with open(out / GEODESIC_FOLDER / "index.csv", encoding="utf-8", newline="") as fh:
+            rows = list(csv.DictReader(fh))
+        print(json.dumps({"out": str(out.resolve()), "setting": bench.setting, "method": args.geodesic_method,
+                          "splits": args.splits, "matrices": len({r["stem"] for r in rows}),
+                          "bytes": sum(p.stat().st_size for p in (out / GEODESIC_FOLDER).glob("*.npy"))}))
+        return 0
     if args.export_kind == "export-released":
         if bench.setting not in out.resolve().parts:
             print(f"becos export-released: note: DeepShapeMatchingKit's BeCoSDataset reads the setting from "
@@ -612,15 +861,21 @@ def run_cli(args: argparse.Namespace) -> int:
                   file=sys.stderr)
         write_released(bench.records(), out, setting=bench.setting, metadata=bench.metadata,
                        overwrite=args.force, progress=True)
+    elif args.export_kind == "export-ulrssm":
+        write_ulrssm(bench.records(), out, metadata=bench.metadata, overwrite=args.force, progress=True,
+                     geodesics=args.geodesics, method=args.geodesic_method, splits=args.splits, jobs=args.jobs)
+    elif args.export_kind == "export-dpfm":
+        write_dpfm(bench.records(), out, metadata=bench.metadata, overwrite=args.force, progress=True)
     else:
         write_psmal(bench.records(), out, metadata=bench.metadata, overwrite=args.force, progress=True)
         if args.geodesics:
-            write_geodesics(bench.records(), out, args.geodesic_method, overwrite=args.force, progress=True)
+            write_geodesics(bench.records(), out, args.geodesic_method, overwrite=args.force, progress=True,
+                            splits=args.splits, jobs=args.jobs)
     with open(out / IDS_FILE, encoding="utf-8", newline="") as fh:
         splits = [row["split"] for row in csv.DictReader(fh)]
     result = {"out": str(out.resolve()), "setting": bench.setting,
               "pairs": {s: splits.count(s) for s in dict.fromkeys(splits)}}
-    if args.export_kind == "export-psmal":
+    if args.export_kind in ("export-psmal", "export-ulrssm"):
         result["geodesics"] = args.geodesic_method if args.geodesics else None
     print(json.dumps(result))
     return 0

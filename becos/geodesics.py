@@ -262,6 +262,24 @@ class GeodesicDistances:
         return _adaptive_corner_search(graph, self.n_vertices, sources, corners, radius, interpolate)
 
 
+def distance_rows(vertices: np.ndarray, faces: np.ndarray, sources: np.ndarray, method: str = "heat") -> np.ndarray:
+    """(len(sources), V) float32 geodesic distances from each source vertex to every vertex of the mesh
+    (units of ``vertices``), for exports of whole distance matrices.
+
+    Heat: potpourri3d's solver is factored once (its constructor: Laplacian and heat-flow Cholesky
+    factors, ~0.2 s at 10k vertices); each source then costs two back-substitutions and a gradient
+    (~5 ms per source at 10k vertices on one core). Rows are produced in blocks of bounded float64
+    memory and stored as float32. A module-level function (no object state) so process pools can call it.
+    """
+    mesh = TriMesh(np.asarray(vertices, dtype=np.float64), np.asarray(faces, dtype=np.int64))
+    solver = GeodesicDistances(mesh, method, cache_bytes=0)
+    sources = np.asarray(sources, dtype=np.int64).reshape(-1)
+    out = np.empty((len(sources), mesh.n_vertices), dtype=np.float32)
+    for block in _chunks(np.arange(len(sources)), mesh.n_vertices):
+        out[block] = solver.from_vertices(sources[block])
+    return out
+
+
 class GeodesicsCache:
     """Solvers of several shapes, least recently used first out: "cached per shape" across pairs.
 

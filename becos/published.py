@@ -269,7 +269,9 @@ def write_published_pickle(manifest: pd.DataFrame, path: str | Path, catalog: pd
                            template_rows=None,
                            face_targets: Callable[[str, str, int], int] | None = None,
                            random_rotations: Mapping[str, np.ndarray] | None = None,
-                           cameras: Mapping[str, np.ndarray] | None = None, regime: str = "high") -> None:
+                           cameras: Mapping[str, np.ndarray] | None = None, regime: str = "high",
+                           pair_face_targets: Mapping[str, tuple[int, int]] | None = None,
+                           data_root: str | Path | None = None) -> None:
     """Write ``manifest`` as a pair list in the published pickle schema (atomic, protocol 4).
 
     Args:
@@ -283,10 +285,17 @@ def write_published_pickle(manifest: pd.DataFrame, path: str | Path, catalog: pd
             rotation per shape from ``rng_for(pair seed, 'random_rotation')``.
         cameras: ``{pair_id: (2, 10, 3)}`` for partial settings (written as ``cam_pos``); default:
             unit directions of ``draw_camera_pair(rng_for(pair seed, 'cameras', k), regime)``.
-            Pass the rotations/cameras your records used when the pickle must describe them.
+            Pass the rotations/cameras your records used when the pickle must describe them
+            (:func:`store_pair_facts` reads them from a benchmark store).
+        pair_face_targets: ``{pair_id: (x faces, y faces)}``; overrides ``face_targets`` (e.g. the
+            face counts of the remeshed shapes a store's records were built from).
+        data_root: the data root the catalog's files lie in (config ``data_dir``): ``file_path`` is then
+            written as the reference writes it, ``data/<path below the data root>`` (the reference
+            reads ``f"{data_dir}/{file_path[4:]}"``); without it, the catalog's ``file`` as is.
 
-    ``rot`` is written as the three angles of the catalog's frame rotation, ``file_path`` as the
-    catalog's ``file``. Shapes missing from the catalog raise ``ConfigError``.
+    ``rot`` is written as the three angles of the catalog's frame rotation. Shapes missing from the
+    catalog, or pairs missing from ``random_rotations`` / ``cameras`` / ``pair_face_targets``, raise
+    ``ConfigError``; a catalog file outside ``data_root`` too.
     """
     settings = set(manifest["setting"])
     if len(settings) > 1:
@@ -295,8 +304,25 @@ def write_published_pickle(manifest: pd.DataFrame, path: str | Path, catalog: pd
     face_targets = face_targets or default_face_target
     shapes = {shape_key(r["dataset"], r["name"]): r for r in catalog.to_dict("records")}
     rot_cache: dict[str, list] = {}
+    root = None if data_root is None else Path(data_root).resolve()
 
-    def shape_dict(side: str, row: dict, rot: np.ndarray, cam: np.ndarray | None) -> dict:
+    def file_path(entry: dict) -> str:
+        if root is None:
+            return str(entry["file"])
+        try:
+            below = Path(entry["file"]).resolve().relative_to(root)
+        except ValueError:
+            raise ConfigError(f"{entry['file']}: shape {entry['dataset']}/{entry['name']} lies outside the data "
+                              f"root {root}. Fix: pass the data_dir the catalog was built from") from None
+        return f"data/{below.as_posix()}"
+
+    def lookup(table: Mapping | None, pid: str, what: str):
+        if pid not in table:
+            raise ConfigError(f"pair {pid}: no {what} given for it (the store lacks the pair?). Fix: write the "
+                              f"pair list from the store built from this manifest")
+        return table[pid]
+
+    def shape_dict(side: str, row: dict, rot: np.ndarray, cam: np.ndarray | None, faces: int | None) -> dict:
         key = shape_key(row[f"{side}_dataset"], row[f"{side}_name"])
         entry = shapes.get(key)
         if entry is None:
@@ -306,12 +332,12 @@ def write_published_pickle(manifest: pd.DataFrame, path: str | Path, catalog: pd
         trow = _template_row(template_rows, str(entry["template_key"]))
         d = {
             "name": str(row[f"{side}_name"]), "org_dataset": str(row[f"{side}_dataset"]),
-            "category": str(entry["category"]), "file_path": str(entry["file"]), "scale": float(entry["scale"]),
+            "category": str(entry["category"]), "file_path": file_path(entry), "scale": float(entry["scale"]),
             "rot": list(rot_cache[key]),
             "partial_full_template": _field(trow, "partial_full_template") if trow is not None else UNDEFINED,
             "partial_full_dataset": _field(trow, "partial_full_dataset") if trow is not None else UNDEFINED,
-            "desired_n_face_remeshed": int(face_targets(row[f"{side}_dataset"], row[f"{side}_name"],
-                                                        int(row[f"{side}_variant"]))),
+            "desired_n_face_remeshed": int(faces) if faces is not None else int(face_targets(
+                row[f"{side}_dataset"], row[f"{side}_name"], int(row[f"{side}_variant"]))),
             "random_rot": np.array(rot, dtype=np.float64),
             "becos": {"pair_id": str(row["pair_id"]), "setting": str(row["setting"]),
                       "category": str(row["category"]), "copy": int(row["copy"]), "seed": int(row["seed"]),
@@ -326,13 +352,67 @@ def write_published_pickle(manifest: pd.DataFrame, path: str | Path, catalog: pd
         if row["split"] not in lists:
             raise ConfigError(f"pair {row['pair_id']}: split {row['split']!r} has no place in a pair list")
         pid = row["pair_id"]
-        rot = (np.asarray(random_rotations[pid]) if random_rotations is not None
+        rot = (np.asarray(lookup(random_rotations, pid, "random rotations")) if random_rotations is not None
                else _default_random_rotations(int(row["seed"])))
         cam = None
         if partial:
-            cam = np.asarray(cameras[pid]) if cameras is not None else _default_cameras(int(row["seed"]), regime)
-        lists[row["split"]].append((shape_dict("x", row, rot[0], None if cam is None else cam[0]),
-                                    shape_dict("y", row, rot[1], None if cam is None else cam[1])))
+            cam = (np.asarray(lookup(cameras, pid, "cameras")) if cameras is not None
+                   else _default_cameras(int(row["seed"]), regime))
+        faces = (None, None) if pair_face_targets is None else lookup(pair_face_targets, pid, "face targets")
+        lists[row["split"]].append((shape_dict("x", row, rot[0], None if cam is None else cam[0], faces[0]),
+                                    shape_dict("y", row, rot[1], None if cam is None else cam[1], faces[1])))
     buf = io.BytesIO()
     _PortablePickler(buf, protocol=4).dump([lists[s] for s in PUBLISHED_SPLITS])
     write_bytes(path, buf.getvalue())
+
+
+def store_pair_facts(bench) -> dict[str, dict[str, np.ndarray]]:
+    """What a benchmark store's records actually used, per ``pair_id``, for :func:`write_published_pickle`.
+
+    Returns ``{"random_rotations": {pid: (2, 3, 3)}, "cameras": {pid: (2, 10, 3)},
+    "face_targets": {pid: (x, y)}}``:
+
+    - random rotations: the records' ``x/y_random_rotation`` (row vectors, applied last), as the
+      reference's ``random_rot``;
+    - cameras: per shape, the unit direction from the look-at target to the camera that cut it
+      (record ``camera`` row 0 - row 1), in the pair's shared frame (Y's turned by its alignment
+      rotation, as the reference casts Y after aligning it to X), repeated in all :data:`N_CAMERAS`
+      tries, so that the reference's first try (and any later one) uses the camera becos used; a full
+      shape (no camera: P2F's X) gets NaN rows;
+    - face targets: ``f<n>`` remesh tokens give n (the published target the remesh aimed at); other
+      shapes the face count of the full remeshed shape the record was cut from.
+
+    Only the small stacked arrays and the metas are read (not the meshes).
+
+    Args:
+        bench: an open :class:`becos.store.Benchmark`.
+    """
+    ids = list(bench.table["pair_id"])
+    metas = bench.read_metas()
+    out: dict[str, dict] = {"random_rotations": {}, "cameras": {}, "face_targets": {}}
+    rot = {s: bench.concatenated(f"{s}_random_rotation")[0] for s in ("x", "y")}
+    cam = {s: bench.concatenated(f"{s}_camera")[0] for s in ("x", "y")}
+    align = {s: bench.concatenated(f"{s}_align_rotation")[0] for s in ("x", "y")}
+    faces = {}
+    for s in ("x", "y"):
+        counts = {}
+        for key in (f"{s}_faces", f"{s}_full_faces"):
+            group = bench.layout[key]
+            counts[key] = np.diff(bench.offsets[group]) if group is not None else np.full(len(ids), 0)
+        faces[s] = np.where(counts[f"{s}_full_faces"] > 0, counts[f"{s}_full_faces"], counts[f"{s}_faces"])
+    for i, pid in enumerate(ids):
+        out["random_rotations"][pid] = np.stack([rot["x"][i], rot["y"][i]]).astype(np.float64)
+        directions = []
+        for s in ("x", "y"):
+            c = np.asarray(cam[s][i], dtype=np.float64)
+            d = c[0] - c[1]
+            d = d @ np.asarray(align[s][i], dtype=np.float64)  # common frame -> shared (aligned) frame
+            d = d / np.linalg.norm(d) if np.isfinite(d).all() and np.linalg.norm(d) > 0 else np.full(3, np.nan)
+            directions.append(np.tile(d, (N_CAMERAS, 1)))
+        out["cameras"][pid] = np.stack(directions)
+        targets = []
+        for s in ("x", "y"):
+            token = str(metas[i].get(f"{s}_token", ""))
+            targets.append(int(token[1:]) if re.fullmatch(r"f\d+", token) else int(faces[s][i]))
+        out["face_targets"][pid] = tuple(targets)
+    return out

@@ -60,7 +60,7 @@ STAGE_KEYS: dict[str, tuple[str, ...]] = {
     "manifest": ("data_dir", "annotations", "datasets", "shapes", "template_file", "combinations", "seed", "usage_scale",
                  "caps", "remesh", "remesh_variants", "n_chunks", "original_settings"),
     "remesh": ("seed", "remesh", "remesher"),
-    "export": (),
+    "export": ("data_dir",),
     "ground_truth": ("annotations", "template_file", "remesh"),
     "pairs": ("one_axis_rotation", "up_axis", "area_normalised", "propagate_annotations", "annotations",
               "template_file", "original_settings", "remesher"),
@@ -81,6 +81,30 @@ def _schema() -> dict:
     import yaml
 
     return yaml.safe_load(SCHEMA_PATH.read_text())
+
+
+def _typed_command_line_values(schema: dict, instance):
+    """Nested values given as ``snakemake --config 'exports={zarr: true, ...}'`` arrive as strings
+    (Snakemake reads them with YAML's BaseLoader): turn ``"true"``/``"false"`` and numbers into the
+    boolean / integer / number the schema asks for, recursively; anything else is left to the schema."""
+    kind = schema.get("type")
+    if isinstance(instance, dict) and kind == "object":
+        props = schema.get("properties", {})
+        return {k: _typed_command_line_values(props[k], v) if k in props else v for k, v in instance.items()}
+    if isinstance(instance, list) and kind == "array" and isinstance(schema.get("items"), dict):
+        return [_typed_command_line_values(schema["items"], v) for v in instance]
+    if isinstance(instance, str):
+        text = instance.strip()
+        if kind == "boolean" and text.lower() in ("true", "false"):
+            return text.lower() == "true"
+        try:
+            if kind == "integer" and text.lstrip("+-").isdigit():
+                return int(text)
+            if kind == "number":
+                return float(text)
+        except ValueError:
+            pass
+    return instance
 
 
 def _fill_defaults(schema: dict, instance):
@@ -105,7 +129,7 @@ def resolve_config(raw: dict) -> dict:
     import jsonschema
 
     schema = _schema()
-    config = _fill_defaults(schema, deepcopy(dict(raw)))
+    config = _fill_defaults(schema, _typed_command_line_values(schema, deepcopy(dict(raw))))
     if config.get("remesher") == "auto":  # the published targets, rotations and views refer to the reference's remesh
         config["remesher"] = "reference" if config.get("original_settings") else "becos"
     validator = jsonschema.Draft202012Validator(schema)
@@ -1022,14 +1046,20 @@ def published_parts(config: dict, setting: str) -> dict[str, bool | None]:
             "views": None if setting == "full_full" else (reference and setting == "partial_partial")}
 
 
-def export_pairings_stage(config: dict, setting: str, out: Path) -> None:
-    """The manifest in the published pickle schema (share a benchmark as pair lists + code)."""
+def export_pairings_stage(config: dict, setting: str, out: Path, store: Path) -> None:
+    """The manifest in the published pickle schema (share a benchmark as pair lists + code), with the
+    random rotations, cameras and face counts the store's records actually used (docs/released-layout.md,
+    section "Published pair lists")."""
     from becos.catalog import read_catalog
-    from becos.published import write_published_pickle
+    from becos.published import store_pair_facts, write_published_pickle
     from becos.sampling import read_manifest
+    from becos.store import open_benchmark
 
     layout = Layout.of(config)
-    write_published_pickle(read_manifest(layout.manifest(setting)), out, read_catalog(layout.catalog))
+    facts = store_pair_facts(open_benchmark(store))
+    write_published_pickle(read_manifest(layout.manifest(setting)), out, read_catalog(layout.catalog),
+                           random_rotations=facts["random_rotations"], cameras=facts["cameras"],
+                           pair_face_targets=facts["face_targets"], data_root=config.get("data_dir"))
 
 
 # --------------------------------------------------------------------------------------------------
@@ -1047,6 +1077,8 @@ def configure_parser(parser: argparse.ArgumentParser, name: str) -> None:
         parser.add_argument("--ground-truth", required=True, type=Path, help="the chunk's ground-truth index")
     if name == "manifest":
         parser.add_argument("--catalog", required=True, type=Path)
+    if name == "export-pairings":
+        parser.add_argument("--store", required=True, type=Path, help="the setting's benchmark store")
     if name == "remesh":
         parser.add_argument("--shape", required=True, help="JSON: the shape's catalog row")
         parser.add_argument("--token", required=True, help="v<k> (variant k) or f<n> (target faces n)")
@@ -1107,5 +1139,5 @@ def _run_stage(args: argparse.Namespace, config: dict) -> int:
         write_text(args.out, json.dumps(store_metadata(config, args.setting), indent=1, sort_keys=True,
                                         default=str) + "\n")
     elif args.command == "export-pairings":
-        export_pairings_stage(config, args.setting, args.out)
+        export_pairings_stage(config, args.setting, args.out, args.store)
     return 0

@@ -37,7 +37,8 @@ from workflow import REPO, becos_code, write_config  # noqa: E402
 RULES = {"write-config": "resolved_config", "check": "check_datasets", "catalog": "catalog", "manifest": "manifest",
          "remesh": "remesh", "ground-truth": "ground_truth", "pairs": "pairs", "metadata": "store_metadata",
          "export-zarr": "zarr_store", "validate": "validate_store", "export-released": "released_layout",
-         "export-psmal": "psmal_layout", "export-pairings": "published_pairings", "report": "report",
+         "export-psmal": "psmal_layout", "export-geodesics": "geodesics", "export-pairings": "published_pairings",
+         "report": "report",
          "baseline": "baseline", "evaluate": "evaluate", "synthetic": "synthetic_collection"}
 SETTINGS = ("full_full", "partial_full", "partial_partial")
 # rules whose time grows with pairs: per chunk (ground truth, pairs) or per setting (the rest)

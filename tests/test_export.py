@@ -137,7 +137,12 @@ def test_released_round_trip(setting, records, tmp_path):
         r = by_id[pair["row"]["pair_id"]]
         assert r.meta["split"] == split
         assert pair["row"]["x"] == r.meta["x"]["name"] and pair["row"]["y"] == r.meta["y"]["name"]
-        assert pair["file0"] == f"0_{r.meta['x']['name']}.off" and pair["file1"] == f"1_{r.meta['y']['name']}.off"
+        variants = int(r["x_remesh_variant"]), int(r["y_remesh_variant"])
+        assert variants == (0, 0)  # remesh variant 0 of cat0 and cat3: "_v0" in the file names
+        scanned = {"full_full": (), "partial_full": ("y",), "partial_partial": ("x", "y")}[setting]
+        for k, s in ((0, "x"), (1, "y")):  # each scan is its own mesh: the pair id in its file name
+            scan = f"_scan-{r.pair_id}" if s in scanned else ""
+            assert pair[f"file{k}"] == f"{k}_{r.meta[s]['name']}_v0{scan}.off"
         for k, s in ((0, "x"), (1, "y")):
             v, f = pair[f"off{k}"]
             assert v.dtype == np.float64 and np.array_equal(v, r[f"{s}_vertices"])  # exact
@@ -156,6 +161,7 @@ def test_released_round_trip(setting, records, tmp_path):
             assert type(info["surface_area"]) is float and info["pair_id"] == r.pair_id
             assert np.array_equal(info["random_rotation"], r[f"{s}_random_rotation"])
             assert info["random_rotation"].flags.writeable
+            assert info["remesh_variant"] == 0 and info["mesh_id"].startswith(f"tosca/{info['name']}/v0")
         assert i0["align_rotation"] is None and i0["align_translation"] is None
         assert np.array_equal(i1["align_rotation"], r["y_align_rotation"])
         assert np.array_equal(i1["align_translation"], r["y_align_translation"])
@@ -168,13 +174,13 @@ def test_released_round_trip(setting, records, tmp_path):
                 assert np.array_equal(info["cam_pos"], r[f"{s}_camera"][0]) and info["cam_pos"].shape == (3,)
             else:
                 assert "partial2full" not in info and "cam_pos" not in info
-            if setting == "full_full":
-                assert not {"overlap_mask", "found_faces_mask", "found_faces_mask_yx"} & set(info)
-            else:  # each shape's OWN mask under the reference's key (the reference swaps them in P2P)
-                assert info["overlap_mask"].dtype == bool and np.array_equal(info["overlap_mask"], r[f"{s}_overlap_mask"])
-                assert len(info["overlap_mask"]) == len(r[f"{s}_vertices"])
-                assert info["overlap_percentage"] == pytest.approx(info["overlap_mask"].mean())
-        if setting == "partial_partial":  # released placement: the other shape's mask
+            # every setting: each shape's OWN mask under the reference's key (the reference swaps them in
+            # P2P and has none in F2F)
+            assert info["overlap_mask"].dtype == bool and np.array_equal(info["overlap_mask"], r[f"{s}_overlap_mask"])
+            assert len(info["overlap_mask"]) == len(r[f"{s}_vertices"])
+            assert info["overlap_percentage"] == pytest.approx(info["overlap_mask"].mean())
+            assert info["mesh_id"].endswith(f"/scan/{r.pair_id}/{s}") == (s in scanned)
+        if setting in ("partial_partial", "full_full"):  # released placement: the other shape's mask
             assert np.array_equal(i0["found_faces_mask_yx"], r["y_overlap_mask"]) and "found_faces_mask" not in i0
             assert np.array_equal(i1["found_faces_mask"], r["x_overlap_mask"]) and "found_faces_mask_yx" not in i1
         if setting == "partial_full":
@@ -402,3 +408,281 @@ def test_cli_exports_a_store(records, pair_record_files, small_record, tmp_path,
     (row,) = read_ids(tmp_path / "psmal")
     d = np.load(tmp_path / "psmal" / "test" / "geodesics" / f"{row['y_id']}.npy")
     assert d.shape == (len(small_record["y_vertices"]),) * 2
+    assert main(["export-geodesics", str(small_store), str(tmp_path / "geo"), "--splits", "train"]) == 0
+    result = json.loads(capsys.readouterr().out)
+    assert result["matrices"] == 0 and result["splits"] == ["train"]   # the small pair is in "test"
+    assert main(["export-geodesics", str(small_store), str(tmp_path / "geo"), "--force", "--jobs", "2"]) == 0
+    result = json.loads(capsys.readouterr().out)
+    assert result["matrices"] == 2 and result["bytes"] > 4 * len(small_record["y_vertices"]) ** 2
+    assert main(["export-geodesics", str(small_store), str(tmp_path / "geo2"), "--jobs", "0"]) == 2
+
+
+# --------------------------------------------------------------------------------------------------
+# one name, several remesh variants; F2F masks (semantic missing parts)
+
+
+def _ball_records(setting: str) -> list[PairRecord]:
+    """"ball" remeshed twice (variant 0: 162 vertices, variant 1: 642) paired with "egg"; egg vertices
+    with y > 0.25 are a semantic missing part (no counterpart on the ball). Pairs ball0a, ball0b
+    (variant 0, two seeds) and ball1 (variant 1)."""
+    import trimesh
+    from scipy.spatial import cKDTree
+
+    from becos.mesh import TriMesh
+    from becos.pairs import PairOptions, ShapeInstance, build_pair
+    from becos.surface_map import SurfaceMap
+
+    coarse, fine = trimesh.creation.icosphere(subdivisions=2), trimesh.creation.icosphere(subdivisions=3)
+    fv, ff = np.asarray(fine.vertices), np.asarray(fine.faces)
+    egg = ShapeInstance("synthetic", "egg", "blob", "egg", TriMesh(fv * [0.6, 0.5, 0.45], ff), remesh_variant=0)
+    out = []
+    for pair_id, variant, sphere, seed in (("ball0a", 0, coarse, 1), ("ball0b", 0, coarse, 2), ("ball1", 1, fine, 3)):
+        v, f = np.asarray(sphere.vertices), np.asarray(sphere.faces)
+        assert np.allclose(v, fv[:len(v)])  # icosphere levels share their first vertices
+        ball = ShapeInstance("synthetic", "ball", "blob", "ball", TriMesh(v * 0.5, f), remesh_variant=variant)
+        from_egg = cKDTree(v).query(fv)[1]
+        from_egg[fv[:, 1] > 0.5] = -1  # the missing part
+        gt_xy = SurfaceMap.from_vertex_indices(np.arange(len(v)), ff)
+        gt_yx = SurfaceMap.from_vertex_indices(from_egg, f)
+        out.append(build_pair(ball, egg, gt_xy, gt_yx, pair_id=pair_id, seed=seed, split="test",
+                              options=PairOptions(setting=setting)))
+    return out
+
+
+def _distances(vertices: np.ndarray) -> np.ndarray:
+    """A rotation-invariant per-shape quantity (stands in for a geodesic matrix)."""
+    return np.linalg.norm(vertices[:, None] - vertices[None], axis=2)
+
+
+@pytest.mark.parametrize("setting", ["full_full", "partial_full"])
+def test_name_keyed_cache_and_f2f_masks(setting, tmp_path):
+    """A loader that caches a per-shape matrix under the OFF file's stem (as geo-lora caches geodesics
+    under ``<off stem>.npy``) gets each variant's own mesh; masks are read where DSMK would assume ones."""
+    import trimesh
+
+    recs = _ball_records(setting)
+    out = write_released(recs, tmp_path / setting, setting=setting)
+    cache: dict[str, np.ndarray] = {}
+    hits = 0
+    by_name: dict[str, int] = {}
+    for row in read_ids(out):
+        folder = out / row["split"] / row["index"]
+        offs = sorted(folder.glob("*.off"))
+        for k, off in enumerate(offs):
+            vertices = np.asarray(trimesh.load(off, process=False, maintain_order=True).vertices)
+            info = read_info(off.with_name(off.stem + "_info.pkl"))
+            if off.stem in cache:
+                hits += 1
+                # a cache hit must be the same mesh (up to the pair's rigid motion)
+                np.testing.assert_allclose(cache[off.stem], _distances(vertices), atol=1e-9)
+            else:
+                cache[off.stem] = _distances(vertices)
+            by_name.setdefault(info["name"], len(vertices))
+            if k == 0:  # the ball: one name, two meshes, told apart by file name and info
+                assert info["name"] == "ball" and off.stem == f"0_ball_v{info['remesh_variant']}"
+                assert info["mesh_id"] == f"synthetic/ball/v{info['remesh_variant']}"
+        # masks: both shapes carry their own; where corres is -1 the mask is 0 (not the all-ones default)
+        mask_egg = read_info(offs[1].with_name(offs[1].stem + "_info.pkl"))["overlap_mask"]
+        corr = np.load(folder / "corres_10.npy")
+        assert np.array_equal(mask_egg, corr != -1) and 0 < (~mask_egg).sum() < len(mask_egg)
+    eggs = ["1_egg_v0"] if setting == "full_full" else [f"1_egg_v0_scan-{r.pair_id}" for r in recs]
+    assert sorted(cache) == sorted(["0_ball_v0", "0_ball_v1", *eggs])
+    assert hits == (3 if setting == "full_full" else 1)  # ball v0 again (+ the full egg twice in F2F)
+    # keyed by name alone, the cache would have served ball v0's 162 vertices to ball v1 (642)
+    assert by_name["ball"] == 162 and len(cache["0_ball_v1"]) == 642
+
+
+def geolora_cached_geodesics_path(full_file: str) -> str:
+    """Where geo-lora's ``BecosDataset`` (P2F mode) loads a full shape's geodesic matrix instead of
+    computing it: ``./geodesic_dist_matrices/<OFF file name before ".off">.npy``, relative to the
+    working folder, for the first ``.off`` of the sorted pair folder (geo-lora ``utils/shape_dataset.py``,
+    ``BaseDataset.get_geodesic_distmat`` with ``loading=True``; licence not stated in our index). The
+    matrix it computes otherwise is divided by the shape's sqrt-area (``normalize=True``)."""
+    return "./geodesic_dist_matrices/" + full_file.split(".off")[0] + ".npy"
+
+
+def test_geodesic_matrices_where_loaders_read_them(tmp_path, monkeypatch):
+    import trimesh
+
+    from becos.export import GEODESIC_FOLDER, write_geodesic_matrices
+
+    recs = _ball_records("partial_full")
+    recs[2] = _copy(recs[2], recs[2].pair_id, "train")     # ball v1 in train: left out by splits=["test"]
+    released = write_released(recs, tmp_path / "BeCoS" / "partial_full", setting="partial_full")
+    out = write_geodesic_matrices(recs, tmp_path / "geodesics", splits=["test"], jobs=2)
+    with open(out / GEODESIC_FOLDER / "index.csv", encoding="utf-8", newline="") as fh:
+        index = list(csv.DictReader(fh))
+    assert {row["split"] for row in index} == {"test"} and len(index) == 4   # 2 test pairs x 2 shapes
+    files = sorted(p.name for p in (out / GEODESIC_FOLDER).glob("*.npy"))
+    assert len(files) == 3   # ball v0 once (two pairs), two scans of the egg
+    monkeypatch.chdir(out)   # geo-lora reads ./geodesic_dist_matrices relative to its working folder
+    by_id = {r.pair_id: r for r in recs}
+    for row in read_ids(released):
+        if row["split"] != "test":
+            continue
+        r = by_id[row["pair_id"]]
+        folder = released / row["split"] / row["index"]
+        offs = sorted(p.name for p in folder.glob("*.off"))
+        for k, (s, off) in enumerate(zip(("x", "y"), offs)):
+            d = np.load(geolora_cached_geodesics_path(off))
+            info = read_info(folder / off.replace(".off", "_info.pkl"))
+            vertices = np.asarray(trimesh.load(folder / off, process=False, maintain_order=True).vertices)
+            assert d.dtype == np.float32 and d.shape == (len(vertices),) * 2
+            assert np.array_equal(d, d.T) and not np.diag(d).any()
+            (entry,) = [e for e in index if e["pair_id"] == r.pair_id and e["side"] == str(k)]
+            assert float(entry["sqrt_area"]) == info["surface_area_after_scaling"] and entry["mesh_id"] == info["mesh_id"]
+            if s == "x":  # the ball: a sphere of radius 0.5, geodesics are great-circle arcs
+                unit = vertices / np.linalg.norm(vertices, axis=1, keepdims=True)
+                arc = 0.5 * np.arccos(np.clip(unit @ unit.T, -1, 1)) / info["surface_area_after_scaling"]
+                far = arc > 0.05
+                assert abs(np.median(d[far] / arc[far]) - 1) < 0.05
+            else:  # a scan: distances on the FULL egg between its kept vertices
+                p2f = info["partial2full"]
+                full = _edge_dijkstra(r["y_full_vertices"], r["y_full_faces"])[np.ix_(p2f, p2f)]
+                ratio = full[d > 0.05] / (d[d > 0.05] * info["surface_area_after_scaling"])
+                assert 1.0 < np.median(ratio) < 1.2   # edge paths a little longer than surface geodesics
+
+
+# --------------------------------------------------------------------------------------------------
+# ULRSSM and DPFM layouts, read with the loaders' own parsing logic (numpy in place of torch)
+
+
+def ulrssm_sort_list(paths: list[str]) -> list[str]:
+    """ULRSSM ``datasets/shape_dataset.py`` ``sort_list`` (MIT licence): sort by the first integer that
+    is followed by a ``.`` in the path, or lexicographically when some path has none."""
+    import re
+
+    try:
+        return sorted(paths, key=lambda x: int(re.search(r"\d+(?=\.)", x).group()))
+    except AttributeError:
+        return sorted(paths)
+
+
+def ulrssm_pair(data_root: Path, first: int, second: int, with_dist: bool) -> dict:
+    """ULRSSM ``SingleShapeDataset._init_data`` / ``__getitem__`` file logic for two shapes of a root:
+    ``off/*.off``, ``corres/*.vts`` (``np.loadtxt(..., dtype=np.int32) - 1``), ``dist/*.mat`` (key
+    ``dist``), each list sorted by ``sort_list``; a pair's ground truth is the template pairing
+    ``first['corr'][t] <-> second['corr'][t]``."""
+    import glob
+
+    import scipy.io
+    import trimesh
+
+    offs = ulrssm_sort_list(glob.glob(f"{data_root / 'off'}/*.off"))
+    corrs = ulrssm_sort_list(glob.glob(f"{data_root / 'corres'}/*.vts"))
+    dists = ulrssm_sort_list(glob.glob(f"{data_root / 'dist'}/*.mat")) if with_dist else []
+    assert len(offs) == len(corrs) and (not with_dist or len(dists) == len(offs))
+    items = []
+    for i in (first, second):
+        mesh = trimesh.load(offs[i], process=False, maintain_order=True)
+        item = {"name": Path(offs[i]).stem, "verts": np.asarray(mesh.vertices, np.float32),
+                "corr": np.loadtxt(corrs[i], dtype=np.int32) - 1}
+        if with_dist:
+            item["dist"] = scipy.io.loadmat(dists[i])["dist"].astype(np.float32)
+        items.append(item)
+    return {"first": items[0], "second": items[1]}
+
+
+@pytest.mark.parametrize("setting", SETTINGS)
+def test_ulrssm_layout_reads_like_ulrssm(setting, records, tmp_path):
+    from becos.export import write_ulrssm
+
+    recs = records[setting][:2]  # a train and a test pair (the OFF text of 9k-vertex shapes dominates)
+    out = write_ulrssm(_shuffled(recs, 2), tmp_path / "ulrssm")
+    by_id = {r.pair_id: r for r in recs}
+    rows = read_ids(out)
+    _check_numbering(out, rows, recs, set())
+    for row in rows:
+        r = by_id[row["pair_id"]]
+        root = out / row["split"] / row["index"]
+        pair = ulrssm_pair(root, 0, 1, with_dist=False)
+        first, second = pair["first"], pair["second"]
+        assert np.array_equal(first["verts"], r["x_vertices"].astype(np.float32))
+        assert np.array_equal(second["verts"], r["y_vertices"].astype(np.float32))
+        x_of_t, y_of_t = first["corr"], second["corr"]
+        assert len(x_of_t) == len(y_of_t) == int((r["corr_10"] >= 0).sum())  # one template point per matched Y vertex
+        assert x_of_t.min() >= 0 and y_of_t.min() >= 0                        # never the -1 ULRSSM cannot express
+        assert np.array_equal(r["corr_10"][y_of_t], x_of_t)                    # the ground truth Y -> X exactly
+        back = ulrssm_pair(root, 1, 0, with_dist=False)                        # the reversed pair: same points
+        assert np.array_equal(back["first"]["corr"], y_of_t)
+
+
+def dpfm_pairs(data_root: Path, name: str = "") -> dict:
+    """DPFM ``shrec_partial_dataset.py`` ``ShrecPartialDataset.__init__`` / ``__getitem__`` file logic
+    (MIT licence): shapes = sorted ``shapes/*`` stems containing ``name``; each ``maps/<x>_<y>.map``
+    (split at the LAST ``_``) whose two ids are shapes is the pair (shape1 = y, shape2 = x) with
+    ``map21 = loadtxt(int32)`` (one entry per vertex of x); partiality masks from it."""
+    import trimesh
+
+    used = sorted(p.stem for p in (data_root / "shapes").iterdir() if name in p.stem)
+    pairs = {}
+    for stem in (p.stem for p in (data_root / "maps").iterdir() if name in p.stem):
+        x, y = stem[:stem.rfind("_")], stem[stem.rfind("_") + 1:]
+        if x in used and y in used:
+            map21 = np.loadtxt(data_root / "maps" / f"{x}_{y}.map", dtype=np.int32)
+            n1 = len(trimesh.load(data_root / "shapes" / f"{y}.off", process=False).vertices)
+            mask12 = np.zeros(n1, dtype=np.int64)
+            mask12[map21[map21 != -1]] = 1
+            pairs[(x, y)] = {"map21": map21, "mask21": (map21 != -1).astype(np.int64), "mask12": mask12}
+    return pairs
+
+
+@pytest.mark.parametrize("setting", SETTINGS)
+def test_dpfm_layout_reads_like_dpfm(setting, records, tmp_path):
+    from becos.export import write_dpfm
+
+    recs = records[setting][:2]
+    out = write_dpfm(_shuffled(recs, 3), tmp_path / "dpfm")
+    rows = read_ids(out)
+    _check_numbering(out, rows, recs, {"shapes", "maps"})
+    by_id = {r.pair_id: r for r in recs}
+    for split in {row["split"] for row in rows}:
+        pairs = dpfm_pairs(out / split)
+        split_rows = [row for row in rows if row["split"] == split]
+        assert len(pairs) == 2 * len(split_rows)   # both directions of every pair survive the id parsing
+        for row in split_rows:
+            r = by_id[row["pair_id"]]
+            assert "_" not in row["x_id"] + row["y_id"]
+            for (x, y), corr, mask_x, mask_y in (((row["x_id"], row["y_id"]), r["corr_01"], "x", "y"),
+                                                 ((row["y_id"], row["x_id"]), r["corr_10"], "y", "x")):
+                got = pairs[(x, y)]
+                assert np.array_equal(got["map21"], corr)
+                assert np.array_equal(got["mask21"].astype(bool), r[f"{mask_x}_overlap_mask"])
+                hit = np.zeros(len(r[f"{mask_y}_vertices"]), bool)
+                hit[corr[corr >= 0]] = True
+                assert np.array_equal(got["mask12"].astype(bool), hit)
+
+
+def test_ulrssm_dist_matches_the_geodesic_export(small_record, tmp_path):
+    from becos.export import GEODESIC_FOLDER, write_geodesic_matrices, write_ulrssm
+
+    recs = [small_record, *_ball_records("partial_full")[:1]]
+    recs[1] = _copy(recs[1], recs[1].pair_id, "test")
+    out = write_ulrssm(recs, tmp_path / "ulrssm", geodesics=True, splits=["test"], jobs=1)
+    geo = write_geodesic_matrices(recs, tmp_path / "geo")
+    with open(geo / GEODESIC_FOLDER / "index.csv", encoding="utf-8", newline="") as fh:
+        index = {(row["pair_id"], int(row["side"])): row["stem"] for row in csv.DictReader(fh)}
+    for row in read_ids(out):
+        pair = ulrssm_pair(out / row["split"] / row["index"], 0, 1, with_dist=True)
+        for k, item in enumerate((pair["first"], pair["second"])):
+            d = item["dist"]
+            assert d.shape == (len(item["verts"]),) * 2 and d.dtype == np.float32
+            assert np.array_equal(d, np.load(geo / GEODESIC_FOLDER / f"{index[(row['pair_id'], k)]}.npy"))
+
+
+def test_nested_export_keys_on_the_snakemake_command_line():
+    """``--config 'exports={...}'``: Snakemake hands nested values over as strings; they are typed by
+    the schema instead of failing with "'true' is not of type 'boolean'"."""
+    from snakemake.cli import parse_config
+
+    from becos.errors import ConfigError
+    from becos.workflow import resolve_config
+
+    base = {"data_dir": "d", "annotations": "a", "datasets": ["tosca"]}
+    given = parse_config(["exports={zarr: true, psmal: True, geodesics: false, geodesic_splits: [test, val]}"])
+    assert given["exports"]["psmal"] == "True"   # what Snakemake passes on
+    exports = resolve_config({**base, **given})["exports"]
+    assert exports["zarr"] is True and exports["psmal"] is True and exports["geodesics"] is False
+    assert exports["geodesic_splits"] == ["test", "val"] and exports["released"] is True  # defaults kept
+    with pytest.raises(ConfigError, match="exports/psmal"):
+        resolve_config({**base, **parse_config(["exports={psmal: maybe}"])})

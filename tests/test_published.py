@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import pickle
+from pathlib import Path
 from collections import Counter
 
 import numpy as np
@@ -10,7 +11,7 @@ import pandas as pd
 import pytest
 
 from becos.catalog import catalog_table
-from becos.errors import InputFileError
+from becos.errors import ConfigError, InputFileError
 from becos.published import (SHAPE_FIELDS, import_published, load_cameras, load_published, published_shapes,
                              rotation_to_xyz_degrees, save_cameras, write_published_pickle, y_rotation)
 from becos.sampling import MANIFEST_COLUMNS, read_manifest, sample_pairs, write_manifest
@@ -148,3 +149,94 @@ def test_rotation_helpers():
     r = y_rotation(0.3)
     np.testing.assert_allclose(r @ r.T, np.eye(3), atol=1e-15)
     assert r[1, 1] == 1.0 and np.isclose(np.arccos(r[0, 0]), 0.3)
+
+
+# --------------------------------------------------------------------------------------------------
+# a store's pickle describes the store: rotations, cameras, face targets, reference-style file paths
+
+
+def _manifest_of(records) -> pd.DataFrame:
+    from becos.sampling import sort_manifest
+
+    rows = [{"pair_id": r.pair_id, "setting": r.meta["setting"], "split": r.meta["split"], "category": "four-legged",
+             "copy": 0, "x_dataset": r.meta["x"]["dataset"], "x_name": r.meta["x"]["name"],
+             "y_dataset": r.meta["y"]["dataset"], "y_name": r.meta["y"]["name"], "seed": int(r.meta["seed"]),
+             "x_variant": 0, "y_variant": 0, "chunk": 0} for r in records]
+    return sort_manifest(pd.DataFrame(rows, columns=list(MANIFEST_COLUMNS)))
+
+
+def reference_shape_path(file_path: str, data_dir: str) -> str:
+    """Where the reference generator reads a shape of a pair list: with ``data_dir`` other than
+    ``data`` it rebuilds the path as ``f"{data_dir}/{file_path[4:]}"`` (BeCoS reference, generator
+    script, function ``update_data_path_in_dict``; the expression the issue quotes), else it opens
+    ``file_path`` as is, relative to its working folder."""
+    return file_path if data_dir == "data" else f"{data_dir}/{file_path[4:]}"
+
+
+@pytest.mark.parametrize("setting", ["full_full", "partial_full", "partial_partial"])
+def test_store_pickle_round_trip(setting, pair_record_files, store_of, becos_code, tosca_catalog, tmp_path,
+                                 monkeypatch):
+    from becos.cameras import draw_camera_pair
+    from becos.published import N_CAMERAS, store_pair_facts
+    from becos.record import PairRecord
+    from becos.seeding import rng_for
+    from becos.store import open_benchmark
+
+    records = [PairRecord.load(p) for p in pair_record_files[setting]]
+    records[1].meta["x_token"] = "f18765"  # a published face target: written as is
+    bench = open_benchmark(store_of(records, setting))
+    facts = store_pair_facts(bench)
+    path = tmp_path / f"pairings_{setting}.pkl"
+    write_published_pickle(_manifest_of(records), path, tosca_catalog, random_rotations=facts["random_rotations"],
+                           cameras=facts["cameras"], pair_face_targets=facts["face_targets"],
+                           data_root=becos_code / "data")
+    back = import_published(path)
+    m = back.manifest.set_index("pair_id")
+    assert sorted(m.index) == sorted(r.pair_id for r in records)
+    for r in records:
+        row = m.loc[r.pair_id]
+        for s in ("x", "y"):
+            rot = row[[f"{s}_random_rot_{i}" for i in range(9)]].to_numpy(float).reshape(3, 3)
+            assert np.array_equal(rot, r[f"{s}_random_rotation"])   # the rotation the record applied
+            full_faces = len(r[f"{s}_full_faces"]) or len(r[f"{s}_faces"])
+            want = 18765 if (s, r is records[1]) == ("x", True) else full_faces
+            assert row[f"{s}_face_target"] == want
+        if setting == "full_full":
+            assert back.cameras is None
+            continue
+        cams = back.cameras[r.pair_id]
+        assert cams.shape == (2, N_CAMERAS, 3)
+        for k, s in enumerate(("x", "y")):
+            if setting == "partial_full" and s == "x":
+                assert np.isnan(cams[k]).all()   # the full template has no camera
+                continue
+            camera = r[f"{s}_camera"]
+            assert (cams[k] == cams[k, 0]).all() and np.linalg.norm(cams[k, 0]) == pytest.approx(1.0)
+            # every try holds the camera that cut the record: position - target along it (shared frame)
+            along = (camera[0] - camera[1]) @ r[f"{s}_align_rotation"]
+            np.testing.assert_allclose(cams[k, 0] * np.linalg.norm(along), along, atol=1e-12)
+        if setting == "partial_partial":  # ... and it is the try the scanner accepted, redrawn from its seed
+            o = r.meta["options"]
+            drawn = draw_camera_pair(rng_for(r.meta["seed"], r.pair_id, "cameras", r.meta["try_index"]),
+                                     o["cam_pos_regime"], o["up_axis"], o["camera_distance"])
+            for k in (0, 1):
+                np.testing.assert_allclose(cams[k, 0], drawn[k].position / np.linalg.norm(drawn[k].position),
+                                           atol=1e-9)
+
+    # file_path as the reference writes it; its path logic finds the meshes under another data_dir
+    raw = load_published(path)
+    shapes = [s for split in raw for pair in split for s in pair]
+    assert {s["file_path"] for s in shapes} == {"data/tosca-off/cat0.off", "data/tosca-off/cat3.off"}
+    elsewhere = tmp_path / "elsewhere" / "meshes"
+    elsewhere.mkdir(parents=True)
+    (elsewhere / "tosca-off").symlink_to(becos_code / "data" / "tosca-off", target_is_directory=True)
+    for s in shapes:
+        found = Path(reference_shape_path(s["file_path"], str(elsewhere)))
+        assert found.is_file() and found.read_bytes() == (becos_code / "data" / "tosca-off" / f"{s['name']}.off").read_bytes()
+    monkeypatch.chdir(becos_code)   # default data_dir "data": relative to the reference checkout
+    assert all(Path(reference_shape_path(s["file_path"], "data")).is_file() for s in shapes)
+    # a catalog file outside the data root cannot be written as data/...
+    with pytest.raises(ConfigError, match="outside the data root"):
+        write_published_pickle(_manifest_of(records), tmp_path / "x.pkl", tosca_catalog, data_root=tmp_path)
+    with pytest.raises(ConfigError, match="no random rotations"):
+        write_published_pickle(_manifest_of(records), tmp_path / "x.pkl", tosca_catalog, random_rotations={})

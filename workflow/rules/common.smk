@@ -83,6 +83,8 @@ def all_targets(wildcards):
             targets.append(f"{base}/released")
         if EXPORTS["psmal"]:
             targets.append(f"{base}/psmal")
+        if EXPORTS["geodesics"]:
+            targets.append(f"{base}/geodesics")
         if EXPORTS["published_pickle"]:
             targets.append(f"{base}/pairings_{setting}.pkl")
         if EXPORTS["report"]:

@@ -63,21 +63,38 @@ rule psmal_layout:
         validation=f"{RESULTS}/{{setting}}/validation.json",
     output:
         directory(f"{RESULTS}/{{setting}}/psmal"),
-    params:
-        geodesics="--geodesics" if EXPORTS["geodesics"] else "",
     resources:
         mem_mb=RESOURCES.mem_mb("psmal_layout"),
         runtime=RESOURCES.runtime("psmal_layout", n_pairs=setting_pairs),
     log:
         "logs/psmal_layout/{setting}.log",
     shell:
-        "becos export-psmal {input.store:q} {output:q} {params.geodesics} > {log:q} 2>&1"
+        "becos export-psmal {input.store:q} {output:q} > {log:q} 2>&1"
+
+
+rule geodesics:
+    input:
+        store=f"{RESULTS}/{{setting}}/benchmark.zarr",
+        validation=f"{RESULTS}/{{setting}}/validation.json",
+    output:
+        directory(f"{RESULTS}/{{setting}}/geodesics"),
+    params:
+        splits=" ".join(["--splits", *EXPORTS["geodesic_splits"]]) if EXPORTS["geodesic_splits"] else "",
+    threads: max(1, workflow.cores)
+    resources:
+        mem_mb=RESOURCES.mem_mb("geodesics"),
+        runtime=RESOURCES.runtime("geodesics", n_pairs=setting_pairs),
+    log:
+        "logs/geodesics/{setting}.log",
+    shell:
+        "becos export-geodesics {input.store:q} {output:q} {params.splits} --jobs {threads} > {log:q} 2>&1"
 
 
 rule published_pairings:
     input:
         manifest=f"{RESULTS}/{{setting}}/manifest.csv",
         catalog=LAYOUT.catalog,
+        store=f"{RESULTS}/{{setting}}/benchmark.zarr",
     output:
         f"{RESULTS}/{{setting}}/pairings_{{setting}}.pkl",
     params:
@@ -85,7 +102,8 @@ rule published_pairings:
     log:
         "logs/published_pairings/{setting}.log",
     shell:
-        "becos export-pairings --options {params.options:q} --setting {wildcards.setting} --out {output:q} > {log:q} 2>&1"
+        "becos export-pairings --options {params.options:q} --setting {wildcards.setting} --store {input.store:q}"
+        " --out {output:q} > {log:q} 2>&1"
 
 
 rule report:
