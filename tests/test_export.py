@@ -684,5 +684,5 @@ def test_nested_export_keys_on_the_snakemake_command_line():
     exports = resolve_config({**base, **given})["exports"]
     assert exports["zarr"] is True and exports["psmal"] is True and exports["geodesics"] is False
     assert exports["geodesic_splits"] == ["test", "val"] and exports["released"] is True  # defaults kept
-    with pytest.raises(ConfigError, match="exports/psmal"):
+    with pytest.raises(ConfigError, match=r"exports\.psmal"):
         resolve_config({**base, **parse_config(["exports={psmal: maybe}"])})
