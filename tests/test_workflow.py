@@ -137,12 +137,14 @@ def test_a_bad_config_fails_before_any_job(becos_code, tmp_path):
 
 
 def test_pairs_chunks_are_fixed_by_the_pair_id(tiny_tosca_run):
-    from becos.sampling import read_manifest
+    """A pair's chunk job is its fixed hash bucket's range (becos.sampling.assign_chunks)."""
+    from becos.sampling import N_BUCKETS, chunk_jobs, read_manifest
     from becos.seeding import stable_hash
 
-    n_chunks = json.loads((tiny_tosca_run / "results" / "config.json").read_text())["n_chunks"]
+    config = json.loads((tiny_tosca_run / "results" / "config.json").read_text())
     manifest = read_manifest(tiny_tosca_run / "results" / "partial_partial" / "manifest.csv")
-    assert all(stable_hash(p) % n_chunks == c for p, c in zip(manifest["pair_id"], manifest["chunk"]))
+    jobs = chunk_jobs(len(manifest), config["n_chunks"], config["pairs_per_chunk"])
+    assert all(stable_hash(p) % N_BUCKETS * jobs // N_BUCKETS == c for p, c in zip(manifest["pair_id"], manifest["chunk"]))
     indices = sorted((tiny_tosca_run / "results" / "partial_partial" / "pairs").glob("chunk_*.json"))
     assert len(indices) == manifest["chunk"].nunique()  # one job per non-empty chunk, not per pair
 
