@@ -33,6 +33,7 @@ from __future__ import annotations
 import argparse
 import hashlib
 import json
+import math
 import sys
 import time
 from collections import OrderedDict
@@ -40,12 +41,15 @@ from copy import deepcopy
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
-import pandas as pd
 
 from becos.atomic import remove_stale_temporaries, write_text
 from becos.errors import ConfigError
+
+if TYPE_CHECKING:
+    import pandas as pd  # imported where used: write-config, metadata and remesh jobs start without it
 
 SETTINGS = ("full_full", "partial_full", "partial_partial")
 SCHEMA_PATH = Path(__file__).resolve().parents[1] / "config" / "schema.yaml"
@@ -248,7 +252,7 @@ def remesh_token(row, side: str, remesh: bool) -> str:
     if not remesh:
         return "original"
     target = row.get(f"{side}_face_target") if hasattr(row, "get") else None
-    if target is not None and not pd.isna(target) and int(target) > 0:
+    if target is not None and not math.isnan(float(target)) and int(target) > 0:
         return f"f{int(target)}"
     return f"v{int(row[f'{side}_variant'])}"
 
@@ -284,6 +288,8 @@ def build_catalog(config: dict, annotations=None) -> pd.DataFrame:
 
 def build_manifest(config: dict, setting: str, catalog: pd.DataFrame, annotations=None) -> pd.DataFrame:
     """The pair manifest of ``setting`` (:mod:`becos.sampling`, or the published lists)."""
+    import pandas as pd
+
     from becos.sampling import assign_chunks, sample_pairs
 
     if config.get("original_settings"):
@@ -410,12 +416,16 @@ class Plan:
         return json.dumps(self._catalog_rows[(dataset, name)], sort_keys=True)
 
     def remesh_target(self, dataset: str, name: str, token: str) -> dict:
-        """Arguments of :func:`becos.remesh.remesh` for a token."""
-        from becos.remesh import variant_target_vertices
+        return remesh_target(self.config, dataset, name, token)
 
-        if token.startswith("f"):
-            return {"target_faces": int(token[1:])}
-        return {"target_vertices": int(variant_target_vertices(self.config["seed"], dataset, name, int(token[1:])))}
+
+def remesh_target(config: dict, dataset: str, name: str, token: str) -> dict:
+    """Arguments of :func:`becos.remesh.remesh` for a token."""
+    from becos.remesh import variant_target_vertices
+
+    if token.startswith("f"):
+        return {"target_faces": int(token[1:])}
+    return {"target_vertices": int(variant_target_vertices(config["seed"], dataset, name, int(token[1:])))}
 
 
 # --------------------------------------------------------------------------------------------------
@@ -454,12 +464,14 @@ class ShapeStore:
     (:data:`SHAPES_KEPT`): the job's memory does not grow with the number of pairs in a chunk.
     """
 
-    def __init__(self, config: dict, catalog: pd.DataFrame):
+    def __init__(self, config: dict, catalog: "pd.DataFrame | list[dict]"):
+        """``catalog``: the catalog table, or some of its rows as dicts."""
         from becos.mesh import MeshCache
 
         self.config = config
         self.layout = Layout.of(config)
-        self.entries = {(r["dataset"], r["name"]): _entry(r) for r in catalog.to_dict("records")}
+        rows = catalog if isinstance(catalog, list) else catalog.to_dict("records")
+        self.entries = {(r["dataset"], r["name"]): _entry(r) for r in rows}
         self.mesh_cache = MeshCache(self.layout.cache / "meshes", max_in_memory=2 * SHAPES_KEPT)
         self._prepared = _Recent(SHAPES_KEPT)
         self._remeshed = _Recent(SHAPES_KEPT)
@@ -563,8 +575,8 @@ def remesh_stage(config: dict, shape_row: dict, token: str, out: Path, ply: Path
     from becos.remesh import remesh, save_remeshed, write_ply
 
     dataset, name = shape_row["dataset"], shape_row["name"]
-    shapes = ShapeStore(config, pd.DataFrame([shape_row]))
-    target = Plan(config, pd.DataFrame([shape_row]), {}).remesh_target(dataset, name, token)
+    shapes = ShapeStore(config, [shape_row])
+    target = remesh_target(config, dataset, name, token)
     prepared = shapes.prepared(dataset, name)
     start = time.perf_counter()
     if config.get("remesher") == "reference":
@@ -758,7 +770,7 @@ def _published_views(config: dict, row: dict, options):
 
 def _published_rotations(row: dict):
     """The published lists' random rotations of a pair (``original_settings``), else None."""
-    if "x_random_rot_0" not in row or pd.isna(row["x_random_rot_0"]):
+    if "x_random_rot_0" not in row or math.isnan(float(row["x_random_rot_0"])):
         return None
     return tuple(np.array([row[f"{side}_random_rot_{i}"] for i in range(9)], dtype=np.float64).reshape(3, 3)
                  for side in ("x", "y"))

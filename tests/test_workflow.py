@@ -181,6 +181,20 @@ def test_incremental_rebuild(becos_code, tmp_path):
     assert "remesh" not in planned and "ground_truth" not in planned, planned
     print(f"min_overlap 0.1 -> 0.15 plans: {planned}")
 
+    # regrouping the pairs into more chunk jobs reruns the chunk jobs but recomputes no pair (issue 18)
+    setting_dir = workdir / "results" / "partial_partial"
+    files = {p: (p.stat().st_mtime_ns, p.read_bytes()) for p in setting_dir.glob("*/*.npz")}
+    jobs_before = len(list(setting_dir.glob("pairs/chunk_*.json")))
+    write_config(workdir, becos_code, combinations="all", pairs_per_chunk=4, **common)
+    snakemake(workdir, "--cores", "2", "--until", "pairs")
+    indices = sorted(setting_dir.glob("pairs/chunk_*.json"))
+    regrouped = {json.loads(i.read_text())["chunk"] for i in indices}
+    assert jobs_before == 1 and len(regrouped) > 1, (jobs_before, regrouped)
+    assert {p: (p.stat().st_mtime_ns, p.read_bytes()) for p in setting_dir.glob("*/*.npz")} == files
+    logs = [*(workdir / "logs" / "ground_truth").rglob("*.log"), *(workdir / "logs" / "pairs").rglob("*.log")]
+    assert len(logs) == 2 * len(regrouped) and all(", 0 computed," in log.read_text() for log in logs), logs
+    print(f"regrouped {len(files)} pair and ground-truth files from 1 into {len(regrouped)} chunk jobs: none rewritten")
+
 
 def test_original_settings_plan_uses_the_published_pairs(becos_code, tmp_path):
     from becos import workflow as bw
