@@ -19,11 +19,11 @@ Files under ``results`` (config key ``results``)::
 Incremental rebuilds. A pair's chunk job is a contiguous range of fixed hash buckets of its id
 (:func:`becos.sampling.assign_chunks`; the manifest's ``chunk`` column records the grouping), so
 growth adds pairs to chunks and moves one only when the number of chunk jobs doubles; a moved pair
-keeps its files (named by pair id; the chunk is not part of any input key). A chunk job reruns when the manifest or catalog is rewritten or
-its stage's options change (they are its Snakemake ``params``, :func:`job_options`); a remesh job
-only when its shape's catalog row or target changes. Inside a chunk job, a pair's file is rewritten
-only when the pair's
-*input key* changed: the digest of its manifest row, the stage options and the digests of the files
+keeps its files (named by pair id; the chunk is not part of any input key). A chunk job reruns when
+the manifest or catalog is rewritten or its stage's options change (they are its Snakemake
+``params``, :func:`job_options`); a remesh job only when its shape's catalog row or target changes.
+Inside a chunk job, a pair's file is rewritten only when the pair's *input key* changed: the digest
+of its manifest row (except its chunk), the stage options and the digests of the files
 it reads (remesh variants, ground truth). So enabling another dataset recomputes only the new or
 re-partnered pairs, and changing ``min_overlap`` recomputes records but no remesh and no ground truth.
 """

@@ -36,12 +36,14 @@ figures do not depend on the repository's ``config/config.yaml``.
 each ``becos`` job) appends its own CPU time at exit to a log (a ``sitecustomize`` hook on the jobs'
 ``PYTHONPATH``), summed per ``becos`` sub-command; ``total`` is the CPU of the whole process tree.
 ``--repo PATH`` runs another checkout's Snakefile and code (e.g. a worktree of ``main``, for a
-before/after comparison) with this script.
+before/after comparison) with this script. ``--remeshed DIR`` copies a finished run's
+``results/remeshed`` in first (the remesh jobs are then done; every later stage still runs from
+scratch), for a quicker comparison of the chunk stages on a loaded machine.
 
 Usage::
 
     python benchmarks/workflow.py [--workdir /tmp/becos-bench] [--variants 1] [--skip-run] [--full-plan [--profile]]
-    python benchmarks/workflow.py --stages [--repo PATH] [--workdir /tmp/becos-bench]
+    python benchmarks/workflow.py --stages [--repo PATH] [--remeshed DIR] [--workdir /tmp/becos-bench]
 """
 
 from __future__ import annotations
@@ -283,11 +285,13 @@ def _process_kind(argv: list[str]) -> str:
     return program
 
 
-def stages(workdir: Path, code: Path, repo: Path) -> dict:
+def stages(workdir: Path, code: Path, repo: Path, remeshed: Path | None = None) -> dict:
     """CPU seconds by stage of a ~150-pair TOSCA run from scratch (module docstring, ``--stages``)."""
     run = workdir / "stages"
     shutil.rmtree(run, ignore_errors=True)
     write_config(run, code, caps={"train": 120, "val": 15, "test": 15}, remesh_variants=1, n_chunks=64)
+    if remeshed is not None:
+        shutil.copytree(remeshed, run / "results" / "remeshed")
     hook = workdir / "cpu-hook"
     hook.mkdir(parents=True, exist_ok=True)
     (hook / "sitecustomize.py").write_text(CPU_HOOK)
@@ -306,6 +310,7 @@ def stages(workdir: Path, code: Path, repo: Path) -> dict:
         kind["cpu_seconds_per_process"] = round(kind["cpu_seconds"] / kind["processes"], 2)
     return {"repo": str(repo), "commit": subprocess.run(["git", "-C", str(repo), "rev-parse", "--short", "HEAD"],
                                                         capture_output=True, text=True).stdout.strip(),
+            "remeshed_copied_from": str(remeshed) if remeshed else None,
             "pairs": n_pairs(run), "wall_seconds": round(seconds, 1), "cpu_seconds_total": memory["cpu_seconds"],
             "peak_rss_mb": memory["peak_rss_mb"], "jobs": job_counts(out),
             "cpu_by_process": dict(sorted(by_kind.items(), key=lambda kv: -kv[1]["cpu_seconds"]))}
@@ -324,11 +329,12 @@ def main() -> None:
                         help="only the CPU seconds by stage of a ~150-pair TOSCA run from scratch")
     parser.add_argument("--repo", type=Path, default=REPO,
                         help="with --stages: the checkout whose Snakefile and code run (default: this one)")
+    parser.add_argument("--remeshed", type=Path, help="with --stages: copy this results/remeshed in first")
     args = parser.parse_args()
     code = becos_code()
     result: dict = {"machine_cores": os.cpu_count()}
     if args.stages:
-        result["stages"] = stages(args.workdir, code, args.repo.resolve())
+        result["stages"] = stages(args.workdir, code, args.repo.resolve(), args.remeshed)
         print(json.dumps(result, indent=1))
         return
     if args.full_plan:
