@@ -37,7 +37,8 @@ def _cpu_children() -> float:
 
 
 def _command(args: list[str]) -> list[str]:
-    return [sys.executable, "-c", "import sys; from becos.cli import main; sys.exit(main())", *args]
+    # -P: the working directory does not go first on sys.path (PYTHONPATH picks the checkout)
+    return [sys.executable, "-P", "-c", "import sys; from becos.cli import main; sys.exit(main())", *args]
 
 
 def timed(args: list[str], env: dict, repeat: int, cwd: Path | None = None) -> dict:
