@@ -11,7 +11,7 @@ job of a finished run, whose pair files are all up to date: its time is start-up
 
 Usage::
 
-    python benchmarks/startup.py [--repo PATH] [--repeat 5] [--job 'ground-truth --options ... --out ...']
+    python benchmarks/startup.py [--repo PATH] [--repeat 5] [--only remesh pairs] [--job 'metadata --options ...']
 """
 
 from __future__ import annotations
@@ -77,6 +77,7 @@ def main() -> None:
     parser.add_argument("--job", action="append", default=[],
                         help="a real job's arguments after `becos` (quoted), run in --cwd")
     parser.add_argument("--cwd", type=Path, help="working directory of the --job runs")
+    parser.add_argument("--only", nargs="+", help="measure only these sub-commands' --help (and becos --help)")
     args = parser.parse_args()
     repo = args.repo.resolve()
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in (str(repo), os.environ.get("PYTHONPATH")) if p)}
@@ -86,7 +87,7 @@ def main() -> None:
     commit = subprocess.run(["git", "-C", str(repo), "rev-parse", "--short", "HEAD"], capture_output=True,
                             text=True).stdout.strip()
     result: dict = {"repo": str(repo), "commit": commit, "repeat": args.repeat, "help": {}}
-    for name in [None, *dict.fromkeys(n for n, _, _ in SUBCOMMANDS)]:
+    for name in [None, *dict.fromkeys(n for n, _, _ in SUBCOMMANDS if not args.only or n in args.only)]:
         argv = ["--help"] if name is None else [name, "--help"]
         label = " ".join(["becos", *argv])
         result["help"][label] = {**timed(argv, env, args.repeat), **imports(argv, env)}
