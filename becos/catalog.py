@@ -28,12 +28,14 @@ from __future__ import annotations
 
 import re
 from pathlib import Path
-from typing import Iterable
+from typing import TYPE_CHECKING, Iterable
 
 import numpy as np
-import pandas as pd
 
 from becos.atomic import write_text
+
+if TYPE_CHECKING:
+    import pandas as pd  # imported where used: a remesh job reads one catalog row and needs no pandas
 
 ROTATION_COLUMNS = tuple(f"frame_rotation_{i}" for i in range(9))
 COLUMNS = ("dataset", "name", "category", "class", "split", "file", "template_key", "scale",
@@ -86,6 +88,8 @@ def catalog_table(entries: Iterable) -> pd.DataFrame:
 
     Raises ``ValueError`` on a duplicate ``(dataset, name)``, an unknown category or split.
     """
+    import pandas as pd
+
     rows = [_entry_row(e) for e in entries]
     df = pd.DataFrame(rows, columns=list(COLUMNS))
     _validate(df)
@@ -122,6 +126,8 @@ def write_catalog(df: pd.DataFrame, path: str | Path) -> None:
 
 def read_catalog(path: str | Path) -> pd.DataFrame:
     """Read a catalog CSV written by :func:`write_catalog` (strings stay strings: ``0001`` is not 1)."""
+    import pandas as pd
+
     dtypes = {c: str for c in STRING_COLUMNS}
     dtypes.update({c: np.float64 for c in ("scale", *ROTATION_COLUMNS)})
     dtypes["usage"] = np.int64

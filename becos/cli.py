@@ -69,8 +69,8 @@ SUBCOMMANDS: tuple[tuple[str, str, str], ...] = (
 
 
 def build_parser(only: str | None = None) -> argparse.ArgumentParser:
-    """The parser; with ``only`` a sub-command name, import just that sub-command's module (a workflow
-    job starts in ~0.3 s instead of importing every module)."""
+    """The parser. Only the module of sub-command ``only`` is imported (none for ``becos --help``):
+    the others are listed by name and help, so a job imports what its sub-command uses."""
     parser = argparse.ArgumentParser(prog="becos", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True)
 
@@ -80,7 +80,7 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
     info.set_defaults(func=cmd_info)
 
     for name, module_name, help_text in SUBCOMMANDS:
-        if only is not None and name != only:
+        if name != only:
             sub.add_parser(name, help=help_text)
             continue
         try:

@@ -64,8 +64,14 @@ Per-copy fields
 - ``seed`` = ``stable_hash(seed, pair_id)`` (63 bits, so it fits a signed 64-bit column);
 - ``x_variant``, ``y_variant`` = ``stable_hash(pair seed, 'x_variant' | 'y_variant') % n_variants``
   (which of the K remeshes of each shape the pair uses);
-- ``chunk`` = ``stable_hash(pair_id) % n_chunks`` with a fixed bucket count, so growth adds pairs to
-  chunks but never moves an existing pair to another chunk.
+- ``chunk``: the chunk job of the pair (:func:`assign_chunks`). A pair's *bucket*
+  ``stable_hash(pair_id) % N_BUCKETS`` never changes; the manifest's ``J`` chunk jobs are ``J``
+  contiguous bucket ranges, ``chunk = bucket * J // N_BUCKETS``. ``J`` (:func:`chunk_jobs`) is the
+  largest power of two that leaves each job at least ``pairs_per_chunk`` pairs, at most ``n_chunks``:
+  growth that keeps ``J`` adds pairs to chunks and never moves one; when ``J`` doubles, every job
+  splits into two (chunk ``k`` into ``2k`` and ``2k + 1``). A moved pair keeps its files (they are
+  named by pair id, and its input key does not hold the chunk): regrouping reruns chunk jobs but
+  recomputes no pair.
 
 Caps
 ----
@@ -108,6 +114,9 @@ MANIFEST_COLUMNS = ("pair_id", "setting", "split", "category", "copy", "x_datase
                     "y_name", "seed", "x_variant", "y_variant", "chunk")
 MANIFEST_STRINGS = ("pair_id", "setting", "split", "category", "x_dataset", "x_name", "y_dataset", "y_name")
 MANIFEST_INTS = ("copy", "seed", "x_variant", "y_variant", "chunk")
+N_BUCKETS = 4096
+"""Fixed hash buckets of pair ids (``stable_hash(pair_id) % N_BUCKETS``); chunk jobs are contiguous
+bucket ranges, so at most this many chunk jobs (the schema's maximum ``n_chunks``)."""
 UNDEFINED = "undefined"
 
 _U64 = np.uint64
@@ -320,8 +329,8 @@ def _p2f_pairs(cat: pd.DataFrame, *, categories: set[str], template_rows, usage_
 
 
 def sample_pairs(catalog: pd.DataFrame, setting: str, *, seed: int, combinations: str = "all",
-                 template_rows=None, n_variants: int = 4, n_chunks: int = 64, caps: dict | None = None,
-                 usage_scale: float = 1.0) -> pd.DataFrame:
+                 template_rows=None, n_variants: int = 4, n_chunks: int = 64, pairs_per_chunk: int = 100,
+                 caps: dict | None = None, usage_scale: float = 1.0) -> pd.DataFrame:
     """The pair manifest of ``setting`` for the shapes of ``catalog`` (rules in the module doc).
 
     Args:
@@ -334,7 +343,8 @@ def sample_pairs(catalog: pd.DataFrame, setting: str, *, seed: int, combinations
             (attributes) or a dict with ``partial_full_template`` / ``partial_full_dataset``, or an
             object with ``template_row(key)`` (``becos.annotations.AnnotationSource``).
         n_variants: remesh variants per shape (K); ``x_variant``/``y_variant`` lie in ``[0, K)``.
-        n_chunks: fixed number of chunk buckets.
+        n_chunks, pairs_per_chunk: the most chunk jobs, the fewest pairs per chunk job
+            (:func:`chunk_jobs`).
         caps: optional ``{split: max pairs}``.
         usage_scale: multiplies every dataset's usage count (0.5 ≈ the published pair counts).
 
@@ -346,8 +356,9 @@ def sample_pairs(catalog: pd.DataFrame, setting: str, *, seed: int, combinations
         raise ConfigError(f"setting must be one of {SETTINGS}, got {setting!r}")
     if combinations not in COMBINATIONS:
         raise ConfigError(f"combinations must be one of {sorted(COMBINATIONS)}, got {combinations!r}")
-    if n_variants < 1 or n_chunks < 1:
-        raise ConfigError(f"n_variants and n_chunks must be >= 1, got {n_variants}, {n_chunks}")
+    if n_variants < 1 or not 1 <= n_chunks <= N_BUCKETS or pairs_per_chunk < 1:
+        raise ConfigError(f"n_variants, n_chunks and pairs_per_chunk must be >= 1 (n_chunks <= {N_BUCKETS}), "
+                          f"got {n_variants}, {n_chunks}, {pairs_per_chunk}")
     if usage_scale < 0:
         raise ConfigError(f"usage_scale must be >= 0, got {usage_scale}")
     pools, centaurs = COMBINATIONS[combinations]
@@ -367,14 +378,14 @@ def sample_pairs(catalog: pd.DataFrame, setting: str, *, seed: int, combinations
         _pool_pairs(cat, seed=seed, setting=setting, pools=pools, centaurs=centaurs,
                     usage_scale=usage_scale, rows=rows, skipped=skipped)
 
-    df = _finish(rows, setting=setting, seed=seed, n_variants=n_variants, n_chunks=n_chunks, caps=caps,
-                 skipped=skipped)
+    df = _finish(rows, setting=setting, seed=seed, n_variants=n_variants, caps=caps, skipped=skipped)
+    df["chunk"] = assign_chunks(df["pair_id"], n_chunks=n_chunks, pairs_per_chunk=pairs_per_chunk)
     df.attrs["report"]["excluded_shapes"] = int((cat["split"] == "excluded").sum())
     return df
 
 
-def _finish(rows: _Rows, *, setting, seed, n_variants, n_chunks, caps, skipped: Counter) -> pd.DataFrame:
-    """Ids, seeds, variants, chunks; caps; stable order."""
+def _finish(rows: _Rows, *, setting, seed, n_variants, caps, skipped: Counter) -> pd.DataFrame:
+    """Ids, seeds, variants; caps; stable order (chunks: :func:`assign_chunks`, once the pairs are known)."""
     n = len(rows.x)
     pair_ids = [pair_id_of(setting, x, y, c) for x, y, c in zip(rows.x, rows.y, rows.copy)]
     if len(set(pair_ids)) != n:  # (x, y, copy) is unique by construction; a 64-bit collision is not
@@ -393,7 +404,7 @@ def _finish(rows: _Rows, *, setting, seed, n_variants, n_chunks, caps, skipped: 
         "seed": np.asarray(seeds, dtype=np.int64),
         "x_variant": np.asarray([stable_hash(s, "x_variant") % n_variants for s in seeds], dtype=np.int64),
         "y_variant": np.asarray([stable_hash(s, "y_variant") % n_variants for s in seeds], dtype=np.int64),
-        "chunk": np.asarray([stable_hash(pid) % n_chunks for pid in pair_ids], dtype=np.int64),
+        "chunk": np.zeros(n, dtype=np.int64),
     }, columns=list(MANIFEST_COLUMNS))
     if caps:
         rank = np.array([stable_hash(seed, setting, "cap", a, c) for a, c in zip(rows.anchor, rows.copy)],
@@ -414,6 +425,24 @@ def _finish(rows: _Rows, *, setting, seed, n_variants, n_chunks, caps, skipped: 
         "n_pairs": {s: int((df["split"] == s).sum()) for s in SPLIT_ORDER},
     }
     return df
+
+
+def chunk_jobs(n_pairs: int, n_chunks: int, pairs_per_chunk: int) -> int:
+    """Chunk jobs per stage for ``n_pairs`` pairs: the largest power of two ``J`` with
+    ``J * pairs_per_chunk <= n_pairs`` (so ``pairs_per_chunk`` to twice as many pairs per job), at
+    least 1 and at most ``n_chunks``. Powers of two change rarely as a benchmark grows, and a doubling
+    splits each job's bucket range in two."""
+    jobs = 1 << max(0, (n_pairs // max(1, pairs_per_chunk)).bit_length() - 1)
+    return max(1, min(jobs, n_chunks, N_BUCKETS))
+
+
+def assign_chunks(pair_ids, *, n_chunks: int, pairs_per_chunk: int) -> np.ndarray:
+    """``(N,) int64``: the chunk job of each pair id, ``bucket * J // N_BUCKETS`` with ``J``
+    :func:`chunk_jobs` of the ``N`` pairs and ``bucket = stable_hash(pair_id) % N_BUCKETS``."""
+    pair_ids = list(pair_ids)
+    jobs = chunk_jobs(len(pair_ids), n_chunks, pairs_per_chunk)
+    buckets = np.fromiter((stable_hash(p) % N_BUCKETS for p in pair_ids), dtype=np.int64, count=len(pair_ids))
+    return buckets * jobs // N_BUCKETS
 
 
 def sort_manifest(df: pd.DataFrame) -> pd.DataFrame:

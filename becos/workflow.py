@@ -16,12 +16,14 @@ Files under ``results`` (config key ``results``)::
     <setting>/benchmark.zarr            the store (becos.store), validated into validation.json
     cache/                              parsed meshes and edge files (safe to delete)
 
-Incremental rebuilds. A pair belongs to chunk ``hash(pair_id) % n_chunks`` forever, so growth adds
-pairs to chunks and never moves one. A chunk job reruns when the manifest or catalog is rewritten or
-its stage's options change (they are its Snakemake ``params``, :func:`job_options`); a remesh job
-only when its shape's catalog row or target changes. Inside a chunk job, a pair's file is rewritten
-only when the pair's
-*input key* changed: the digest of its manifest row, the stage options and the digests of the files
+Incremental rebuilds. A pair's chunk job is a contiguous range of fixed hash buckets of its id
+(:func:`becos.sampling.assign_chunks`; the manifest's ``chunk`` column records the grouping), so
+growth adds pairs to chunks and moves one only when the number of chunk jobs doubles; a moved pair
+keeps its files (named by pair id; the chunk is not part of any input key). A chunk job reruns when
+the manifest or catalog is rewritten or its stage's options change (they are its Snakemake
+``params``, :func:`job_options`); a remesh job only when its shape's catalog row or target changes.
+Inside a chunk job, a pair's file is rewritten only when the pair's *input key* changed: the digest
+of its manifest row (except its chunk), the stage options and the digests of the files
 it reads (remesh variants, ground truth). So enabling another dataset recomputes only the new or
 re-partnered pairs, and changing ``min_overlap`` recomputes records but no remesh and no ground truth.
 """
@@ -31,6 +33,7 @@ from __future__ import annotations
 import argparse
 import hashlib
 import json
+import math
 import sys
 import time
 from collections import OrderedDict
@@ -38,12 +41,15 @@ from copy import deepcopy
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
-import pandas as pd
 
 from becos.atomic import remove_stale_temporaries, write_text
 from becos.errors import ConfigError, InputFileError
+
+if TYPE_CHECKING:
+    import pandas as pd  # imported where used: write-config, metadata and remesh jobs start without it
 
 SETTINGS = ("full_full", "partial_full", "partial_partial")
 SCHEMA_PATH = Path(__file__).resolve().parents[1] / "config" / "schema.yaml"
@@ -58,7 +64,7 @@ SHAPES_KEPT = 6
 STAGE_KEYS: dict[str, tuple[str, ...]] = {
     "catalog": ("data_dir", "annotations", "datasets", "shapes", "template_file"),
     "manifest": ("data_dir", "annotations", "datasets", "shapes", "template_file", "combinations", "seed", "usage_scale",
-                 "caps", "remesh", "remesh_variants", "n_chunks", "original_settings"),
+                 "caps", "remesh", "remesh_variants", "n_chunks", "pairs_per_chunk", "original_settings"),
     "remesh": ("seed", "remesh", "remesher"),
     "export": ("data_dir",),
     "ground_truth": ("annotations", "template_file", "remesh"),
@@ -440,7 +446,7 @@ def remesh_token(row, side: str, remesh: bool) -> str:
     if not remesh:
         return "original"
     target = row.get(f"{side}_face_target") if hasattr(row, "get") else None
-    if target is not None and not pd.isna(target) and int(target) > 0:
+    if target is not None and not math.isnan(float(target)) and int(target) > 0:
         return f"f{int(target)}"
     return f"v{int(row[f'{side}_variant'])}"
 
@@ -476,7 +482,9 @@ def build_catalog(config: dict, annotations=None) -> pd.DataFrame:
 
 def build_manifest(config: dict, setting: str, catalog: pd.DataFrame, annotations=None) -> pd.DataFrame:
     """The pair manifest of ``setting`` (:mod:`becos.sampling`, or the published lists)."""
-    from becos.sampling import sample_pairs
+    import pandas as pd
+
+    from becos.sampling import assign_chunks, sample_pairs
 
     if config.get("original_settings"):
         from becos.published import import_published
@@ -491,12 +499,16 @@ def build_manifest(config: dict, setting: str, catalog: pd.DataFrame, annotation
             columns = {f"{side}_cam_pos_{i}": cams[:, s, i] for s, side in enumerate("xy") for i in range(cams.shape[2])}
             manifest = pd.concat([manifest, pd.DataFrame(columns, index=manifest.index)], axis=1)
             manifest.attrs = imported.manifest.attrs
-        return _restrict_published(manifest, catalog, config, setting)
+        manifest = _restrict_published(manifest, catalog, config, setting)
+        manifest["chunk"] = assign_chunks(manifest["pair_id"], n_chunks=config["n_chunks"],
+                                          pairs_per_chunk=config["pairs_per_chunk"])
+        return manifest
     annotations = annotations or annotation_source(config)
     caps = {k: v for k, v in (config.get("caps") or {}).items() if v is not None}
     return sample_pairs(catalog, setting, seed=config["seed"], combinations=config["combinations"],
                         template_rows=annotations, n_variants=config["remesh_variants"],
-                        n_chunks=config["n_chunks"], caps=caps or None, usage_scale=config["usage_scale"])
+                        n_chunks=config["n_chunks"], pairs_per_chunk=config["pairs_per_chunk"], caps=caps or None,
+                        usage_scale=config["usage_scale"])
 
 
 def _restrict_published(manifest: pd.DataFrame, catalog: pd.DataFrame, config: dict, setting: str) -> pd.DataFrame:
@@ -533,6 +545,7 @@ class Plan:
     catalog: pd.DataFrame
     manifests: dict[str, pd.DataFrame]
     layout: Layout = field(init=False)
+    _chunk_inputs: dict[tuple[str, int], list[str]] = field(init=False, default_factory=dict, repr=False)
 
     def __post_init__(self):
         self.layout = Layout.of(self.config)
@@ -566,19 +579,27 @@ class Plan:
             jobs.update(self._side_files(manifest))
         return sorted(jobs)
 
+    @cached_property
+    def _chunk_groups(self) -> dict[str, dict[int, pd.DataFrame]]:
+        """``{setting: {chunk: rows}}``, split once (Snakemake asks per chunk job, several times)."""
+        return {s: {int(c): rows for c, rows in m.groupby("chunk", sort=True)} for s, m in self.manifests.items()}
+
     def chunks(self, setting: str) -> list[int]:
-        return sorted(int(c) for c in self.manifests[setting]["chunk"].unique())
+        return list(self._chunk_groups[setting])
 
     def chunk_rows(self, setting: str, chunk: int) -> pd.DataFrame:
-        m = self.manifests[setting]
-        return m[m["chunk"] == int(chunk)]
+        rows = self._chunk_groups[setting].get(int(chunk))
+        return self.manifests[setting].iloc[:0] if rows is None else rows
 
     def chunk_inputs(self, setting: str, chunk: int) -> list[str]:
-        """Remesh files the chunk reads (none without remeshing)."""
+        """Remesh files the chunk reads (none without remeshing); computed once per chunk."""
         if not self.config.get("remesh", True):
             return []
-        rows = self.chunk_rows(setting, chunk)
-        return [str(self.layout.remeshed(*key)) for key in self._side_files(rows)]
+        key = (setting, int(chunk))
+        if key not in self._chunk_inputs:
+            rows = self.chunk_rows(setting, chunk)
+            self._chunk_inputs[key] = [str(self.layout.remeshed(*k)) for k in self._side_files(rows)]
+        return list(self._chunk_inputs[key])
 
     @cached_property
     def _catalog_rows(self) -> dict[tuple[str, str], dict]:
@@ -589,12 +610,16 @@ class Plan:
         return json.dumps(self._catalog_rows[(dataset, name)], sort_keys=True)
 
     def remesh_target(self, dataset: str, name: str, token: str) -> dict:
-        """Arguments of :func:`becos.remesh.remesh` for a token."""
-        from becos.remesh import variant_target_vertices
+        return remesh_target(self.config, dataset, name, token)
 
-        if token.startswith("f"):
-            return {"target_faces": int(token[1:])}
-        return {"target_vertices": int(variant_target_vertices(self.config["seed"], dataset, name, int(token[1:])))}
+
+def remesh_target(config: dict, dataset: str, name: str, token: str) -> dict:
+    """Arguments of :func:`becos.remesh.remesh` for a token."""
+    from becos.remesh import variant_target_vertices
+
+    if token.startswith("f"):
+        return {"target_faces": int(token[1:])}
+    return {"target_vertices": int(variant_target_vertices(config["seed"], dataset, name, int(token[1:])))}
 
     def chunk_edge_files(self, setting: str, chunk: int) -> list[str]:
         """The annotation folder's edge files the chunk's ground truth reads (both directions), so that
@@ -657,12 +682,14 @@ class ShapeStore:
     (:data:`SHAPES_KEPT`): the job's memory does not grow with the number of pairs in a chunk.
     """
 
-    def __init__(self, config: dict, catalog: pd.DataFrame):
+    def __init__(self, config: dict, catalog: "pd.DataFrame | list[dict]"):
+        """``catalog``: the catalog table, or some of its rows as dicts."""
         from becos.mesh import MeshCache
 
         self.config = config
         self.layout = Layout.of(config)
-        self.entries = {(r["dataset"], r["name"]): _entry(r) for r in catalog.to_dict("records")}
+        rows = catalog if isinstance(catalog, list) else catalog.to_dict("records")
+        self.entries = {(r["dataset"], r["name"]): _entry(r) for r in rows}
         self.mesh_cache = MeshCache(self.layout.cache / "meshes", max_in_memory=2 * SHAPES_KEPT)
         self._prepared = _Recent(SHAPES_KEPT)
         self._remeshed = _Recent(SHAPES_KEPT)
@@ -797,8 +824,8 @@ def remesh_stage(config: dict, shape_row: dict, token: str, out: Path, ply: Path
     from becos.remesh import remesh, save_remeshed, write_ply
 
     dataset, name = shape_row["dataset"], shape_row["name"]
-    shapes = ShapeStore(config, pd.DataFrame([shape_row]))
-    target = Plan(config, pd.DataFrame([shape_row]), {}).remesh_target(dataset, name, token)
+    shapes = ShapeStore(config, [shape_row])
+    target = remesh_target(config, dataset, name, token)
     prepared = shapes.prepared(dataset, name)
     start = time.perf_counter()
     if config.get("remesher") == "reference":
@@ -945,7 +972,7 @@ def pairs_stage(config: dict, setting: str, chunk: int, gt_index: Path, out_inde
         if gt is None:
             raise ConfigError(f"{gt_index}: no ground truth for pair {row['pair_id']}; re-run the workflow "
                               "(the ground-truth index is older than the manifest)")
-        key = digest({"version": RECORD_VERSION, "row": {k: row[k] for k in sorted(row)},
+        key = digest({"version": RECORD_VERSION, "row": {k: row[k] for k in sorted(row) if k != "chunk"},
                       "options": stage_options(config, "pairs", setting), "ground_truth": gt["digest"],
                       "sources": [shapes.source_digest(row["x_dataset"], row["x_name"], tx),
                                   shapes.source_digest(row["y_dataset"], row["y_name"], ty)]})
@@ -973,7 +1000,7 @@ def pairs_stage(config: dict, setting: str, chunk: int, gt_index: Path, out_inde
                     if full is not None:
                         record.arrays[f"{side}_annotation"] = full[record[f"{side}_partial_to_full"]]
             record.meta.update(input_key=key, category=row["category"], copy=int(row["copy"]),
-                               chunk=int(row["chunk"]), x_token=tx, y_token=ty)
+                               x_token=tx, y_token=ty)  # no chunk: regrouping keeps the record
             record.save(path)
         entries.append({"pair_id": row["pair_id"], "path": str(path), "input_key": key, "computed": computed,
                         "split": row["split"], "digest": shapes.file_digest(path)})
@@ -999,7 +1026,7 @@ def _published_views(config: dict, row: dict, options):
 
 def _published_rotations(row: dict):
     """The published lists' random rotations of a pair (``original_settings``), else None."""
-    if "x_random_rot_0" not in row or pd.isna(row["x_random_rot_0"]):
+    if "x_random_rot_0" not in row or math.isnan(float(row["x_random_rot_0"])):
         return None
     return tuple(np.array([row[f"{side}_random_rot_{i}"] for i in range(9)], dtype=np.float64).reshape(3, 3)
                  for side in ("x", "y"))

@@ -30,9 +30,20 @@ template vertex counts): all 8 dataset entries, the three settings, default usag
 Every configuration key is written to the run's ``--configfile`` (the resolved config), so the
 figures do not depend on the repository's ``config/config.yaml``.
 
+``--stages`` measures instead the CPU seconds by stage of a ~150-pair TOSCA run from scratch
+(issue 18): partial-to-partial, ``caps`` train 120 / val 15 / test 15, one remesh variant,
+``n_chunks: 64``, no released/pickle/report exports. Every Python process of the run (Snakemake and
+each ``becos`` job) appends its own CPU time at exit to a log (a ``sitecustomize`` hook on the jobs'
+``PYTHONPATH``), summed per ``becos`` sub-command; ``total`` is the CPU of the whole process tree.
+``--repo PATH`` runs another checkout's Snakefile and code (e.g. a worktree of ``main``, for a
+before/after comparison) with this script. ``--remeshed DIR`` copies a finished run's
+``results/remeshed`` in first (the remesh jobs are then done; every later stage still runs from
+scratch), for a quicker comparison of the chunk stages on a loaded machine.
+
 Usage::
 
     python benchmarks/workflow.py [--workdir /tmp/becos-bench] [--variants 1] [--skip-run] [--full-plan [--profile]]
+    python benchmarks/workflow.py --stages [--repo PATH] [--remeshed DIR] [--workdir /tmp/becos-bench]
 """
 
 from __future__ import annotations
@@ -108,13 +119,16 @@ def _children_cpu() -> float:
     return usage.ru_utime + usage.ru_stime
 
 
-def snakemake(workdir: Path, *args: str) -> tuple[float, str, dict]:
-    cmd = [sys.executable, "-m", "snakemake", "-s", str(REPO / "Snakefile"), "-d", str(workdir),
+def snakemake(workdir: Path, *args: str, repo: Path = REPO, hook: Path | None = None,
+              env_extra: dict | None = None) -> tuple[float, str, dict]:
+    """Run ``repo``'s Snakefile in ``workdir``; ``hook``: a folder put first on ``PYTHONPATH``."""
+    cmd = [sys.executable, "-m", "snakemake", "-s", str(repo / "Snakefile"), "-d", str(workdir),
            "--configfile", str(workdir / "config.yaml"), *args]
     start = time.perf_counter()
     cpu_start = _children_cpu()
     # the jobs' `becos` runs this checkout's code, whatever the environment installed
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in (str(REPO), os.environ.get("PYTHONPATH")) if p)}
+    path = (str(hook) if hook else None, str(repo), os.environ.get("PYTHONPATH"))
+    env = {**os.environ, **(env_extra or {}), "PYTHONPATH": os.pathsep.join(p for p in path if p)}
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env)
     rss = PeakRss(proc.pid)
     out, _ = proc.communicate()
@@ -243,6 +257,66 @@ def full_plan(workdir: Path, code: Path, profile: bool = False) -> dict:
     return out
 
 
+CPU_HOOK = """\
+import atexit, json, os, resource, sys
+
+def _becos_bench_record(log=os.environ.get("BECOS_BENCH_CPU_LOG")):
+    if not log:
+        return
+    usage = resource.getrusage(resource.RUSAGE_SELF)
+    line = json.dumps({"argv": sys.argv[:2], "cpu": usage.ru_utime + usage.ru_stime}) + "\\n"
+    fd = os.open(log, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
+    try:
+        os.write(fd, line.encode())
+    finally:
+        os.close(fd)
+
+atexit.register(_becos_bench_record)
+"""
+"""``sitecustomize``: each Python process appends ``{"argv", "cpu"}`` (its own CPU seconds) at exit."""
+
+
+def _process_kind(argv: list[str]) -> str:
+    """``becos <sub-command>``, ``snakemake`` or the program's name."""
+    program = Path(argv[0]).name if argv else "?"
+    if program == "becos" and len(argv) > 1:
+        return argv[1]
+    if "snakemake" in argv[0]:
+        return "snakemake"
+    return program
+
+
+def stages(workdir: Path, code: Path, repo: Path, remeshed: Path | None = None) -> dict:
+    """CPU seconds by stage of a ~150-pair TOSCA run from scratch (module docstring, ``--stages``)."""
+    run = workdir / "stages"
+    shutil.rmtree(run, ignore_errors=True)
+    write_config(run, code, caps={"train": 120, "val": 15, "test": 15}, remesh_variants=1, n_chunks=64)
+    if remeshed is not None:
+        shutil.copytree(remeshed, run / "results" / "remeshed")
+    hook = workdir / "cpu-hook"
+    hook.mkdir(parents=True, exist_ok=True)
+    (hook / "sitecustomize.py").write_text(CPU_HOOK)
+    log = workdir / "cpu-by-process.jsonl"
+    log.unlink(missing_ok=True)
+    seconds, out, memory = snakemake(run, "--cores", "2", repo=repo, hook=hook,
+                                     env_extra={"BECOS_BENCH_CPU_LOG": str(log)})
+    by_kind: dict[str, dict] = {}
+    for line in log.read_text().splitlines():
+        entry = json.loads(line)
+        kind = by_kind.setdefault(_process_kind(entry["argv"]), {"processes": 0, "cpu_seconds": 0.0})
+        kind["processes"] += 1
+        kind["cpu_seconds"] += entry["cpu"]
+    for kind in by_kind.values():
+        kind["cpu_seconds"] = round(kind["cpu_seconds"], 1)
+        kind["cpu_seconds_per_process"] = round(kind["cpu_seconds"] / kind["processes"], 2)
+    return {"repo": str(repo), "commit": subprocess.run(["git", "-C", str(repo), "rev-parse", "--short", "HEAD"],
+                                                        capture_output=True, text=True).stdout.strip(),
+            "remeshed_copied_from": str(remeshed) if remeshed else None,
+            "pairs": n_pairs(run), "wall_seconds": round(seconds, 1), "cpu_seconds_total": memory["cpu_seconds"],
+            "peak_rss_mb": memory["peak_rss_mb"], "jobs": job_counts(out),
+            "cpu_by_process": dict(sorted(by_kind.items(), key=lambda kv: -kv[1]["cpu_seconds"]))}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--workdir", type=Path, default=Path("/tmp/becos-bench"))
@@ -252,9 +326,18 @@ def main() -> None:
                         help="only the plan of the whole published benchmark on a stand-in data root")
     parser.add_argument("--profile", action="store_true",
                         help="with --full-plan: also profile the dry run (cProfile; ~2 min more)")
+    parser.add_argument("--stages", action="store_true",
+                        help="only the CPU seconds by stage of a ~150-pair TOSCA run from scratch")
+    parser.add_argument("--repo", type=Path, default=REPO,
+                        help="with --stages: the checkout whose Snakefile and code run (default: this one)")
+    parser.add_argument("--remeshed", type=Path, help="with --stages: copy this results/remeshed in first")
     args = parser.parse_args()
     code = becos_code()
     result: dict = {"machine_cores": os.cpu_count()}
+    if args.stages:
+        result["stages"] = stages(args.workdir, code, args.repo.resolve(), args.remeshed)
+        print(json.dumps(result, indent=1))
+        return
     if args.full_plan:
         result["full_plan"] = full_plan(args.workdir / "fullplan", code, profile=args.profile)
         print(json.dumps(result, indent=1))

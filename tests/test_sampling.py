@@ -15,8 +15,10 @@ import pandas as pd
 import pytest
 
 from becos.catalog import catalog_table, natural_key, read_catalog, write_catalog
-from becos.sampling import (MANIFEST_COLUMNS, appearance_counts, appearance_summary, partner_score,
-                            read_manifest, sample_pairs, shape_key, write_manifest)
+from becos.sampling import (MANIFEST_COLUMNS, N_BUCKETS, appearance_counts, appearance_summary, assign_chunks,
+                            chunk_jobs, pair_id_of, partner_score, read_manifest, sample_pairs, shape_key,
+                            write_manifest)
+from becos.seeding import stable_hash
 
 TOSCA_CLASSES = {  # class -> (category, split), config/tosca.yaml
     "michael": ("human", "train"), "david": ("human", "val"), "victoria": ("human", "test"),
@@ -185,8 +187,10 @@ def test_determinism_row_order_and_files(catalog, manifest_all, tmp_path):
     # ids and derived fields
     assert manifest_all["pair_id"].str.fullmatch(r"[0-9a-f]{16}").all()
     assert manifest_all["pair_id"].is_unique
-    assert manifest_all["x_variant"].between(0, 3).all() and manifest_all["chunk"].between(0, 63).all()
-    assert manifest_all["x_variant"].nunique() == 4 and manifest_all["chunk"].nunique() == 64
+    jobs = chunk_jobs(len(manifest_all), n_chunks=64, pairs_per_chunk=100)
+    assert 1 < jobs < 64 and 100 <= len(manifest_all) / jobs < 200  # default n_chunks and pairs_per_chunk
+    assert manifest_all["x_variant"].between(0, 3).all() and manifest_all["chunk"].between(0, jobs - 1).all()
+    assert manifest_all["x_variant"].nunique() == 4 and manifest_all["chunk"].nunique() == jobs
     order = list(zip(manifest_all["split"].map({"train": 0, "val": 1, "test": 2}), manifest_all["pair_id"]))
     assert order == sorted(order)
 
@@ -369,3 +373,23 @@ def test_partial_full_with_annotation_source(becos_code, catalog, table):
     odd.loc[odd["name"] == "wolf0", "template_key"] = "tosca_unicorn"
     m = sample_pairs(odd, "partial_full", seed=42, combinations="all", template_rows=source)
     assert m.attrs["report"]["skipped"]["no_template_row:tosca_unicorn"] == 70
+
+
+def test_chunk_jobs_follow_the_pair_count_and_growth_moves_no_pair_needlessly():
+    """Chunk jobs hold pairs_per_chunk to twice as many pairs, at most n_chunks; growth that keeps the
+    job count moves no pair, a doubling splits every job in two (issue 18)."""
+    assert [chunk_jobs(n, n_chunks=64, pairs_per_chunk=100) for n in (0, 1, 150, 199, 200, 1334, 10029)] == \
+        [1, 1, 1, 1, 2, 8, 64]
+    assert chunk_jobs(10**6, n_chunks=100, pairs_per_chunk=100) == 100  # capped by n_chunks
+    ids = [pair_id_of("full_full", f"d/x{i}", f"d/y{i}", 0) for i in range(1700)]
+    small = assign_chunks(ids[:1000], n_chunks=64, pairs_per_chunk=100)
+    grown = assign_chunks(ids[:1500], n_chunks=64, pairs_per_chunk=100)
+    doubled = assign_chunks(ids, n_chunks=64, pairs_per_chunk=100)
+    assert small.max() == grown.max() == 7 and doubled.max() == 15
+    assert np.array_equal(grown[:1000], small)                  # 8 jobs still: no existing pair moves
+    assert np.array_equal(doubled[:1000] // 2, small)           # 16 jobs: job k splits into 2k, 2k + 1
+    sizes = np.bincount(small)
+    assert sizes.min() > 80 and sizes.max() < 170, sizes       # contiguous bucket ranges: balanced jobs
+    buckets = np.array([stable_hash(p) % N_BUCKETS for p in ids[:1000]])
+    ranges = [(buckets[small == k].min(), buckets[small == k].max()) for k in range(8)]
+    assert all(hi < next_lo for (_, hi), (next_lo, _) in zip(ranges, ranges[1:]))  # contiguous bucket ranges

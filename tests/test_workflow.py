@@ -155,12 +155,15 @@ def test_a_bad_config_fails_before_any_job(becos_code, tmp_path):
 
 
 def test_pairs_chunks_are_fixed_by_the_pair_id(tiny_tosca_run):
-    from becos.sampling import read_manifest
+    """A pair's chunk job is its fixed hash bucket's range (becos.sampling.assign_chunks)."""
+    from becos.sampling import N_BUCKETS, chunk_jobs, read_manifest
     from becos.seeding import stable_hash
 
-    n_chunks = json.loads((tiny_tosca_run / "results" / "config.json").read_text())["n_chunks"]
+    config = json.loads((tiny_tosca_run / "results" / "config.json").read_text())
     manifest = read_manifest(tiny_tosca_run / "results" / "partial_partial" / "manifest.csv")
-    assert all(stable_hash(p) % n_chunks == c for p, c in zip(manifest["pair_id"], manifest["chunk"]))
+    jobs = chunk_jobs(len(manifest), config["n_chunks"], config["pairs_per_chunk"])
+    buckets = [stable_hash(p) % N_BUCKETS for p in manifest["pair_id"]]
+    assert all(b * jobs // N_BUCKETS == c for b, c in zip(buckets, manifest["chunk"]))
     indices = sorted((tiny_tosca_run / "results" / "partial_partial" / "pairs").glob("chunk_*.json"))
     assert len(indices) == manifest["chunk"].nunique()  # one job per non-empty chunk, not per pair
 
@@ -196,6 +199,20 @@ def test_incremental_rebuild(becos_code, tmp_path):
     assert planned.get("pairs", 0) >= 1
     assert "remesh" not in planned and "ground_truth" not in planned, planned
     print(f"min_overlap 0.1 -> 0.15 plans: {planned}")
+
+    # regrouping the pairs into more chunk jobs reruns the chunk jobs but recomputes no pair (issue 18)
+    setting_dir = workdir / "results" / "partial_partial"
+    files = {p: (p.stat().st_mtime_ns, p.read_bytes()) for p in setting_dir.glob("*/*.npz")}
+    jobs_before = len(list(setting_dir.glob("pairs/chunk_*.json")))
+    write_config(workdir, becos_code, combinations="all", pairs_per_chunk=4, **common)
+    snakemake(workdir, "--cores", "2", "--until", "pairs")
+    indices = sorted(setting_dir.glob("pairs/chunk_*.json"))
+    regrouped = {json.loads(i.read_text())["chunk"] for i in indices}
+    assert jobs_before == 1 and len(regrouped) > 1, (jobs_before, regrouped)
+    assert {p: (p.stat().st_mtime_ns, p.read_bytes()) for p in setting_dir.glob("*/*.npz")} == files
+    logs = [*(workdir / "logs" / "ground_truth").rglob("*.log"), *(workdir / "logs" / "pairs").rglob("*.log")]
+    assert len(logs) == 2 * len(regrouped) and all(", 0 computed," in log.read_text() for log in logs), logs
+    print(f"regrouped {len(files)} pair and ground-truth files from 1 into {len(regrouped)} chunk jobs: none rewritten")
 
 
 def test_original_settings_plan_uses_the_published_pairs(becos_code, tmp_path):
