@@ -167,6 +167,29 @@ def test_a_failed_job_shows_its_becos_error_line_on_the_console(becos_code, tmp_
     assert "cat0.off" in console.split("becos: job check_datasets failed")[1]
 
 
+def test_wrong_mesh_content_stops_the_run_before_any_remesh(becos_code, tmp_path):
+    """Issue #17: a mesh replaced by a 3-vertex one, and a mesh holding another shape's content (dog0's
+    25,290 vertices where the wolf class has 4,344), used to pass the dataset check and fail in
+    ground_truth after every remesh had run. The check now names both, and no remesh job starts."""
+    tosca = tmp_path / "data" / "tosca-off"
+    tosca.mkdir(parents=True)
+    for mesh in (becos_code / "data" / "tosca-off").glob("*.off"):
+        (tosca / mesh.name).symlink_to(mesh)
+    (tosca / "wolf1.off").unlink()
+    (tosca / "wolf1.off").write_text("OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0.5\n3 0 1 2\n")
+    (tosca / "wolf2.off").unlink()
+    (tosca / "wolf2.off").symlink_to(becos_code / "data" / "tosca-off" / "dog0.off")
+    config = tosca_config(becos_code, data_dir=str(tmp_path / "data"), shapes=["tosca/wolf*", "tosca/dog*"])
+    workdir = write_config_file(tmp_path / "run", config)
+    result = run_snakemake(tmp_path, "-d", str(workdir), "--configfile", str(workdir / "config.yaml"),
+                           "--cores", "1")
+    assert result.returncode != 0
+    console = result.stderr.split("becos: job check_datasets failed")[-1]
+    assert f"{tosca / 'wolf1.off'}: all its 3 vertices lie in one plane" in console, console[-3000:]
+    assert f"{tosca / 'wolf2.off'}: has 25290 vertices but its class template" in console
+    assert not (workdir / "results" / "remeshed").exists() and not (workdir / "logs" / "remesh").exists()
+
+
 def test_failure_report_names_rule_log_and_error(tmp_path):
     log = tmp_path / "remesh.log"
     log.write_text("remesh tosca/cat0 v0\nbecos remesh: /d/cat0.off: 3 vertices. Fix: re-download it\n")
