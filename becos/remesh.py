@@ -108,6 +108,11 @@ class Remeshed:
     seconds: float
 
 
+FROM_ORIGINAL_RINGS = 2
+"""An original vertex's point on its remesh lies in a face with a corner within this many edge rings
+of the remeshed vertex nearest to it along the original surface (``from_original``)."""
+
+
 # ----------------------------------------------------------------------------------------------
 # small mesh utilities (numpy)
 
@@ -203,6 +208,29 @@ def _original_vertex_normals(mesh: TriMesh) -> np.ndarray:
     np.add.at(normals, mesh.faces.ravel(), np.repeat(oriented_face_normals(mesh), 3, axis=0))
     length = np.linalg.norm(normals, axis=1, keepdims=True)
     return np.divide(normals, length, out=np.zeros_like(normals), where=length > 0)
+
+
+def _from_original(surface: TriMesh, remeshed: TriMesh, face: np.ndarray, weights: np.ndarray):
+    """Each vertex of ``surface`` (the original's repaired copy) -> its point on ``remeshed``.
+
+    ``face``, ``weights``: the remeshed vertices' points on ``surface`` (rows of ``surface.faces``).
+    Each original vertex is first given the remeshed vertex whose point is nearest to it along the
+    original surface (:func:`becos.geometry.nearest_along_surface`); its point is then the closest
+    point among remeshed faces with a corner within :data:`FROM_ORIGINAL_RINGS` rings of that vertex
+    (:meth:`SurfaceLocator.closest_near`). Returns face, weights, distance and ``unresolved`` (no such
+    face: the normal-aware closest point is kept).
+    """
+    from becos.geometry import VertexRings, nearest_along_surface
+
+    anchor = surface.faces[face, np.asarray(weights).argmax(axis=1)]            # (V_r,) surface vertex
+    owner = nearest_along_surface(surface, anchor)                              # (V_s,) remeshed vertex
+    rings = VertexRings(remeshed.faces, remeshed.n_vertices, FROM_ORIGINAL_RINGS)
+
+    def accept(rows, cand):
+        near = rings.near(owner[rows][:, None, None], remeshed.faces[cand]).any(axis=2)
+        return near | (owner[rows] < 0)[:, None]
+
+    return SurfaceLocator(remeshed).closest_near(surface.vertices, accept, _original_vertex_normals(surface))
 
 
 def _content_key(mesh: TriMesh) -> str:
@@ -351,8 +379,12 @@ def remesh_with_stats(mesh: TriMesh, target_vertices: int | None = None, target_
     # snapped vertices ARE their image (distance 0); unsnapped ones keep their projection distance.
     # Faces are rows of the input as given (the copy keeps each kept row's columns).
     to_original = SurfaceMap(repair.face_index[face], weights, np.where(kept, dist, 0.0))
-    # 7. original vertices -> remeshed surface; vertices the copy dropped have no image
-    rf, rw, rd = SurfaceLocator(remeshed).closest(surface.vertices, _original_vertex_normals(surface))
+    # 7. original vertices -> remeshed surface; vertices the copy dropped have no image. A vertex
+    # lands only in a remeshed face whose corners sit (by ``to_original``) within a few edge rings of
+    # it on the original: never on a part that merely touches it in space (a hand on a hip, the two
+    # sheets of a foot's arch), where distance and normals cannot tell the parts apart.
+    rf, rw, rd, unresolved = _from_original(surface, remeshed, face, weights)
+    stats["from_original_unresolved"] = int(unresolved.sum())
     of = np.full(mesh.n_vertices, -1, dtype=np.int64)
     ow = np.zeros((mesh.n_vertices, 3))
     od = np.full(mesh.n_vertices, np.nan)
