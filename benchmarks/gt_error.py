@@ -9,11 +9,13 @@ truth becos has, computed here without its composition code:
    point on the source's original mesh (the remesh file's ``to_original``: original face + weights);
 2. that point carried to the target's original mesh by vertex identity (the same three original
    vertices with the same weights);
-3. located on the target's full remesh WITHOUT a closest-point jump across a contact: among the
-   remesh faces nearest to it in 3D, the one whose point, carried by the remesh vertices' own
-   ``to_original`` points into every pose of the class, stays closest to the true point in the worst
-   pose (two touching parts are far apart in some other pose). The worst-pose distance of the chosen
-   point is reported as ``residual``;
+3. located on the target's full remesh WITHOUT a jump across a contact: the closest point among
+   the remesh faces (of the 12 nearest) with a corner within 2 rings of the remesh vertex nearest to
+   the true point ALONG the target's original surface (a geodesic Voronoi partition of the remesh
+   vertices' ``to_original`` points; two touching parts are far apart along the surface). As an
+   independent check, the located point is carried by the remesh vertices' ``to_original`` points
+   into up to 8 poses of the class (touching parts are far apart in some other pose); its
+   worst-pose distance from the truth is reported as ``residual``;
 4. the error: geodesic distance on the target's full remesh from the predicted vertex to the located
    truth, over sqrt(area of that remesh). Within the 2-ring of the truth's face (mesh connectivity,
    so never across a contact) it is the Euclidean distance, where chord and geodesic agree; beyond, the
@@ -52,12 +54,16 @@ if str(REPO) not in sys.path:
 
 from becos.geometry import (barycentric_coordinates, closest_points_on_triangles,  # noqa: E402
                             nearest_along_surface, surface_area)
-from becos.mesh import TriMesh, read_mesh  # noqa: E402
+from becos.mesh import TriMesh  # noqa: E402
 from becos.record import SETTINGS  # noqa: E402
 from becos.remesh import Remeshed, load_remeshed  # noqa: E402
 
-CANDIDATES = 32
+CANDIDATES = 12
 """Remesh faces (nearest centroids) considered when locating a true point on a remesh."""
+
+MAX_POSES = 8
+"""Poses of a class used for the worst-pose distances: the shape's own and up to 7 others (spread
+over the class in catalog order)."""
 
 LOCAL_RINGS = 2
 """Within this many rings of the truth's face, the error is the Euclidean distance."""
@@ -70,7 +76,10 @@ BOUND = 0.04
 # the shapes of a run
 
 class ClassPoses:
-    """The original meshes of a run's catalog, grouped by (dataset, class); loaded on first use."""
+    """The original meshes of a run's catalog, grouped by (dataset, class); loaded on first use.
+
+    Meshes are in the workflow's common frame (:func:`becos.datasets.prepare_shape`), the frame of its
+    remesh files; each pose has its own centre, which the worst-pose distances do not mind."""
 
     def __init__(self, catalog: pd.DataFrame):
         self.catalog = catalog
@@ -82,9 +91,13 @@ class ClassPoses:
         return str(self._rows[(dataset, name)]["class"])
 
     def mesh(self, dataset: str, name: str) -> TriMesh:
+        """The shape's original mesh in the common frame the workflow remeshes (scaled, centred, rotated)."""
+        from becos.datasets import prepare_shape
+        from becos.workflow import _entry
+
         key = (dataset, name)
         if key not in self._meshes:
-            self._meshes[key] = read_mesh(Path(self._rows[key]["file"]))
+            self._meshes[key] = prepare_shape(_entry(self._rows[key])).mesh
         return self._meshes[key]
 
     def poses(self, dataset: str, shape_class: str) -> np.ndarray:
@@ -126,10 +139,16 @@ class RemeshTarget:
         if not m.matched.all():
             raise ValueError("a remesh vertex has no point on its original surface")
         corners = np.asarray(original_faces)[m.face]                           # (V_r, 3) original vertices
-        self.images = np.einsum("vk,pvkd->pvd", m.weights, poses[:, corners])  # (P, V_r, 3) in every pose
+        others = np.delete(np.arange(len(poses)), self_pose)
+        others = others[np.unique(np.linspace(0, len(others) - 1, min(MAX_POSES - 1, len(others))).round().astype(int))] \
+            if len(others) else others
+        self.pose_rows = np.concatenate([[self_pose], others]).astype(np.int64)  # row 0: this shape
+        own_pose = poses[self_pose]
+        poses = poses[self.pose_rows]
+        self.images = np.einsum("vk,pvkd->pvd", m.weights, poses[:, corners])  # (P', V_r, 3) in the poses used
         # each original vertex -> the remesh vertex whose original point is nearest along the original surface
         anchor = corners[np.arange(len(corners)), m.weights.argmax(axis=1)]
-        self.owner = nearest_along_surface(TriMesh(poses[self.self_pose], np.asarray(original_faces)), anchor)
+        self.owner = nearest_along_surface(TriMesh(own_pose, np.asarray(original_faces)), anchor)
         tri = self.mesh.vertices[self.mesh.faces]
         self._centroids = cKDTree(tri.mean(axis=1))
         self._vertices = cKDTree(self.mesh.vertices)
@@ -158,18 +177,20 @@ class RemeshTarget:
         """Place true points on the remesh.
 
         Args:
-            truth: (P, N, 3) the true points in every pose of the class; row ``self_pose`` of them is
-                this shape's own pose (the remesh's frame).
+            truth: (P, N, 3) the true points in every pose of the class (rows as ``poses`` of the
+                constructor; row ``self_pose`` is this shape's own pose, the remesh's frame).
             triple: (N, 3) the original vertices of the true points' original faces. Only remesh faces
                 with a corner within LOCAL_RINGS rings of a remesh vertex nearest to one of them along
                 the ORIGINAL surface are candidates (two sheets that stay close in every pose, e.g. a
-                foot's arch, are told apart this way); among them, the smallest worst-pose distance wins.
+                foot's arch, are told apart this way); among them, the closest in this pose wins.
+                Where none is near, the smallest worst-pose distance decides.
 
         Returns:
             face (N,), weights (N, 3), residual (N,): the worst-pose distance between the located point
             (carried by the remesh vertices' ``to_original`` images) and the truth, in remesh units.
         """
-        own = truth[self.self_pose]
+        truth = truth[self.pose_rows]
+        own = truth[0]
         face = np.empty(len(own), dtype=np.int64)
         weights = np.empty((len(own), 3))
         residual = np.empty(len(own))
@@ -186,20 +207,23 @@ class RemeshTarget:
         flat = tri.reshape(-1, 3, 3)
         bary = barycentric_coordinates(closest.reshape(-1, 3), flat[:, 0], flat[:, 1], flat[:, 2])
         bary = bary.reshape(len(own), CANDIDATES, 3)
-        corner_images = self.images[:, self.mesh.faces[cand]]                    # (P, N, K, 3, 3)
-        carried = np.einsum("nkc,pnkcd->pnkd", bary, corner_images)               # (P, N, K, 3)
-        worst = np.linalg.norm(carried - truth[:, :, None], axis=3).max(axis=0)  # (N, K)
         owners = self.owner[triple]                                              # (N, 3) remesh vertices
         corners = self.mesh.faces[cand]                                          # (N, K, 3)
         near = np.zeros(cand.shape, dtype=bool)
         for a in range(3):
             for b in range(3):
                 near |= self._near(owners[:, a][:, None], corners[:, :, b])
-        score = np.where(near, worst, np.inf)
-        score = np.where(np.isfinite(score).any(axis=1)[:, None], score, worst)  # none near: worst-pose only
-        best = score.argmin(axis=1)
+        distance = np.linalg.norm(closest - own[:, None], axis=2)                # (N, K) in this pose
         rows = np.arange(len(own))
-        return cand[rows, best], bary[rows, best], worst[rows, best]
+        best = np.where(near, distance, np.inf).argmin(axis=1)
+        lost = np.flatnonzero(~near.any(axis=1))
+        if len(lost):  # no candidate near along the surface: the smallest worst-pose distance decides
+            carried = np.einsum("nkc,pnkcd->pnkd", bary[lost], self.images[:, corners[lost]])
+            best[lost] = np.linalg.norm(carried - truth[:, lost, None], axis=3).max(axis=0).argmin(axis=1)
+        face, weights = cand[rows, best], bary[rows, best]
+        carried = np.einsum("nc,pncd->pnd", weights, self.images[:, self.mesh.faces[face]])
+        residual = np.linalg.norm(carried - truth, axis=2).max(axis=0)
+        return face, weights, residual
 
     def errors(self, predicted: np.ndarray, face: np.ndarray, weights: np.ndarray) -> np.ndarray:
         """(N,) geodesic distance from vertex ``predicted[i]`` to the point (face, weights), remesh units."""
@@ -254,7 +278,7 @@ class Run:
             t = RemeshTarget(self.remeshed(dataset, name, variant), self.poses.mesh(dataset, name).faces,
                              self.poses.poses(dataset, shape_class), self.class_names(dataset, shape_class).index(name))
             self._targets[key] = t
-            while len(self._targets) > 8:
+            while len(self._targets) > 24:
                 self._targets.popitem(last=False)
         return self._targets[key]
 
@@ -344,7 +368,7 @@ def measure_direction(run: Run, record, setting: str, s: str, t: str) -> Directi
     gt_face = record[f"{t}_full_face_ids"][gt_face_partial]
     gt_w = record[f"{corr_key}_weights"][has]
     gt_images = np.einsum("nk,pnkd->pnd", gt_w, target.images[:, target.mesh.faces[gt_face]])
-    gt_point_error = np.linalg.norm(gt_images - truth, axis=2).max(axis=0)
+    gt_point_error = np.linalg.norm(gt_images - truth[target.pose_rows], axis=2).max(axis=0)
     orig_faces_t = run.poses.mesh(meta_t["dataset"], meta_t["name"]).faces
     pred_map = target.remeshed.to_original
     predicted_original = orig_faces_t[pred_map.face[predicted_full], pred_map.weights[predicted_full].argmax(axis=1)]
