@@ -34,12 +34,21 @@ both:
 6. the remesh is oriented like the majority of the input (area-weighted vote of face normals against
    the input's normals at the closest points) and every remeshed vertex is snapped to its closest
    point on the input surface with a compatible normal (:class:`becos.geometry.SurfaceLocator`:
-   never across a contact between touching parts). So ``to_original`` is exact (distance 0) and vertices sit on the
+   not onto a touching part that faces the other way; parts that meet at an angle are not told
+   apart by this, see step 7). So ``to_original`` is exact (distance 0) and vertices sit on the
    original surface, not on the Loop-smoothed one; the snap moves vertices by ~1e-4 of the bounding
    box diagonal, far less than an edge. Where it would fold a sliver face in a crease (a few faces
    on some TOSCA shapes), that face's corners stay where decimation put them (their
    ``to_original.distance`` is then the small projection distance; counted in
    :func:`remesh_with_stats` as ``unsnapped_vertices``).
+7. ``from_original``: each original vertex goes to the closest point of a remeshed face that has a
+   corner within :data:`FROM_ORIGINAL_RINGS` rings of the remeshed vertex nearest to it ALONG the
+   original surface (a geodesic Voronoi partition of the remeshed vertices' ``to_original`` points,
+   :func:`becos.geometry.nearest_along_surface`). Where two parts touch or pass through each other
+   (TOSCA victoria1: a hand at the hip; the arch of a foot against its heel) the plain or
+   normal-aware closest point can lie on the other part, 0.01 mm away in space and a body length away
+   along the surface; normals do not tell them apart there (the parts meet at an angle), mesh
+   connectivity does (issue #20).
 
 Guarantee on counts: with ``target_vertices`` the result has EXACTLY that many vertices unless the
 decimation cannot get there (it stalls when every remaining collapse would break the topology or a
@@ -94,7 +103,7 @@ class Remeshed:
         to_original: (V_r,) map: remeshed vertex -> closest point of the ORIGINAL surface (face rows
             of the input as given; distance in input units, ~0 because vertices are snapped there).
         from_original: (V_original,) map: original vertex -> closest point of the remeshed surface
-            (distance in input units).
+            near it along the original surface (step 7; distance in input units).
         target_vertices: the vertex target asked for (None in face-target mode).
         target_faces: the face target asked for (None in vertex-target mode).
         seconds: wall time of :func:`remesh`, maps included.

@@ -8,7 +8,8 @@ becos; vertex-index form (``-1`` = none) is derived from it only at the end
 
 Composition (:func:`compose`) follows the issue's rule: the image of a point (face f, weights w)
 of the middle surface is the w-weighted combination of the images of f's vertices, projected to
-the closest point of the target surface; if f's largest-weight vertex has no image the point has
+the closest point of the target surface among the faces near the images' faces along the target's
+connectivity (:data:`COMPOSE_RINGS`; never onto another part that touches them in space); if f's largest-weight vertex has no image the point has
 none, otherwise the weights are renormalised over the vertices that have one. Maps are composed
 from the target end backwards, so that only the *faces* of intermediate templates are needed (the
 BeCoS annotation folder ships those for templates whose datasets a user may not have) and every
