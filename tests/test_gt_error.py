@@ -20,7 +20,7 @@ sys.path.insert(0, str(REPO / "benchmarks"))
 
 import gt_error  # noqa: E402
 
-SHAPES = ["tosca/victoria1", "tosca/victoria2"]
+SHAPES = ["tosca/victoria0", "tosca/victoria1", "tosca/victoria2"]  # victoria0: the class template, on every path
 SETTINGS = ("full_full", "partial_partial")  # partial_full pairs need michael0 (the human P2F template): the benchmark covers them
 
 
@@ -43,13 +43,13 @@ def test_every_same_class_pair_is_within_the_bound(touching_run):
         found = gt_error.audit_setting(run, setting)
         assert found, f"no same-class pair in {setting}"
         results += found
+    # issue #20's pair victoria2 -> victoria1 (max 1.05 x sqrt area before the fix) is among them
+    assert "8beeb2fde1d5b8cc" in {r.pair_id for r in results if r.setting == "full_full"}
     table = gt_error.distribution_table(results)
     print("\n" + table.to_string(index=False, float_format=lambda v: f"{v:.4f}"))
     for r in results:
         s = r.summary()
         assert s["n"] > 0
-        # the located truth is where it should be (carried into every victoria pose)
-        assert s["residual_max"] < 0.03, s
         assert s["max"] <= gt_error.BOUND, s
         # means stay within 10 % of the best possible vertex map (plus a small slack for short partial views)
         assert s["mean"] <= 1.1 * s["best_mean"] + 1e-3, s
