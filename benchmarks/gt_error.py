@@ -30,7 +30,9 @@ the remesh files, up to those transforms).
 
 Run: ``python benchmarks/gt_error.py RESULTS [--settings full_full,...] [--worst 25] [--pairs ID,...]
 [--json OUT]`` where RESULTS is a run's ``results`` folder (with ``catalog.csv``, ``remeshed/`` and
-``<setting>/benchmark.zarr``). Tables on stdout, progress on stderr.
+``<setting>/benchmark.zarr``). Tables on stdout, progress on stderr. Large runs can be split into
+processes by ``--pairs`` lists, each with its own ``--json``; ``--combine A.json B.json ...`` then
+prints the tables over all of them.
 """
 
 from __future__ import annotations
@@ -411,9 +413,11 @@ def body_location(run: Run, dataset: str, shape_class: str, original_vertex: np.
     return [f"({a:.2f},{b:.2f},{c:.2f})" for a, b, c in frac]
 
 
-def distribution_table(results: list[DirectionResult]) -> pd.DataFrame:
-    """Per setting: over pair directions, the distribution of the per-pair mean, median, p95, max."""
-    df = pd.DataFrame([r.summary() for r in results])
+def distribution_table(results: list) -> pd.DataFrame:
+    """Per setting: over pair directions, the distribution of the per-pair mean, median, p95, max.
+
+    ``results``: :class:`DirectionResult` or their :meth:`~DirectionResult.summary` dicts."""
+    df = pd.DataFrame([r if isinstance(r, dict) else r.summary() for r in results])
     rows = []
     for setting, g in df.groupby("setting", sort=False):
         row = {"setting": setting, "pairs": g["pair_id"].nunique(), "directions": len(g)}
@@ -452,30 +456,40 @@ def worst_vertices(run: Run, results: list[DirectionResult], n: int) -> pd.DataF
     return pd.DataFrame(out)
 
 
+def _print_tables(summaries: list[dict]) -> None:
+    print("Distribution over pair directions (error x sqrt area of the target remesh):")
+    print(distribution_table(summaries).to_string(index=False, float_format=lambda v: f"{v:.4f}"))
+    per_pair = pd.DataFrame(summaries)
+    bad = per_pair[per_pair["max"] > BOUND].sort_values("max", ascending=False)
+    print(f"\nPair directions with max > {BOUND}: {len(bad)} of {len(per_pair)}")
+    if len(bad):
+        print(bad.to_string(index=False, float_format=lambda v: f"{v:.4f}"))
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("results", type=Path, help="a finished run's results folder")
+    parser.add_argument("results", type=Path, nargs="?", help="a finished run's results folder")
+    parser.add_argument("--combine", type=Path, nargs="+", default=None,
+                        help="instead: print the tables of --json files of earlier runs (e.g. one per --pairs part)")
     parser.add_argument("--settings", default=",".join(SETTINGS))
     parser.add_argument("--pairs", default=None, help="comma-separated pair ids (default: every same-class pair)")
     parser.add_argument("--worst", type=int, default=25, help="how many worst vertices to list")
     parser.add_argument("--json", type=Path, default=None, help="write per-direction summaries here")
     args = parser.parse_args(argv)
+    pd.set_option("display.width", 250)
+    pd.set_option("display.max_columns", 40)
+    pd.set_option("display.max_rows", 500)
+    if args.combine:
+        summaries = [row for path in args.combine for row in json.loads(path.read_text())]
+        _print_tables(summaries)
+        return 0
     run = Run(args.results)
     pair_ids = set(args.pairs.split(",")) if args.pairs else None
     results = []
     log = lambda m: print(m, file=sys.stderr, flush=True)  # noqa: E731
     for setting in args.settings.split(","):
         results += audit_setting(run, setting, pair_ids, log)
-    pd.set_option("display.width", 250)
-    pd.set_option("display.max_columns", 40)
-    pd.set_option("display.max_rows", 500)
-    print("Distribution over pair directions (error x sqrt area of the target remesh):")
-    print(distribution_table(results).to_string(index=False, float_format=lambda v: f"{v:.4f}"))
-    per_pair = pd.DataFrame([r.summary() for r in results])
-    bad = per_pair[per_pair["max"] > BOUND].sort_values("max", ascending=False)
-    print(f"\nPair directions with max > {BOUND}: {len(bad)} of {len(per_pair)}")
-    if len(bad):
-        print(bad.to_string(index=False, float_format=lambda v: f"{v:.4f}"))
+    _print_tables([r.summary() for r in results])
     print(f"\nWorst {args.worst} vertices (locations: bounding-box fractions on the class's first pose):")
     print(worst_vertices(run, results, args.worst).to_string(index=False, float_format=lambda v: f"{v:.4f}"))
     if args.json:
