@@ -612,6 +612,19 @@ class Plan:
     def remesh_target(self, dataset: str, name: str, token: str) -> dict:
         return remesh_target(self.config, dataset, name, token)
 
+    @cached_property
+    def _annotations(self):
+        return annotation_source(self.config)
+
+    def chunk_edge_files(self, setting: str, chunk: int) -> list[str]:
+        """The annotation folder's edge files the chunk's ground truth reads (both directions), so that
+        editing or restoring one reruns the chunk (:func:`edge_files_between`)."""
+        keys = self._catalog_rows
+        rows = self.chunk_rows(setting, chunk)
+        pairs = {(keys[(xd, xn)]["template_key"], keys[(yd, yn)]["template_key"])
+                 for xd, xn, yd, yn in zip(rows["x_dataset"], rows["x_name"], rows["y_dataset"], rows["y_name"])}
+        return sorted({str(p) for kx, ky in pairs for p in edge_files_between(self._annotations, kx, ky)})
+
 
 def remesh_target(config: dict, dataset: str, name: str, token: str) -> dict:
     """Arguments of :func:`becos.remesh.remesh` for a token."""
@@ -620,17 +633,6 @@ def remesh_target(config: dict, dataset: str, name: str, token: str) -> dict:
     if token.startswith("f"):
         return {"target_faces": int(token[1:])}
     return {"target_vertices": int(variant_target_vertices(config["seed"], dataset, name, int(token[1:])))}
-
-    def chunk_edge_files(self, setting: str, chunk: int) -> list[str]:
-        """The annotation folder's edge files the chunk's ground truth reads (both directions), so that
-        editing or restoring one reruns the chunk (:func:`edge_files_between`)."""
-        if not hasattr(self, "_annotations"):
-            self._annotations = annotation_source(self.config)
-        keys = self._catalog_rows
-        rows = self.chunk_rows(setting, chunk)
-        pairs = {(keys[(xd, xn)]["template_key"], keys[(yd, yn)]["template_key"])
-                 for xd, xn, yd, yn in zip(rows["x_dataset"], rows["x_name"], rows["y_dataset"], rows["y_name"])}
-        return sorted({str(p) for kx, ky in pairs for p in edge_files_between(self._annotations, kx, ky)})
 
 
 def edge_files_between(annotations, x_key: str, y_key: str) -> list[Path]:
