@@ -165,15 +165,8 @@ class SurfaceLocator:
         self._tree.init(mesh.vertices, self._faces)
         self._normals = None
         self._centroids = None
-        self._rings: dict[int, VertexRings] = {}
         edges = mesh.vertices[self._faces] - mesh.vertices[np.roll(self._faces, 1, axis=1)]
         self.max_detour = float(np.linalg.norm(edges, axis=2).mean())
-
-    def rings(self, rings: int) -> "VertexRings":
-        """:class:`VertexRings` of the mesh (built once per ring count)."""
-        if rings not in self._rings:
-            self._rings[rings] = VertexRings(self.mesh.faces, self.mesh.n_vertices, rings)
-        return self._rings[rings]
 
     def _row(self, index: np.ndarray) -> np.ndarray:
         """Rows of ``mesh.faces`` of indices into the searched faces."""
@@ -255,112 +248,3 @@ class SurfaceLocator:
         tri = self.mesh.vertices[self.mesh.faces[face]]
         weights = barycentric_coordinates(closest, tri[:, 0], tri[:, 1], tri[:, 2])
         return face, weights, np.linalg.norm(closest - points, axis=1)
-
-    def closest_near(self, points: np.ndarray, accept, normals: np.ndarray | None = None,
-                     ks: tuple[int, ...] = (32, 256)) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Closest surface point of each query among the faces ``accept`` allows: contact-safe by connectivity.
-
-        Where two parts of a shape touch or pass through each other (a hand on a hip, the arch of a foot
-        against its heel), neither distance nor normals say which part a point belongs to; what the
-        caller knows of the point's neighbourhood along the surface does. ``accept(rows, faces)`` gets
-        (M,) query indices and (M, K) candidate face rows and returns (M, K) bool: the face may hold
-        that query's point.
-
-        The answer of :meth:`closest` (with ``normals``, if given) is kept where accepted; otherwise the
-        closest accepted face among the ``k`` faces with the nearest centroids, for ``k`` in ``ks``.
-
-        Returns:
-            face (N,), weights (N, 3), distance (N,) as :meth:`closest`, and ``unresolved`` (N,) bool:
-            no accepted face was found, the answer is :meth:`closest`'s.
-        """
-        from scipy.spatial import cKDTree
-
-        points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
-        face, weights, distance = self.closest(points, normals)
-        todo = np.flatnonzero(~np.asarray(accept(np.arange(len(points)), face[:, None]), dtype=bool)[:, 0])
-        if len(todo) and self._centroids is None:
-            self._centroids = cKDTree(self.mesh.vertices[self._faces].mean(axis=1))
-        for k in ks:
-            if len(todo) == 0:
-                break
-            k = min(k, len(self._faces))
-            _, cand = self._centroids.query(points[todo], k=k)
-            cand = self._row(np.asarray(cand).reshape(len(todo), k))
-            tri = self.mesh.vertices[self.mesh.faces[cand]]                      # (M, k, 3, 3)
-            closest = closest_points_on_triangles(points[todo, None, :], tri[..., 0, :], tri[..., 1, :], tri[..., 2, :])
-            dist = np.linalg.norm(closest - points[todo, None, :], axis=2)
-            dist = np.where(np.asarray(accept(todo, cand), dtype=bool), dist, np.inf)
-            best = dist.argmin(axis=1)
-            rows = np.arange(len(todo))
-            found = np.isfinite(dist[rows, best])
-            hit, f, c = todo[found], cand[rows, best][found], closest[rows, best][found]
-            tri = self.mesh.vertices[self.mesh.faces[f]]
-            face[hit] = f
-            weights[hit] = barycentric_coordinates(c, tri[:, 0], tri[:, 1], tri[:, 2])
-            distance[hit] = np.linalg.norm(c - points[hit], axis=1)
-            todo = todo[~found]
-        unresolved = np.zeros(len(points), dtype=bool)
-        unresolved[todo] = True
-        return face, weights, distance, unresolved
-
-
-class VertexRings:
-    """Which vertices of a mesh lie within ``rings`` edge rings of each other (mesh connectivity only).
-
-    Two points that are close in space but far apart along the surface (two touching parts) are
-    told apart by this; Euclidean distance and normals cannot. Stored as the sorted keys
-    ``a * V + b`` of the non-zeros of ``(A + I) ** rings`` (A: vertex adjacency): ~(1 + 3 r (r + 1))
-    keys per vertex on a regular mesh (r = 5: 91).
-    """
-
-    def __init__(self, faces: np.ndarray, n_vertices: int, rings: int):
-        import scipy.sparse as sp
-
-        faces = np.asarray(faces, dtype=np.int64)
-        self.n_vertices = int(n_vertices)
-        self.rings = int(rings)
-        e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
-        n = self.n_vertices
-        a = sp.coo_matrix((np.ones(len(e), dtype=np.float32), (e[:, 0], e[:, 1])), shape=(n, n)).tocsr()
-        a = ((a + a.T + sp.identity(n, dtype=np.float32, format="csr")) > 0).astype(np.float32)
-        reach = a
-        for _ in range(self.rings - 1):
-            reach = ((reach @ a) > 0).astype(np.float32)
-        reach = reach.tocoo()
-        self._keys = np.sort(reach.row.astype(np.int64) * n + reach.col)
-
-    def near(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-        """Bool array (``a`` and ``b`` broadcast): vertex ``b`` is within ``rings`` rings of vertex ``a``."""
-        keys = np.asarray(a, dtype=np.int64) * self.n_vertices + np.asarray(b, dtype=np.int64)
-        if len(self._keys) == 0:
-            return np.zeros(keys.shape, dtype=bool)
-        pos = np.minimum(np.searchsorted(self._keys, keys), len(self._keys) - 1)
-        return self._keys[pos] == keys
-
-
-def mean_edge_length(mesh: TriMesh) -> float:
-    """Mean length of the face edges (each interior edge counted twice), in mesh units."""
-    tri = mesh.vertices[mesh.faces]
-    return float(np.linalg.norm(tri - np.roll(tri, 1, axis=1), axis=2).mean())
-
-
-def nearest_along_surface(mesh: TriMesh, sources: np.ndarray) -> np.ndarray:
-    """(V,) int64 index into ``sources`` of the source vertex nearest to each vertex ALONG the surface.
-
-    Shortest paths on the mesh's edge graph from all sources at once (one multi-source Dijkstra,
-    :func:`scipy.sparse.csgraph.dijkstra` with ``min_only``): a geodesic Voronoi partition, so a
-    vertex is never given a source on another part that merely touches it in space. -1 for vertices
-    no source reaches (other components).
-    """
-    from scipy.sparse.csgraph import dijkstra
-
-    from becos.geodesics import edge_graph
-
-    sources = np.asarray(sources, dtype=np.int64)
-    unique, first = np.unique(sources, return_index=True)
-    _, _, owner = dijkstra(edge_graph(mesh), directed=False, indices=unique, min_only=True,
-                           return_predecessors=True)
-    owner = np.asarray(owner, dtype=np.int64)
-    lookup = np.full(mesh.n_vertices, -1, dtype=np.int64)
-    lookup[unique] = first
-    return np.where(owner >= 0, lookup[np.maximum(owner, 0)], -1)

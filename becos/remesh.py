@@ -34,21 +34,12 @@ both:
 6. the remesh is oriented like the majority of the input (area-weighted vote of face normals against
    the input's normals at the closest points) and every remeshed vertex is snapped to its closest
    point on the input surface with a compatible normal (:class:`becos.geometry.SurfaceLocator`:
-   not onto a touching part that faces the other way; parts that meet at an angle are not told
-   apart by this, see step 7). So ``to_original`` is exact (distance 0) and vertices sit on the
+   never across a contact between touching parts). So ``to_original`` is exact (distance 0) and vertices sit on the
    original surface, not on the Loop-smoothed one; the snap moves vertices by ~1e-4 of the bounding
    box diagonal, far less than an edge. Where it would fold a sliver face in a crease (a few faces
    on some TOSCA shapes), that face's corners stay where decimation put them (their
    ``to_original.distance`` is then the small projection distance; counted in
    :func:`remesh_with_stats` as ``unsnapped_vertices``).
-7. ``from_original``: each original vertex goes to the closest point of a remeshed face that has a
-   corner within :data:`FROM_ORIGINAL_RINGS` rings of the remeshed vertex nearest to it ALONG the
-   original surface (a geodesic Voronoi partition of the remeshed vertices' ``to_original`` points,
-   :func:`becos.geometry.nearest_along_surface`). Where two parts touch or pass through each other
-   (TOSCA victoria1: a hand at the hip; the arch of a foot against its heel) the plain or
-   normal-aware closest point can lie on the other part, 0.01 mm away in space and a body length away
-   along the surface; normals do not tell them apart there (the parts meet at an angle), mesh
-   connectivity does (issue #20).
 
 Guarantee on counts: with ``target_vertices`` the result has EXACTLY that many vertices unless the
 decimation cannot get there (it stalls when every remaining collapse would break the topology or a
@@ -103,7 +94,7 @@ class Remeshed:
         to_original: (V_r,) map: remeshed vertex -> closest point of the ORIGINAL surface (face rows
             of the input as given; distance in input units, ~0 because vertices are snapped there).
         from_original: (V_original,) map: original vertex -> closest point of the remeshed surface
-            near it along the original surface (step 7; distance in input units).
+            (distance in input units).
         target_vertices: the vertex target asked for (None in face-target mode).
         target_faces: the face target asked for (None in vertex-target mode).
         seconds: wall time of :func:`remesh`, maps included.
@@ -115,11 +106,6 @@ class Remeshed:
     target_vertices: int | None
     target_faces: int | None
     seconds: float
-
-
-FROM_ORIGINAL_RINGS = 2
-"""An original vertex's point on its remesh lies in a face with a corner within this many edge rings
-of the remeshed vertex nearest to it along the original surface (``from_original``)."""
 
 
 # ----------------------------------------------------------------------------------------------
@@ -217,29 +203,6 @@ def _original_vertex_normals(mesh: TriMesh) -> np.ndarray:
     np.add.at(normals, mesh.faces.ravel(), np.repeat(oriented_face_normals(mesh), 3, axis=0))
     length = np.linalg.norm(normals, axis=1, keepdims=True)
     return np.divide(normals, length, out=np.zeros_like(normals), where=length > 0)
-
-
-def _from_original(surface: TriMesh, remeshed: TriMesh, face: np.ndarray, weights: np.ndarray):
-    """Each vertex of ``surface`` (the original's repaired copy) -> its point on ``remeshed``.
-
-    ``face``, ``weights``: the remeshed vertices' points on ``surface`` (rows of ``surface.faces``).
-    Each original vertex is first given the remeshed vertex whose point is nearest to it along the
-    original surface (:func:`becos.geometry.nearest_along_surface`); its point is then the closest
-    point among remeshed faces with a corner within :data:`FROM_ORIGINAL_RINGS` rings of that vertex
-    (:meth:`SurfaceLocator.closest_near`). Returns face, weights, distance and ``unresolved`` (no such
-    face: the normal-aware closest point is kept).
-    """
-    from becos.geometry import VertexRings, nearest_along_surface
-
-    anchor = surface.faces[face, np.asarray(weights).argmax(axis=1)]            # (V_r,) surface vertex
-    owner = nearest_along_surface(surface, anchor)                              # (V_s,) remeshed vertex
-    rings = VertexRings(remeshed.faces, remeshed.n_vertices, FROM_ORIGINAL_RINGS)
-
-    def accept(rows, cand):
-        near = rings.near(owner[rows][:, None, None], remeshed.faces[cand]).any(axis=2)
-        return near | (owner[rows] < 0)[:, None]
-
-    return SurfaceLocator(remeshed).closest_near(surface.vertices, accept, _original_vertex_normals(surface))
 
 
 def _content_key(mesh: TriMesh) -> str:
@@ -388,12 +351,8 @@ def remesh_with_stats(mesh: TriMesh, target_vertices: int | None = None, target_
     # snapped vertices ARE their image (distance 0); unsnapped ones keep their projection distance.
     # Faces are rows of the input as given (the copy keeps each kept row's columns).
     to_original = SurfaceMap(repair.face_index[face], weights, np.where(kept, dist, 0.0))
-    # 7. original vertices -> remeshed surface; vertices the copy dropped have no image. A vertex
-    # lands only in a remeshed face whose corners sit (by ``to_original``) within a few edge rings of
-    # it on the original: never on a part that merely touches it in space (a hand on a hip, the two
-    # sheets of a foot's arch), where distance and normals cannot tell the parts apart.
-    rf, rw, rd, unresolved = _from_original(surface, remeshed, face, weights)
-    stats["from_original_unresolved"] = int(unresolved.sum())
+    # 7. original vertices -> remeshed surface; vertices the copy dropped have no image
+    rf, rw, rd = SurfaceLocator(remeshed).closest(surface.vertices, _original_vertex_normals(surface))
     of = np.full(mesh.n_vertices, -1, dtype=np.int64)
     ow = np.zeros((mesh.n_vertices, 3))
     od = np.full(mesh.n_vertices, np.nan)
