@@ -248,3 +248,25 @@ class SurfaceLocator:
         tri = self.mesh.vertices[self.mesh.faces[face]]
         weights = barycentric_coordinates(closest, tri[:, 0], tri[:, 1], tri[:, 2])
         return face, weights, np.linalg.norm(closest - points, axis=1)
+
+
+def nearest_along_surface(mesh: TriMesh, sources: np.ndarray) -> np.ndarray:
+    """(V,) int64 index into ``sources`` of the source vertex nearest to each vertex ALONG the surface.
+
+    Shortest paths on the mesh's edge graph from all sources at once (one multi-source Dijkstra,
+    :func:`scipy.sparse.csgraph.dijkstra` with ``min_only``): a geodesic Voronoi partition, so a
+    vertex is never given a source on another part that merely touches it in space. -1 for vertices
+    no source reaches (other components).
+    """
+    from scipy.sparse.csgraph import dijkstra
+
+    from becos.geodesics import edge_graph
+
+    sources = np.asarray(sources, dtype=np.int64)
+    unique, first = np.unique(sources, return_index=True)
+    _, _, owner = dijkstra(edge_graph(mesh), directed=False, indices=unique, min_only=True,
+                           return_predecessors=True)
+    owner = np.asarray(owner, dtype=np.int64)
+    lookup = np.full(mesh.n_vertices, -1, dtype=np.int64)
+    lookup[unique] = first
+    return np.where(owner >= 0, lookup[np.maximum(owner, 0)], -1)

@@ -1,0 +1,501 @@
+"""Exact ground-truth error of a finished workflow run, over EVERY same-class pair (issue #20).
+
+For each setting's ``benchmark.zarr`` and each pair whose two shapes belong to one class (poses of
+one TOSCA class share a triangulation: vertex i is vertex i), both directions (``corr_01``: X -> Y,
+``corr_10``: Y -> X), each source vertex with a predicted target vertex is scored against the exact
+truth becos has, computed here without its composition code:
+
+1. the source vertex (partial index) -> its vertex of the full remesh (``s_partial_to_full``) -> its
+   point on the source's original mesh (the remesh file's ``to_original``: original face + weights);
+2. that point carried to the target's original mesh by vertex identity (the same three original
+   vertices with the same weights);
+3. located on the target's full remesh WITHOUT a jump across a contact: the closest point among
+   the remesh faces (of the 12 nearest) with a corner within 2 rings of the remesh vertex nearest to
+   the true point ALONG the target's original surface (a geodesic Voronoi partition of the remesh
+   vertices' ``to_original`` points; two touching parts are far apart along the surface). As an
+   independent check, the located point is carried by the remesh vertices' ``to_original`` points
+   into up to 8 poses of the class (touching parts are far apart in some other pose); its
+   worst-pose distance from the truth is reported as ``residual``;
+4. the error: geodesic distance on the target's full remesh from the predicted vertex to the located
+   truth, over sqrt(area of that remesh). Within the 2-ring of the truth's face (mesh connectivity,
+   so never across a contact) it is the Euclidean distance, where chord and geodesic agree; beyond, the
+   heat method (:class:`becos.geodesics.GeodesicDistances`).
+
+The "best possible vertex map" sends each vertex to the remesh vertex nearest its truth (within the
+2-ring); ``mean / best`` says how far a pair's mean is above it.
+
+Everything is measured in the remesh files' own frame and units (the record's rotations, alignment
+and scale are rigid motions and a uniform scale; the script checks the record's full shapes against
+the remesh files, up to those transforms).
+
+Run: ``python benchmarks/gt_error.py RESULTS [--settings full_full,...] [--worst 25] [--pairs ID,...]
+[--json OUT]`` where RESULTS is a run's ``results`` folder (with ``catalog.csv``, ``remeshed/`` and
+``<setting>/benchmark.zarr``). Tables on stdout, progress on stderr. Large runs can be split into
+processes by ``--pairs`` lists, each with its own ``--json``; ``--combine A.json B.json ...`` then
+prints the tables over all of them.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from collections import OrderedDict
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import scipy.sparse as sp
+from scipy.spatial import cKDTree
+
+REPO = Path(__file__).resolve().parents[1]
+if str(REPO) not in sys.path:
+    sys.path.insert(0, str(REPO))
+
+from becos.geometry import (barycentric_coordinates, closest_points_on_triangles,  # noqa: E402
+                            nearest_along_surface, surface_area)
+from becos.mesh import TriMesh  # noqa: E402
+from becos.record import SETTINGS  # noqa: E402
+from becos.remesh import Remeshed, load_remeshed  # noqa: E402
+
+CANDIDATES = 12
+"""Remesh faces (nearest centroids) considered when locating a true point on a remesh."""
+
+MAX_POSES = 8
+"""Poses of a class used for the worst-pose distances: the shape's own and up to 7 others (spread
+over the class in catalog order)."""
+
+LOCAL_RINGS = 2
+"""Within this many rings of the truth's face, the error is the Euclidean distance."""
+
+BOUND = 0.04
+"""Issue #20: the largest error (x sqrt area) allowed on any pair."""
+
+
+# ----------------------------------------------------------------------------------------------
+# the shapes of a run
+
+class ClassPoses:
+    """The original meshes of a run's catalog, grouped by (dataset, class); loaded on first use.
+
+    Meshes are in the workflow's common frame (:func:`becos.datasets.prepare_shape`), the frame of its
+    remesh files; each pose has its own centre, which the worst-pose distances do not mind."""
+
+    def __init__(self, catalog: pd.DataFrame):
+        self.catalog = catalog
+        self._rows = {(r["dataset"], r["name"]): r for r in catalog.to_dict("records")}
+        self._meshes: dict[tuple[str, str], TriMesh] = {}
+        self._stacks: dict[tuple[str, str], np.ndarray] = {}
+
+    def shape_class(self, dataset: str, name: str) -> str:
+        return str(self._rows[(dataset, name)]["class"])
+
+    def mesh(self, dataset: str, name: str) -> TriMesh:
+        """The shape's original mesh in the common frame the workflow remeshes (scaled, centred, rotated)."""
+        from becos.datasets import prepare_shape
+        from becos.workflow import _entry
+
+        key = (dataset, name)
+        if key not in self._meshes:
+            self._meshes[key] = prepare_shape(_entry(self._rows[key])).mesh
+        return self._meshes[key]
+
+    def poses(self, dataset: str, shape_class: str) -> np.ndarray:
+        """(P, V, 3) vertices of every catalogued pose of the class (catalog order)."""
+        key = (dataset, shape_class)
+        if key not in self._stacks:
+            names = [r["name"] for r in self._rows.values() if r["dataset"] == dataset and str(r["class"]) == shape_class]
+            stack = [self.mesh(dataset, n).vertices for n in names]
+            if len({len(v) for v in stack}) != 1:
+                raise ValueError(f"{dataset}/{shape_class}: poses with different vertex counts "
+                                 f"{sorted({len(v) for v in stack})}; not one triangulation")
+            self._stacks[key] = np.stack(stack)
+        return self._stacks[key]
+
+
+def _adjacency(faces: np.ndarray, n: int) -> sp.csr_matrix:
+    """(n, n) vertex adjacency with the diagonal (a vertex is in its own 1-ring)."""
+    e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    a = sp.coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n)).tocsr()
+    return ((a + a.T + sp.identity(n, format="csr")) > 0).astype(np.float64).tocsr()
+
+
+class RemeshTarget:
+    """One remesh variant as the target of maps: locates true points on it, measures errors.
+
+    Args:
+        remeshed: the remesh file (its own frame and units).
+        original_faces: (F_o, 3) faces of the shape's original mesh (as ``to_original`` indexes them).
+        poses: (P, V_o, 3) original vertices of every pose of the class.
+        self_pose: the row of ``poses`` that is this shape.
+    """
+
+    def __init__(self, remeshed: Remeshed, original_faces: np.ndarray, poses: np.ndarray, self_pose: int):
+        self.remeshed = remeshed
+        self.self_pose = int(self_pose)
+        self.mesh = remeshed.mesh
+        self.sqrt_area = float(np.sqrt(surface_area(self.mesh)))
+        m = remeshed.to_original
+        if not m.matched.all():
+            raise ValueError("a remesh vertex has no point on its original surface")
+        corners = np.asarray(original_faces)[m.face]                           # (V_r, 3) original vertices
+        others = np.delete(np.arange(len(poses)), self_pose)
+        others = others[np.unique(np.linspace(0, len(others) - 1, min(MAX_POSES - 1, len(others))).round().astype(int))] \
+            if len(others) else others
+        self.pose_rows = np.concatenate([[self_pose], others]).astype(np.int64)  # row 0: this shape
+        own_pose = poses[self_pose]
+        poses = poses[self.pose_rows]
+        self.images = np.einsum("vk,pvkd->pvd", m.weights, poses[:, corners])  # (P', V_r, 3) in the poses used
+        # each original vertex -> the remesh vertex whose original point is nearest along the original surface
+        anchor = corners[np.arange(len(corners)), m.weights.argmax(axis=1)]
+        self.owner = nearest_along_surface(TriMesh(own_pose, np.asarray(original_faces)), anchor)
+        tri = self.mesh.vertices[self.mesh.faces]
+        self._centroids = cKDTree(tri.mean(axis=1))
+        self._vertices = cKDTree(self.mesh.vertices)
+        n = self.mesh.n_vertices
+        a = _adjacency(self.mesh.faces, n)
+        ring = a
+        for _ in range(LOCAL_RINGS - 1):
+            ring = ring @ a
+        ring = ring.tocoo()
+        self._ring_keys = np.unique(ring.row.astype(np.int64) * n + ring.col)
+        self._geodesics = None
+
+    def _near(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """Vertex ``b`` within LOCAL_RINGS rings of vertex ``a`` on the remesh (arrays broadcast)."""
+        keys = a.astype(np.int64) * self.mesh.n_vertices + b
+        pos = np.minimum(np.searchsorted(self._ring_keys, keys), len(self._ring_keys) - 1)
+        return self._ring_keys[pos] == keys
+
+    def in_ring(self, vertex: np.ndarray, corners: np.ndarray) -> np.ndarray:
+        """(N,) bool: ``vertex[i]`` lies within LOCAL_RINGS rings of some corner in ``corners[i]`` (N, 3)."""
+        keys = vertex[:, None].astype(np.int64) * self.mesh.n_vertices + corners
+        pos = np.minimum(np.searchsorted(self._ring_keys, keys), len(self._ring_keys) - 1)
+        return (self._ring_keys[pos] == keys).any(axis=1)
+
+    def locate(self, truth: np.ndarray, triple: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Place true points on the remesh.
+
+        Args:
+            truth: (P, N, 3) the true points in every pose of the class (rows as ``poses`` of the
+                constructor; row ``self_pose`` is this shape's own pose, the remesh's frame).
+            triple: (N, 3) the original vertices of the true points' original faces. Only remesh faces
+                with a corner within LOCAL_RINGS rings of a remesh vertex nearest to one of them along
+                the ORIGINAL surface are candidates (two sheets that stay close in every pose, e.g. a
+                foot's arch, are told apart this way); among them, the closest in this pose wins.
+                Where none is near, the smallest worst-pose distance decides.
+
+        Returns:
+            face (N,), weights (N, 3), residual (N,): the worst-pose distance between the located point
+            (carried by the remesh vertices' ``to_original`` images) and the truth, in remesh units.
+        """
+        truth = truth[self.pose_rows]
+        own = truth[0]
+        face = np.empty(len(own), dtype=np.int64)
+        weights = np.empty((len(own), 3))
+        residual = np.empty(len(own))
+        block = max(1, 4_000_000 // (CANDIDATES * 9 * len(truth)))             # bounded memory
+        for start in range(0, len(own), block):
+            sl = slice(start, start + block)
+            face[sl], weights[sl], residual[sl] = self._locate_block(truth[:, sl], own[sl], triple[sl])
+        return face, weights, residual
+
+    def _locate_block(self, truth: np.ndarray, own: np.ndarray, triple: np.ndarray):
+        _, cand = self._centroids.query(own, k=CANDIDATES)                       # (N, K)
+        tri = self.mesh.vertices[self.mesh.faces[cand]]                          # (N, K, 3, 3)
+        closest = closest_points_on_triangles(own[:, None], tri[..., 0, :], tri[..., 1, :], tri[..., 2, :])
+        flat = tri.reshape(-1, 3, 3)
+        bary = barycentric_coordinates(closest.reshape(-1, 3), flat[:, 0], flat[:, 1], flat[:, 2])
+        bary = bary.reshape(len(own), CANDIDATES, 3)
+        owners = self.owner[triple]                                              # (N, 3) remesh vertices
+        corners = self.mesh.faces[cand]                                          # (N, K, 3)
+        near = np.zeros(cand.shape, dtype=bool)
+        for a in range(3):
+            for b in range(3):
+                near |= self._near(owners[:, a][:, None], corners[:, :, b])
+        distance = np.linalg.norm(closest - own[:, None], axis=2)                # (N, K) in this pose
+        rows = np.arange(len(own))
+        best = np.where(near, distance, np.inf).argmin(axis=1)
+        lost = np.flatnonzero(~near.any(axis=1))
+        if len(lost):  # no candidate near along the surface: the smallest worst-pose distance decides
+            carried = np.einsum("nkc,pnkcd->pnkd", bary[lost], self.images[:, corners[lost]])
+            best[lost] = np.linalg.norm(carried - truth[:, lost, None], axis=3).max(axis=0).argmin(axis=1)
+        face, weights = cand[rows, best], bary[rows, best]
+        carried = np.einsum("nc,pncd->pnd", weights, self.images[:, self.mesh.faces[face]])
+        residual = np.linalg.norm(carried - truth, axis=2).max(axis=0)
+        return face, weights, residual
+
+    def errors(self, predicted: np.ndarray, face: np.ndarray, weights: np.ndarray) -> np.ndarray:
+        """(N,) geodesic distance from vertex ``predicted[i]`` to the point (face, weights), remesh units."""
+        corners = self.mesh.faces[face]
+        points = np.einsum("nk,nkd->nd", weights, self.mesh.vertices[corners])
+        out = np.linalg.norm(self.mesh.vertices[predicted] - points, axis=1)
+        far = np.flatnonzero(~self.in_ring(predicted, corners))
+        if len(far):
+            if self._geodesics is None:
+                from becos.geodesics import GeodesicDistances
+
+                self._geodesics = GeodesicDistances(self.mesh, "heat", cache_bytes=64 << 20)
+            out[far] = np.maximum(self._geodesics.between(predicted[far], face[far], weights[far]), out[far])
+        return out
+
+    def best(self, face: np.ndarray, weights: np.ndarray) -> np.ndarray:
+        """(N,) distance from each point to the nearest remesh vertex within the 2-ring of its face."""
+        corners = self.mesh.faces[face]
+        points = np.einsum("nk,nkd->nd", weights, self.mesh.vertices[corners])
+        d, idx = self._vertices.query(points, k=8)
+        ok = np.stack([self.in_ring(idx[:, k], corners) for k in range(idx.shape[1])], axis=1)
+        d = np.where(ok, d, np.inf)
+        return np.minimum(d.min(axis=1), np.linalg.norm(self.mesh.vertices[corners] - points[:, None], axis=2).min(axis=1))
+
+
+class Run:
+    """A finished run's ``results`` folder: catalog, remesh files, stores."""
+
+    def __init__(self, results: Path):
+        from becos.catalog import read_catalog
+
+        self.results = Path(results)
+        self.poses = ClassPoses(read_catalog(self.results / "catalog.csv"))
+        self._targets: OrderedDict[tuple, RemeshTarget] = OrderedDict()
+        self._remeshes: OrderedDict[tuple, Remeshed] = OrderedDict()
+
+    def remeshed(self, dataset: str, name: str, variant: int) -> Remeshed:
+        key = (dataset, name, int(variant))
+        if key not in self._remeshes:
+            self._remeshes[key] = load_remeshed(self.results / "remeshed" / dataset / name / f"v{int(variant)}.npz")
+            while len(self._remeshes) > 24:
+                self._remeshes.popitem(last=False)
+        return self._remeshes[key]
+
+    def class_names(self, dataset: str, shape_class: str) -> list[str]:
+        return [r["name"] for r in self.poses._rows.values() if r["dataset"] == dataset and str(r["class"]) == shape_class]
+
+    def target(self, dataset: str, name: str, variant: int) -> RemeshTarget:
+        key = (dataset, name, int(variant))
+        if key not in self._targets:
+            shape_class = self.poses.shape_class(dataset, name)
+            t = RemeshTarget(self.remeshed(dataset, name, variant), self.poses.mesh(dataset, name).faces,
+                             self.poses.poses(dataset, shape_class), self.class_names(dataset, shape_class).index(name))
+            self._targets[key] = t
+            while len(self._targets) > 24:
+                self._targets.popitem(last=False)
+        return self._targets[key]
+
+
+# ----------------------------------------------------------------------------------------------
+# one pair direction
+
+@dataclass
+class DirectionResult:
+    """Per-vertex results of one direction of one pair (rows: source vertices with a prediction)."""
+
+    pair_id: str
+    setting: str
+    dataset: str
+    direction: str                  # "x->y" (corr_01) or "y->x" (corr_10)
+    source: str
+    target: str
+    source_vertex: np.ndarray       # (N,) partial index on the source
+    source_full: np.ndarray         # (N,) vertex of the source's full remesh
+    predicted_full: np.ndarray      # (N,) predicted vertex of the target's full remesh
+    error: np.ndarray               # (N,) x sqrt area of the target remesh
+    best: np.ndarray                # (N,) best possible vertex map, x sqrt area
+    gt_point_error: np.ndarray      # (N,) worst-pose distance of the record's GT point from the truth, x sqrt area
+    residual: np.ndarray            # (N,) worst-pose distance of the located truth, x sqrt area
+    truth_original_vertex: np.ndarray  # (N,) largest-weight original vertex of the truth
+    predicted_original_vertex: np.ndarray  # (N,) largest-weight original vertex of the prediction
+
+    def summary(self) -> dict:
+        e = self.error
+        return {"pair_id": self.pair_id, "setting": self.setting, "direction": self.direction,
+                "source": self.source, "target": self.target, "n": int(len(e)),
+                "mean": float(e.mean()) if len(e) else np.nan, "median": float(np.median(e)) if len(e) else np.nan,
+                "p95": float(np.percentile(e, 95)) if len(e) else np.nan, "max": float(e.max()) if len(e) else np.nan,
+                "best_mean": float(self.best.mean()) if len(e) else np.nan,
+                "gt_point_max": float(self.gt_point_error.max()) if len(e) else np.nan,
+                "residual_max": float(self.residual.max()) if len(e) else np.nan}
+
+
+def _side(record, s: str) -> dict:
+    return {k: record[f"{s}_{k}"] for k in ("partial_to_full", "full_face_ids", "remesh_variant", "faces",
+                                            "full_faces", "vertices", "full_vertices")}
+
+
+def _check_record_shape(record, s: str, remeshed: Remeshed) -> None:
+    """The record's full shape of side ``s`` is the remesh file's, up to a similarity transform."""
+    faces = record[f"{s}_full_faces"] if len(record[f"{s}_full_faces"]) else record[f"{s}_faces"]
+    verts = record[f"{s}_full_vertices"] if len(record[f"{s}_full_faces"]) else record[f"{s}_vertices"]
+    if not np.array_equal(faces, remeshed.mesh.faces):
+        raise ValueError(f"pair {record.pair_id}: side {s} full faces differ from its remesh file")
+    a, b = remeshed.mesh.vertices, verts
+    a0, b0 = a - a.mean(0), b - b.mean(0)
+    scale = np.linalg.norm(b0) / np.linalg.norm(a0)
+    u, _, vt = np.linalg.svd(a0.T @ b0)
+    rot = u @ vt
+    off = np.abs(a0 @ rot * scale - b0).max() / np.abs(b0).max()
+    if off > 1e-6:
+        raise ValueError(f"pair {record.pair_id}: side {s} full vertices are not a similarity of its remesh file "
+                         f"(relative residual {off:.2e})")
+
+
+def measure_direction(run: Run, record, setting: str, s: str, t: str) -> DirectionResult:
+    """Score ``corr_01`` (s = 'x') or ``corr_10`` (s = 'y') of ``record`` against the exact truth."""
+    meta_s, meta_t = record.meta[s], record.meta[t]
+    dataset = meta_s["dataset"]
+    corr_key = "corr_01" if s == "x" else "corr_10"
+    corr = record[corr_key]
+    src_p2f, tgt_p2f = record[f"{s}_partial_to_full"], record[f"{t}_partial_to_full"]
+    rs = run.remeshed(dataset, meta_s["name"], int(record[f"{s}_remesh_variant"]))
+    target = run.target(meta_t["dataset"], meta_t["name"], int(record[f"{t}_remesh_variant"]))
+    for side, r in ((s, rs), (t, target.remeshed)):
+        _check_record_shape(record, side, r)
+    has = np.flatnonzero(corr >= 0)
+    source_full = src_p2f[has]
+    predicted_full = tgt_p2f[corr[has]]
+    # the exact truth: the source remesh vertex's original point, carried by vertex identity into every pose
+    to_orig = rs.to_original
+    orig_faces_s = run.poses.mesh(dataset, meta_s["name"]).faces
+    triple = orig_faces_s[to_orig.face[source_full]]                              # (N, 3) original vertex ids
+    w = to_orig.weights[source_full]
+    poses = run.poses.poses(dataset, run.poses.shape_class(dataset, meta_t["name"]))
+    truth = np.einsum("nk,pnkd->pnd", w, poses[:, triple])                        # (P, N, 3)
+    face, weights, residual = target.locate(truth, triple)
+    error = target.errors(predicted_full, face, weights)
+    best = target.best(face, weights)
+    # where the record's own ground-truth point is, compared with the truth in every pose
+    gt_face_partial = record[f"{corr_key}_face"][has]
+    gt_face = record[f"{t}_full_face_ids"][gt_face_partial]
+    gt_w = record[f"{corr_key}_weights"][has]
+    gt_images = np.einsum("nk,pnkd->pnd", gt_w, target.images[:, target.mesh.faces[gt_face]])
+    gt_point_error = np.linalg.norm(gt_images - truth[target.pose_rows], axis=2).max(axis=0)
+    orig_faces_t = run.poses.mesh(meta_t["dataset"], meta_t["name"]).faces
+    pred_map = target.remeshed.to_original
+    predicted_original = orig_faces_t[pred_map.face[predicted_full], pred_map.weights[predicted_full].argmax(axis=1)]
+    scale = target.sqrt_area
+    return DirectionResult(record.pair_id, setting, dataset, f"{s}->{t}", meta_s["name"], meta_t["name"], has, source_full,
+                           predicted_full, error / scale, best / scale, gt_point_error / scale, residual / scale,
+                           triple[np.arange(len(has)), w.argmax(axis=1)], predicted_original)
+
+
+def audit_setting(run: Run, setting: str, pair_ids: set[str] | None = None, log=None) -> list[DirectionResult]:
+    """Both directions of every same-class pair of a setting's store (``pair_ids``: only these)."""
+    from becos.store import open_benchmark
+
+    bench = open_benchmark(run.results / setting / "benchmark.zarr")
+    out = []
+    started = time.perf_counter()
+    for record in bench.records():
+        mx, my = record.meta["x"], record.meta["y"]
+        if (mx["dataset"], mx["class"]) != (my["dataset"], my["class"]):
+            continue
+        if pair_ids is not None and record.pair_id not in pair_ids:
+            continue
+        for s, t in (("x", "y"), ("y", "x")):
+            out.append(measure_direction(run, record, setting, s, t))
+        if log is not None:
+            r = out[-2].summary(), out[-1].summary()
+            log(f"{setting} {record.pair_id} {mx['name']}<->{my['name']}: max {r[0]['max']:.4f} / {r[1]['max']:.4f} "
+                f"({time.perf_counter() - started:.0f} s)")
+    return out
+
+
+# ----------------------------------------------------------------------------------------------
+# reporting
+
+def body_location(run: Run, dataset: str, shape_class: str, original_vertex: np.ndarray) -> list[str]:
+    """Where original vertices are on the class's first pose: bounding-box fractions (x, y, z)."""
+    rest = run.poses.poses(dataset, shape_class)[0]
+    lo, hi = rest.min(axis=0), rest.max(axis=0)
+    frac = (rest[original_vertex] - lo) / (hi - lo)
+    return [f"({a:.2f},{b:.2f},{c:.2f})" for a, b, c in frac]
+
+
+def distribution_table(results: list) -> pd.DataFrame:
+    """Per setting: over pair directions, the distribution of the per-pair mean, median, p95, max.
+
+    ``results``: :class:`DirectionResult` or their :meth:`~DirectionResult.summary` dicts."""
+    df = pd.DataFrame([r if isinstance(r, dict) else r.summary() for r in results])
+    rows = []
+    for setting, g in df.groupby("setting", sort=False):
+        row = {"setting": setting, "pairs": g["pair_id"].nunique(), "directions": len(g)}
+        for stat in ("mean", "median", "p95", "max"):
+            v = g[stat].to_numpy()
+            row[f"{stat}: median"] = np.median(v)
+            row[f"{stat}: p90"] = np.percentile(v, 90)
+            row[f"{stat}: max"] = v.max()
+        row["mean / best"] = float(g["mean"].mean() / g["best_mean"].mean())
+        row[f"max > {BOUND}"] = int((g["max"] > BOUND).sum())
+        row["residual max"] = g["residual_max"].max()
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def worst_vertices(run: Run, results: list[DirectionResult], n: int) -> pd.DataFrame:
+    rows = []
+    for r in results:
+        if not len(r.error):
+            continue
+        top = np.argsort(r.error)[::-1][:n]
+        for i in top:
+            rows.append((r, int(i), float(r.error[i])))
+    rows.sort(key=lambda item: -item[2])
+    out = []
+    for r, i, e in rows[:n]:
+        dataset = r.dataset
+        shape_class = run.poses.shape_class(dataset, r.target)
+        loc_t = body_location(run, dataset, shape_class, np.array([r.truth_original_vertex[i]]))[0]
+        loc_p = body_location(run, dataset, shape_class, np.array([r.predicted_original_vertex[i]]))[0]
+        out.append({"setting": r.setting, "pair_id": r.pair_id, "direction": f"{r.source}->{r.target}",
+                    "vertex": int(r.source_vertex[i]), "full vertex": int(r.source_full[i]),
+                    "error": e, "gt point off": float(r.gt_point_error[i]),
+                    "truth orig v": int(r.truth_original_vertex[i]), "truth at": loc_t,
+                    "pred orig v": int(r.predicted_original_vertex[i]), "pred at": loc_p})
+    return pd.DataFrame(out)
+
+
+def _print_tables(summaries: list[dict]) -> None:
+    print("Distribution over pair directions (error x sqrt area of the target remesh):")
+    print(distribution_table(summaries).to_string(index=False, float_format=lambda v: f"{v:.4f}"))
+    per_pair = pd.DataFrame(summaries)
+    bad = per_pair[per_pair["max"] > BOUND].sort_values("max", ascending=False)
+    print(f"\nPair directions with max > {BOUND}: {len(bad)} of {len(per_pair)}")
+    if len(bad):
+        print(bad.to_string(index=False, float_format=lambda v: f"{v:.4f}"))
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("results", type=Path, nargs="?", help="a finished run's results folder")
+    parser.add_argument("--combine", type=Path, nargs="+", default=None,
+                        help="instead: print the tables of --json files of earlier runs (e.g. one per --pairs part)")
+    parser.add_argument("--settings", default=",".join(SETTINGS))
+    parser.add_argument("--pairs", default=None, help="comma-separated pair ids (default: every same-class pair)")
+    parser.add_argument("--worst", type=int, default=25, help="how many worst vertices to list")
+    parser.add_argument("--json", type=Path, default=None, help="write per-direction summaries here")
+    args = parser.parse_args(argv)
+    pd.set_option("display.width", 250)
+    pd.set_option("display.max_columns", 40)
+    pd.set_option("display.max_rows", 500)
+    if args.combine:
+        summaries = [row for path in args.combine for row in json.loads(path.read_text())]
+        _print_tables(summaries)
+        return 0
+    run = Run(args.results)
+    pair_ids = set(args.pairs.split(",")) if args.pairs else None
+    results = []
+    log = lambda m: print(m, file=sys.stderr, flush=True)  # noqa: E731
+    for setting in args.settings.split(","):
+        results += audit_setting(run, setting, pair_ids, log)
+    _print_tables([r.summary() for r in results])
+    print(f"\nWorst {args.worst} vertices (locations: bounding-box fractions on the class's first pose):")
+    print(worst_vertices(run, results, args.worst).to_string(index=False, float_format=lambda v: f"{v:.4f}"))
+    if args.json:
+        args.json.write_text(json.dumps([r.summary() for r in results], indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
