@@ -838,7 +838,7 @@ def _check_edge_contents(source, edges: list[tuple[str, str]], present: dict[str
         return arrays[key]
 
     problems, bad, compared, plausible = [], [], 0, {}
-    for a, b in edges:
+    for a, b in sorted(edges):                         # sorted: the report is byte-identical between runs
         try:
             edge_source = source.edge_source(a, b)
             if edge_source.kind != "file":

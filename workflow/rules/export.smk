@@ -80,7 +80,7 @@ rule geodesics:
         directory(f"{RESULTS}/{{setting}}/geodesics"),
     params:
         splits=" ".join(["--splits", *EXPORTS["geodesic_splits"]]) if EXPORTS["geodesic_splits"] else "",
-    threads: max(1, workflow.cores)
+    threads: 4  # capped at --cores on a local run; no total core count is needed (SLURM, --unlock)
     resources:
         mem_mb=RESOURCES.mem_mb("geodesics"),
         runtime=RESOURCES.runtime("geodesics", n_pairs=setting_pairs),
