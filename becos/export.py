@@ -400,6 +400,20 @@ def _write_annotation_files(folder: Path, record: PairRecord) -> bool:
 # writers
 
 
+def _place_by_split(staging: _Staging, tmp: Path) -> tuple[list[list], dict[str, int]]:
+    """Move the staged pair folders to ``tmp/<split>/<index>`` (store order); returns the id-file rows
+    ``[split, index, pair_id, x, y]`` and the pair count per split."""
+    rows, counts = [], {}
+    for split, entries in staging.by_split().items():
+        (tmp / split).mkdir()
+        for i, e in enumerate(entries):
+            os.replace(e.folder, tmp / split / str(i))
+            rows.append([split, i, e.pair_id, e.x_name, e.y_name])
+        counts[split] = len(entries)
+    staging.finish()
+    return rows, counts
+
+
 def write_released(records: Iterable[PairRecord], out_dir: str | Path, *, setting: str,
                    metadata: Mapping | None = None, overwrite: bool = False, progress: bool = False) -> Path:
     """Write the records in the released BeCoS folder layout (``docs/released-layout.md``).
@@ -432,14 +446,7 @@ def write_released(records: Iterable[PairRecord], out_dir: str | Path, *, settin
         for record in records:
             _check_record(record, setting)
             _write_released_pair(staging.add(record), record, setting)
-        rows, counts = [], {}
-        for split, entries in staging.by_split().items():
-            (tmp / split).mkdir()
-            for i, e in enumerate(entries):
-                os.replace(e.folder, tmp / split / str(i))
-                rows.append([split, i, e.pair_id, e.x_name, e.y_name])
-            counts[split] = len(entries)
-        staging.finish()
+        rows, counts = _place_by_split(staging, tmp)
         _write_ids(tmp / IDS_FILE, ["split", "index", "pair_id", "x", "y"], rows)
         _write_log(tmp, "becos.export.write_released", "becos released BeCoS layout", counts, setting, metadata)
     return out
@@ -571,14 +578,7 @@ def write_ulrssm(records: Iterable[PairRecord], out_dir: str | Path, *, metadata
                 (folder / "corres" / f"{k}.vts").write_text(text, encoding="utf-8")
 
         shapes, meshes, needed, numbers = _geodesic_plan(records, splits if geodesics else [], each=write_pair)
-        rows, counts = [], {}
-        for split, entries in staging.by_split().items():
-            (tmp / split).mkdir()
-            for i, e in enumerate(entries):
-                os.replace(e.folder, tmp / split / str(i))
-                rows.append([split, i, e.pair_id, e.x_name, e.y_name])
-            counts[split] = len(entries)
-        staging.finish()
+        rows, counts = _place_by_split(staging, tmp)
         if geodesics and shapes:
             work = tmp / ".rows"
             work.mkdir()
