@@ -74,8 +74,9 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 
-CONFIG_DIR = Path(__file__).resolve().parents[1] / "config" / "datasets"
-"""Default folder of the dataset YAMLs (override with ``config_dir`` or ``$BECOS_DATASETS_DIR``)."""
+CONFIG_DIR = Path(__file__).resolve().parent / "data" / "datasets"
+"""Default folder of the dataset YAMLs, shipped inside the package (``config/datasets`` in a checkout is a
+link to it); override with ``config_dir`` or ``$BECOS_DATASETS_DIR``."""
 
 CATEGORIES = ("human", "four-legged", "centaur")
 SPLITS = ("train", "val", "test")

@@ -52,7 +52,8 @@ if TYPE_CHECKING:
     import pandas as pd  # imported where used: write-config, metadata and remesh jobs start without it
 
 SETTINGS = ("full_full", "partial_full", "partial_partial")
-SCHEMA_PATH = Path(__file__).resolve().parents[1] / "config" / "schema.yaml"
+SCHEMA_PATH = Path(__file__).resolve().parent / "data" / "schema.yaml"
+"""The config schema, shipped inside the package (``config/schema.yaml`` in a checkout is a link to it)."""
 GROUND_TRUTH_VERSION = 1
 """Bumped when the ground-truth computation changes, so cached files are recomputed."""
 RECORD_VERSION = 1
