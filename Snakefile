@@ -17,7 +17,7 @@ min_version("9.0")
 configfile: os.path.join(workflow.basedir, "config", "config.yaml")
 
 
-# config/schema.yaml and the checks across keys (defaults filled in); each problem is one console line
+# becos/data/schema.yaml and the checks across keys (defaults filled in); each problem is one console line
 # `becos config: <key>: <what is wrong>. Fix: <fix>`, without Snakemake's traceback header
 try:
     config.update(resolve_config(config))

@@ -103,7 +103,7 @@ REFERENCE_REGIMES: dict[str, float] = {
 }
 """Reference-like regime -> the reference's ``r`` (radians), see the module doc."""
 CAMERA_REGIMES: tuple[str, ...] = (*REGIMES, *REFERENCE_REGIMES)
-"""Every accepted ``cam_pos_regime`` (config/schema.yaml lists the same)."""
+"""Every accepted ``cam_pos_regime`` (becos/data/schema.yaml lists the same)."""
 
 _AXES = {"x": 0, "y": 1, "z": 2}
 

@@ -53,7 +53,7 @@ if TYPE_CHECKING:
 
 SETTINGS = ("full_full", "partial_full", "partial_partial")
 SCHEMA_PATH = Path(__file__).resolve().parent / "data" / "schema.yaml"
-"""The config schema, shipped inside the package (``config/schema.yaml`` in a checkout is a link to it)."""
+"""The config schema, shipped inside the package (config/README.md documents every key)."""
 GROUND_TRUTH_VERSION = 1
 """Bumped when the ground-truth computation changes, so cached files are recomputed."""
 RECORD_VERSION = 1
@@ -127,7 +127,7 @@ def _fill_defaults(schema: dict, instance):
 
 
 def resolve_config(raw: dict) -> dict:
-    """Validate ``raw`` against ``config/schema.yaml``, fill defaults, check what a schema cannot.
+    """Validate ``raw`` against ``becos/data/schema.yaml``, fill defaults, check what a schema cannot.
 
     Raises:
         ConfigError: one line per problem (:func:`schema_problems`, :func:`check_config`), each
@@ -1144,7 +1144,7 @@ def run_cli(args: argparse.Namespace) -> int:
                           f"pass the JSON the workflow's rule writes (becos.workflow.job_options)") from None
     except TypeError as exc:
         raise ConfigError(f"--options: a value has the wrong type ({exc}). Fix: check the "
-                          f"values against config/schema.yaml, or pass the JSON the workflow's rule writes") from None
+                          f"values against becos/data/schema.yaml, or pass the JSON the workflow's rule writes") from None
     except FileNotFoundError as exc:
         raise InputFileError(exc.filename or "?", "not found (an input of this stage)",
                              f"run the stages before `becos {args.command}` (the workflow does), or check `results` "
