@@ -40,6 +40,7 @@ import numpy as np
 
 from becos.atomic import save_npz
 from becos.errors import BecosError, InputFileError
+from becos.settings import SPLITS
 from becos.surface_map import SurfaceMap
 
 log = logging.getLogger(__name__)
@@ -609,7 +610,7 @@ def read_template_table(path: str | Path) -> tuple[dict[str, TemplateRow], list[
     for raw in _read_csv_rows(path, fields):
         row = TemplateRow(raw["dataset"], raw["template"], raw["split"], raw["partial_full_template"],
                           raw["partial_full_dataset"])
-        if row.split not in ("train", "val", "test", NO_TEMPLATE):
+        if row.split not in (*SPLITS, NO_TEMPLATE):
             raise InputFileError(path, f"row '{row.key}' has split '{row.split}'", "use train, val, test or -")
         if row.key in rows:
             duplicates.append(row.key)

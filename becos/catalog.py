@@ -33,6 +33,7 @@ from typing import TYPE_CHECKING, Iterable
 import numpy as np
 
 from becos.atomic import write_text
+from becos.settings import SPLITS as BENCHMARK_SPLITS
 
 if TYPE_CHECKING:
     import pandas as pd  # imported where used: a remesh job reads one catalog row and needs no pandas
@@ -42,7 +43,8 @@ COLUMNS = ("dataset", "name", "category", "class", "split", "file", "template_ke
            *ROTATION_COLUMNS, "usage")
 STRING_COLUMNS = ("dataset", "name", "category", "class", "split", "file", "template_key")
 CATEGORIES = ("human", "four-legged", "centaur")
-SPLITS = ("train", "val", "test", "excluded")
+SPLITS = (*BENCHMARK_SPLITS, "excluded")
+"""A catalog row's split: a benchmark split, or ``excluded`` (a shape no pair uses)."""
 
 
 def natural_key(text: str) -> tuple:

@@ -68,6 +68,7 @@ from becos.download import ARCHIVE_SCHEMES
 from becos.errors import BecosError, ConfigError, InputFileError
 from becos.geometry import surface_area
 from becos.mesh import MeshCache, TriMesh, read_mesh
+from becos.settings import SPLITS
 
 if TYPE_CHECKING:
     from becos.annotations import AnnotationSource
@@ -79,7 +80,6 @@ CONFIG_DIR = Path(__file__).resolve().parent / "data" / "datasets"
 link to it); override with ``config_dir`` or ``$BECOS_DATASETS_DIR``."""
 
 CATEGORIES = ("human", "four-legged", "centaur")
-SPLITS = ("train", "val", "test")
 EXCLUDED = "excluded"
 LAYOUTS = ("flat", "class_folders", "dt4d")
 SPLIT_RULES = ("by_class", "by_name", "slices", "template_table")

@@ -24,7 +24,8 @@ from scipy.spatial.transform import Rotation
 
 from becos.mesh import TriMesh
 from becos.partiality import Partial, Scanner, align_to, cast_p2f, cast_p2p, whole
-from becos.record import SETTINGS, PairRecord
+from becos.record import PairRecord
+from becos.settings import MAX_OVERLAP, MIN_OVERLAP, SETTINGS, overlap_range_problem
 from becos.seeding import rng_for
 from becos.surface_map import SurfaceMap
 
@@ -40,8 +41,8 @@ class PairOptions:
     up_axis: str = "y"
     camera_distance: float = 1.0
     n_cam_pos: int = 10
-    min_overlap: float = 0.1
-    max_overlap: float = 0.9
+    min_overlap: float = MIN_OVERLAP
+    max_overlap: float = MAX_OVERLAP
     one_axis_rotation: bool = True
     area_normalised: bool = False
 
@@ -50,8 +51,9 @@ class PairOptions:
             raise ValueError(f"setting must be one of {SETTINGS}, got {self.setting!r}")
         if self.up_axis not in _UP:
             raise ValueError(f"up_axis must be x, y or z, got {self.up_axis!r}")
-        if not 0.0 <= self.min_overlap <= self.max_overlap <= 1.0:
-            raise ValueError(f"need 0 <= min_overlap <= max_overlap <= 1, got {self.min_overlap}, {self.max_overlap}")
+        problem = overlap_range_problem(self.min_overlap, self.max_overlap)
+        if problem:
+            raise ValueError(problem)
 
 
 @dataclass(frozen=True, eq=False)

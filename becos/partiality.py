@@ -27,6 +27,7 @@ from becos.align import RigidTransform, procrustes
 from becos.cameras import Camera, draw_camera, draw_camera_pair, normalise_to_unit_box
 from becos.mesh import TriMesh
 from becos.seeding import rng_for
+from becos.settings import MAX_OVERLAP, MIN_OVERLAP
 from becos.surface_map import NONE, SurfaceMap
 from becos.visibility import DEFAULT_SAMPLES_PER_FACE, VisibilityScene
 
@@ -259,7 +260,7 @@ def align_to(x: TriMesh, y: TriMesh, gt_xy: SurfaceMap) -> RigidTransform:
 
 def cast_p2p(x: TriMesh, y: TriMesh, gt_xy: SurfaceMap, gt_yx: SurfaceMap, rng: RngSource,
              regime: str = "high", up_axis: str = "y", camera_distance: float = 1.0, n_tries: int = 10,
-             min_overlap: float = 0.1, max_overlap: float = 0.9,
+             min_overlap: float = MIN_OVERLAP, max_overlap: float = MAX_OVERLAP,
              samples_per_face: int = DEFAULT_SAMPLES_PER_FACE,
              scanners: tuple[Scanner, Scanner] | None = None) -> P2PResult:
     """Scan both shapes of a partial-to-partial pair, retrying cameras until both overlaps are in range.

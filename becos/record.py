@@ -55,6 +55,7 @@ from pathlib import Path
 import numpy as np
 
 from becos.atomic import save_npz
+from becos.settings import SETTINGS  # noqa: F401 (re-exported: becos.record.SETTINGS)
 
 SCHEMA_VERSION = 1
 SHAPE_KEYS = ("vertices", "faces", "full_vertices", "full_faces", "partial_to_full", "full_to_partial",
@@ -62,7 +63,6 @@ SHAPE_KEYS = ("vertices", "faces", "full_vertices", "full_faces", "partial_to_fu
               "annotation", "full_area", "full_sqrt_area", "dataset_scale", "frame_rotation", "centre",
               "align_rotation", "align_translation", "random_rotation", "camera", "remesh_variant", "overlap")
 PAIR_KEYS = ("corr_01", "corr_01_face", "corr_01_weights", "corr_10", "corr_10_face", "corr_10_weights")
-SETTINGS = ("full_full", "partial_full", "partial_partial")
 
 
 @dataclass

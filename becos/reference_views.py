@@ -35,6 +35,7 @@ import numpy as np
 
 from becos.errors import InputFileError
 from becos.mesh import TriMesh
+from becos.settings import MAX_OVERLAP, MIN_OVERLAP
 
 PIXELS = 5000
 """Rays per image side of the reference's pinhole (5000 × 5000 = 25 M rays)."""
@@ -332,7 +333,7 @@ class PublishedP2P:
 
 
 def published_p2p(x: TriMesh, y: TriMesh, gt_xy, gt_yx, views, n_tries: int = 10,
-                  min_overlap: float = 0.1, max_overlap: float = 0.9) -> PublishedP2P:
+                  min_overlap: float = MIN_OVERLAP, max_overlap: float = MAX_OVERLAP) -> PublishedP2P:
     """Cast the tries of a published P2P pair in order and keep the one the reference keeps.
 
     ``views``: ``k -> (kept_x, kept_y)`` (e.g. :class:`PublishedViews`); ``gt_xy`` / ``gt_yx``: becos's
@@ -390,7 +391,7 @@ class PublishedScan:
 
 
 def published_scan(x: TriMesh, y: TriMesh, gt_xy, gt_yx, root, x_name: str, y_name: str, cameras,
-                   n_tries: int = 10, min_overlap: float = 0.1, max_overlap: float = 0.9) -> PublishedScan:
+                   n_tries: int = 10, min_overlap: float = MIN_OVERLAP, max_overlap: float = MAX_OVERLAP) -> PublishedScan:
     """A published P2P pair's views, end to end: :func:`casting_frames`, :class:`PublishedViews`,
     :func:`published_p2p`; the recorded cameras are the reference's (the camera try's, facts §7.5) in
     the meshes' input frames. ``x``, ``y``: the reference remeshes in becos's common frame."""

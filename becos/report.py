@@ -48,6 +48,7 @@ import numpy as np
 
 from becos.atomic import write_bytes, write_text
 from becos.record import PairRecord
+from becos.settings import SPLITS
 
 #: RGB of Y vertices without a counterpart on X (``corr_10 == -1``), before shading.
 NO_MATCH_GREY = (0.62, 0.62, 0.62)
@@ -60,8 +61,6 @@ TEXT_COLOUR = "#1d2c57"
 HIST_EDGES = np.linspace(0.0, 1.0, 11)
 #: Table columns :func:`write_report` needs.
 REQUIRED_COLUMNS = ("pair_id", "split", "category", "x_dataset", "y_dataset", "x_overlap", "y_overlap")
-#: Canonical split order; other split names follow, sorted.
-SPLIT_ORDER = ("train", "val", "test")
 SETTING_LABELS = {"full_full": "F2F", "partial_full": "P2F", "partial_partial": "P2P"}
 #: Output kind -> caption file in ``workflow/report/`` (for ``report(..., caption=...)`` in the Snakefile).
 CAPTIONS = {
@@ -299,7 +298,7 @@ def _panel_label(record: PairRecord, shape: str) -> str:
 def split_order(splits: Iterable[str]) -> list[str]:
     """Distinct split names, train / val / test first, then the others sorted."""
     present = set(splits)
-    return [s for s in SPLIT_ORDER if s in present] + sorted(present - set(SPLIT_ORDER))
+    return [s for s in SPLITS if s in present] + sorted(present - set(SPLITS))  # the others follow, sorted
 
 
 def select_render_ids(table, n: int) -> list[str]:

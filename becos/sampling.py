@@ -96,9 +96,8 @@ import pandas as pd
 from becos.catalog import atomic_write_text, sort_catalog
 from becos.errors import BecosError, ConfigError
 from becos.seeding import stable_hash
+from becos.settings import SETTINGS, SPLITS
 
-SETTINGS = ("full_full", "partial_full", "partial_partial")
-SPLIT_ORDER = ("train", "val", "test")
 POOL_ORDER = ("human", "four-legged")
 JOINER = "centaur"
 COMBINATIONS: dict[str, tuple[tuple[str, ...], bool]] = {
@@ -240,7 +239,7 @@ def _pool_pairs(cat: pd.DataFrame, *, seed: int, setting: str, pools: tuple[str,
     """F2F / P2P pairs: rendezvous partners inside each (split, pool)."""
     keys = cat["key"].tolist()
     names = cat["name"].to_numpy(dtype=object)
-    for split in SPLIT_ORDER:
+    for split in SPLITS:
         in_split = cat["split"].to_numpy() == split
         joiners = np.flatnonzero(in_split & (cat["category"].to_numpy() == JOINER)) if centaurs else np.array([], int)
         if centaurs and split != "train":
@@ -293,7 +292,7 @@ def _p2f_pairs(cat: pd.DataFrame, *, categories: set[str], template_rows, usage_
     present = set(cat["key"])
     for i in range(len(cat)):
         category, split = cat["category"].iat[i], cat["split"].iat[i]
-        if category not in categories or split not in SPLIT_ORDER:
+        if category not in categories or split not in SPLITS:
             continue
         n = n_copies(int(cat["usage"].iat[i]), usage_scale) if split == "train" else 1
         if n == 0:
@@ -411,8 +410,8 @@ def _finish(rows: _Rows, *, setting, seed, n_variants, caps, skipped: Counter) -
                         dtype=object)
         keep = np.ones(n, dtype=bool)
         for split, cap in caps.items():
-            if split not in SPLIT_ORDER:
-                raise ConfigError(f"caps: unknown split {split!r}; expected {SPLIT_ORDER}")
+            if split not in SPLITS:
+                raise ConfigError(f"caps: unknown split {split!r}; expected {SPLITS}")
             idx = np.flatnonzero(df["split"].to_numpy() == split)
             if cap is not None and len(idx) > int(cap):
                 order = sorted(idx, key=lambda i: rank[i])
@@ -422,7 +421,7 @@ def _finish(rows: _Rows, *, setting, seed, n_variants, caps, skipped: Counter) -
     df = sort_manifest(df)
     df.attrs["report"] = {
         "skipped": dict(sorted(skipped.items())),
-        "n_pairs": {s: int((df["split"] == s).sum()) for s in SPLIT_ORDER},
+        "n_pairs": {s: int((df["split"] == s).sum()) for s in SPLITS},
     }
     return df
 
@@ -447,7 +446,7 @@ def assign_chunks(pair_ids, *, n_chunks: int, pairs_per_chunk: int) -> np.ndarra
 
 def sort_manifest(df: pd.DataFrame) -> pd.DataFrame:
     """Manifest rows in the stable order: split (train, val, test, then others by name), pair_id."""
-    rank = {s: i for i, s in enumerate(SPLIT_ORDER)}
+    rank = {s: i for i, s in enumerate(SPLITS)}
     keys = [(rank.get(s, len(rank)), s, p) for s, p in zip(df["split"].astype(str), df["pair_id"].astype(str))]
     order = sorted(range(len(keys)), key=keys.__getitem__)
     return df.iloc[order].reset_index(drop=True)

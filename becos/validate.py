@@ -74,10 +74,10 @@ from pathlib import Path
 import numpy as np
 
 from becos.errors import BecosError
-from becos.record import SCHEMA_VERSION, SETTINGS
+from becos.record import SCHEMA_VERSION
+from becos.settings import SETTINGS, SPLITS
 from becos.store import DAMAGED_STORE_FIX as STORE_FIX
 
-SPLITS = ("train", "val", "test")
 WEIGHT_TOL = 1e-6
 ROTATION_TOL = 1e-6
 MAX_EXAMPLES = 3

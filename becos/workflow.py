@@ -47,11 +47,11 @@ import numpy as np
 
 from becos.atomic import remove_stale_temporaries, write_text
 from becos.errors import ConfigError, InputFileError
+from becos.settings import SETTINGS, SPLITS, overlap_range_problem
 
 if TYPE_CHECKING:
     import pandas as pd  # imported where used: write-config, metadata and remesh jobs start without it
 
-SETTINGS = ("full_full", "partial_full", "partial_partial")
 SCHEMA_PATH = Path(__file__).resolve().parent / "data" / "schema.yaml"
 """The config schema, shipped inside the package (config/README.md documents every key)."""
 GROUND_TRUTH_VERSION = 1
@@ -260,9 +260,9 @@ def check_config(config: dict) -> None:
     from becos.datasets import available_datasets
 
     problems = []
-    if config.get("min_overlap", 0.1) > config.get("max_overlap", 0.9):
-        problems.append(f"min_overlap: {config['min_overlap']} is above max_overlap {config['max_overlap']} "
-                        "(the overlap range is reversed). Fix: set min_overlap <= max_overlap")
+    overlap = overlap_range_problem(config["min_overlap"], config["max_overlap"])
+    if overlap:
+        problems.append(overlap)
     known = sorted(available_datasets())
     for name in config["datasets"]:
         if name not in known:
@@ -528,7 +528,7 @@ def _restrict_published(manifest: pd.DataFrame, catalog: pd.DataFrame, config: d
             rank = sorted(rows["pair_id"], key=lambda p: stable_hash(config["seed"], setting, "cap", p))
             out = out[(out["split"] != split) | out["pair_id"].isin(rank[:cap])]
     report = dict(manifest.attrs.get("report", {}))
-    report["n_pairs"] = {s: int((out["split"] == s).sum()) for s in ("train", "val", "test")}
+    report["n_pairs"] = {s: int((out["split"] == s).sum()) for s in SPLITS}
     out = sort_manifest(out)
     out.attrs["report"] = report
     return out
