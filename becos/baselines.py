@@ -419,10 +419,8 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
 
 
 def run_cli(args: argparse.Namespace) -> int:
-    try:
-        from becos.store import open_benchmark
-    except ModuleNotFoundError as exc:  # pragma: no cover - while the store module is being written
-        raise BecosError(f"becos.store is not available ({exc})") from exc
+    from becos.store import open_benchmark
+
     benchmark = open_benchmark(args.store)
     if args.split != "all" and args.split not in benchmark.splits():
         raise InputFileError(args.store, f"has no split {args.split!r} (splits: {benchmark.splits()})",

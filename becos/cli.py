@@ -83,15 +83,8 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
         if name != only:
             sub.add_parser(name, help=help_text)
             continue
-        try:
-            module = importlib.import_module(module_name)
-        except ModuleNotFoundError as exc:
-            if exc.name != module_name:
-                raise
-            continue  # not built yet
-        configure = getattr(module, "configure_parser", None)
-        if configure is None:
-            continue
+        module = importlib.import_module(module_name)
+        configure = module.configure_parser
         command = sub.add_parser(name, help=help_text)
         if _takes_name(configure):
             configure(command, name)

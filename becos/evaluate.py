@@ -689,8 +689,6 @@ def run_cli(args: argparse.Namespace) -> int:
 
 
 def _open_store(path: Path):
-    try:
-        from becos.store import open_benchmark
-    except ModuleNotFoundError as exc:  # pragma: no cover - while the store module is being written
-        raise BecosError(f"becos.store is not available ({exc})") from exc
+    from becos.store import open_benchmark
+
     return open_benchmark(path)
