@@ -260,6 +260,9 @@ def check_config(config: dict) -> None:
     from becos.datasets import available_datasets
 
     problems = []
+    if config["exports"].get("zarr") is False:
+        problems.append("exports.zarr: false is not supported: the Zarr store is always built (validation, the report "
+                        "and every other export read it). Fix: remove exports.zarr from the configuration")
     overlap = overlap_range_problem(config["min_overlap"], config["max_overlap"])
     if overlap:
         problems.append(overlap)
