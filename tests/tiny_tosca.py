@@ -1,8 +1,9 @@
 """The tiny TOSCA workflow configuration of ``tests/test_workflow.py`` (fixture ``tiny_tosca_run``).
 
-8 TOSCA shapes, caps train 4 / val 1 / test 1, one remesh variant, renders on: every stage of the
-workflow runs for all three settings in about a minute on 2 cores. Used by ``tests/test_slurm.py``
-to run the same configuration locally and on SLURM; ``tests/test_workflow.py`` builds its
+Defined once, in ``.test/config/config.yaml`` (the configuration CI runs, as the snakemake-workflows
+keep it): 8 TOSCA shapes, caps train 4 / val 1 / test 1, one remesh variant, renders on: every stage of
+the workflow runs for all three settings in about a minute on 2 cores. Used by ``tests/test_slurm.py``
+to run the same configuration locally and on SLURM; ``tests/test_workflow.py`` builds its other
 configurations from :func:`tosca_config`.
 """
 
@@ -17,8 +18,9 @@ import yaml
 
 SETTINGS = ("full_full", "partial_full", "partial_partial")
 
-TINY_SHAPES = ["tosca/cat0", "tosca/cat1", "tosca/dog0", "tosca/dog1", "tosca/horse0", "tosca/horse5",
-               "tosca/wolf0", "tosca/centaur0"]
+TINY_CONFIG = Path(__file__).resolve().parents[1] / ".test" / "config" / "config.yaml"
+"""The tiny TOSCA configuration without its two paths (``data_dir``, ``annotations``)."""
+TINY_SHAPES = yaml.safe_load(TINY_CONFIG.read_text())["shapes"]
 
 
 def tosca_config(becos_code: Path, **overrides) -> dict:
@@ -40,8 +42,9 @@ def tosca_config(becos_code: Path, **overrides) -> dict:
 def tiny_tosca_config(becos_code: Path, **overrides) -> dict:
     """The configuration dict of the tiny TOSCA run (``becos_code``: the BeCoS code checkout that
     ``../shared/unpack`` prints)."""
-    tiny = dict(shapes=list(TINY_SHAPES), caps={"train": 4, "val": 1, "test": 1}, store_vis=True, n_renders=2)
-    return tosca_config(becos_code, **{**tiny, **overrides})
+    tiny = yaml.safe_load(TINY_CONFIG.read_text())
+    paths = {"data_dir": str(Path(becos_code) / "data"), "annotations": str(becos_code)}
+    return {"synthetic": tiny.pop("synthetic"), **paths, **tiny, **overrides}
 
 
 def write_config_file(workdir: Path, config: dict) -> Path:
