@@ -90,10 +90,11 @@ def load_published(path: str | Path) -> list[list[tuple[dict, dict]]]:
     try:
         data = _RestrictedUnpickler(io.BytesIO(path.read_bytes())).load()
     except FileNotFoundError:
-        raise InputFileError(path, "file not found", "give the path of config/pairings_original_<setting>.pkl")
+        raise InputFileError(path, "file not found",
+                             "give the path of config/pairings_original_<setting>.pkl") from None
     except (pickle.UnpicklingError, EOFError, AttributeError, ImportError) as exc:
         raise InputFileError(path, f"not a readable pair list ({exc})",
-                             "use a pair-list pickle from the BeCoS repository or write_published_pickle")
+                             "use a pair-list pickle from the BeCoS repository or write_published_pickle") from None
     if not (isinstance(data, list) and len(data) == 3 and all(isinstance(s, list) for s in data)):
         raise InputFileError(path, "expected a list of 3 lists [train, test, val]",
                              "use a pair-list pickle from the BeCoS repository or write_published_pickle")

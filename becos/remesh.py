@@ -241,7 +241,7 @@ def _to_vertex_target(sub_v: np.ndarray, sub_f: np.ndarray, target_vertices: int
     # the continuation (cheap: the mesh is already small) only ever removes vertices.
     first_faces = 2 * target_vertices + 16
     best = None
-    for attempt in range(6):
+    for attempt in range(6):  # noqa: B007 (read after the loop)
         ms = _meshset(sub_v, sub_f)
         _decimate(ms, first_faces)
         for _ in range(40):

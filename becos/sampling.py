@@ -269,9 +269,9 @@ def _pool_pairs(cat: pd.DataFrame, *, seed: int, setting: str, pools: tuple[str,
             row_keys = _anchor_keys(seed, setting, [keys[i] for i in a_idx], a_copy)
             col_keys = _candidate_keys([keys[j] for j in cols])
 
-            def allowed(lo, hi):
-                ok = row_names[lo:hi, None] != col_names[None, :]
-                return ok & (is_joiner_row[lo:hi, None] | ~is_joiner_col[None, :])
+            def allowed(lo, hi):  # called at once, inside this iteration: the loop variables are this pool's
+                ok = row_names[lo:hi, None] != col_names[None, :]  # noqa: B023
+                return ok & (is_joiner_row[lo:hi, None] | ~is_joiner_col[None, :])  # noqa: B023
 
             best = _argmin_partners(row_keys, col_keys, allowed)
             for r, b in enumerate(best):

@@ -329,8 +329,6 @@ def job_options(config: dict, stage: str, setting: str | None = None) -> str:
 
 def load_config(path: str | Path) -> dict:
     """Read a config (JSON or YAML) and resolve it (:func:`resolve_config`)."""
-    import yaml
-
     return resolve_config(read_config_file(path))
 
 
@@ -359,7 +357,7 @@ def read_config_file(path: str | Path) -> dict:
         raise ConfigError(f"{path}: {where}not valid YAML ({problem}). Fix: correct the YAML syntax there "
                           "(e.g. a missing ']' or ':', tabs used for indentation)") from None
     except (OSError, UnicodeDecodeError) as exc:
-        raise ConfigError(f"{path}: cannot be read ({exc}). Fix: check the file's permissions and encoding")
+        raise ConfigError(f"{path}: cannot be read ({exc}). Fix: check the file's permissions and encoding") from None
     if value is None:
         return {}
     if not isinstance(value, dict):

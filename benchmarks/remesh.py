@@ -85,7 +85,7 @@ def remesh_benchmark(names: list[str] | None = None, variant_shapes: list[str] |
     classes: dict[str, list[str]] = {}
     for name in names:
         classes.setdefault(re.sub(r"\d+$", "", name), []).append(name)
-    for cls, members in classes.items():
+    for members in classes.values():
         members = sorted(members, key=lambda n: int(re.search(r"\d+$", n).group()))
         a = members[0]
         for b in members[1:]:

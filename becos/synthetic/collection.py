@@ -526,7 +526,7 @@ def _write_annotations(root: Path, models: dict[str, ClassModel]) -> None:
         _write(root / "precomputed_chirality_templates" / f"{node}.txt", "\n".join(map(str, left)) + "\n")
     _write(root / "config" / "templates_chirality_all.csv", "\n".join(chir) + "\n")
 
-    for node, model in models.items():
+    for model in models.values():
         _write(root / "corres_comp" / "default_faces" / f"{model.spec.template}.npy", _npy_bytes(model.mesh.faces))
 
     for u, v in TREE_EDGES:

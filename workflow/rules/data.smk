@@ -2,6 +2,8 @@
 
 
 rule resolved_config:
+    conda:
+        "../envs/becos.yaml"
     output:
         LAYOUT.config,
     params:
@@ -15,6 +17,8 @@ rule resolved_config:
 if config["synthetic"]["enabled"]:
 
     rule synthetic_collection:
+        conda:
+            "../envs/becos.yaml"
         output:
             directory(config["synthetic"]["out"]),
         params:
@@ -32,6 +36,8 @@ if config["synthetic"]["enabled"]:
 if config["annotations_archive"]:
 
     rule fetch_annotations:
+        conda:
+            "../envs/becos.yaml"
         output:
             directory(config["annotations"]),
         params:
@@ -53,6 +59,8 @@ DT4D_JOBS = {(job.kind, job.cls): job for job in bdt4d.preparation_plan(config)}
 if DT4D_JOBS:
 
     rule prepare_dt4d:
+        conda:
+            "../envs/becos.yaml"
         input:
             anime=lambda w: DT4D_JOBS[(w.kind, w.cls)].anime,
             info=lambda w: ancient(DT4D_JOBS[(w.kind, w.cls)].info),
@@ -82,6 +90,8 @@ if config["download"]:
         download_dataset,
 
     rule download_dataset:
+        conda:
+            "../envs/becos.yaml"
         output:
             str(LAYOUT.downloaded("{dataset}")),
         wildcard_constraints:
@@ -100,6 +110,8 @@ if config["download"]:
 
 
 checkpoint check_datasets:
+    conda:
+        "../envs/becos.yaml"
     input:
         generated_inputs,
     output:
@@ -119,6 +131,8 @@ checkpoint check_datasets:
 
 
 rule catalog:
+    conda:
+        "../envs/becos.yaml"
     input:
         LAYOUT.checks,
     output:

@@ -2,6 +2,8 @@
 
 
 rule baseline:
+    conda:
+        "../envs/becos.yaml"
     input:
         store=f"{RESULTS}/{{setting}}/benchmark.zarr",
         validation=f"{RESULTS}/{{setting}}/validation.json",
@@ -21,6 +23,8 @@ rule baseline:
 
 
 rule evaluate:
+    conda:
+        "../envs/becos.yaml"
     input:
         store=f"{RESULTS}/{{setting}}/benchmark.zarr",
         predictions=expand(f"{RESULTS}/{{{{setting}}}}/predictions/{{baseline}}", baseline=BASELINES),

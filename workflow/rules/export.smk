@@ -2,6 +2,8 @@
 
 
 rule store_metadata:
+    conda:
+        "../envs/becos.yaml"
     output:
         f"{RESULTS}/{{setting}}/metadata.json",
     params:
@@ -13,6 +15,8 @@ rule store_metadata:
 
 
 rule zarr_store:
+    conda:
+        "../envs/becos.yaml"
     input:
         pairs=lambda w: chunk_files(w.setting, "pairs"),
         metadata=f"{RESULTS}/{{setting}}/metadata.json",
@@ -29,6 +33,8 @@ rule zarr_store:
 
 
 rule validate_store:
+    conda:
+        "../envs/becos.yaml"
     input:
         f"{RESULTS}/{{setting}}/benchmark.zarr",
     output:
@@ -43,6 +49,8 @@ rule validate_store:
 
 
 rule released_layout:
+    conda:
+        "../envs/becos.yaml"
     input:
         store=f"{RESULTS}/{{setting}}/benchmark.zarr",
         validation=f"{RESULTS}/{{setting}}/validation.json",
@@ -58,6 +66,8 @@ rule released_layout:
 
 
 rule psmal_layout:
+    conda:
+        "../envs/becos.yaml"
     input:
         store=f"{RESULTS}/{{setting}}/benchmark.zarr",
         validation=f"{RESULTS}/{{setting}}/validation.json",
@@ -73,6 +83,8 @@ rule psmal_layout:
 
 
 rule geodesics:
+    conda:
+        "../envs/becos.yaml"
     input:
         store=f"{RESULTS}/{{setting}}/benchmark.zarr",
         validation=f"{RESULTS}/{{setting}}/validation.json",
@@ -91,6 +103,8 @@ rule geodesics:
 
 
 rule published_pairings:
+    conda:
+        "../envs/becos.yaml"
     input:
         manifest=f"{RESULTS}/{{setting}}/manifest.csv",
         catalog=LAYOUT.catalog,
@@ -107,6 +121,8 @@ rule published_pairings:
 
 
 rule report:
+    conda:
+        "../envs/becos.yaml"
     input:
         store=f"{RESULTS}/{{setting}}/benchmark.zarr",
         validation=f"{RESULTS}/{{setting}}/validation.json",

@@ -5,6 +5,8 @@
 
 
 rule manifest:
+    conda:
+        "../envs/becos.yaml"
     input:
         catalog=LAYOUT.catalog,
     output:
@@ -19,6 +21,8 @@ rule manifest:
 
 
 rule remesh:
+    conda:
+        "../envs/becos.yaml"
     input:
         lambda w: plan().files[(w.dataset, w.name)],
     output:
@@ -43,6 +47,8 @@ rule remesh:
 
 
 rule ground_truth:
+    conda:
+        "../envs/becos.yaml"
     input:
         manifest=f"{RESULTS}/{{setting}}/manifest.csv",
         catalog=LAYOUT.catalog,
@@ -65,6 +71,8 @@ rule ground_truth:
 
 
 rule pairs:
+    conda:
+        "../envs/becos.yaml"
     input:
         ground_truth=f"{RESULTS}/{{setting}}/ground_truth/chunk_{{chunk}}.json",
         manifest=f"{RESULTS}/{{setting}}/manifest.csv",
