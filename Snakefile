@@ -25,6 +25,10 @@ except ConfigError as exc:
     sys.exit("\n".join(f"becos config: {line}" for line in str(exc).splitlines()))
 
 
+# `snakemake --report report.zip`: each setting's report folder (rule report) under this description
+report: "workflow/report/workflow.rst"
+
+
 include: "workflow/rules/common.smk"
 include: "workflow/rules/data.smk"
 include: "workflow/rules/pairs.smk"

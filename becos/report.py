@@ -29,8 +29,9 @@ Report folder (:func:`write_report`)
 For a P2P store the overlap histogram is shown beside the published benchmark's
 (:data:`becos.published.P2P_OVERLAP_HISTOGRAM`), both as shares of all directions since the totals
 differ (:func:`published_overlap_comparison`).
-The captions for ``snakemake --report`` live in ``workflow/report/*.rst`` (one per output kind,
-:data:`CAPTIONS`).
+``snakemake --report report.zip`` packs each setting's folder with the caption
+``workflow/report/index.rst`` (which describes every file above) under ``workflow/report/workflow.rst``
+(:data:`CAPTIONS`).
 """
 
 from __future__ import annotations
@@ -62,15 +63,8 @@ HIST_EDGES = np.linspace(0.0, 1.0, 11)
 #: Table columns :func:`write_report` needs.
 REQUIRED_COLUMNS = ("pair_id", "split", "category", "x_dataset", "y_dataset", "x_overlap", "y_overlap")
 SETTING_LABELS = {"full_full": "F2F", "partial_full": "P2F", "partial_partial": "P2P"}
-#: Output kind -> caption file in ``workflow/report/`` (for ``report(..., caption=...)`` in the Snakefile).
-CAPTIONS = {
-    "counts": "counts.rst",
-    "overlap_histogram": "overlap_histogram.rst",
-    "overlap_histogram_table": "overlap_histogram_table.rst",
-    "summary": "summary.rst",
-    "renders": "renders.rst",
-    "index": "index.rst",
-}
+#: Output -> its caption file in ``workflow/report/`` (``report(..., caption=...)`` of rule ``report``).
+CAPTIONS = {"report": "index.rst"}
 
 _AMBIENT = 0.3  # Lambert: shade = ambient + (1 - ambient) * |n . l|
 _UP = {"x": np.array([1.0, 0.0, 0.0]), "y": np.array([0.0, 1.0, 0.0]), "z": np.array([0.0, 0.0, 1.0])}

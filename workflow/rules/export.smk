@@ -1,17 +1,25 @@
 # Stage 5-7: the Zarr store per setting, its validation, the other export formats, the report.
 
 
+# Keys that say which outputs are built from a store, or how the data arrived, not what a store holds: an
+# edit to one of them (e.g. n_renders) reruns the report, not every store. The metadata still records the
+# whole resolved config (read from results/config.json, whose rewrite alone does not rerun the job).
+STORE_BLIND_KEYS = ("setting", "n_renders", "store_vis", "exports", "evaluation", "download", "download_urls")
+
+
 rule store_metadata:
     conda:
         "../envs/becos.yaml"
+    input:
+        config=ancient(LAYOUT.config),
     output:
         f"{RESULTS}/{{setting}}/metadata.json",
     params:
-        config=json.dumps(config, sort_keys=True),
+        rerun_when=json.dumps({k: v for k, v in config.items() if k not in STORE_BLIND_KEYS}, sort_keys=True),
     log:
         "logs/store_metadata/{setting}.log",
     shell:
-        "becos metadata --options {params.config:q} --setting {wildcards.setting} --out {output:q} > {log:q} 2>&1"
+        'becos metadata --options "$(cat {input.config:q})" --setting {wildcards.setting} --out {output:q} > {log:q} 2>&1'
 
 
 rule zarr_store:
@@ -127,7 +135,13 @@ rule report:
         store=f"{RESULTS}/{{setting}}/benchmark.zarr",
         validation=f"{RESULTS}/{{setting}}/validation.json",
     output:
-        directory(f"{RESULTS}/{{setting}}/report"),
+        report(
+            directory(f"{RESULTS}/{{setting}}/report"),
+            htmlindex="index.html",
+            caption="../report/index.rst",
+            category="Benchmark report",
+            labels={"setting": "{setting}"},
+        ),
     params:
         renders=config["n_renders"] if config["store_vis"] else 0,
     resources:
