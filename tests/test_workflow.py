@@ -98,6 +98,30 @@ def test_rerun_of_a_finished_run_does_nothing(tiny_tosca_run):
     assert "Nothing to be done" in result.stdout + result.stderr, result.stdout[-2000:]
 
 
+def test_an_edit_to_a_report_key_reruns_the_reports_not_the_stores(tiny_tosca_run):
+    """Issue #15: store_metadata reruns on the keys a store depends on, not on the whole config."""
+    planned = jobs_planned(snakemake(tiny_tosca_run, "-n", "--config", "n_renders=1").stdout)
+    assert planned.get("report") == 3, planned
+    assert not {"store_metadata", "zarr_store", "validate_store", "released_layout"} & set(planned), planned
+    planned = jobs_planned(snakemake(tiny_tosca_run, "-n", "--config", "min_overlap=0.15").stdout)
+    assert planned.get("store_metadata") == 3 and planned.get("pairs", 0) >= 1, planned   # a key a store records
+
+
+def test_snakemake_report_packs_each_settings_report_with_its_caption(tiny_tosca_run, tmp_path):
+    import zipfile
+
+    out = tmp_path / "report.zip"
+    snakemake(tiny_tosca_run, "--report", str(out))
+    with zipfile.ZipFile(out) as packed:
+        names = packed.namelist()
+        text = "\n".join(packed.read(n).decode("utf-8", "replace") for n in names if n.endswith((".html", ".js")))
+    for setting in SETTINGS:
+        assert any(n.endswith(f"results/{setting}/report/index.html") for n in names), names[:20]
+    assert any(n.endswith(".png") and "/renders/" in n for n in names)
+    assert "BeCoS benchmark generator" in text                              # workflow/report/workflow.rst
+    assert "Sample pairs with their ground truth" in text                   # workflow/report/index.rst
+
+
 def test_a_deleted_remesh_output_is_rebuilt(tiny_tosca_run):
     """Issue #21: every remesh output (the .ply nothing else reads included) is a target of the run."""
     import shutil
