@@ -2,24 +2,25 @@
 
 
 # Keys that say which outputs are built from a store, or how the data arrived, not what a store holds: an
-# edit to one of them (e.g. n_renders) reruns the report, not every store. The metadata still records the
-# whole resolved config (read from results/config.json, whose rewrite alone does not rerun the job).
+# edit to one of them (e.g. n_renders) reruns the report, not every store.
 STORE_BLIND_KEYS = ("setting", "n_renders", "store_vis", "exports", "evaluation", "download", "download_urls")
 
 
 rule store_metadata:
     conda:
         "../envs/becos.yaml"
-    input:
-        config=ancient(LAYOUT.config),
     output:
         f"{RESULTS}/{{setting}}/metadata.json",
     params:
-        rerun_when=json.dumps({k: v for k, v in config.items() if k not in STORE_BLIND_KEYS}, sort_keys=True),
+        # the rerun trigger: every key but STORE_BLIND_KEYS
+        store_keys=json.dumps({k: v for k, v in config.items() if k not in STORE_BLIND_KEYS}, sort_keys=True),
+        # what the metadata records: the whole config. A param computed from the output is "derived", and
+        # Snakemake leaves derived params out of its params trigger
+        config=lambda wildcards, output: json.dumps(config, sort_keys=True),
     log:
         "logs/store_metadata/{setting}.log",
     shell:
-        'becos metadata --options "$(cat {input.config:q})" --setting {wildcards.setting} --out {output:q} > {log:q} 2>&1'
+        "becos metadata --options {params.config:q} --setting {wildcards.setting} --out {output:q} > {log:q} 2>&1"
 
 
 rule zarr_store:
