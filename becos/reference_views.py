@@ -126,8 +126,6 @@ def reference_component(vertices: np.ndarray, faces: np.ndarray, triangle_ids: n
     import trimesh
     from scipy.spatial import cKDTree
 
-    from becos.mesh import vertex_set_keys
-
     vertices = np.asarray(vertices, dtype=np.float64)
     faces = np.asarray(faces, dtype=np.int64)
     kept = np.zeros(len(faces), dtype=bool)
