@@ -74,10 +74,24 @@ def remove_stale_temporaries(folder: str | Path, names: Iterable[str]) -> int:
     return removed
 
 
+NPZ_LEVEL = 1
+"""Deflate level of compressed .npz files: level 1 is ~2x faster to write than numpy's default (6)
+and as small on float coordinates (measured on a TOSCA pair record: 1.105 vs 1.108 MB)."""
+
+
 def save_npz(path: str | Path, compressed: bool = False, **arrays: np.ndarray) -> None:
-    """``np.savez`` (or ``savez_compressed``) to ``path``, atomically."""
+    """``np.savez`` (or, ``compressed``, a deflated .npz at :data:`NPZ_LEVEL` that ``np.load`` reads) to
+    ``path``, atomically."""
+    import zipfile
+
     with atomic_path(path, suffix=".tmp.npz") as tmp:
-        (np.savez_compressed if compressed else np.savez)(tmp, **arrays)
+        if not compressed:
+            np.savez(tmp, **arrays)
+            return
+        with zipfile.ZipFile(tmp, "w", compression=zipfile.ZIP_DEFLATED, compresslevel=NPZ_LEVEL) as z:
+            for key, value in arrays.items():
+                with z.open(f"{key}.npy", "w", force_zip64=True) as fh:
+                    np.lib.format.write_array(fh, np.asanyarray(value), allow_pickle=False)
 
 
 def write_bytes(path: str | Path, data: bytes) -> None:
