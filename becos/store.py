@@ -1065,6 +1065,56 @@ class Benchmark:
         return self._decode_metas(blob, self._meta_offsets, "the pair metadata")
 
 
+class TrainingView:
+    """The pairs of a store (or of one split) for a training loop: ``len(view)`` and ``view[i]`` -> a
+    dict of plain numpy arrays (record keys as in :data:`becos.record.RECORD_SCHEMA`, index keys
+    int64, plus ``row``: the pair's store row). Needs no torch; a ``torch.utils.data.Dataset`` can
+    wrap it as is.
+
+    Safe in ``DataLoader`` worker processes, forked or spawned: the store is opened lazily in each
+    process (again after a fork), and pickling the view carries only the path, split, keys and rows,
+    never an open store. Reads go through :meth:`Benchmark.read_rows` (a few ms per pair).
+
+    Args:
+        path: the store folder.
+        split: only the pairs of this split (train, val, test ...), in store order; None: all.
+        keys: record keys to return (default: all).
+    """
+
+    def __init__(self, path: str | Path, split: str | None = None, keys: Iterable[str] | None = None):
+        self.path, self.split = Path(path), split
+        bench = Benchmark(self.path)
+        unknown = sorted(set(keys or ()) - set(bench.layout))
+        if unknown:
+            raise BecosError(f"{self.path}: no record keys {unknown}. Fix: choose keys from "
+                             f"{sorted(bench.layout)}")
+        self.keys = tuple(keys) if keys is not None else tuple(bench.layout)
+        table_split = bench.table["split"].to_numpy()
+        self.rows = np.arange(len(bench)) if split is None else np.flatnonzero(table_split == split)
+        self._bench, self._pid = bench, os.getpid()
+
+    def __getstate__(self) -> dict:
+        return {**self.__dict__, "_bench": None, "_pid": None}
+
+    def __len__(self) -> int:
+        return len(self.rows)
+
+    def benchmark(self) -> Benchmark:
+        """This process's open store (opened on first use, and again in a forked child)."""
+        if self._bench is None or self._pid != os.getpid():
+            self._bench, self._pid = Benchmark(self.path), os.getpid()
+        return self._bench
+
+    def __getitem__(self, i: int) -> dict[str, np.ndarray]:
+        if isinstance(i, (bool, np.bool_)) or not isinstance(i, (int, np.integer)):
+            raise PairKeyError(f"{self.path}: a training view is indexed by an int, not {i!r}")
+        if not -len(self) <= i < len(self):
+            raise IndexError(f"{self.path}: item {i} out of range for {len(self)} pairs")
+        row = int(self.rows[i])
+        record = self.benchmark().read_rows(row, row + 1).record(0)
+        return {**{k: record.arrays[k] for k in self.keys}, "row": np.int64(row)}
+
+
 def open_benchmark(path: str | Path) -> Benchmark:
     """Open a store written by :func:`write_store` (read-only)."""
     return Benchmark(path)

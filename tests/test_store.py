@@ -178,3 +178,50 @@ def test_a_killed_writes_folder_is_removed_but_not_a_sibling_stores(pair_record_
     write_store(pair_record_files["full_full"], tmp_path / "s.zarr", setting="full_full", progress=False)
     assert not killed.exists() and sibling.exists()
     assert sorted(p.name for p in tmp_path.iterdir()) == [sibling.name, "s.zarr"]
+
+
+
+
+def _read_in_child(view, queue) -> None:
+    queue.put(view[1])
+
+
+@pytest.mark.parametrize("method", ["fork", "spawn"])
+def test_training_view_in_worker_processes(stores, pair_record_files, method):
+    """len()/[i] give plain numpy arrays equal to the records; the view pickles without an open store and
+    reads in forked children (after the parent has read: the inherited store is reopened) and spawned ones."""
+    import multiprocessing
+    import operator
+    import pickle
+
+    from becos.store import TrainingView
+
+    view = TrainingView(stores["partial_partial"], keys=["x_vertices", "corr_01", "y_faces"])
+    assert len(view) == 2 and len(TrainingView(stores["partial_partial"], split="test")) == 1
+    by_id = {r.pair_id: r for r in map(PairRecord.load, pair_record_files["partial_partial"])}
+    first = view[0]
+    assert set(first) == {"x_vertices", "corr_01", "y_faces", "row"}
+    want = by_id[open_benchmark(stores["partial_partial"]).table["pair_id"][0]]
+    for key in ("x_vertices", "corr_01", "y_faces"):
+        assert type(first[key]) is np.ndarray and first[key].dtype == want[key].dtype
+        assert np.array_equal(first[key], want[key])
+    assert view[-1]["row"] == 1
+    with pytest.raises(IndexError):
+        view[2]
+    state = pickle.dumps(view)
+    assert pickle.loads(state)._bench is None and len(state) < 2000
+    context = multiprocessing.get_context(method)
+    with context.Pool(2) as pool:
+        got = pool.starmap(operator.getitem, [(view, i) for i in (0, 1, 0, 1)])
+    if method == "fork":      # the child inherits the parent's open store itself (not pickled)
+        queue = context.Queue()
+        child = context.Process(target=_read_in_child, args=(view, queue))
+        child.start()
+        got.append(queue.get(timeout=60))
+        child.join(timeout=60)
+        assert child.exitcode == 0
+    for d in got:
+        row = int(d["row"])
+        record = by_id[open_benchmark(stores["partial_partial"]).table["pair_id"][row]]
+        assert np.array_equal(d["x_vertices"], record["x_vertices"]) and d["corr_01"].dtype == np.int64
+        assert np.array_equal(d["corr_01"], record["corr_01"])
