@@ -31,12 +31,17 @@ else ragged with their own offsets), so any :class:`~becos.record.PairRecord` ro
 same keys, dtypes, shapes and values (NaN included) and the same ``meta``. The layout actually
 used is recorded in the root attribute ``becos_store.layout`` (key -> group, or null = stacked).
 
-Files: arrays are sharded (``SHARD_BYTES`` per shard file, inner chunks of ``CHUNK_BYTES``,
-Blosc zstd with byte shuffle, chunk files named ``c.<i>.<j>``), so a store holds about two files
-per array (``zarr.json`` + one shard) until an array outgrows a shard: ~115 files for a few pairs,
-815 for 1,000 F2F pairs of 10k-vertex shapes (2.9 GB of arrays, 0.6 GB on disk; written in ~12 s,
-``benchmarks/store.py``) instead of one file per pair and key — while
-reading one pair still decodes only the inner chunks it touches.
+Files: arrays are sharded (``SHARD_BYTES`` per shard file, inner chunks of ``CHUNK_BYTES`` for
+ragged keys and ``STACKED_CHUNK_BYTES`` for per-pair keys, Blosc zstd with byte shuffle, chunk files
+named ``c.<i>.<j>``), so a store holds about two files per array (``zarr.json`` + one shard) until an
+array outgrows a shard, instead of one file per pair and key. Index keys are stored int32
+(:attr:`becos.record.Field.stored`) and widened back on read (store format 2; format 1 held them
+int64 in 1 MiB chunks).
+
+Reading: :meth:`Benchmark.record`, :meth:`Benchmark.records` and :class:`TrainingView` read the chunk
+files directly (:class:`_ChunkFiles`: per key one ``pread`` and one Blosc decode per 64 KiB chunk
+touched), about as fast as ``np.load`` of the pair's own .npz (``benchmarks/store.py``);
+:meth:`Benchmark.read_block` (``becos validate``, ``compare``) reads through zarr.
 
 Root attributes (``Benchmark.metadata``): the caller's metadata (``config_hash``, ``config``,
 ``datasets`` with licence and citation ...) plus ``schema_version`` (:data:`becos.record.SCHEMA_VERSION`),

@@ -8,6 +8,17 @@ copy unless ``--no-jitter``, so compression does not see identical copies), then
 collects them. Prints JSON ``{n_pairs, write_seconds, read_all_seconds, n_files, ...}``;
 ``read_all_seconds`` is one pass of :meth:`Benchmark.records` over every pair.
 
+``reads``: CPU time of a random ``Benchmark.record(i)`` against ``np.load`` of the same pair's npz,
+interleaved in one run, and of one sequential pass (``records()`` against ``np.load`` of every npz).
+
+``--results DIR`` (a workflow run's results folder) measures that run instead: MB per pair by
+artefact kind (pair records, ground truth, store, released export) as found and as this becos
+writes them (records, ground truth and store re-encoded from the run's own files; the released
+export's format is the reference's and counted as found), and the reads on the re-encoded files,
+also against ``np.load`` of the records as store format 1 wrote them (uncompressed, int64)::
+
+    PYTHONPATH=. python benchmarks/store.py --results results --random 40
+
 Aim (issue "store"): O(10 s) for 1,000 records (the brief's measure: 13 s for concatenated arrays
 with offsets vs 72–129 s for one array per pair).
 
