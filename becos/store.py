@@ -85,8 +85,15 @@ import numpy as np
 
 from becos.atomic import remove_stale_temporaries
 from becos.errors import BecosError, DiskFullError, InputFileError
-from becos.record import (IDENTITY_MEMBER, RECORD_KEYS, RECORD_SCHEMA, SCHEMA_VERSION, SETTINGS, PairRecord,
-                          decode_arrays)
+from becos.record import (
+    IDENTITY_MEMBER,
+    RECORD_KEYS,
+    RECORD_SCHEMA,
+    SCHEMA_VERSION,
+    SETTINGS,
+    PairRecord,
+    decode_arrays,
+)
 
 STORE_FORMAT = 2
 """2: index keys int32 (:attr:`becos.record.Field.stored`), inner chunks of :data:`CHUNK_BYTES`."""

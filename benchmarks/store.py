@@ -128,8 +128,8 @@ def run_artefacts(results: Path, work: Path, n_random: int) -> dict:
     pair records re-saved, ground truth re-saved, the store re-written from the re-saved records;
     the released export's format is not this module's and is counted as found), plus read timings on
     the re-encoded files."""
-    from becos.workflow import _narrow
     from becos.atomic import save_npz
+    from becos.workflow import _narrow
 
     out, timings = {}, {}
     for setting_dir in sorted(p for p in results.iterdir() if (p / "pairs").is_dir()):
