@@ -256,7 +256,7 @@ def test_record_files_hold_int32_indices_and_no_identity_maps(pair_record_files,
     assert all(f"s_{k}" in becos.record.__doc__ for k in becos.record.SHAPE_KEYS)
 
 
-def test_direct_reads_equal_zarr_reads_and_damage_is_named(stores, tmp_path):
+def test_direct_reads_equal_zarr_reads_and_damage_is_named(stores, pair_record_files, tmp_path, monkeypatch):
     """record(i) reads the chunk files itself; it returns what zarr's read_block returns, and a damaged
     chunk file ends in DamagedStoreError (through zarr), never in another pair's or garbage values."""
     import shutil
@@ -268,6 +268,17 @@ def test_direct_reads_equal_zarr_reads_and_damage_is_named(stores, tmp_path):
         assert_same_record(bench.record(i), bench.read_block(i, i + 1).record(0))
     assert bench._files, "the direct reader was not used"
     assert bench.record(1).arrays["x_faces"].dtype == np.int64
+    import becos.store
+
+    monkeypatch.setattr(becos.store, "CHUNK_BYTES", 4096)       # many chunks over several shards per array
+    monkeypatch.setattr(becos.store, "SHARD_BYTES", 32768)
+    small = open_benchmark(write_store(pair_record_files["partial_partial"], tmp_path / "small.zarr",
+                                       setting="partial_partial", progress=False))
+    assert len(list((tmp_path / "small.zarr" / "arrays" / "x_vertices").glob("c.*"))) > 2
+    whole = small.read_block(0, 2)
+    for i, got in enumerate(small.records()):                 # whole chunks decoded in place
+        assert_same_record(got, whole.record(i))
+        assert_same_record(small.record(i), whole.record(i))
     damaged = tmp_path / "damaged.zarr"
     shutil.copytree(stores["partial_partial"], damaged)
     chunk = next((damaged / "arrays" / "x_vertices").glob("c.*"))
