@@ -194,7 +194,8 @@ class PairRecord:
         """Write one .npz (arrays + ``meta`` as JSON), atomically. ``meta["content_digest"]`` is set to
         :func:`content_digest` of the record, so an edit of the file is noticed (:func:`is_intact`).
 
-        The file is a deflated .npz (:func:`encode_arrays`: int32 indices, no identity maps;
+        The file is a .npz with deflated integer members (:func:`becos.atomic.save_npz`;
+        :func:`encode_arrays`: int32 indices, no identity maps;
         ``__identity__`` lists the maps left out), read back exactly by :meth:`load`."""
         self.meta["content_digest"] = content_digest(self.arrays, self.meta)
         stored, identity = encode_arrays(self.arrays)

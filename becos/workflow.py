@@ -940,7 +940,8 @@ def _narrow(face: np.ndarray) -> np.ndarray:
 
 
 def load_ground_truth(path: Path):
-    """``(gt_xy, gt_yx)`` :class:`becos.surface_map.SurfaceMap` from a ground-truth file (a deflated .npz:
+    """``(gt_xy, gt_yx)`` :class:`becos.surface_map.SurfaceMap` from a ground-truth file (a .npz,
+    :func:`becos.atomic.save_npz` compressed:
     ``input_key``, ``xy_face`` (V_x,) int32, ``xy_weights`` (V_x, 3), ``xy_distance`` (V_x,), the same
     for ``yx``; files of older becos hold int64 faces, uncompressed)."""
     from becos.surface_map import SurfaceMap
