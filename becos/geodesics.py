@@ -263,64 +263,63 @@ class GeodesicDistances:
 
 
 class HeatDistanceSolver:
-    """The heat method (Crane, Weischedel and Wardetzky 2013) with both linear systems factored once per
-    mesh and many sources solved together: the export's all-pairs solver.
+    """The heat method (Crane, Weischedel and Wardetzky 2013) on the intrinsic Delaunay triangulation,
+    with both linear systems factored once per mesh and many sources solved together: the export's
+    all-pairs solver.
 
-    Per block of B sources: one heat solve ``(M + t L) U = δ`` with a (V, B) right-hand side, the
-    normalised per-face gradients ``X = -∇U / |∇U|`` (extrinsic triangles), one Poisson solve
-    ``(L + εM) Φ = Gᵀ diag(A) X`` (G: per-face gradient, A: face areas; ε = 1e-8 / area only makes L
-    definite), then each column shifted to 0 at its source and clipped at 0. ``L``, ``M``: the intrinsic-
-    Delaunay ("robust") Laplacian and lumped mass of robust_laplacian (Sharp and Crane 2020), an M-matrix,
-    so the heat is positive everywhere even on the obtuse triangles a decimation leaves (the plain
-    cotangent Laplacian gives negative heat there and ~2x the error); ``t = t_coef · mean edge length²``.
-    Both matrices are factored with SuperLU (scipy, symmetric mode, no pivoting), once.
-
-    Compared with potpourri3d's solver (one source per call, every step on the intrinsic triangulation,
-    used by :class:`GeodesicDistances`): the gradient and divergence are taken on the extrinsic
-    triangles, which costs some accuracy on badly shaped ones (measured in config/README.md), and the
-    batched solve is several times cheaper per row.
+    The mesh's edges are flipped intrinsically until Delaunay (libigl ``intrinsic_delaunay_triangulation``:
+    same vertices and surface metric, triangles laid out from edge lengths), as potpourri3d's "robust"
+    solver does, so the Laplacian is an M-matrix and the heat stays positive on the obtuse triangles a
+    decimation leaves. On it: G the per-face gradient (2 rows per face, in each triangle's own plane), A
+    the face areas, ``L = Gᵀ diag(A) G`` (the cotangent Laplacian), M the lumped (barycentric) mass,
+    ``t = t_coef · mean edge length²``. Per block of B sources: one heat solve ``(M + t L) U = δ`` with a
+    (V, B) right-hand side, ``X = -∇U / |∇U|`` per face, one Poisson solve ``(L + εM) Φ = Gᵀ diag(A) X``
+    (ε = 1e-8 / area only makes L definite), each column shifted to 0 at its source and clipped at 0.
 
     Distances are in the units of ``vertices``. A mesh with several connected components gives
     meaningless values between components (no heat reaches them); becos's remeshed shapes are connected.
     """
 
     def __init__(self, vertices: np.ndarray, faces: np.ndarray, t_coef: float = 1.0):
-        import robust_laplacian
-        from scipy.sparse.linalg import splu
+        import igl
 
-        v = np.asarray(vertices, dtype=np.float64)
-        f = np.asarray(faces, dtype=np.int64)
+        v = np.ascontiguousarray(vertices, dtype=np.float64)
+        f = np.ascontiguousarray(faces, dtype=np.int64)
         self.n_vertices = n = len(v)
-        self.faces = f
-        corners = v[f]  # (F, 3, 3)
-        cross = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
-        double_area = np.linalg.norm(cross, axis=1)
+        original = igl.edge_lengths(v, f)  # (F, 3): opposite corners 0, 1, 2
+        t = float(t_coef) * float(original.mean()) ** 2
+        lengths, f = igl.intrinsic_delaunay_triangulation(original, f)[:2]
+        l_bc, l_ca, l_ab = lengths[:, 0], lengths[:, 1], lengths[:, 2]
+        # each triangle in its plane: corner 0 at the origin, corner 1 on the x axis, corner 2 above it
+        x2 = (l_ab ** 2 + l_ca ** 2 - l_bc ** 2) / (2.0 * np.maximum(l_ab, 1e-300))
+        y2 = np.sqrt(np.maximum(l_ca ** 2 - x2 ** 2, 0.0))
+        points = np.zeros((len(f), 3, 2))
+        points[:, 1, 0] = l_ab
+        points[:, 2, 0], points[:, 2, 1] = x2, y2
+        double_area = np.maximum(l_ab * y2, 1e-300)
         area = 0.5 * double_area
-        normal = cross / np.maximum(double_area, 1e-300)[:, None]
-        # gradient of the hat function of corner k on its face: (N x e_k) / 2A, e_k the opposite edge
-        grad_rows, grad_cols, grad_vals = [], [], []
-        for k in range(3):
-            edge = corners[:, (k + 2) % 3] - corners[:, (k + 1) % 3]
-            g = np.cross(normal, edge) / np.maximum(double_area, 1e-300)[:, None]  # (F, 3)
-            for d in range(3):
-                grad_rows.append(3 * np.arange(len(f)) + d)
-                grad_cols.append(f[:, k])
-                grad_vals.append(g[:, d])
-        self.gradient = sp.csr_matrix((np.concatenate(grad_vals), (np.concatenate(grad_rows),
-                                                                  np.concatenate(grad_cols))), shape=(3 * len(f), n))
-        self.divergence = (self.gradient.T @ sp.diags(np.repeat(area, 3))).tocsr()  # (V, 3F) = Gᵀ diag(A)
-        laplacian, mass = robust_laplacian.mesh_laplacian(v, f)
-        edges = np.linalg.norm(corners[:, [1, 2, 0]] - corners, axis=2)
-        t = float(t_coef) * float(edges.mean()) ** 2
-        total_area = float(area.sum())
-        options = {"SymmetricMode": True}
-        self._heat = splu((mass + t * laplacian).tocsc(), permc_spec="MMD_AT_PLUS_A",
-                          diag_pivot_thresh=0.0, options=options)
-        self._poisson = splu((laplacian + mass * (1e-8 / max(total_area, 1e-300))).tocsc(),
-                             permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options=options)
+        n_faces = len(f)
+        rows, cols, vals = [], [], []
+        for k in range(3):  # gradient of corner k's hat function: the opposite edge turned inwards / 2A
+            edge = points[:, (k + 2) % 3] - points[:, (k + 1) % 3]
+            for d, component in enumerate((-edge[:, 1], edge[:, 0])):
+                rows.append(d * n_faces + np.arange(n_faces))
+                cols.append(f[:, k])
+                vals.append(component / double_area)
+        self.gradient = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                                      shape=(2 * n_faces, n))  # rows: x of every face, then y
+        self.divergence = (self.gradient.T @ sp.diags(np.tile(area, 2))).tocsr()  # (V, 2F) = Gᵀ diag(A)
+        self._gradient32 = self.gradient.astype(np.float32)
+        self._divergence32 = self.divergence.astype(np.float32)
+        laplacian = (self.divergence @ self.gradient).tocsc()
+        mass = np.bincount(f.reshape(-1), weights=np.repeat(area / 3.0, 3), minlength=n)
+        self._factor_heat = sp.diags(mass) + t * laplacian
+        self._factor_poisson = laplacian + sp.diags(mass * (1e-8 / max(float(area.sum()), 1e-300)))
+        self._heat = _factor(self._factor_heat)
+        self._poisson = _factor(self._factor_poisson)
 
     def block_size(self, budget_bytes: int = 1 << 27) -> int:
-        """Sources per solve so that the (3F, B) gradient block stays within ``budget_bytes`` (float64)."""
+        """Sources per solve so that the (2F, B) gradient block stays within ``budget_bytes`` (float64)."""
         return int(max(1, min(1024, budget_bytes // (8 * max(self.gradient.shape[0], 1)))))
 
     def distances(self, sources: np.ndarray) -> np.ndarray:
@@ -329,15 +328,43 @@ class HeatDistanceSolver:
         b = len(sources)
         delta = np.zeros((self.n_vertices, b))
         delta[sources, np.arange(b)] = 1.0
-        heat = self._heat.solve(delta)
-        grad = (self.gradient @ heat).reshape(-1, 3, b)  # (F, 3, B)
-        norm = np.linalg.norm(grad, axis=1, keepdims=True)
-        grad /= -np.maximum(norm, 1e-300)
-        phi = self._poisson.solve(self.divergence @ grad.reshape(-1, b))  # (V, B)
+        heat = self._heat(delta)
+        # the field's direction only matters: in float32 (half the memory traffic) when every column,
+        # scaled to a maximum of 1e30, stays above float32's smallest normal number (heat spans ~50
+        # orders of magnitude on a 10k-vertex shape); float64 otherwise
+        heat *= 1e30 / np.maximum(heat.max(axis=0), 1e-300)
+        single = bool(heat.min() > 1e-36)
+        gradient, divergence = (self._gradient32, self._divergence32) if single else (self.gradient, self.divergence)
+        grad = gradient @ (heat.astype(np.float32) if single else heat)  # (2F, B)
+        half = grad.shape[0] // 2
+        norm = np.hypot(grad[:half], grad[half:])
+        np.maximum(norm, 1e-30, out=norm)
+        grad[:half] /= norm
+        grad[half:] /= norm
+        phi = self._poisson(-(divergence @ grad).astype(np.float64))  # (V, B)
         phi -= phi[sources, np.arange(b)]
         np.maximum(phi, 0.0, out=phi)
         phi[sources, np.arange(b)] = 0.0
         return phi.T
+
+
+def _factor(matrix: sp.spmatrix):
+    """A solve function ``b (V, B) float64 -> x`` of the symmetric positive definite ``matrix``, factored
+    once: cholespy's CHOLMOD-based sparse Cholesky, whose multi-column solve costs ~0.3 ms per column at
+    10k vertices (SuperLU's: ~1 ms)."""
+    from cholespy import CholeskySolverD, MatrixType
+
+    coo = sp.coo_matrix(matrix)
+    solver = CholeskySolverD(coo.shape[0], coo.row.astype(np.int32), coo.col.astype(np.int32),
+                             coo.data.astype(np.float64), MatrixType.COO)
+
+    def solve(b: np.ndarray) -> np.ndarray:
+        b = np.ascontiguousarray(b, dtype=np.float64)
+        x = np.empty_like(b)
+        solver.solve(b, x)
+        return x
+
+    return solve
 
 
 def distance_rows(vertices: np.ndarray, faces: np.ndarray, sources: np.ndarray, method: str = "heat") -> np.ndarray:
