@@ -224,3 +224,18 @@ def test_plan_rows_and_layouts_read_by_the_loaders(small_records, store_of, tmp_
     # rows without this store's meshes (the empty part) are refused with a message naming the fix
     assert main(["export-geodesics", str(stores[2]), str(tmp_path / "geo-bad"), "--rows", str(rows[2])]) == 2
     assert "Fix:" in capsys.readouterr().err
+
+
+def test_workflow_plans_one_geodesic_plan_parallel_rows_and_one_layout_job_per_setting(becos_code, tmp_path):
+    """`exports.geodesics`: the distinct meshes of every setting are planned once and solved by
+    WORKFLOW_PARTS parallel jobs; each setting's layouts are a job of their own (dry run)."""
+    from test_workflow import jobs_planned, snakemake, write_config
+    from tiny_tosca import TINY_SHAPES
+
+    from becos.geodesic_jobs import WORKFLOW_PARTS
+
+    workdir = write_config(tmp_path / "geo", becos_code, shapes=TINY_SHAPES,
+                           exports={"geodesics": True, "geodesic_splits": ["test"]})
+    planned = jobs_planned(snakemake(workdir, "-n", "--cores", "2").stdout)
+    assert planned.get("geodesic_plan") == 1 and planned.get("geodesic_rows") == WORKFLOW_PARTS > 1, planned
+    assert planned.get("geodesics") == 3, planned
