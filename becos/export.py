@@ -767,6 +767,8 @@ def write_geodesics(records: Iterable[PairRecord], out_dir: str | Path, method: 
     return out
 
 
+GEODESIC_LAYOUTS = ("geo-lora", "dsmk")
+"""The geodesic layouts :func:`write_geodesic_matrices` can write (``exports.geodesic_layouts``)."""
 DSMK_FOLDER = "dsmk"
 """Folder of DeepShapeMatchingKit's geodesic cache layout (:func:`write_geodesic_matrices`)."""
 
@@ -821,7 +823,8 @@ def _rows_for(meshes: dict, needed: dict, rows_folders, method: str, jobs: int, 
 
 def write_geodesic_matrices(records: Iterable[PairRecord], out_dir: str | Path, method: str = "heat", *,
                             splits=None, jobs: int = 1, metadata: Mapping | None = None,
-                            overwrite: bool = False, progress: bool = False, rows=None) -> Path:
+                            overwrite: bool = False, progress: bool = False, rows=None,
+                            layouts=GEODESIC_LAYOUTS) -> Path:
     """Geodesic matrices in the layouts loaders read (``docs/released-layout.md``, section 3):
 
     - ``<out>/geodesic_dist_matrices/<stem>.npy``: (V, V) float32 distances between the vertices of the
@@ -840,9 +843,14 @@ def write_geodesic_matrices(records: Iterable[PairRecord], out_dir: str | Path, 
 
     Each distinct full mesh is solved once for the union of the vertices its shapes keep, by ``jobs``
     processes, or its rows are read from ``rows`` (folders written by ``becos geodesic-rows``);
-    ``splits`` (e.g. ``["test"]``) limits the export to those splits.
+    ``splits`` (e.g. ``["test"]``) limits the export to those splits. ``layouts``: which of
+    :data:`GEODESIC_LAYOUTS` to write (``index.csv`` is always written).
     """
     from becos.atomic import save_npz
+
+    unknown = sorted(set(layouts) - set(GEODESIC_LAYOUTS))
+    if unknown or not layouts:
+        raise ExportError(f"geodesic layouts {unknown or '(none)'}: unknown. Fix: choose from {GEODESIC_LAYOUTS}")
 
     out = Path(out_dir)
     with _staged_dir(out, overwrite) as tmp:
@@ -855,12 +863,12 @@ def write_geodesic_matrices(records: Iterable[PairRecord], out_dir: str | Path, 
         table, written, dsmk_written = [], set(), set()
         for sh in shapes:
             matrix = None
-            if sh.stem not in written:  # one full mesh in several pairs: one file
+            if "geo-lora" in layouts and sh.stem not in written:  # one full mesh in several pairs: one file
                 written.add(sh.stem)
                 matrix = _shape_matrix(sh, sources[sh.key], matrices[sh.key])
                 np.save(folder / f"{sh.stem}.npy", (matrix / np.float32(sh.sqrt_area)).astype(np.float32, copy=False))
             dsmk_file = ""
-            if _dsmk_reads(sh.setting, sh.side):
+            if "dsmk" in layouts and _dsmk_reads(sh.setting, sh.side):
                 dsmk_file = f"{DSMK_FOLDER}/{sh.split}/dist/{dsmk_cache_name(sh.vertices, sh.faces)}"
                 if dsmk_file not in dsmk_written:
                     dsmk_written.add(dsmk_file)
@@ -910,6 +918,9 @@ def configure_parser(parser: argparse.ArgumentParser, name: str) -> argparse.Arg
         parser.add_argument("--rows", type=Path, nargs="+", metavar="DIR",
                             help="read the distance rows from these `becos geodesic-rows` folders instead of "
                                  "computing them")
+        parser.add_argument("--layouts", nargs="+", choices=GEODESIC_LAYOUTS, default=list(GEODESIC_LAYOUTS),
+                            help="layouts to write (default: all): geo-lora geodesic_dist_matrices/<stem>.npy, "
+                                 "dsmk dsmk/<split>/dist/<sha1>_0.npz")
     if name in ("export-psmal", "export-geodesics", "export-ulrssm"):
         parser.add_argument("--geodesic-method", choices=METHODS, default="heat",
                             help="geodesic estimator (default: heat)")
@@ -930,11 +941,12 @@ def run_cli(args: argparse.Namespace) -> int:
         raise ExportError(f"--jobs must be at least 1, got {args.jobs}")
     if args.export_kind == "export-geodesics":
         write_geodesic_matrices(bench.records(), out, args.geodesic_method, splits=args.splits, jobs=args.jobs,
-                                metadata=bench.metadata, overwrite=args.force, progress=True, rows=args.rows)
+                                metadata=bench.metadata, overwrite=args.force, progress=True, rows=args.rows,
+                                layouts=args.layouts)
         with open(out / GEODESIC_FOLDER / "index.csv", encoding="utf-8", newline="") as fh:
             rows = list(csv.DictReader(fh))
         print(json.dumps({"out": str(out.resolve()), "setting": bench.setting, "method": args.geodesic_method,
-                          "splits": args.splits, "matrices": len({r["stem"] for r in rows}),
+                          "splits": args.splits, "matrices": len(list((out / GEODESIC_FOLDER).glob("*.npy"))),
                           "bytes": sum(p.stat().st_size for p in (out / GEODESIC_FOLDER).glob("*.npy")),
                           "dsmk_files": len({r["dsmk_file"] for r in rows if r["dsmk_file"]}),
                           "dsmk_bytes": sum(p.stat().st_size for p in out.glob(f"{DSMK_FOLDER}/*/dist/*.npz"))}))

@@ -221,6 +221,10 @@ def test_plan_rows_and_layouts_read_by_the_loaders(small_records, store_of, tmp_
             assert info0["mesh_id"].startswith("tosca/cat0")
         assert n_dsmk == (2 if setting == "partial_full" else 4)
         assert printed["matrices"] == len({r["stem"] for r in index})
+    # one layout only
+    assert main(["export-geodesics", str(stores[0]), str(tmp_path / "geo-only"), "--splits", "test",
+                 "--layouts", "geo-lora", "--rows", *map(str, rows)]) == 0
+    assert json.loads(capsys.readouterr().out)["dsmk_files"] == 0 and not (tmp_path / "geo-only" / "dsmk").exists()
     # rows without this store's meshes (the empty part) are refused with a message naming the fix
     assert main(["export-geodesics", str(stores[2]), str(tmp_path / "geo-bad"), "--rows", str(rows[2])]) == 2
     assert "Fix:" in capsys.readouterr().err

@@ -121,13 +121,15 @@ rule geodesics:
         directory(f"{RESULTS}/{{setting}}/geodesics"),
     params:
         splits=GEODESIC_SPLITS,
+        layouts=" ".join(EXPORTS["geodesic_layouts"]),
     resources:
         mem_mb=RESOURCES.mem_mb("geodesics"),
         runtime=RESOURCES.runtime("geodesics", n_pairs=setting_pairs),
     log:
         "logs/geodesics/{setting}.log",
     shell:
-        "becos export-geodesics {input.store:q} {output:q} {params.splits} --rows {input.rows:q} > {log:q} 2>&1"
+        "becos export-geodesics {input.store:q} {output:q} {params.splits} --layouts {params.layouts}"
+        " --rows {input.rows:q} > {log:q} 2>&1"
 
 
 rule published_pairings:
