@@ -711,9 +711,13 @@ def _compute_geodesic_rows(meshes: dict, needed: dict, method: str, jobs: int, f
 
 
 def _shape_matrix(shape: _GeodesicShape, rows: np.ndarray, matrix: np.ndarray) -> np.ndarray:
-    """(V, V) float32 symmetrised matrix of a shape's vertices from its full mesh's rows."""
-    sub = np.asarray(matrix[np.searchsorted(rows, shape.p2f)][:, shape.p2f], dtype=np.float64)
-    sym = (0.5 * (sub + sub.T)).astype(np.float32)
+    """(V, V) float32 symmetrised matrix of a shape's vertices from its full mesh's rows (float32
+    throughout: two (V, V) arrays at a time, no float64 copies of a 10k-vertex matrix)."""
+    sub = np.asarray(matrix[np.searchsorted(rows, shape.p2f)], dtype=np.float32)
+    if not (len(shape.p2f) == sub.shape[1] and np.array_equal(shape.p2f, np.arange(sub.shape[1]))):
+        sub = sub[:, shape.p2f]
+    sym = sub.T + sub
+    sym *= np.float32(0.5)
     np.fill_diagonal(sym, 0.0)
     return sym
 
