@@ -35,7 +35,7 @@ from becos.errors import BecosError
 WORKFLOW_PARTS = 8
 """Parts (``geodesic_rows`` jobs) of the workflow's geodesic plan: enough to keep a few cores or cluster
 nodes busy with the ~10-100 distinct full meshes of a test split, few enough that each job's start-up
-(~2 s) stays small against its meshes (~3 s of CPU per 10k-vertex mesh)."""
+(~2 s) stays small against its meshes (~13 s of CPU per 10k-vertex mesh)."""
 
 SEPARATOR = "|"
 """Between a mesh key and the array name in a part file (keys are file-name safe, never hold it)."""
