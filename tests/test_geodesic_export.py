@@ -9,14 +9,12 @@ import hashlib
 import json
 import os
 import pickle
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from becos.cli import main
 from becos.geodesics import GeodesicDistances, HeatDistanceSolver, distance_rows
-from becos.mesh import TriMesh
 
 SETTINGS = ("full_full", "partial_full", "partial_partial")
 
@@ -125,7 +123,7 @@ def dsmk_becos_dist(data_root: str, off_file_x: str) -> np.ndarray | None:
     """BeCoSDataset(shape_scale="default", return_dist=True): the first shape's ``dist``."""
     import trimesh
 
-    info_x = pickle.load(open(off_file_x.replace(".off", "_info.pkl"), "rb"))
+    info_x = pickle.load(open(off_file_x.replace(".off", "_info.pkl"), "rb"))  # noqa: SIM115 (as transcribed)
     mesh_x = trimesh.load(off_file_x, process=False, maintain_order=True)
     verts = np.asarray(mesh_x.vertices).astype(np.float32)     # torch.from_numpy(verts_x).float()
     faces = np.asarray(mesh_x.faces).astype(np.int64)          # torch.from_numpy(faces_x).long()
@@ -189,8 +187,8 @@ def test_plan_rows_and_layouts_read_by_the_loaders(small_records, store_of, tmp_
         monkeypatch.chdir(out)   # geo-lora reads ./geodesic_dist_matrices
         n_dsmk = 0
         for folder in sorted(p for p in data_root.iterdir() if p.name.isdigit()):
-            off0 = sorted(folder.glob("0_*.off"))[0]
-            off1 = sorted(folder.glob("1_*.off"))[0]
+            off0 = min(folder.glob("0_*.off"))
+            off1 = min(folder.glob("1_*.off"))
             info0 = pickle.loads(off0.with_name(off0.stem + "_info.pkl").read_bytes())
             (row,) = {r["pair_id"] for r in index if r["index"] == folder.name}
             record = by_id[row]
