@@ -60,6 +60,8 @@ SUBCOMMANDS: tuple[tuple[str, str, str], ...] = (
     ("export-released", "becos.export", "write a store in the released BeCoS folder layout"),
     ("export-psmal", "becos.export", "write a store as PSMAL-style shapes/*.off + maps/*.vts"),
     ("export-geodesics", "becos.export", "write geodesic matrices of a store's shapes in the loaders' layout"),
+    ("geodesic-plan", "becos.geodesic_jobs", "spread the distinct full meshes of some stores over geodesic jobs"),
+    ("geodesic-rows", "becos.geodesic_jobs", "compute the geodesic rows of one part of a geodesic plan"),
     ("export-ulrssm", "becos.export", "write a store ULRSSM style: one off/ corres/ [dist/] root per pair"),
     ("export-dpfm", "becos.export", "write a store DPFM style: shapes/*.off + maps/<x>_<y>.map"),
     ("report", "becos.report", "counts, overlap histogram and renders of a store"),

@@ -598,8 +598,8 @@ def write_ulrssm(records: Iterable[PairRecord], out_dir: str | Path, *, metadata
 
 GEODESIC_FOLDER = "geodesic_dist_matrices"
 """Folder of the loaders' geodesic layout (:func:`write_geodesic_matrices`)."""
-_GEODESIC_TASK_ROWS = 1024
-"""Distance rows per parallel task (one solver factorisation each: ~0.2 s against ~5 s of rows)."""
+_GEODESIC_TASK_ROWS = 4096
+"""Distance rows per parallel task (one solver set-up each: ~0.3 s against ~5 s of rows at 10k vertices)."""
 
 
 @dataclass(frozen=True)
@@ -616,6 +616,9 @@ class _GeodesicShape:
     key: str           # the full mesh up to rigid motion (cache key of its rows)
     p2f: np.ndarray    # (V,) its vertices on the full mesh
     sqrt_area: float   # the full shape's sqrt-area in the units of the record's vertices
+    setting: str = ""
+    vertices: np.ndarray | None = None  # (V, 3) float64 as written (only when the plan keeps arrays)
+    faces: np.ndarray | None = None     # (F, 3) int64
 
 
 def _full_mesh_key(vertices: np.ndarray, faces: np.ndarray, dataset: str, name: str, variant: int) -> str:
@@ -629,12 +632,14 @@ def _full_mesh_key(vertices: np.ndarray, faces: np.ndarray, dataset: str, name: 
     return f"{_id_field(dataset)}_{_id_field(name)}_v{int(variant)}_{digest}"
 
 
-def _geodesic_plan(records: Iterable[PairRecord], splits, each=None) -> tuple[list[_GeodesicShape], dict, dict, dict]:
+def _geodesic_plan(records: Iterable[PairRecord], splits, each=None,
+                   keep_arrays: bool = False) -> tuple[list[_GeodesicShape], dict, dict, dict]:
     """Shapes to write, unique full meshes ``{key: (vertices, faces)}``, the rows each needs
     ``{key: sorted unique full vertices}`` (the union of its shapes' ``partial_to_full``) and the pair
     numbers ``{(split, pair_id): index}`` of ALL records (ascending pair_id per split, as every export
     numbers pairs; so a split subset keeps the whole export's numbering). Streams the records, calling
-    ``each(record)`` on every one (to write other files in the same pass)."""
+    ``each(record)`` on every one (to write other files in the same pass). ``keep_arrays``: each shape
+    also keeps its written vertices and faces."""
     keep = None if splits is None else {str(s) for s in splits}
     shapes, meshes, needed, ids = [], {}, {}, {}
     for record in records:
@@ -656,7 +661,10 @@ def _geodesic_plan(records: Iterable[PairRecord], splits, each=None) -> tuple[li
             shapes.append(_GeodesicShape(
                 str(record.meta["split"]), str(record.pair_id), k, info["org_dataset"], info["name"],
                 released_file_stem(k, info["name"], info["remesh_variant"], record.pair_id if scanned else None),
-                info["mesh_id"], key, p2f, 1.0 if normalised else float(record[f"{s}_full_sqrt_area"])))
+                info["mesh_id"], key, p2f, 1.0 if normalised else float(record[f"{s}_full_sqrt_area"]),
+                str(record.meta["setting"]),
+                np.asarray(record[f"{s}_vertices"], dtype=np.float64) if keep_arrays else None,
+                np.asarray(record[f"{s}_faces"], dtype=np.int64) if keep_arrays else None))
     numbers = {}
     for split, pair_ids in ids.items():
         pair_ids.sort()
@@ -703,9 +711,13 @@ def _compute_geodesic_rows(meshes: dict, needed: dict, method: str, jobs: int, f
 
 
 def _shape_matrix(shape: _GeodesicShape, rows: np.ndarray, matrix: np.ndarray) -> np.ndarray:
-    """(V, V) float32 symmetrised matrix of a shape's vertices from its full mesh's rows."""
-    sub = np.asarray(matrix[np.searchsorted(rows, shape.p2f)][:, shape.p2f], dtype=np.float64)
-    sym = (0.5 * (sub + sub.T)).astype(np.float32)
+    """(V, V) float32 symmetrised matrix of a shape's vertices from its full mesh's rows (float32
+    throughout: two (V, V) arrays at a time, no float64 copies of a 10k-vertex matrix)."""
+    sub = np.asarray(matrix[np.searchsorted(rows, shape.p2f)], dtype=np.float32)
+    if not (len(shape.p2f) == sub.shape[1] and np.array_equal(shape.p2f, np.arange(sub.shape[1]))):
+        sub = sub[:, shape.p2f]
+    sym = sub.T + sub
+    sym *= np.float32(0.5)
     np.fill_diagonal(sym, 0.0)
     return sym
 
@@ -759,46 +771,125 @@ def write_geodesics(records: Iterable[PairRecord], out_dir: str | Path, method: 
     return out
 
 
+GEODESIC_LAYOUTS = ("geo-lora", "dsmk")
+"""The geodesic layouts :func:`write_geodesic_matrices` can write (``exports.geodesic_layouts``)."""
+DSMK_FOLDER = "dsmk"
+"""Folder of DeepShapeMatchingKit's geodesic cache layout (:func:`write_geodesic_matrices`)."""
+
+
+def dsmk_cache_name(vertices: np.ndarray, faces: np.ndarray) -> str:
+    """DeepShapeMatchingKit's geodesic cache file name of a shape, ``<sha1>_0.npz``, as its
+    ``BeCoSDataset`` (``shape_scale: default``) looks it up: ``utils.cache_util.get_cached_compute`` hashes
+    the loaded OFF's vertices as float32 and its faces as int64 (``hash_arrays``: SHA-1 over the raw bytes
+    of each array in turn); ``_0`` is the first slot of its collision chain.
+
+    Args:
+        vertices: (V, 3) the shape's written vertices (any float dtype; cast to float32 as the loader does).
+        faces: (F, 3) its faces.
+    """
+    import hashlib
+
+    digest = hashlib.sha1()
+    digest.update(np.ascontiguousarray(vertices, dtype=np.float32).view(np.uint8))
+    digest.update(np.ascontiguousarray(faces, dtype=np.int64).view(np.uint8))
+    return f"{digest.hexdigest()}_0.npz"
+
+
+def _dsmk_reads(setting: str, side: int) -> bool:
+    """Whether DeepShapeMatchingKit's BeCoSDataset asks for the geodesics of this shape: only the first
+    shape of each pair it forms is given ``dist``; it forms (0, 1) always and (1, 0) for F2F and P2P."""
+    return side == 0 or setting in ("partial_partial", "full_full")
+
+
+def _rows_for(meshes: dict, needed: dict, rows_folders, method: str, jobs: int, work: Path,
+              progress: bool) -> tuple[dict, dict]:
+    """``({key: sorted source vertices}, {key: (R, V) float32 rows})``: read from ``rows_folders``
+    (outputs of ``becos geodesic-rows``; they may hold more rows and meshes) or computed here."""
+    if rows_folders is None:
+        return needed, _compute_geodesic_rows(meshes, needed, method, jobs, work, progress)
+    from becos.geodesic_jobs import load_rows
+
+    loaded = load_rows(rows_folders)
+    sources, rows = {}, {}
+    for key in meshes:
+        if key not in loaded:
+            raise ExportError(f"{', '.join(map(str, rows_folders))}: no geodesic rows of mesh {key}. Fix: plan "
+                              f"the rows with this store and the same splits (`becos geodesic-plan`), then "
+                              f"rerun `becos geodesic-rows`")
+        have, matrix = loaded[key]
+        if matrix.shape[1] != len(meshes[key][0]) or not np.isin(needed[key], have).all():
+            raise ExportError(f"geodesic rows of mesh {key}: {matrix.shape} for a mesh of {len(meshes[key][0])} "
+                              f"vertices, missing some of the {len(needed[key])} rows this store needs. Fix: "
+                              f"rerun `becos geodesic-plan` and `becos geodesic-rows` with this store")
+        sources[key], rows[key] = have, matrix
+    return sources, rows
+
+
 def write_geodesic_matrices(records: Iterable[PairRecord], out_dir: str | Path, method: str = "heat", *,
                             splits=None, jobs: int = 1, metadata: Mapping | None = None,
-                            overwrite: bool = False, progress: bool = False) -> Path:
-    """Geodesic matrices in the layout loaders read (``docs/released-layout.md``, section 3):
+                            overwrite: bool = False, progress: bool = False, rows=None,
+                            layouts=GEODESIC_LAYOUTS) -> Path:
+    """Geodesic matrices in the layouts loaders read (``docs/released-layout.md``, section 3):
 
-    ``<out>/geodesic_dist_matrices/<stem>.npy``: (V, V) float32 distances between the vertices of the
-    released file ``<stem>.off`` (:func:`released_file_stem`; measured on the shape's FULL mesh),
-    divided by the full shape's sqrt-area (the released ``surface_area_after_scaling``): the file
-    geo-lora's ``BecosDataset`` loads from ``./geodesic_dist_matrices/<off stem>.npy`` instead of
-    computing it. ``<out>/geodesic_dist_matrices/index.csv`` lists every matrix with its split, pair
-    index, pair_id, mesh_id, vertex count and the sqrt-area (multiply to get the record's units);
-    ``<out>/logs/config.yaml`` as the other exports.
+    - ``<out>/geodesic_dist_matrices/<stem>.npy``: (V, V) float32 distances between the vertices of the
+      released file ``<stem>.off`` (:func:`released_file_stem`; measured on the shape's FULL mesh),
+      divided by the full shape's sqrt-area (the released ``surface_area_after_scaling``): the file
+      geo-lora's ``BecosDataset`` loads from ``./geodesic_dist_matrices/<off stem>.npy`` instead of
+      computing it. ``index.csv`` beside them lists every shape of every pair with its split, pair
+      index, pair_id, stem, mesh_id, vertex count, the sqrt-area (multiply to get the record's units)
+      and its DeepShapeMatchingKit file.
+    - ``<out>/dsmk/<split>/dist/<sha1>_0.npz``: DeepShapeMatchingKit's geodesic cache
+      (:func:`dsmk_cache_name`; keys ``verts`` float32, ``faces`` int64, ``result`` (V, V) float32 in
+      the units of the written vertices, which its ``BeCoSDataset`` divides by the info file's
+      ``surface_area_after_scaling``) of every shape it gives geodesics to; link or copy
+      ``dsmk/<split>/dist`` to ``<released export>/<split>/dist``.
+    - ``<out>/logs/config.yaml`` as the other exports.
 
     Each distinct full mesh is solved once for the union of the vertices its shapes keep, by ``jobs``
-    processes; ``splits`` (e.g. ``["test"]``) limits the export to those splits.
+    processes, or its rows are read from ``rows`` (folders written by ``becos geodesic-rows``);
+    ``splits`` (e.g. ``["test"]``) limits the export to those splits. ``layouts``: which of
+    :data:`GEODESIC_LAYOUTS` to write (``index.csv`` is always written).
     """
+    from becos.atomic import save_npz
+
+    unknown = sorted(set(layouts) - set(GEODESIC_LAYOUTS))
+    if unknown or not layouts:
+        raise ExportError(f"geodesic layouts {unknown or '(none)'}: unknown. Fix: choose from {GEODESIC_LAYOUTS}")
+
     out = Path(out_dir)
     with _staged_dir(out, overwrite) as tmp:
-        shapes, meshes, needed, numbers = _geodesic_plan(records, splits)
+        shapes, meshes, needed, numbers = _geodesic_plan(records, splits, keep_arrays=True)
         work = tmp / ".rows"
         work.mkdir()
-        rows = _compute_geodesic_rows(meshes, needed, method, jobs, work, progress)
+        sources, matrices = _rows_for(meshes, needed, rows, method, jobs, work, progress)
         folder = tmp / GEODESIC_FOLDER
         folder.mkdir()
-        table, written = [], {}
+        table, written, dsmk_written = [], set(), set()
         for sh in shapes:
+            matrix = None
+            if "geo-lora" in layouts and sh.stem not in written:  # one full mesh in several pairs: one file
+                written.add(sh.stem)
+                matrix = _shape_matrix(sh, sources[sh.key], matrices[sh.key])
+                np.save(folder / f"{sh.stem}.npy", (matrix / np.float32(sh.sqrt_area)).astype(np.float32, copy=False))
+            dsmk_file = ""
+            if "dsmk" in layouts and _dsmk_reads(sh.setting, sh.side):
+                dsmk_file = f"{DSMK_FOLDER}/{sh.split}/dist/{dsmk_cache_name(sh.vertices, sh.faces)}"
+                if dsmk_file not in dsmk_written:
+                    dsmk_written.add(dsmk_file)
+                    if matrix is None:
+                        matrix = _shape_matrix(sh, sources[sh.key], matrices[sh.key])
+                    (tmp / dsmk_file).parent.mkdir(parents=True, exist_ok=True)
+                    save_npz(tmp / dsmk_file, verts=sh.vertices.astype(np.float32), faces=sh.faces, result=matrix)
             table.append([sh.split, numbers[(sh.split, sh.pair_id)], sh.pair_id, sh.side, sh.stem, sh.mesh_id,
-                          len(sh.p2f), repr(sh.sqrt_area)])
-            if sh.stem in written:  # one full mesh in several pairs: one file
-                continue
-            written[sh.stem] = sh.key
-            matrix = _shape_matrix(sh, needed[sh.key], rows[sh.key]) / np.float32(sh.sqrt_area)
-            np.save(folder / f"{sh.stem}.npy", matrix.astype(np.float32, copy=False))
-        del rows
+                          len(sh.p2f), repr(sh.sqrt_area), dsmk_file])
+        del matrices
         shutil.rmtree(work)
         _write_ids(folder / "index.csv", ["split", "index", "pair_id", "side", "stem", "mesh_id", "n_vertices",
-                                          "sqrt_area"], table)
+                                          "sqrt_area", "dsmk_file"], table)
         counts = {split: len({r[2] for r in table if r[0] == split}) for split in dict.fromkeys(r[0] for r in table)}
         _write_log(tmp, "becos.export.write_geodesic_matrices",
-                   f"becos geodesic matrices ({method}, divided by sqrt-area)", counts, None, metadata)
+                   f"becos geodesic matrices ({method}, divided by sqrt-area; DeepShapeMatchingKit cache)",
+                   counts, None, metadata)
     return out
 
 
@@ -826,7 +917,14 @@ def configure_parser(parser: argparse.ArgumentParser, name: str) -> argparse.Arg
         parser.add_argument("--geodesics", action="store_true",
                             help="also write dist/<k>.mat (key dist: geodesics divided by the sqrt-area)")
     else:
-        parser.add_argument("out", type=Path, help="output folder (<out>/geodesic_dist_matrices/<stem>.npy)")
+        parser.add_argument("out", type=Path, help="output folder (<out>/geodesic_dist_matrices/<stem>.npy, "
+                                                   "<out>/dsmk/<split>/dist/<hash>_0.npz)")
+        parser.add_argument("--rows", type=Path, nargs="+", metavar="DIR",
+                            help="read the distance rows from these `becos geodesic-rows` folders instead of "
+                                 "computing them")
+        parser.add_argument("--layouts", nargs="+", choices=GEODESIC_LAYOUTS, default=list(GEODESIC_LAYOUTS),
+                            help="layouts to write (default: all): geo-lora geodesic_dist_matrices/<stem>.npy, "
+                                 "dsmk dsmk/<split>/dist/<sha1>_0.npz")
     if name in ("export-psmal", "export-geodesics", "export-ulrssm"):
         parser.add_argument("--geodesic-method", choices=METHODS, default="heat",
                             help="geodesic estimator (default: heat)")
@@ -847,12 +945,15 @@ def run_cli(args: argparse.Namespace) -> int:
         raise ExportError(f"--jobs must be at least 1, got {args.jobs}")
     if args.export_kind == "export-geodesics":
         write_geodesic_matrices(bench.records(), out, args.geodesic_method, splits=args.splits, jobs=args.jobs,
-                                metadata=bench.metadata, overwrite=args.force, progress=True)
+                                metadata=bench.metadata, overwrite=args.force, progress=True, rows=args.rows,
+                                layouts=args.layouts)
         with open(out / GEODESIC_FOLDER / "index.csv", encoding="utf-8", newline="") as fh:
             rows = list(csv.DictReader(fh))
         print(json.dumps({"out": str(out.resolve()), "setting": bench.setting, "method": args.geodesic_method,
-                          "splits": args.splits, "matrices": len({r["stem"] for r in rows}),
-                          "bytes": sum(p.stat().st_size for p in (out / GEODESIC_FOLDER).glob("*.npy"))}))
+                          "splits": args.splits, "matrices": len(list((out / GEODESIC_FOLDER).glob("*.npy"))),
+                          "bytes": sum(p.stat().st_size for p in (out / GEODESIC_FOLDER).glob("*.npy")),
+                          "dsmk_files": len({r["dsmk_file"] for r in rows if r["dsmk_file"]}),
+                          "dsmk_bytes": sum(p.stat().st_size for p in out.glob(f"{DSMK_FOLDER}/*/dist/*.npz"))}))
         return 0
     if args.export_kind == "export-released":
         if bench.setting not in out.resolve().parts:

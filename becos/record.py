@@ -3,42 +3,11 @@
 A record holds shape 0 (X) and shape 1 (Y) and the ground truth between them. Arrays that index a
 shape's vertices are *named after that shape*: ``x_overlap_mask`` has one entry per vertex of X.
 
-Per shape ``s`` in (``x``, ``y``):
-
-=====================  ==========  ===========================================================
-key                    dtype       meaning
-=====================  ==========  ===========================================================
-s_vertices             float64     (V_s, 3) in the final frame (after the random rotation), at
-                                   dataset scale unless ``area_normalised``
-s_faces                int64       (F_s, 3)
-s_full_vertices        float64     (V_full, 3) the full (remeshed) shape in the same final frame, for
-                                   errors measured on the full shape; (0, 3) when the shape is full
-                                   (then it is ``s_vertices``)
-s_full_faces           int64       (F_full, 3) its faces; (0, 3) when the shape is full
-s_partial_to_full      int64       (V_s,) vertex of the full (remeshed) shape; arange when full
-s_full_to_partial      int64       (V_full,) -1 where the full vertex was not kept
-s_full_face_ids        int64       (F_s,) face of the full (remeshed) shape of each face
-s_overlap_mask         bool        (V_s,) the vertex's ground-truth point lies on the other shape
-s_annotation           int8        (V_s,) reserved per-vertex label (left/right), -1 = none/unset
-s_full_area            float64     area of the full remeshed shape at dataset scale
-s_full_sqrt_area       float64     its square root (the Princeton error normaliser)
-s_dataset_scale        float64     scale applied to the file's coordinates
-s_frame_rotation       float64     (3, 3) file frame -> common y-up frame (row vectors, V @ R)
-s_centre               float64     (3,) subtracted after scaling, before the frame rotation
-s_align_rotation       float64     (3, 3) rigid alignment onto X (identity for X), row vectors
-s_align_translation    float64     (3,) added after the alignment rotation
-s_random_rotation      float64     (3, 3) applied last (row vectors)
-s_camera               float64     (3, 3) rows: position, look-at target, up, in the shape's
-                                   common frame (before alignment); NaN for a full shape
-s_remesh_variant       int64       remesh variant index (-1 = not remeshed)
-s_overlap              float64     share of V_s with ``s_overlap_mask`` (1.0 for F2F)
-=====================  ==========  ===========================================================
-
-Ground truth (vertex form and barycentric form):
-
-- ``corr_01`` (V_x,) int64: X vertex -> Y vertex, -1 = no counterpart on Y;
-  ``corr_01_face`` (V_x,) int64 Y face, ``corr_01_weights`` (V_x, 3) barycentric weights.
-- ``corr_10``, ``corr_10_face``, ``corr_10_weights``: the same from Y to X.
+The schema (keys, dtypes, shapes, store groups and meanings) is one table, :data:`RECORD_SCHEMA`,
+built from :data:`SIDE_FIELDS` (per shape ``s`` in ``x``, ``y``) and :data:`PAIR_FIELDS` (ground
+truth, vertex form ``corr_01`` (V_x,) X vertex -> Y vertex, -1 = no counterpart on Y, and
+barycentric form ``corr_01_face``/``corr_01_weights``; ``corr_10*`` the same from Y to X). Its rows
+are listed at the end of this docstring (generated from the table).
 
 Final frame: ``final = ((file * scale - centre) @ frame_rotation @ align_rotation + align_translation)
 @ random_rotation``. Metadata (``meta``): schema_version, pair_id, seed, setting, split, n_tries,
@@ -49,7 +18,7 @@ from __future__ import annotations
 
 import hashlib
 import json
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -58,11 +27,147 @@ from becos.atomic import save_npz
 from becos.settings import SETTINGS  # noqa: F401 (re-exported: becos.record.SETTINGS)
 
 SCHEMA_VERSION = 1
-SHAPE_KEYS = ("vertices", "faces", "full_vertices", "full_faces", "partial_to_full", "full_to_partial",
-              "full_face_ids", "overlap_mask",
-              "annotation", "full_area", "full_sqrt_area", "dataset_scale", "frame_rotation", "centre",
-              "align_rotation", "align_translation", "random_rotation", "camera", "remesh_variant", "overlap")
-PAIR_KEYS = ("corr_01", "corr_01_face", "corr_01_weights", "corr_10", "corr_10_face", "corr_10_weights")
+SIDES = ("x", "y")
+
+
+@dataclass(frozen=True)
+class Field:
+    """One record key of :data:`RECORD_SCHEMA`.
+
+    Attributes:
+        dtype: dtype of the array in a :class:`PairRecord` (what every reader returns).
+        shape: ragged keys: the shape of one row (the leading length is the pair's); per-pair keys:
+            the whole array's shape.
+        group: ragged keys: the store's offsets group (``x_vertex``: one row per vertex of X ...),
+            None for per-pair keys (stacked as (N, ...) in the store).
+        meaning: what the array holds (units, frames, -1 conventions).
+        stored: dtype on disk (pair record files and the store) when narrower than ``dtype``:
+            vertex and face indices fit int32; readers widen them back, values unchanged.
+        identity: the key is ``arange`` for a full shape; record files then omit it and readers
+            derive it (:func:`encode_arrays` / :func:`decode_arrays`).
+    """
+
+    dtype: str
+    shape: tuple[int, ...]
+    group: str | None
+    meaning: str
+    stored: str | None = None
+    identity: bool = False
+
+    @property
+    def disk_dtype(self) -> str:
+        return self.stored or self.dtype
+
+
+SIDE_FIELDS: dict[str, Field] = {
+    "vertices": Field("float64", (3,), "vertex", "(V_s, 3) in the final frame (after the random rotation), at "
+                                                 "dataset scale unless ``area_normalised``"),
+    "faces": Field("int64", (3,), "face", "(F_s, 3)", stored="int32"),
+    "full_vertices": Field("float64", (3,), "full_vertex",
+                           "(V_full, 3) the full (remeshed) shape in the same final frame, for errors measured on "
+                           "the full shape; (0, 3) when the shape is full (then it is ``s_vertices``)"),
+    "full_faces": Field("int64", (3,), "full_face", "(F_full, 3) its faces; (0, 3) when the shape is full",
+                        stored="int32"),
+    "partial_to_full": Field("int64", (), "vertex", "(V_s,) vertex of the full (remeshed) shape; arange when full",
+                             stored="int32", identity=True),
+    "full_to_partial": Field("int64", (), "full_to_partial",
+                             "(V_full,) -1 where the full vertex was not kept (V_full rows also for a full shape)",
+                             stored="int32", identity=True),
+    "full_face_ids": Field("int64", (), "face", "(F_s,) face of the full (remeshed) shape of each face",
+                           stored="int32", identity=True),
+    "overlap_mask": Field("bool", (), "vertex", "(V_s,) the vertex's ground-truth point lies on the other shape"),
+    "annotation": Field("int8", (), "vertex", "(V_s,) reserved per-vertex label (left/right), -1 = none/unset"),
+    "full_area": Field("float64", (), None, "area of the full remeshed shape at dataset scale"),
+    "full_sqrt_area": Field("float64", (), None, "its square root (the Princeton error normaliser)"),
+    "dataset_scale": Field("float64", (), None, "scale applied to the file's coordinates"),
+    "frame_rotation": Field("float64", (3, 3), None, "file frame -> common y-up frame (row vectors, V @ R)"),
+    "centre": Field("float64", (3,), None, "subtracted after scaling, before the frame rotation"),
+    "align_rotation": Field("float64", (3, 3), None, "rigid alignment onto X (identity for X), row vectors"),
+    "align_translation": Field("float64", (3,), None, "added after the alignment rotation"),
+    "random_rotation": Field("float64", (3, 3), None, "applied last (row vectors)"),
+    "camera": Field("float64", (3, 3), None, "rows: position, look-at target, up, in the shape's common frame "
+                                             "(before alignment); NaN for a full shape"),
+    "remesh_variant": Field("int64", (), None, "remesh variant index (-1 = not remeshed)"),
+    "overlap": Field("float64", (), None, "share of V_s with ``s_overlap_mask`` (1.0 for F2F)"),
+}
+"""Per-shape keys, named ``<s>_<key>`` for s in :data:`SIDES`; group ``vertex`` means ``<s>_vertex``."""
+
+PAIR_FIELDS: dict[str, Field] = {
+    "": Field("int64", (), "vertex", "(V_s,) vertex of the other shape, -1 = no counterpart", stored="int32"),
+    "_face": Field("int64", (), "vertex", "(V_s,) face of the other shape holding the point", stored="int32"),
+    "_weights": Field("float64", (3,), "vertex", "(V_s, 3) barycentric weights in that face"),
+}
+"""Ground-truth keys, named ``corr_01<key>`` (X -> Y, rows of X) and ``corr_10<key>`` (Y -> X)."""
+
+CORR_OF_SIDE = {"x": "corr_01", "y": "corr_10"}
+
+
+def _schema() -> dict[str, Field]:
+    out = {}
+    for s in SIDES:
+        for key, f in SIDE_FIELDS.items():
+            out[f"{s}_{key}"] = replace(f, group=None if f.group is None else f"{s}_{f.group}")
+    for s in SIDES:
+        for key, f in PAIR_FIELDS.items():
+            out[f"{CORR_OF_SIDE[s]}{key}"] = replace(f, group=f"{s}_{f.group}")
+    return out
+
+
+RECORD_SCHEMA: dict[str, Field] = _schema()
+"""Record key -> :class:`Field`: the one definition of the pair-record schema."""
+SHAPE_KEYS = tuple(SIDE_FIELDS)
+PAIR_KEYS = tuple(f"{c}{k}" for c in CORR_OF_SIDE.values() for k in PAIR_FIELDS)
+RECORD_KEYS = tuple(RECORD_SCHEMA)
+IDENTITY_MEMBER = "__identity__"
+"""Record-file member: JSON ``{key: length}`` of the identity maps left out of the file."""
+
+
+def _schema_doc() -> str:
+    rows = [(f"s_{k}", f.dtype + ("" if f.stored is None else f" ({f.stored} on disk)"), f.meaning)
+            for k, f in SIDE_FIELDS.items()]
+    rows += [(f"corr_01{k}", f.dtype + ("" if f.stored is None else f" ({f.stored} on disk)"), f.meaning)
+             for k, f in PAIR_FIELDS.items()]
+    w = [max(len(r[i]) for r in rows) for i in range(2)]
+    rule = f"{'=' * w[0]}  {'=' * w[1]}  {'=' * 60}"
+    lines = [rule, f"{'key':<{w[0]}}  {'dtype':<{w[1]}}  meaning", rule]
+    lines += [f"{a:<{w[0]}}  {b:<{w[1]}}  {c}" for a, b, c in rows]
+    return "\n".join(["", "Record keys (generated from :data:`RECORD_SCHEMA`; ``s`` is x or y):", "", *lines, rule, ""])
+
+
+__doc__ = (__doc__ or "") + _schema_doc()
+
+
+def encode_arrays(arrays: dict[str, np.ndarray]) -> tuple[dict[str, np.ndarray], dict[str, int]]:
+    """The arrays as a record file stores them: schema index keys narrowed to their ``stored`` dtype
+    when every value fits, identity maps (``arange``) left out. Returns ``(arrays, {left-out key: length})``;
+    :func:`decode_arrays` inverts it exactly."""
+    out, identity = {}, {}
+    for key, value in arrays.items():
+        f = RECORD_SCHEMA.get(key)
+        if f is not None and f.identity and value.ndim == 1 and value.dtype == np.dtype(f.dtype) and len(value) \
+                and value[0] == 0 and np.array_equal(value, np.arange(len(value))):
+            identity[key] = len(value)
+            continue
+        if f is not None and f.stored is not None and value.dtype == np.dtype(f.dtype) and value.size:
+            info = np.iinfo(f.stored)
+            if info.min <= value.min() and value.max() <= info.max:
+                value = value.astype(f.stored)
+        out[key] = value
+    return out, identity
+
+
+def decode_arrays(stored: dict[str, np.ndarray], identity: dict[str, int] | None = None) -> dict[str, np.ndarray]:
+    """Record arrays from :func:`encode_arrays`' output: schema keys widened back to their dtype,
+    identity maps derived (``arange(length)``)."""
+    out = {}
+    for key, value in stored.items():
+        f = RECORD_SCHEMA.get(key)
+        if f is not None and f.stored is not None and value.dtype == np.dtype(f.stored):
+            value = value.astype(f.dtype)
+        out[key] = value
+    for key, n in (identity or {}).items():
+        out[key] = np.arange(int(n), dtype=RECORD_SCHEMA[key].dtype)
+    return out
 
 
 @dataclass
@@ -73,8 +178,7 @@ class PairRecord:
     meta: dict = field(default_factory=dict)
 
     def __post_init__(self):
-        missing = [f"{s}_{k}" for s in ("x", "y") for k in SHAPE_KEYS if f"{s}_{k}" not in self.arrays]
-        missing += [k for k in PAIR_KEYS if k not in self.arrays]
+        missing = [k for k in RECORD_KEYS if k not in self.arrays]
         if missing:
             raise ValueError(f"pair record lacks {missing}")
         self.meta.setdefault("schema_version", SCHEMA_VERSION)
@@ -88,16 +192,23 @@ class PairRecord:
 
     def save(self, path: str | Path) -> None:
         """Write one .npz (arrays + ``meta`` as JSON), atomically. ``meta["content_digest"]`` is set to
-        :func:`content_digest` of the record, so an edit of the file is noticed (:func:`is_intact`)."""
+        :func:`content_digest` of the record, so an edit of the file is noticed (:func:`is_intact`).
+
+        The file is a .npz with deflated integer members (:func:`becos.atomic.save_npz`;
+        :func:`encode_arrays`: int32 indices, no identity maps;
+        ``__identity__`` lists the maps left out), read back exactly by :meth:`load`."""
         self.meta["content_digest"] = content_digest(self.arrays, self.meta)
-        save_npz(path, __meta__=np.array(json.dumps(self.meta, sort_keys=True)), **self.arrays)
+        stored, identity = encode_arrays(self.arrays)
+        save_npz(path, compressed=True, __meta__=np.array(json.dumps(self.meta, sort_keys=True)),
+                 **{IDENTITY_MEMBER: np.array(json.dumps(identity, sort_keys=True))}, **stored)
 
     @classmethod
     def load(cls, path: str | Path) -> "PairRecord":
         with np.load(path, allow_pickle=False) as data:
             meta = json.loads(str(data["__meta__"]))
-            arrays = {k: data[k] for k in data.files if k != "__meta__"}
-        return cls(arrays, meta)
+            identity = json.loads(str(data[IDENTITY_MEMBER])) if IDENTITY_MEMBER in data.files else {}
+            stored = {k: data[k] for k in data.files if k not in ("__meta__", IDENTITY_MEMBER)}
+        return cls(decode_arrays(stored, identity), meta)
 
 
 def content_digest(arrays: dict[str, np.ndarray], meta: dict) -> str:

@@ -74,24 +74,13 @@ from pathlib import Path
 import numpy as np
 
 from becos.errors import BecosError
-from becos.record import SCHEMA_VERSION
+from becos.record import RECORD_SCHEMA, SCHEMA_VERSION
 from becos.settings import SETTINGS, SPLITS
 from becos.store import DAMAGED_STORE_FIX as STORE_FIX
 
 WEIGHT_TOL = 1e-6
 ROTATION_TOL = 1e-6
 MAX_EXAMPLES = 3
-
-_SIDE_DTYPES = {
-    "vertices": ("float64", (3,)), "faces": ("int64", (3,)), "full_vertices": ("float64", (3,)),
-    "full_faces": ("int64", (3,)), "partial_to_full": ("int64", ()), "full_to_partial": ("int64", ()),
-    "full_face_ids": ("int64", ()), "overlap_mask": ("bool", ()), "annotation": ("int8", ()),
-    "full_area": ("float64", ()), "full_sqrt_area": ("float64", ()), "dataset_scale": ("float64", ()),
-    "frame_rotation": ("float64", (3, 3)), "centre": ("float64", (3,)), "align_rotation": ("float64", (3, 3)),
-    "align_translation": ("float64", (3,)), "random_rotation": ("float64", (3, 3)),
-    "camera": ("float64", (3, 3)), "remesh_variant": ("int64", ()), "overlap": ("float64", ()),
-}
-_PAIR_DTYPES = {"": ("int64", ()), "_face": ("int64", ()), "_weights": ("float64", (3,))}
 
 VALIDATE_BLOCK_BYTES = 16 << 20
 """Uncompressed bytes checked at once (the checks make several temporaries per block, so the
@@ -100,10 +89,8 @@ block size sets the validator's memory, independent of the store's size)."""
 
 def expected_schema() -> dict[str, tuple[str, tuple[int, ...]]]:
     """Record key -> (dtype name, trailing shape) as stored: ragged keys without their leading length,
-    stacked keys with their full per-pair shape."""
-    out = {f"{s}_{k}": v for s in ("x", "y") for k, v in _SIDE_DTYPES.items()}
-    out.update({f"{c}{k}": v for c in ("corr_01", "corr_10") for k, v in _PAIR_DTYPES.items()})
-    return out
+    stacked keys with their full per-pair shape (from :data:`becos.record.RECORD_SCHEMA`)."""
+    return {key: (f.disk_dtype, f.shape) for key, f in RECORD_SCHEMA.items()}
 
 
 @dataclass
@@ -373,8 +360,6 @@ class _BlockChecker:
 
 def _check_schema(bench, problems: list[str]) -> bool:
     """Keys, dtypes, shapes and groups; False if the row-wise checks cannot run."""
-    from becos.store import SCHEMA_GROUPS
-
     ok = True
     expected = expected_schema()
     missing = sorted(set(expected) - set(bench.layout))
@@ -386,7 +371,7 @@ def _check_schema(bench, problems: list[str]) -> bool:
             continue
         array = bench.array(key)
         group = bench.layout[key]
-        want_group = SCHEMA_GROUPS.get(key)
+        want_group = RECORD_SCHEMA[key].group
         if group != want_group:
             problems.append(f"schema: {key} is stored in offset group {group}, expected {want_group} "
                             "(its lengths disagree with the other arrays of that group)")

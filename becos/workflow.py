@@ -927,17 +927,25 @@ def ground_truth_stage(config: dict, setting: str, chunk: int, out_index: Path) 
             rx, ry = shapes.remeshed(x.dataset, x.name, tx), shapes.remeshed(y.dataset, y.name, ty)
             gt_xy = shapes.network.ground_truth(x, y, x_remesh=rx, y_remesh=ry)
             gt_yx = shapes.network.ground_truth(y, x, x_remesh=ry, y_remesh=rx)
-            save_npz(path, input_key=np.array(key), xy_face=gt_xy.face, xy_weights=gt_xy.weights,
-                     xy_distance=gt_xy.distance, yx_face=gt_yx.face, yx_weights=gt_yx.weights,
-                     yx_distance=gt_yx.distance)
+            save_npz(path, compressed=True, input_key=np.array(key), xy_face=_narrow(gt_xy.face),
+                     xy_weights=gt_xy.weights, xy_distance=gt_xy.distance, yx_face=_narrow(gt_yx.face),
+                     yx_weights=gt_yx.weights, yx_distance=gt_yx.distance)
         entries.append({"pair_id": row["pair_id"], "path": str(path), "input_key": key, "computed": computed,
                         "digest": shapes.file_digest(path)})
         _progress("ground truth", setting, chunk, entries, len(rows), started)
     return _write_index(Path(out_index), setting, chunk, entries, started)
 
 
+def _narrow(face: np.ndarray) -> np.ndarray:
+    """Face indices as int32 on disk when they fit (:class:`SurfaceMap` widens them on load)."""
+    return face.astype(np.int32) if len(face) and face.max() <= np.iinfo(np.int32).max else face
+
+
 def load_ground_truth(path: Path):
-    """``(gt_xy, gt_yx)`` :class:`becos.surface_map.SurfaceMap` from a ground-truth file."""
+    """``(gt_xy, gt_yx)`` :class:`becos.surface_map.SurfaceMap` from a ground-truth file (a .npz,
+    :func:`becos.atomic.save_npz` compressed:
+    ``input_key``, ``xy_face`` (V_x,) int32, ``xy_weights`` (V_x, 3), ``xy_distance`` (V_x,), the same
+    for ``yx``; files of older becos hold int64 faces, uncompressed)."""
     from becos.surface_map import SurfaceMap
 
     with np.load(path, allow_pickle=False) as d:

@@ -35,7 +35,7 @@ def test_a_store_of_a_newer_format_says_so(store):
     meta = json.loads((store / "zarr.json").read_text())
     meta["attributes"]["becos_store"]["format"] += 1
     (store / "zarr.json").write_text(json.dumps(meta))
-    with pytest.raises(InputFileError, match=r"was written by a newer becos: store format 2, this becos reads format 1"
+    with pytest.raises(InputFileError, match=r"was written by a newer becos: store format 3, this becos reads format 2"
                                              r"\. Fix: upgrade becos"):
         open_benchmark(store)
 

@@ -178,3 +178,110 @@ def test_a_killed_writes_folder_is_removed_but_not_a_sibling_stores(pair_record_
     write_store(pair_record_files["full_full"], tmp_path / "s.zarr", setting="full_full", progress=False)
     assert not killed.exists() and sibling.exists()
     assert sorted(p.name for p in tmp_path.iterdir()) == [sibling.name, "s.zarr"]
+
+
+
+
+def _read_in_child(view, queue) -> None:
+    queue.put(view[1])
+
+
+@pytest.mark.parametrize("method", ["fork", "spawn"])
+def test_training_view_in_worker_processes(stores, pair_record_files, method):
+    """len()/[i] give plain numpy arrays equal to the records; the view pickles without an open store and
+    reads in forked children (after the parent has read: the inherited store is reopened) and spawned ones."""
+    import multiprocessing
+    import operator
+    import pickle
+
+    from becos.store import TrainingView
+
+    view = TrainingView(stores["partial_partial"], keys=["x_vertices", "corr_01", "y_faces"])
+    assert len(view) == 2 and len(TrainingView(stores["partial_partial"], split="test")) == 1
+    by_id = {r.pair_id: r for r in map(PairRecord.load, pair_record_files["partial_partial"])}
+    first = view[0]
+    assert set(first) == {"x_vertices", "corr_01", "y_faces", "row"}
+    want = by_id[open_benchmark(stores["partial_partial"]).table["pair_id"][0]]
+    for key in ("x_vertices", "corr_01", "y_faces"):
+        assert type(first[key]) is np.ndarray and first[key].dtype == want[key].dtype
+        assert np.array_equal(first[key], want[key])
+    assert view[-1]["row"] == 1
+    with pytest.raises(IndexError):
+        view[2]
+    state = pickle.dumps(view)
+    assert pickle.loads(state)._bench is None and len(state) < 2000
+    context = multiprocessing.get_context(method)
+    with context.Pool(2) as pool:
+        got = pool.starmap(operator.getitem, [(view, i) for i in (0, 1, 0, 1)])
+    if method == "fork":      # the child inherits the parent's open store itself (not pickled)
+        queue = context.Queue()
+        child = context.Process(target=_read_in_child, args=(view, queue))
+        child.start()
+        got.append(queue.get(timeout=60))
+        child.join(timeout=60)
+        assert child.exitcode == 0
+    for d in got:
+        row = int(d["row"])
+        record = by_id[open_benchmark(stores["partial_partial"]).table["pair_id"][row]]
+        assert np.array_equal(d["x_vertices"], record["x_vertices"]) and d["corr_01"].dtype == np.int64
+        assert np.array_equal(d["corr_01"], record["corr_01"])
+
+
+def test_record_files_hold_int32_indices_and_no_identity_maps(pair_record_files, tmp_path):
+    """A full shape's identity maps are left out of the file and derived on load; index keys are int32
+    on disk and int64 again after loading; values, dtypes and shapes round-trip exactly."""
+    from becos.record import IDENTITY_MEMBER, RECORD_SCHEMA, encode_arrays
+
+    record = PairRecord.load(pair_record_files["partial_full"][0])         # X full, Y partial
+    path = tmp_path / "r.npz"
+    record.save(path)
+    with np.load(path) as data:
+        on_disk = {k: data[k] for k in data.files}
+    identity = json.loads(str(on_disk[IDENTITY_MEMBER]))
+    assert set(identity) == {"x_partial_to_full", "x_full_to_partial", "x_full_face_ids"}
+    assert identity["x_full_face_ids"] == len(record["x_faces"]) and not set(identity) & set(on_disk)
+    assert on_disk["y_partial_to_full"].dtype == np.int32 and on_disk["corr_10"].dtype == np.int32
+    assert on_disk["y_vertices"].dtype == np.float64 and on_disk["x_annotation"].dtype == np.int8
+    assert assert_same_record(PairRecord.load(path), record) is None
+    wide = dict(record.arrays, corr_01=record["corr_01"] + (1 << 40))    # does not fit int32: kept int64
+    assert encode_arrays(wide)[0]["corr_01"].dtype == np.int64
+    # the one schema table drives the store layout and the validator's expectations
+    from becos.store import SCHEMA_GROUPS
+    from becos.validate import expected_schema
+
+    assert expected_schema()["x_faces"] == ("int32", (3,)) and SCHEMA_GROUPS["corr_10_face"] == "y_vertex"
+    assert set(expected_schema()) == set(RECORD_SCHEMA) == set(record.arrays)
+    import becos.record
+
+    assert all(f"s_{k}" in becos.record.__doc__ for k in becos.record.SHAPE_KEYS)
+
+
+def test_direct_reads_equal_zarr_reads_and_damage_is_named(stores, pair_record_files, tmp_path, monkeypatch):
+    """record(i) reads the chunk files itself; it returns what zarr's read_block returns, and a damaged
+    chunk file ends in DamagedStoreError (through zarr), never in another pair's or garbage values."""
+    import shutil
+
+    from becos.store import DamagedStoreError
+
+    bench = open_benchmark(stores["partial_partial"])
+    for i in range(len(bench)):
+        assert_same_record(bench.record(i), bench.read_block(i, i + 1).record(0))
+    assert bench._files, "the direct reader was not used"
+    assert bench.record(1).arrays["x_faces"].dtype == np.int64
+    import becos.store
+
+    monkeypatch.setattr(becos.store, "CHUNK_BYTES", 4096)       # many chunks over several shards per array
+    monkeypatch.setattr(becos.store, "SHARD_BYTES", 32768)
+    small = open_benchmark(write_store(pair_record_files["partial_partial"], tmp_path / "small.zarr",
+                                       setting="partial_partial", progress=False))
+    assert len(list((tmp_path / "small.zarr" / "arrays" / "x_vertices").glob("c.*"))) > 2
+    whole = small.read_block(0, 2)
+    for i, got in enumerate(small.records()):                 # whole chunks decoded in place
+        assert_same_record(got, whole.record(i))
+        assert_same_record(small.record(i), whole.record(i))
+    damaged = tmp_path / "damaged.zarr"
+    shutil.copytree(stores["partial_partial"], damaged)
+    chunk = next((damaged / "arrays" / "x_vertices").glob("c.*"))
+    chunk.write_bytes(chunk.read_bytes()[:50])
+    with pytest.raises(DamagedStoreError, match="arrays/x_vertices|cannot be read"):
+        open_benchmark(damaged).record(0)

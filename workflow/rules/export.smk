@@ -91,24 +91,66 @@ rule psmal_layout:
         "becos export-psmal {input.store:q} {output:q} > {log:q} 2>&1"
 
 
+from becos.geodesic_jobs import WORKFLOW_PARTS as GEODESIC_PARTS
+
+GEODESIC_SPLITS = " ".join(["--splits", *EXPORTS["geodesic_splits"]]) if EXPORTS["geodesic_splits"] else ""
+
+
+# Geodesics (docs/released-layout.md section 3): one plan over every setting's store, so that a full mesh
+# shared by pairs and settings is solved once; GEODESIC_PARTS jobs solve its meshes; one job per setting
+# writes the loaders' layouts from their rows (the rows are temporary).
+rule geodesic_plan:
+    input:
+        stores=expand(f"{RESULTS}/{{setting}}/benchmark.zarr", setting=SETTINGS),
+        validations=expand(f"{RESULTS}/{{setting}}/validation.json", setting=SETTINGS),
+    output:
+        temp(directory(f"{RESULTS}/geodesics/plan")),
+    params:
+        splits=GEODESIC_SPLITS,
+        parts=GEODESIC_PARTS,
+    resources:
+        mem_mb=RESOURCES.mem_mb("geodesic_plan"),
+        runtime=RESOURCES.runtime("geodesic_plan"),
+    log:
+        "logs/geodesics/plan.log",
+    shell:
+        "becos geodesic-plan {input.stores:q} --out {output:q} --parts {params.parts} {params.splits} > {log:q} 2>&1"
+
+
+rule geodesic_rows:
+    input:
+        f"{RESULTS}/geodesics/plan",
+    output:
+        temp(directory(f"{RESULTS}/geodesics/rows/part_{{part}}")),
+    resources:
+        mem_mb=RESOURCES.mem_mb("geodesic_rows"),
+        runtime=RESOURCES.runtime("geodesic_rows"),
+    log:
+        "logs/geodesics/rows_{part}.log",
+    shell:
+        "becos geodesic-rows {input:q}/part_{wildcards.part}.npz {output:q} > {log:q} 2>&1"
+
+
 rule geodesics:
     conda:
         "../envs/becos.yaml"
     input:
         store=f"{RESULTS}/{{setting}}/benchmark.zarr",
         validation=f"{RESULTS}/{{setting}}/validation.json",
+        rows=expand(f"{RESULTS}/geodesics/rows/part_{{part}}", part=range(GEODESIC_PARTS)),
     output:
         directory(f"{RESULTS}/{{setting}}/geodesics"),
     params:
-        splits=" ".join(["--splits", *EXPORTS["geodesic_splits"]]) if EXPORTS["geodesic_splits"] else "",
-    threads: 4  # capped at --cores on a local run; no total core count is needed (SLURM, --unlock)
+        splits=GEODESIC_SPLITS,
+        layouts=" ".join(EXPORTS["geodesic_layouts"]),
     resources:
         mem_mb=RESOURCES.mem_mb("geodesics"),
         runtime=RESOURCES.runtime("geodesics", n_pairs=setting_pairs),
     log:
         "logs/geodesics/{setting}.log",
     shell:
-        "becos export-geodesics {input.store:q} {output:q} {params.splits} --jobs {threads} > {log:q} 2>&1"
+        "becos export-geodesics {input.store:q} {output:q} {params.splits} --layouts {params.layouts}"
+        " --rows {input.rows:q} > {log:q} 2>&1"
 
 
 rule published_pairings:

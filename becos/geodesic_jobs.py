@@ -1,0 +1,189 @@
+"""Geodesic rows as parallel jobs: each distinct full mesh of every setting solved once, in parts.
+
+The workflow's geodesics run in three steps (``workflow/rules/export.smk``):
+
+1. ``becos geodesic-plan STORE... --out PLAN --parts N [--splits test]`` reads the stores of all
+   settings and lists every distinct full mesh (up to rigid motion, :func:`becos.export._full_mesh_key`:
+   a remesh variant shared by several pairs or settings is one mesh) with the union of the vertices
+   the chosen splits' shapes keep. Meshes are spread over N parts, largest first onto the least loaded
+   part (cost ~ rows x vertices), and each part is written as ``PLAN/part_<k>.npz`` (per mesh:
+   ``<key>|vertices`` (V, 3) float64, ``<key>|faces`` (F, 3) int64, ``<key>|sources`` (R,) int64
+   sorted), with ``PLAN/plan.json`` listing mesh, part, vertex and row counts.
+2. ``becos geodesic-rows PLAN/part_<k>.npz OUT`` (one job per part) writes ``OUT/<key>.npy``: (R, V)
+   float32 heat-method distances (:func:`becos.geodesics.distance_rows`) from each source, in the
+   mesh's units, and ``OUT/<key>.sources.npy``; ``OUT/timings.json`` gives the CPU seconds per mesh.
+3. ``becos export-geodesics STORE OUT --rows OUT_0 OUT_1 ...`` (one job per setting) cuts each shape's
+   matrix out of its full mesh's rows and writes the loaders' layouts (:func:`becos.export.
+   write_geodesic_matrices`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from becos.errors import BecosError
+
+WORKFLOW_PARTS = 8
+"""Parts (``geodesic_rows`` jobs) of the workflow's geodesic plan: enough to keep a few cores or cluster
+nodes busy with the ~10-100 distinct full meshes of a test split, few enough that each job's start-up
+(~2 s) stays small against its meshes (~13 s of CPU per 10k-vertex mesh)."""
+
+SEPARATOR = "|"
+"""Between a mesh key and the array name in a part file (keys are file-name safe, never hold it)."""
+
+
+class GeodesicJobError(BecosError):
+    """A geodesic plan or part file that cannot be used."""
+
+
+def plan_parts(meshes: dict, needed: dict, parts: int) -> list[list[str]]:
+    """Mesh keys per part: largest cost (rows x vertices) first, each onto the least loaded part.
+    Deterministic (ties by key)."""
+    load = [0] * max(1, int(parts))
+    out: list[list[str]] = [[] for _ in load]
+    for key in sorted(meshes, key=lambda k: (-len(needed[k]) * len(meshes[k][0]), k)):
+        k = min(range(len(load)), key=lambda i: (load[i], i))
+        out[k].append(key)
+        load[k] += len(needed[key]) * len(meshes[key][0])
+    return out
+
+
+def write_plan(stores: list[Path], out: Path, parts: int, splits=None) -> dict:
+    """Write ``out/part_<k>.npz`` (k < ``parts``, some possibly empty) and ``out/plan.json`` for the
+    stores' shapes of ``splits`` (None: every split). Returns the plan summary."""
+    from becos.atomic import save_npz, write_text
+    from becos.export import _geodesic_plan
+    from becos.store import open_benchmark
+
+    meshes, needed = {}, {}
+    for store in stores:
+        _, store_meshes, store_needed, _ = _geodesic_plan(open_benchmark(store).records(), splits)
+        for key, mesh in store_meshes.items():
+            meshes.setdefault(key, mesh)
+            needed.setdefault(key, []).append(store_needed[key])
+    needed = {key: np.unique(np.concatenate(v)) for key, v in needed.items()}
+    assignment = plan_parts(meshes, needed, parts)
+    out.mkdir(parents=True, exist_ok=True)
+    summary = {"parts": len(assignment), "splits": None if splits is None else sorted(splits),
+               "stores": [str(s) for s in stores], "meshes": {}}
+    for k, keys in enumerate(assignment):
+        arrays = {}
+        for key in keys:
+            vertices, faces = meshes[key]
+            arrays[f"{key}{SEPARATOR}vertices"] = vertices
+            arrays[f"{key}{SEPARATOR}faces"] = faces
+            arrays[f"{key}{SEPARATOR}sources"] = needed[key]
+            summary["meshes"][key] = {"part": k, "n_vertices": len(vertices), "n_rows": len(needed[key])}
+        save_npz(out / f"part_{k}.npz", **arrays)
+    write_text(out / "plan.json", json.dumps(summary, indent=1, sort_keys=True) + "\n")
+    return summary
+
+
+def read_part(path: Path) -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """``{key: (vertices, faces, sources)}`` of one part file."""
+    try:
+        data = np.load(path)
+    except (OSError, ValueError) as exc:
+        raise GeodesicJobError(f"{path}: not a geodesic part file ({exc}). Fix: rerun `becos geodesic-plan`") from exc
+    out = {}
+    with data:
+        for name in data.files:
+            key, _, field = name.rpartition(SEPARATOR)
+            out.setdefault(key, {})[field] = data[name]
+    for key, fields in out.items():
+        if set(fields) != {"vertices", "faces", "sources"}:
+            raise GeodesicJobError(f"{path}: mesh {key} lacks {sorted({'vertices', 'faces', 'sources'} - set(fields))}."
+                                   f" Fix: rerun `becos geodesic-plan`")
+    return {key: (f["vertices"], f["faces"], f["sources"]) for key, f in out.items()}
+
+
+def solve_part(part: Path, out: Path, method: str = "heat", progress: bool = False) -> dict:
+    """Write the rows of every mesh of ``part`` into the folder ``out`` (built aside, renamed in).
+    Returns ``{key: {n_vertices, n_rows, cpu_s, bytes}}`` (also ``out/timings.json``)."""
+    from becos.geodesics import distance_rows
+
+    meshes = read_part(part)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(dir=out.parent, prefix=f".{out.name}.tmp-"))
+    try:
+        timings = {}
+        for key, (vertices, faces, sources) in meshes.items():
+            started = time.process_time()
+            rows = distance_rows(vertices, faces, sources, method)
+            cpu = time.process_time() - started
+            np.save(tmp / f"{key}.npy", rows)
+            np.save(tmp / f"{key}.sources.npy", sources)
+            timings[key] = {"n_vertices": len(vertices), "n_rows": len(sources), "cpu_s": round(cpu, 3),
+                            "bytes": int(rows.nbytes)}
+            if progress:
+                print(json.dumps({key: timings[key]}), file=sys.stderr, flush=True)
+        (tmp / "timings.json").write_text(json.dumps(timings, indent=1, sort_keys=True) + "\n", encoding="utf-8")
+        if out.exists():
+            shutil.rmtree(out)
+        os.replace(tmp, out)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return timings
+
+
+def load_rows(folders) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """``{key: (sources (R,) int64 sorted, rows (R, V) float32 memmap)}`` of every mesh in ``folders``
+    (outputs of :func:`solve_part`)."""
+    out = {}
+    for folder in folders:
+        folder = Path(folder)
+        if not folder.is_dir():
+            raise GeodesicJobError(f"{folder}: no geodesic rows folder. Fix: run `becos geodesic-rows` for it")
+        for path in sorted(folder.glob("*.sources.npy")):
+            key = path.name[: -len(".sources.npy")]
+            rows = np.load(folder / f"{key}.npy", mmap_mode="r")
+            sources = np.load(path)
+            if rows.shape[0] != len(sources):
+                raise GeodesicJobError(f"{folder / key}.npy: {rows.shape[0]} rows for {len(sources)} sources. "
+                                       f"Fix: rerun `becos geodesic-rows`")
+            out[key] = (sources, rows)
+    return out
+
+
+# --------------------------------------------------------------------------------------------------
+# command line
+
+
+def configure_parser(parser: argparse.ArgumentParser, name: str) -> argparse.ArgumentParser:
+    if name == "geodesic-plan":
+        parser.add_argument("stores", type=Path, nargs="+", help="benchmark stores (one per setting)")
+        parser.add_argument("--out", type=Path, required=True, help="plan folder (part_<k>.npz, plan.json)")
+        parser.add_argument("--parts", type=int, required=True, help="number of part files (jobs)")
+        parser.add_argument("--splits", nargs="+", metavar="SPLIT", help="these splits only (default: all)")
+    else:
+        from becos.geodesics import METHODS
+
+        parser.add_argument("part", type=Path, help="a part file of `becos geodesic-plan`")
+        parser.add_argument("out", type=Path, help="output folder (<key>.npy rows, <key>.sources.npy)")
+        parser.add_argument("--geodesic-method", choices=METHODS, default="heat")
+    parser.set_defaults(geodesic_job=name)
+    return parser
+
+
+def run_cli(args: argparse.Namespace) -> int:
+    if args.geodesic_job == "geodesic-plan":
+        if args.parts < 1:
+            raise GeodesicJobError(f"--parts must be at least 1, got {args.parts}")
+        summary = write_plan(args.stores, args.out, args.parts, args.splits)
+        print(json.dumps({"out": str(args.out), "parts": summary["parts"], "meshes": len(summary["meshes"]),
+                          "rows": sum(m["n_rows"] for m in summary["meshes"].values())}))
+        return 0
+    timings = solve_part(args.part, args.out, args.geodesic_method, progress=True)
+    print(json.dumps({"out": str(args.out), "meshes": len(timings),
+                      "cpu_s": round(sum(t["cpu_s"] for t in timings.values()), 2),
+                      "bytes": sum(t["bytes"] for t in timings.values())}))
+    return 0
