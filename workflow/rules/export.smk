@@ -100,6 +100,8 @@ GEODESIC_SPLITS = " ".join(["--splits", *EXPORTS["geodesic_splits"]]) if EXPORTS
 # shared by pairs and settings is solved once; GEODESIC_PARTS jobs solve its meshes; one job per setting
 # writes the loaders' layouts from their rows (the rows are temporary).
 rule geodesic_plan:
+    conda:
+        "../envs/becos.yaml"
     input:
         stores=expand(f"{RESULTS}/{{setting}}/benchmark.zarr", setting=SETTINGS),
         validations=expand(f"{RESULTS}/{{setting}}/validation.json", setting=SETTINGS),
@@ -118,6 +120,8 @@ rule geodesic_plan:
 
 
 rule geodesic_rows:
+    conda:
+        "../envs/becos.yaml"
     input:
         f"{RESULTS}/geodesics/plan",
     output:
