@@ -38,7 +38,9 @@ each ``becos`` job) appends its own CPU time at exit to a log (a ``sitecustomize
 ``--repo PATH`` runs another checkout's Snakefile and code (e.g. a worktree of ``main``, for a
 before/after comparison) with this script. ``--remeshed DIR`` copies a finished run's
 ``results/remeshed`` in first (the remesh jobs are then done; every later stage still runs from
-scratch), for a quicker comparison of the chunk stages on a loaded machine.
+scratch), for a quicker comparison of the chunk stages on a loaded machine; the parsed original meshes
+the remesh jobs leave in ``results/cache/meshes`` are copied too when they are beside it (without them
+the ground-truth job parses every original mesh, which a run from scratch never does).
 
 ``--scaling`` measures end-to-end throughput (issue 16, target 3) for each setting and each size in
 ``--sizes`` (default 150 and 1,000 pairs): one run per (setting, size) from scratch on ``--cores 2``,
@@ -303,6 +305,9 @@ def measured_run(workdir: Path, run: Path, repo: Path, remeshed: Path | None = N
     CPU hook; optionally with ``remeshed`` copied in first. Wall and CPU seconds, CPU by process kind."""
     if remeshed is not None:
         shutil.copytree(remeshed, run / "results" / "remeshed")
+        parsed = remeshed.parent / "cache" / "meshes"  # what the remesh jobs would have written
+        if parsed.is_dir() and not (run / "results" / "cache" / "meshes").exists():
+            shutil.copytree(parsed, run / "results" / "cache" / "meshes")
     hook = workdir / "cpu-hook"
     hook.mkdir(parents=True, exist_ok=True)
     (hook / "sitecustomize.py").write_text(CPU_HOOK)

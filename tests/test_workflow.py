@@ -199,7 +199,7 @@ def test_chunk_files_do_not_depend_on_the_shapes_a_job_keeps(tiny_tosca_run, tmp
     results = tmp_path / "results"
     shutil.copytree(source, results, ignore=shutil.ignore_patterns("*.zarr", "released", "report", "psmal"))
     config = {**json.loads((source / "config.json").read_text()), "results": str(results)}
-    for setting in ("partial_partial", "partial_full"):
+    for setting in ("partial_partial",):  # both sides scanned: every per-shape structure is used
         for index in sorted((results / setting / "ground_truth").glob("chunk_*.json")):
             chunk = int(index.stem.split("_")[1])
             gt_index, pairs_index = index, results / setting / "pairs" / index.name
