@@ -286,6 +286,8 @@ class AnnotationSource:
         self.graph: nx.Graph = read_adjacency(self.root / ADJACENCY_CSV)
         self._rows, self.duplicate_keys = read_template_table(self.template_table_path)
         self._node_rows: dict[str, TemplateRow] | None = None
+        self._node_templates: dict[str, tuple[str, str]] = {}
+        self._key_nodes: dict[str, str] = {}
         self._identity_pairs: set[frozenset[str]] | None = None
         self._edge_sources: dict[tuple[str, str], EdgeSource] = {}
         self._edges: OrderedDict[Path, _EdgeData] = OrderedDict()  # least recently used first
@@ -322,6 +324,11 @@ class AnnotationSource:
         Raises:
             BecosError: no row, a row without template, or a node missing from the network.
         """
+        if key not in self._key_nodes:  # asked for every pair
+            self._key_nodes[key] = self._node_of_key(key)
+        return self._key_nodes[key]
+
+    def _node_of_key(self, key: str) -> str:
         row = self.template_row(key)
         if not row.has_template:
             raise BecosError(f"{self.template_table_path}: '{key}' has no template ('{row.template}'), so its "
@@ -355,6 +362,11 @@ class AnnotationSource:
         ``tosca_cat0`` -> (``tosca``, ``cat0``); ``dt4d_animal_bearVGG`` -> (``dt4d_animal``,
         ``bearVGG/Attack2012``); ``smal_horses_muybridge_075_04`` -> (``smal``, ``horses/muybridge_075_04``).
         """
+        if node not in self._node_templates:  # asked for every hop of every pair
+            self._node_templates[node] = self._node_template(node)
+        return self._node_templates[node]
+
+    def _node_template(self, node: str) -> tuple[str, str]:
         if node not in self.graph:
             raise BecosError(f"{self.root / ADJACENCY_CSV}: no network node '{node}'. "
                              f"Fix: use one of its {self.graph.number_of_nodes()} node names")

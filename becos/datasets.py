@@ -194,11 +194,17 @@ class PreparedShape:
     sqrt_area: float
 
 
+def shape_centre(mesh: TriMesh, scale: float, scaled: np.ndarray | None = None) -> np.ndarray:
+    """(3,) :attr:`PreparedShape.centre`: the vertex mean of the file coordinates times ``scale``
+    (``scaled``: those coordinates when already computed)."""
+    return (mesh.vertices * float(scale) if scaled is None else scaled).mean(axis=0)
+
+
 def prepare_shape(entry: ShapeEntry, mesh_cache: MeshCache | None = None) -> PreparedShape:
     """Load ``entry``'s mesh (file vertex order) and bring it into the common frame."""
     mesh = mesh_cache.load(entry.path) if mesh_cache is not None else read_mesh(entry.path)
     scaled = mesh.vertices * float(entry.scale)
-    centre = scaled.mean(axis=0)
+    centre = shape_centre(mesh, entry.scale, scaled)
     prepared = TriMesh((scaled - centre) @ np.asarray(entry.frame_rotation, dtype=np.float64), mesh.faces)
     area = surface_area(prepared)
     return PreparedShape(entry, prepared, centre, area, float(np.sqrt(area)))

@@ -176,6 +176,7 @@ class ShapeNetwork:
         self._chains: dict[tuple[str, ...], SurfaceMap] = {}
         self._per_mesh: OrderedDict[tuple, tuple] = OrderedDict()
         self._geometries: OrderedDict[tuple, tuple] = OrderedDict()
+        self._vertex_counts: dict[tuple[str, str], int | None] = {}
 
     # --- paths ----------------------------------------------------------------------------------
     def template_node(self, shape: ShapeLike) -> str:
@@ -215,8 +216,11 @@ class ShapeNetwork:
         return self._faces_cache[key]
 
     def _n_vertices(self, surface: Surface) -> int | None:
-        mesh = self._meshes(surface.dataset, surface.name)
-        return None if mesh is None else mesh.n_vertices
+        key = (surface.dataset, surface.name)
+        if key not in self._vertex_counts:  # asked on every hop of every pair; the file does not change
+            mesh = self._meshes(surface.dataset, surface.name)
+            self._vertex_counts[key] = None if mesh is None else mesh.n_vertices
+        return self._vertex_counts[key]
 
     def _is_identity_hop(self, a: Surface, b: Surface) -> bool:
         """A shape and its own template are one triangulation (the template table pairs them by class,
@@ -261,9 +265,20 @@ class ShapeNetwork:
             return self._per_mesh[key][1]
         value = make(mesh)
         self._per_mesh[key] = (mesh, value)  # holding the mesh keeps its id from being reused
-        while len(self._per_mesh) > 16:
+        while len(self._per_mesh) > self.MESHES_KEPT:
             self._per_mesh.popitem(last=False)
         return value
+
+    MESHES_KEPT = 24
+    """Target meshes whose locator (and face index) are kept; a caller that knows it is done with a
+    mesh drops them at once (:meth:`forget`)."""
+
+    def forget(self, mesh: TriMesh) -> None:
+        """Drop what was built for ``mesh`` as a target (locator, face index, geometry copies)."""
+        for key in [k for k in self._per_mesh if k[1] == id(mesh)]:
+            del self._per_mesh[key]
+        for key in [k for k in self._geometries if k[1] == id(mesh)]:
+            del self._geometries[key]
 
     def locator(self, mesh: TriMesh) -> SurfaceLocator:
         """A closest-point structure of ``mesh``, kept for the last few meshes used as targets."""

@@ -18,6 +18,7 @@ full shape's sqrt-area (about the common-frame origin) before that rotation: the
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -78,6 +79,13 @@ class ShapeInstance:
     frame_rotation: np.ndarray = field(default_factory=lambda: np.eye(3))
     centre: np.ndarray = field(default_factory=lambda: np.zeros(3))
     remesh_variant: int = -1
+
+    @cached_property
+    def area(self) -> float:
+        """Surface area of ``mesh`` (squared units), computed once per instance."""
+        from becos.geometry import surface_area
+
+        return surface_area(self.mesh)
 
 
 def random_rotation(rng: np.random.Generator, up_axis: str = "y", one_axis: bool = True) -> np.ndarray:
@@ -143,8 +151,6 @@ def build_pair(x: ShapeInstance, y: ShapeInstance, gt_xy: SurfaceMap, gt_yx: Sur
             :class:`becos.reference_views.PublishedScan`: the views of the published cameras, the try
             the reference keeps; masks and maps are then computed on them with the exact ground truth.
     """
-    from becos.geometry import surface_area
-
     if len(gt_xy) != x.mesh.n_vertices or len(gt_yx) != y.mesh.n_vertices:
         raise ValueError(f"pair {pair_id}: ground truth lengths {len(gt_xy)}, {len(gt_yx)} do not match the "
                          f"meshes ({x.mesh.n_vertices}, {y.mesh.n_vertices} vertices)")
@@ -193,7 +199,7 @@ def build_pair(x: ShapeInstance, y: ShapeInstance, gt_xy: SurfaceMap, gt_yx: Sur
         alignment = align_to(x.mesh, y.mesh, gt_xy)
         mask_x, mask_y, map_xy, map_yx = gt_xy.matched, gt_yx.matched, gt_xy, gt_yx
 
-    area_x, area_y = surface_area(x.mesh), surface_area(y.mesh)
+    area_x, area_y = x.area, y.area
     if rotations is not None:
         rot_x, rot_y = (np.asarray(r, dtype=np.float64).reshape(3, 3) for r in rotations)
     else:

@@ -59,8 +59,11 @@ GROUND_TRUTH_VERSION = 1
 RECORD_VERSION = 1
 """Bumped when pair assembly changes, so cached records are rebuilt."""
 STAGE_VERSIONS = {"ground_truth": GROUND_TRUTH_VERSION, "pairs": RECORD_VERSION}
-SHAPES_KEPT = 6
-"""Shapes (prepared, remeshed, scanners) a chunk job keeps in memory."""
+SHAPES_KEPT = 16
+"""Shapes (prepared, remeshed, locators, scanners) a chunk job keeps in memory at most; each is dropped
+as soon as the chunk's remaining pairs no longer use it (:meth:`ShapeStore.release`)."""
+MESHES_KEPT = 12
+"""Original meshes a chunk job keeps parsed in memory (:class:`becos.mesh.MeshCache`)."""
 
 STAGE_KEYS: dict[str, tuple[str, ...]] = {
     "catalog": ("data_dir", "annotations", "datasets", "shapes", "template_file"),
@@ -665,9 +668,10 @@ def _entry(row) -> "object":
 class _Recent(OrderedDict):
     """A dict that keeps only its ``size`` most recently used entries."""
 
-    def __init__(self, size: int):
+    def __init__(self, size: int, on_drop=None):
         super().__init__()
         self.size = size
+        self.on_drop = on_drop  # called with each value pushed out (not with values popped by the caller)
 
     def get_or_make(self, key, make):
         if key in self:
@@ -675,15 +679,53 @@ class _Recent(OrderedDict):
             return self[key]
         value = self[key] = make()
         while len(self) > self.size:
-            self.popitem(last=False)
+            _, dropped = self.popitem(last=False)
+            if self.on_drop is not None:
+                self.on_drop(dropped)
         return value
 
 
-class ShapeStore:
-    """The shapes of one job: catalog entries, parsed meshes, prepared meshes and remesh variants.
+ShapeKey = tuple[str, str, str]
+"""``(dataset, name, token)``: one pair side's shape as a chunk job loads it."""
 
-    A chunk job visits its pairs sorted by shape, so a few recently used shapes are kept
-    (:data:`SHAPES_KEPT`): the job's memory does not grow with the number of pairs in a chunk.
+
+def pair_shape_keys(row: dict, remesh: bool) -> tuple[ShapeKey, ShapeKey]:
+    """The shapes of a manifest row's two sides."""
+    return ((row["x_dataset"], row["x_name"], remesh_token(row, "x", remesh)),
+            (row["y_dataset"], row["y_name"], remesh_token(row, "y", remesh)))
+
+
+def visit_order(records: list[dict], remesh: bool) -> tuple[list[dict], list[list[ShapeKey]]]:
+    """The order a chunk job computes its pairs in, and per pair the shapes it uses for the last time.
+
+    Pairs are sorted by their smaller then larger shape key (then id), so a shape's pairs come close
+    together; a shape is released after its last pair (:meth:`ShapeStore.release`), which keeps a
+    chunk's working set small without reloading shapes. The order changes no output: every pair's
+    files depend on that pair alone, and the chunk's index is sorted by pair id.
+    """
+    def sort_key(row):
+        a, b = pair_shape_keys(row, remesh)
+        return (min(a, b), max(a, b), row["pair_id"])
+
+    ordered = sorted(records, key=sort_key)
+    last_use: dict[ShapeKey, int] = {}
+    for i, row in enumerate(ordered):
+        for key in pair_shape_keys(row, remesh):
+            last_use[key] = i
+    done: list[list[ShapeKey]] = [[] for _ in ordered]
+    for key, i in last_use.items():
+        done[i].append(key)
+    return ordered, done
+
+
+class ShapeStore:
+    """The shapes of one job: catalog entries, parsed meshes, prepared meshes, remesh variants and the
+    per-shape structures built on them (closest-point locators, Embree scanners).
+
+    A chunk job releases a shape after the last of its pairs that uses it (:func:`visit_order`,
+    :meth:`release`) and keeps at most :data:`SHAPES_KEPT` shapes (least recently used dropped first):
+    each shape is loaded and its structures built about once per chunk, and the job's memory does not
+    grow with the number of pairs in a chunk.
     """
 
     def __init__(self, config: dict, catalog: "pd.DataFrame | list[dict]"):
@@ -694,11 +736,49 @@ class ShapeStore:
         self.layout = Layout.of(config)
         rows = catalog if isinstance(catalog, list) else catalog.to_dict("records")
         self.entries = {(r["dataset"], r["name"]): _entry(r) for r in rows}
-        self.mesh_cache = MeshCache(self.layout.cache / "meshes", max_in_memory=2 * SHAPES_KEPT)
+        self.mesh_cache = MeshCache(self.layout.cache / "meshes", max_in_memory=MESHES_KEPT)
         self._prepared = _Recent(SHAPES_KEPT)
-        self._remeshed = _Recent(SHAPES_KEPT)
+        self._remeshed = _Recent(SHAPES_KEPT, on_drop=self._forget_remeshed)
+        self._scanners = _Recent(SHAPES_KEPT)
+        self._instances = _Recent(SHAPES_KEPT)
+        self._centres: dict[tuple[str, str], np.ndarray] = {}
         self._digests: dict[Path, str] = {}
         self._network = None
+
+    def _forget_remeshed(self, remeshed) -> None:
+        """Drop what the network built on a remesh variant's mesh (its closest-point locator)."""
+        if self._network is not None:
+            self._network.forget(remeshed.mesh)
+
+    def release(self, keys: list[ShapeKey]) -> None:
+        """Drop shapes no later pair of the chunk uses (their remesh, locator, scanner, prepared mesh)."""
+        for dataset, name, token in keys:
+            remeshed = self._remeshed.pop((dataset, name, token), None)
+            if remeshed is not None:
+                self._forget_remeshed(remeshed)
+            self._scanners.pop((dataset, name, token), None)
+            self._instances.pop((dataset, name, token), None)
+            if not any(k[:2] == (dataset, name) for k in self._remeshed):
+                self._prepared.pop((dataset, name), None)
+
+    def scanner(self, dataset: str, name: str, token: str, mesh):
+        """The :class:`becos.partiality.Scanner` of a pair side's ``mesh`` (built once while kept)."""
+        from becos.partiality import Scanner
+
+        return self._scanners.get_or_make((dataset, name, token), lambda: Scanner(mesh))
+
+    def centre(self, dataset: str, name: str) -> np.ndarray:
+        """(3,) the shape's centre in scaled file coordinates (:attr:`becos.datasets.PreparedShape.centre`),
+        without preparing the whole mesh."""
+        from becos.datasets import shape_centre
+
+        key = (dataset, name)
+        if key in self._prepared:
+            return self._prepared[key].centre
+        if key not in self._centres:
+            entry = self.entry(dataset, name)
+            self._centres[key] = shape_centre(self.mesh_cache.load(entry.path), entry.scale)
+        return self._centres[key]
 
     def entry(self, dataset: str, name: str):
         try:
@@ -779,15 +859,22 @@ class ShapeStore:
         return self._network
 
     def instance(self, dataset: str, name: str, token: str):
-        """A :class:`becos.pairs.ShapeInstance` (common frame, dataset scale; remeshed unless ``original``)."""
+        """A :class:`becos.pairs.ShapeInstance` (common frame, dataset scale; remeshed unless ``original``),
+        the same object while the shape is kept (so its surface area is computed once)."""
+        return self._instances.get_or_make((dataset, name, token), lambda: self._make_instance(dataset, name, token))
+
+    def _make_instance(self, dataset: str, name: str, token: str):
         from becos.pairs import ShapeInstance
 
-        entry, prepared = self.entry(dataset, name), self.prepared(dataset, name)
-        remeshed = self.remeshed(dataset, name, token)
-        mesh = prepared.mesh if remeshed is None else remeshed.mesh
+        entry, remeshed = self.entry(dataset, name), self.remeshed(dataset, name, token)
+        if remeshed is None:
+            prepared = self.prepared(dataset, name)
+            mesh, centre = prepared.mesh, prepared.centre
+        else:  # the prepared mesh itself is not needed, only its centre
+            mesh, centre = remeshed.mesh, self.centre(dataset, name)
         variant = int(token[1:]) if token.startswith("v") else -1
         return ShapeInstance(entry.dataset, entry.name, entry.category, entry.shape_class, mesh, entry.scale,
-                             entry.frame_rotation, prepared.centre, variant)
+                             entry.frame_rotation, centre, variant)
 
 
 # --------------------------------------------------------------------------------------------------
@@ -863,9 +950,7 @@ def _chunk_rows(config: dict, setting: str, chunk: int) -> pd.DataFrame:
     from becos.sampling import read_manifest
 
     manifest = read_manifest(Layout.of(config).manifest(setting))
-    rows = manifest[manifest["chunk"] == int(chunk)]
-    # shapes in order, so consecutive pairs share loaded meshes and scanners
-    return rows.sort_values(["x_dataset", "x_name", "y_dataset", "y_name", "pair_id"])
+    return manifest[manifest["chunk"] == int(chunk)]
 
 
 def _progress(stage: str, setting: str, chunk: int, entries: list[dict], n_rows: int, started: float) -> None:
@@ -911,7 +996,8 @@ def ground_truth_stage(config: dict, setting: str, chunk: int, out_index: Path) 
     rows = _chunk_rows(config, setting, chunk)
     _remove_killed_writes([*(layout.ground_truth(setting, pid) for pid in rows["pair_id"]), Path(out_index)])
     entries = []
-    for row in rows.to_dict("records"):
+    ordered, last_used = visit_order(rows.to_dict("records"), remesh)
+    for row, done in zip(ordered, last_used):
         tx, ty = remesh_token(row, "x", remesh), remesh_token(row, "y", remesh)
         key = digest({"version": GROUND_TRUTH_VERSION, "x": [row["x_dataset"], row["x_name"], tx],
                       "y": [row["y_dataset"], row["y_name"], ty],
@@ -932,6 +1018,7 @@ def ground_truth_stage(config: dict, setting: str, chunk: int, out_index: Path) 
                      yx_weights=gt_yx.weights, yx_distance=gt_yx.distance)
         entries.append({"pair_id": row["pair_id"], "path": str(path), "input_key": key, "computed": computed,
                         "digest": shapes.file_digest(path)})
+        shapes.release(done)
         _progress("ground truth", setting, chunk, entries, len(rows), started)
     return _write_index(Path(out_index), setting, chunk, entries, started)
 
@@ -964,7 +1051,6 @@ def pairs_stage(config: dict, setting: str, chunk: int, gt_index: Path, out_inde
     """Pair records (partiality, alignment, rotation, annotations) for every pair of a chunk."""
     from becos.catalog import read_catalog
     from becos.pairs import build_pair
-    from becos.partiality import Scanner
     from becos.record import is_intact
 
     started = time.perf_counter()
@@ -975,10 +1061,10 @@ def pairs_stage(config: dict, setting: str, chunk: int, gt_index: Path, out_inde
     gt_files = {e["pair_id"]: e for e in json.loads(Path(gt_index).read_text())["pairs"]}
     rows = _chunk_rows(config, setting, chunk)
     _remove_killed_writes([*(layout.record(setting, pid) for pid in rows["pair_id"]), Path(out_index)])
-    scanners = _Recent(SHAPES_KEPT)
     labels = _labeller(config, shapes) if config.get("propagate_annotations", True) else None
     entries = []
-    for row in rows.to_dict("records"):
+    ordered, last_used = visit_order(rows.to_dict("records"), remesh)
+    for row, done in zip(ordered, last_used):
         tx, ty = remesh_token(row, "x", remesh), remesh_token(row, "y", remesh)
         gt = gt_files.get(row["pair_id"])
         if gt is None:
@@ -1000,8 +1086,7 @@ def pairs_stage(config: dict, setting: str, chunk: int, gt_index: Path, out_inde
             gt_xy, gt_yx = load_ground_truth(Path(gt["path"]))
             pair_scanners = (None, None)
             if setting != "full_full":
-                pair_scanners = tuple(scanners.get_or_make((s.dataset, s.name, t), lambda s=s: Scanner(s.mesh))
-                                      for s, t in ((x, tx), (y, ty)))
+                pair_scanners = tuple(shapes.scanner(s.dataset, s.name, t, s.mesh) for s, t in ((x, tx), (y, ty)))
             record = build_pair(x, y, gt_xy, gt_yx, pair_id=row["pair_id"], seed=int(row["seed"]),
                                 split=row["split"], options=options, scanners=pair_scanners,
                                 rotations=_published_rotations(row),
@@ -1016,6 +1101,7 @@ def pairs_stage(config: dict, setting: str, chunk: int, gt_index: Path, out_inde
             record.save(path)
         entries.append({"pair_id": row["pair_id"], "path": str(path), "input_key": key, "computed": computed,
                         "split": row["split"], "digest": shapes.file_digest(path)})
+        shapes.release(done)
         _progress("pairs", setting, chunk, entries, len(rows), started)
     return _write_index(Path(out_index), setting, chunk, entries, started)
 

@@ -38,12 +38,26 @@ each ``becos`` job) appends its own CPU time at exit to a log (a ``sitecustomize
 ``--repo PATH`` runs another checkout's Snakefile and code (e.g. a worktree of ``main``, for a
 before/after comparison) with this script. ``--remeshed DIR`` copies a finished run's
 ``results/remeshed`` in first (the remesh jobs are then done; every later stage still runs from
-scratch), for a quicker comparison of the chunk stages on a loaded machine.
+scratch), for a quicker comparison of the chunk stages on a loaded machine; the parsed original meshes
+the remesh jobs leave in ``results/cache/meshes`` are copied too when they are beside it (without them
+the ground-truth job parses every original mesh, which a run from scratch never does).
+
+``--scaling`` measures end-to-end throughput (issue 16, target 3) for each setting and each size in
+``--sizes`` (default 150 and 1,000 pairs): one run per (setting, size) from scratch on ``--cores 2``,
+TOSCA, one remesh variant, ``caps`` train ``size - 30`` / val 15 / test 15 (TOSCA has about 16 val and
+23 test pairs per setting), ``usage_scale`` 0.5, exports as ``--stages``. Per run: pairs, wall seconds,
+pairs/s next to the reference's and the issue's target (10x the reference at 150 pairs, 30x at
+1,000), CPU seconds of the whole process tree, and CPU seconds by stage from the same per-process hook
+as ``--stages`` (``snakemake``: the Snakemake process itself; ``other``: non-Python processes such as
+the jobs' shells), with CPU seconds per pair for ``ground-truth`` and ``pairs``. ``--repo`` and
+``--remeshed`` work as for ``--stages`` (with ``--remeshed`` the remesh jobs are skipped, so pairs/s is
+not from scratch; the JSON says so).
 
 Usage::
 
     python benchmarks/workflow.py [--workdir /tmp/becos-bench] [--variants 1] [--skip-run] [--full-plan [--profile]]
     python benchmarks/workflow.py --stages [--repo PATH] [--remeshed DIR] [--workdir /tmp/becos-bench]
+    python benchmarks/workflow.py --scaling [--sizes 150,1000] [--settings full_full,...] [--repo PATH] [--remeshed DIR]
 """
 
 from __future__ import annotations
@@ -286,13 +300,14 @@ def _process_kind(argv: list[str]) -> str:
     return program
 
 
-def stages(workdir: Path, code: Path, repo: Path, remeshed: Path | None = None) -> dict:
-    """CPU seconds by stage of a ~150-pair TOSCA run from scratch (module docstring, ``--stages``)."""
-    run = workdir / "stages"
-    shutil.rmtree(run, ignore_errors=True)
-    write_config(run, code, caps={"train": 120, "val": 15, "test": 15}, remesh_variants=1, n_chunks=64)
+def measured_run(workdir: Path, run: Path, repo: Path, remeshed: Path | None = None) -> dict:
+    """Run ``repo``'s workflow in ``run`` (its ``config.yaml`` written) on ``--cores 2`` with the per-process
+    CPU hook; optionally with ``remeshed`` copied in first. Wall and CPU seconds, CPU by process kind."""
     if remeshed is not None:
         shutil.copytree(remeshed, run / "results" / "remeshed")
+        parsed = remeshed.parent / "cache" / "meshes"  # what the remesh jobs would have written
+        if parsed.is_dir() and not (run / "results" / "cache" / "meshes").exists():
+            shutil.copytree(parsed, run / "results" / "cache" / "meshes")
     hook = workdir / "cpu-hook"
     hook.mkdir(parents=True, exist_ok=True)
     (hook / "sitecustomize.py").write_text(CPU_HOOK)
@@ -312,9 +327,55 @@ def stages(workdir: Path, code: Path, repo: Path, remeshed: Path | None = None) 
     return {"repo": str(repo), "commit": subprocess.run(["git", "-C", str(repo), "rev-parse", "--short", "HEAD"],
                                                         capture_output=True, text=True).stdout.strip(),
             "remeshed_copied_from": str(remeshed) if remeshed else None,
-            "pairs": n_pairs(run), "wall_seconds": round(seconds, 1), "cpu_seconds_total": memory["cpu_seconds"],
+            "wall_seconds": round(seconds, 1), "cpu_seconds_total": memory["cpu_seconds"],
             "peak_rss_mb": memory["peak_rss_mb"], "jobs": job_counts(out),
             "cpu_by_process": dict(sorted(by_kind.items(), key=lambda kv: -kv[1]["cpu_seconds"]))}
+
+
+def stages(workdir: Path, code: Path, repo: Path, remeshed: Path | None = None) -> dict:
+    """CPU seconds by stage of a ~150-pair TOSCA run from scratch (module docstring, ``--stages``)."""
+    run = workdir / "stages"
+    shutil.rmtree(run, ignore_errors=True)
+    write_config(run, code, caps={"train": 120, "val": 15, "test": 15}, remesh_variants=1, n_chunks=64)
+    result = measured_run(workdir, run, repo, remeshed)
+    return {**result, "pairs": n_pairs(run)}
+
+
+REFERENCE_PAIRS_PER_SECOND = {"full_full": 0.248, "partial_full": 0.174, "partial_partial": 0.113}
+"""The reference generator's pairs/s on this machine (n_jobs 2, 30 pairs per setting; issue 16)."""
+TARGET_FACTOR = {150: 10, 1000: 30}
+"""Issue 16's end-to-end targets: this many times the reference's pairs/s at 150 and 1,000 pairs."""
+
+
+def scaling(workdir: Path, code: Path, repo: Path, sizes: list[int], settings: list[str],
+            remeshed: Path | None = None) -> dict:
+    """Pairs/s and CPU seconds by stage per (setting, size) (module docstring, ``--scaling``)."""
+    out: dict = {"repo": str(repo), "remeshed_copied_from": str(remeshed) if remeshed else None,
+                 "from_scratch": remeshed is None, "runs": {}}
+    for size in sizes:
+        for setting in settings:
+            run = workdir / "scaling" / f"{setting}-{size}"
+            shutil.rmtree(run, ignore_errors=True)
+            write_config(run, code, setting=setting, caps={"train": size - 30, "val": 15, "test": 15},
+                         usage_scale=0.5, remesh_variants=1, n_chunks=64)
+            result = measured_run(workdir, run, repo, remeshed)
+            pairs = len((run / "results" / setting / "manifest.csv").read_text().splitlines()) - 1
+            kinds = result["cpu_by_process"]
+            python_cpu = sum(k["cpu_seconds"] for k in kinds.values())
+            reference = REFERENCE_PAIRS_PER_SECOND[setting]
+            per_second = pairs / result["wall_seconds"]
+            summary = {"pairs": pairs, "pairs_per_second": round(per_second, 3),
+                       "reference_pairs_per_second": reference, "times_reference": round(per_second / reference, 2),
+                       "cpu_seconds_by_stage": {k: v["cpu_seconds"] for k, v in kinds.items()},
+                       "cpu_seconds_other": round(result["cpu_seconds_total"] - python_cpu, 1),
+                       "cpu_seconds_per_pair": {k: round(kinds[k]["cpu_seconds"] / pairs, 3)
+                                                for k in ("ground-truth", "pairs", "remesh", "snakemake") if k in kinds},
+                       "load_average": [round(x, 2) for x in os.getloadavg()]}
+            if size in TARGET_FACTOR:
+                summary["target_pairs_per_second"] = round(TARGET_FACTOR[size] * reference, 2)
+            out["runs"][f"{setting}/{size}"] = {**summary, **result}
+            print(json.dumps({f"{setting}/{size}": summary}), file=sys.stderr, flush=True)
+    return out
 
 
 def main() -> None:
@@ -329,11 +390,21 @@ def main() -> None:
     parser.add_argument("--stages", action="store_true",
                         help="only the CPU seconds by stage of a ~150-pair TOSCA run from scratch")
     parser.add_argument("--repo", type=Path, default=REPO,
-                        help="with --stages: the checkout whose Snakefile and code run (default: this one)")
-    parser.add_argument("--remeshed", type=Path, help="with --stages: copy this results/remeshed in first")
+                        help="with --stages/--scaling: the checkout whose Snakefile and code run (default: this one)")
+    parser.add_argument("--remeshed", type=Path, help="with --stages/--scaling: copy this results/remeshed in first")
+    parser.add_argument("--scaling", action="store_true",
+                        help="only pairs/s and CPU by stage per setting and size (issue 16, target 3)")
+    parser.add_argument("--sizes", default="150,1000", help="with --scaling: pairs per setting (comma-separated)")
+    parser.add_argument("--settings", default="full_full,partial_full,partial_partial",
+                        help="with --scaling: the settings (comma-separated)")
     args = parser.parse_args()
     code = becos_code()
     result: dict = {"machine_cores": os.cpu_count()}
+    if args.scaling:
+        result["scaling"] = scaling(args.workdir, code, args.repo.resolve(), [int(n) for n in args.sizes.split(",")],
+                                    args.settings.split(","), args.remeshed)
+        print(json.dumps(result, indent=1))
+        return
     if args.stages:
         result["stages"] = stages(args.workdir, code, args.repo.resolve(), args.remeshed)
         print(json.dumps(result, indent=1))

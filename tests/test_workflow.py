@@ -192,6 +192,56 @@ def test_pairs_chunks_are_fixed_by_the_pair_id(tiny_tosca_run):
     assert len(indices) == manifest["chunk"].nunique()  # one job per non-empty chunk, not per pair
 
 
+def test_visit_order_releases_each_shape_after_its_last_pair():
+    """A chunk job visits every pair once and releases each shape exactly once, after its last pair."""
+    from becos.workflow import pair_shape_keys, visit_order
+
+    names = ["cat0", "cat1", "dog0", "dog1", "horse0"]
+    rows = [{"pair_id": f"p{i:02d}", "x_dataset": "tosca", "x_name": names[i % 5], "x_variant": i % 2,
+             "y_dataset": "tosca", "y_name": names[(3 * i + 1) % 5], "y_variant": 0} for i in range(20)]
+    ordered, released = visit_order(rows, remesh=True)
+    assert sorted(r["pair_id"] for r in ordered) == [r["pair_id"] for r in rows]
+    flat = [key for keys in released for key in keys]
+    used = {key for row in rows for key in pair_shape_keys(row, True)}
+    assert sorted(flat) == sorted(used)                    # each shape released once
+    for i, keys in enumerate(released):
+        later = {key for row in ordered[i + 1:] for key in pair_shape_keys(row, True)}
+        assert set(keys) <= set(pair_shape_keys(ordered[i], True)) and not set(keys) & later
+
+
+def test_chunk_files_do_not_depend_on_the_shapes_a_job_keeps(tiny_tosca_run, tmp_path, monkeypatch):
+    """Ground truth and pair records of a chunk come out byte-identical when its job keeps one shape
+    at a time (every remesh, locator and scanner rebuilt per pair) instead of reusing them."""
+    import shutil
+
+    import becos.network
+    import becos.workflow as bw
+
+    monkeypatch.setattr(bw, "SHAPES_KEPT", 1)
+    monkeypatch.setattr(becos.network.ShapeNetwork, "MESHES_KEPT", 1)
+    source = tiny_tosca_run / "results"
+    results = tmp_path / "results"
+    shutil.copytree(source, results, ignore=shutil.ignore_patterns("*.zarr", "released", "report", "psmal"))
+    config = {**json.loads((source / "config.json").read_text()), "results": str(results)}
+    for setting in ("partial_partial",):  # both sides scanned: every per-shape structure is used
+        for index in sorted((results / setting / "ground_truth").glob("chunk_*.json")):
+            chunk = int(index.stem.split("_")[1])
+            gt_index, pairs_index = index, results / setting / "pairs" / index.name
+            files = [Path(e["path"]).name for i in (gt_index, pairs_index) for e in json.loads(i.read_text())["pairs"]]
+            for name in files:
+                (results / setting / "ground_truth" / name).unlink(missing_ok=True)
+                (results / setting / "pairs" / name).unlink(missing_ok=True)
+            assert bw.ground_truth_stage(config, setting, chunk, gt_index)["computed"] > 0
+            assert bw.pairs_stage(config, setting, chunk, gt_index, pairs_index)["computed"] > 0
+            for kind, ix in (("ground_truth", gt_index), ("pairs", pairs_index)):
+                for entry in json.loads(ix.read_text())["pairs"]:
+                    name = Path(entry["path"]).name
+                    assert (results / setting / kind / name).read_bytes() == (source / setting / kind / name).read_bytes()
+                original = json.loads((source / setting / kind / ix.name).read_text())["pairs"]
+                assert [{k: v for k, v in e.items() if k != "path"} for e in json.loads(ix.read_text())["pairs"]] == \
+                    [{k: v for k, v in e.items() if k != "path"} for e in original]
+
+
 def test_incremental_rebuild(becos_code, tmp_path):
     """Four-legged only, then humans and centaurs; then only min_overlap changes."""
     shapes = ["tosca/cat0", "tosca/cat1", "tosca/dog0", "tosca/dog1", "tosca/horse0", "tosca/horse5", "tosca/wolf0",
