@@ -34,17 +34,22 @@ both:
 6. the remesh is oriented like the majority of the input (area-weighted vote of face normals against
    the input's normals at the closest points) and every remeshed vertex is snapped to its closest
    point on the input surface with a compatible normal (:class:`becos.geometry.SurfaceLocator`:
-   not onto a touching part that faces the other way; parts that meet at an angle are not told
-   apart by this, see step 7). So ``to_original`` is exact (distance 0) and vertices sit on the
+   not onto a touching part that faces the other way). Parts that meet at an angle are not told
+   apart by normals: a vertex whose point lies on another part than its mesh neighbours' (their
+   points' geodesic Voronoi cells on the input are more than two cell hops apart; TOSCA victoria25:
+   a hip vertex snapped onto the hand lying on it) is snapped again among the input faces in its
+   neighbours' cells (:func:`_snap_onto_own_part`; counted as ``snap_moved_off_other_part``). So
+   ``to_original`` is exact (distance 0) and vertices sit on the
    original surface, not on the Loop-smoothed one; the snap moves vertices by ~1e-4 of the bounding
    box diagonal, far less than an edge. Where it would fold a sliver face in a crease (a few faces
    on some TOSCA shapes), that face's corners stay where decimation put them (their
    ``to_original.distance`` is then the small projection distance; counted in
    :func:`remesh_with_stats` as ``unsnapped_vertices``).
 7. ``from_original``: each original vertex goes to the closest point of a remeshed face that has a
-   corner within :data:`FROM_ORIGINAL_RINGS` rings of the remeshed vertex nearest to it ALONG the
-   original surface (a geodesic Voronoi partition of the remeshed vertices' ``to_original`` points,
-   :func:`becos.geometry.nearest_along_surface`). Where two parts touch or pass through each other
+   corner within :data:`FROM_ORIGINAL_RINGS` rings of a remeshed vertex nearest ALONG the original
+   surface to it or to one of its 1-ring neighbours (a geodesic Voronoi partition of the remeshed
+   vertices' ``to_original`` points, :func:`becos.geometry.nearest_along_surface`; the neighbours
+   reach across thin parts, a horse's tail, that a few long remeshed faces cover). Where two parts touch or pass through each other
    (TOSCA victoria1: a hand at the hip; the arch of a foot against its heel) the plain or
    normal-aware closest point can lie on the other part, 0.01 mm away in space and a body length away
    along the surface; normals do not tell them apart there (the parts meet at an angle), mesh
