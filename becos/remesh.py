@@ -421,6 +421,9 @@ def remesh_with_stats(mesh: TriMesh, target_vertices: int | None = None, target_
     """:func:`remesh`, also returning a dict of diagnostics (stage times in s, snap distances in input
     units, dropped faces, decimation attempts, ``vertices_off_target`` (0 when the vertex target is
     met exactly), ``unsnapped_vertices`` and ``snap_flipped_faces`` (always 0 after the fix-up),
+    ``snap_moved_off_other_part`` / ``snap_off_part_unresolved`` (step 6's re-snap onto a vertex's own
+    part), ``from_original_unresolved`` (original vertices with no remeshed face near them along the
+    surface; their normal-aware closest point is kept),
     ``input_repair``: the counts of :class:`becos.mesh.MeshRepair` for step 0).
 
     ``jitter`` (fraction, see :data:`DEFAULT_JITTER`; 0 disables it) and ``seed`` (default: derived
