@@ -283,6 +283,8 @@ def _off_part(surface: TriMesh, surface_edges: np.ndarray, remesh_edges: np.ndar
     owner = _cells(surface, anchor)
     cell = owner[anchor]                                   # (n,) the cell a remeshed vertex is in
     a, b = owner[surface_edges[:, 0]], owner[surface_edges[:, 1]]
+    reached = (a >= 0) & (b >= 0)                          # all, on a connected surface
+    a, b = a[reached], b[reached]
     hop = sp.coo_matrix((np.ones(2 * len(a) + n, dtype=np.float32),
                          (np.concatenate([a, b, np.arange(n)]), np.concatenate([b, a, np.arange(n)]))),
                         shape=(n, n)).tocsr()
@@ -295,16 +297,17 @@ def _off_part(surface: TriMesh, surface_edges: np.ndarray, remesh_edges: np.ndar
 
 
 def _snap_onto_own_part(surface: TriMesh, locator: SurfaceLocator, v: np.ndarray, f: np.ndarray,
-                        vn: np.ndarray, face: np.ndarray, weights: np.ndarray, dist: np.ndarray):
+                        face: np.ndarray, weights: np.ndarray, dist: np.ndarray):
     """Re-snap the remeshed vertices whose snapped point lies on another part than their neighbours'.
 
     Where two parts of the original touch or pass through each other at an angle (TOSCA victoria: a
     hand at the hip; michael: an arm against the body), the normal-aware closest point of a vertex
-    (``face``, ``weights``, ``dist`` for the (V_r, 3) positions ``v``, faces ``f``, normals ``vn``)
+    (``face``, ``weights``, ``dist`` for the (V_r, 3) positions ``v``, faces ``f``)
     can sit on the part its mesh neighbours do not belong to: it looks right in this pose, and is
     a body length off in every other pose of the class. Such a vertex (:func:`_off_part`) is snapped
     again to the closest point among the surface faces in the geodesic Voronoi cells of its settled
-    neighbours' points (1-ring, else 2-ring of the remesh): the part it is connected to. Repeated
+    neighbours' points (1-ring, else 2-ring of the remesh): the part it is connected to (no normal
+    test: the cells already pick the part, and flipped windings mislead normals). Repeated
     until no vertex is off its part (at most :data:`SNAP_ROUNDS` rounds).
 
     Returns face, weights, dist (as given, updated) and the number of vertices moved and left
@@ -325,7 +328,8 @@ def _snap_onto_own_part(surface: TriMesh, locator: SurfaceLocator, v: np.ndarray
         if not off.any():
             break
         settled = np.flatnonzero(~off)
-        owner = settled[_cells(surface, anchor[settled])]              # (V_s,) a settled remeshed vertex
+        cells = _cells(surface, anchor[settled])
+        owner = np.where(cells >= 0, settled[np.maximum(cells, 0)], -1)  # (V_s,) a settled remeshed vertex
         todo = np.flatnonzero(off)
         for ring in (1, 2):
             if len(todo) == 0:
@@ -473,10 +477,9 @@ def remesh_with_stats(mesh: TriMesh, target_vertices: int | None = None, target_
         normals = -normals
     # snap again with normals: where two parts touch (a hand on a hip, a horse's legs) the plain
     # closest point can sit on the other part; their normals are opposite there
-    vn = _vertex_normals(v, f)
-    face, weights, dist = locator.closest(v, vn)
+    face, weights, dist = locator.closest(v, _vertex_normals(v, f))
     # ... and keep each vertex on its own part: normals do not separate parts that meet at an angle
-    face, weights, dist, moved, unresolved = _snap_onto_own_part(surface, locator, v, f, vn, face, weights, dist)
+    face, weights, dist, moved, unresolved = _snap_onto_own_part(surface, locator, v, f, face, weights, dist)
     stats["snap_moved_off_other_part"], stats["snap_off_part_unresolved"] = moved, unresolved
     stats["snap_distance_mean"] = float(dist.mean())
     stats["snap_distance_max"] = float(dist.max())
