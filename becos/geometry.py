@@ -169,7 +169,7 @@ class SurfaceLocator:
         edges = mesh.vertices[self._faces] - mesh.vertices[np.roll(self._faces, 1, axis=1)]
         self.max_detour = float(np.linalg.norm(edges, axis=2).mean())
 
-    def rings(self, rings: int) -> "VertexRings":
+    def rings(self, rings: int) -> VertexRings:
         """:class:`VertexRings` of the mesh (built once per ring count)."""
         if rings not in self._rings:
             self._rings[rings] = VertexRings(self.mesh.faces, self.mesh.n_vertices, rings)

@@ -238,7 +238,12 @@ def _from_original(surface: TriMesh, remeshed: TriMesh, face: np.ndarray, weight
     """
     import scipy.sparse as sp
 
-    from becos.geometry import SparsePairs, VertexRings, nearest_along_surface, vertex_adjacency
+    from becos.geometry import (
+        SparsePairs,
+        VertexRings,
+        nearest_along_surface,
+        vertex_adjacency,
+    )
 
     anchor = surface.faces[face, np.asarray(weights).argmax(axis=1)]            # (V_r,) surface vertex
     owner = nearest_along_surface(surface, anchor)                              # (V_s,) remeshed vertex
@@ -337,7 +342,7 @@ def _snap_onto_own_part(surface: TriMesh, locator: SurfaceLocator, v: np.ndarray
             if ring not in rings:
                 rings[ring] = VertexRings(f, n, ring)
 
-            def accept(rows, cand, near=rings[ring], todo=todo):
+            def accept(rows, cand, near=rings[ring], todo=todo, owner=owner):
                 return near.near(todo[rows][:, None, None], owner[surface.faces[cand]]).any(axis=2)
 
             fc, wc, dc, lost = locator.closest_near(v[todo], accept)

@@ -26,7 +26,7 @@ import pytest
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "benchmarks"))
 
-import gt_error  # noqa: E402
+import gt_error
 
 SEED = 42
 """config/schema.yaml's default seed: the remesh targets of issue #20's run."""
