@@ -34,12 +34,26 @@ both:
 6. the remesh is oriented like the majority of the input (area-weighted vote of face normals against
    the input's normals at the closest points) and every remeshed vertex is snapped to its closest
    point on the input surface with a compatible normal (:class:`becos.geometry.SurfaceLocator`:
-   never across a contact between touching parts). So ``to_original`` is exact (distance 0) and vertices sit on the
+   not onto a touching part that faces the other way). Parts that meet at an angle are not told
+   apart by normals: a vertex whose point lies on another part than its mesh neighbours' (their
+   points' geodesic Voronoi cells on the input are more than two cell hops apart; TOSCA victoria25:
+   a hip vertex snapped onto the hand lying on it) is snapped again among the input faces in its
+   neighbours' cells (:func:`_snap_onto_own_part`; counted as ``snap_moved_off_other_part``). So
+   ``to_original`` is exact (distance 0) and vertices sit on the
    original surface, not on the Loop-smoothed one; the snap moves vertices by ~1e-4 of the bounding
    box diagonal, far less than an edge. Where it would fold a sliver face in a crease (a few faces
    on some TOSCA shapes), that face's corners stay where decimation put them (their
    ``to_original.distance`` is then the small projection distance; counted in
    :func:`remesh_with_stats` as ``unsnapped_vertices``).
+7. ``from_original``: each original vertex goes to the closest point of a remeshed face that has a
+   corner within :data:`FROM_ORIGINAL_RINGS` rings of a remeshed vertex nearest ALONG the original
+   surface to it or to one of its 1-ring neighbours (a geodesic Voronoi partition of the remeshed
+   vertices' ``to_original`` points, :func:`becos.geometry.nearest_along_surface`; the neighbours
+   reach across thin parts, a horse's tail, that a few long remeshed faces cover). Where two parts touch or pass through each other
+   (TOSCA victoria1: a hand at the hip; the arch of a foot against its heel) the plain or
+   normal-aware closest point can lie on the other part, 0.01 mm away in space and a body length away
+   along the surface; normals do not tell them apart there (the parts meet at an angle), mesh
+   connectivity does (issue #20).
 
 Guarantee on counts: with ``target_vertices`` the result has EXACTLY that many vertices unless the
 decimation cannot get there (it stalls when every remaining collapse would break the topology or a
@@ -94,7 +108,7 @@ class Remeshed:
         to_original: (V_r,) map: remeshed vertex -> closest point of the ORIGINAL surface (face rows
             of the input as given; distance in input units, ~0 because vertices are snapped there).
         from_original: (V_original,) map: original vertex -> closest point of the remeshed surface
-            (distance in input units).
+            near it along the original surface (step 7; distance in input units).
         target_vertices: the vertex target asked for (None in face-target mode).
         target_faces: the face target asked for (None in vertex-target mode).
         seconds: wall time of :func:`remesh`, maps included.
@@ -106,6 +120,11 @@ class Remeshed:
     target_vertices: int | None
     target_faces: int | None
     seconds: float
+
+
+FROM_ORIGINAL_RINGS = 2
+"""An original vertex's point on its remesh lies in a face with a corner within this many edge rings
+of the remeshed vertex nearest to it along the original surface (``from_original``)."""
 
 
 # ----------------------------------------------------------------------------------------------
@@ -205,6 +224,137 @@ def _original_vertex_normals(mesh: TriMesh) -> np.ndarray:
     return np.divide(normals, length, out=np.zeros_like(normals), where=length > 0)
 
 
+def _from_original(surface: TriMesh, remeshed: TriMesh, face: np.ndarray, weights: np.ndarray):
+    """Each vertex of ``surface`` (the original's repaired copy) -> its point on ``remeshed``.
+
+    ``face``, ``weights``: the remeshed vertices' points on ``surface`` (rows of ``surface.faces``).
+    Each original vertex and its 1-ring neighbours are given the remeshed vertex whose point is
+    nearest to them along the original surface (:func:`becos.geometry.nearest_along_surface`); the
+    vertex's point is then the closest point among remeshed faces with a corner within
+    :data:`FROM_ORIGINAL_RINGS` rings of one of those (:meth:`SurfaceLocator.closest_near`): all of
+    them lie on the vertex's own part, and together they reach across thin parts (a tail, an ear)
+    whose few long remeshed faces one of them alone may miss. Returns face, weights, distance and
+    ``unresolved`` (no such face: the normal-aware closest point is kept).
+    """
+    import scipy.sparse as sp
+
+    from becos.geometry import (
+        SparsePairs,
+        VertexRings,
+        nearest_along_surface,
+        vertex_adjacency,
+    )
+
+    anchor = surface.faces[face, np.asarray(weights).argmax(axis=1)]            # (V_r,) surface vertex
+    owner = nearest_along_surface(surface, anchor)                              # (V_s,) remeshed vertex
+    reached = owner >= 0
+    rows, cols = vertex_adjacency(surface.faces, surface.n_vertices).nonzero()
+    keep = reached[cols]
+    owners = sp.csr_matrix((np.ones(int(keep.sum()), dtype=np.float32), (rows[keep], owner[cols[keep]])),
+                           shape=(surface.n_vertices, remeshed.n_vertices))  # original vertex -> owners near it
+    rings = VertexRings(remeshed.faces, remeshed.n_vertices, FROM_ORIGINAL_RINGS)
+    near = SparsePairs(owners @ rings.matrix)                                   # original vertex -> remeshed vertices
+
+    def accept(rows, cand):
+        ok = near.near(rows[:, None, None], remeshed.faces[cand]).any(axis=2)
+        return ok | (~reached[rows])[:, None]
+
+    return SurfaceLocator(remeshed).closest_near(surface.vertices, accept, _original_vertex_normals(surface))
+
+
+SNAP_ROUNDS = 4
+"""Rounds of :func:`_snap_onto_own_part` (each settles the vertices with settled neighbours)."""
+
+
+def _cells(surface: TriMesh, anchor: np.ndarray) -> np.ndarray:
+    """(V_s,) int64: for each vertex of ``surface``, the index into ``anchor`` (surface vertices) of the
+    anchor nearest to it ALONG the surface (geodesic Voronoi cells; the first of equal anchors)."""
+    from becos.geometry import nearest_along_surface
+
+    return nearest_along_surface(surface, anchor)
+
+
+def _off_part(surface: TriMesh, surface_edges: np.ndarray, remesh_edges: np.ndarray, n: int,
+              anchor: np.ndarray) -> np.ndarray:
+    """(n,) bool: the remeshed vertex sits on another part of ``surface`` than most of its neighbours.
+
+    ``anchor`` (n,): each remeshed vertex's snapped point as a surface vertex (its largest weight).
+    The anchors' geodesic Voronoi cells on the surface are adjacent (share a surface edge) where the
+    anchors are neighbours along the surface; a remesh edge is consistent when its ends' cells are
+    within two cell hops. Across a contact between two parts the cells are a body length apart.
+    """
+    import scipy.sparse as sp
+
+    owner = _cells(surface, anchor)
+    cell = owner[anchor]                                   # (n,) the cell a remeshed vertex is in
+    a, b = owner[surface_edges[:, 0]], owner[surface_edges[:, 1]]
+    reached = (a >= 0) & (b >= 0)                          # all, on a connected surface
+    a, b = a[reached], b[reached]
+    hop = sp.coo_matrix((np.ones(2 * len(a) + n, dtype=np.float32),
+                         (np.concatenate([a, b, np.arange(n)]), np.concatenate([b, a, np.arange(n)]))),
+                        shape=(n, n)).tocsr()
+    hop.data[:] = 1.0
+    two = (hop @ hop).tocsr()
+    ok = np.asarray(two[cell[remesh_edges[:, 0]], cell[remesh_edges[:, 1]]]).ravel() > 0
+    degree = np.bincount(remesh_edges.ravel(), minlength=n)
+    consistent = np.bincount(remesh_edges[ok].ravel(), minlength=n)
+    return 2 * consistent < degree
+
+
+def _snap_onto_own_part(surface: TriMesh, locator: SurfaceLocator, v: np.ndarray, f: np.ndarray,
+                        face: np.ndarray, weights: np.ndarray, dist: np.ndarray):
+    """Re-snap the remeshed vertices whose snapped point lies on another part than their neighbours'.
+
+    Where two parts of the original touch or pass through each other at an angle (TOSCA victoria: a
+    hand at the hip; michael: an arm against the body), the normal-aware closest point of a vertex
+    (``face``, ``weights``, ``dist`` for the (V_r, 3) positions ``v``, faces ``f``)
+    can sit on the part its mesh neighbours do not belong to: it looks right in this pose, and is
+    a body length off in every other pose of the class. Such a vertex (:func:`_off_part`) is snapped
+    again to the closest point among the surface faces in the geodesic Voronoi cells of its settled
+    neighbours' points (1-ring, else 2-ring of the remesh): the part it is connected to (no normal
+    test: the cells already pick the part, and flipped windings mislead normals). Repeated
+    until no vertex is off its part (at most :data:`SNAP_ROUNDS` rounds).
+
+    Returns face, weights, dist (as given, updated) and the number of vertices moved and left
+    unresolved (no candidate face found; their snap is kept).
+    """
+    from becos.geometry import VertexRings
+
+    n = len(v)
+    surface_edges, _ = undirected_edges(surface.faces)
+    remesh_edges, _ = undirected_edges(f)
+    face, weights, dist = face.copy(), weights.copy(), dist.copy()
+    moved = np.zeros(n, dtype=bool)
+    unresolved = np.zeros(n, dtype=bool)
+    rings = {}
+    for _ in range(SNAP_ROUNDS):
+        anchor = surface.faces[face, weights.argmax(axis=1)]
+        off = _off_part(surface, surface_edges, remesh_edges, n, anchor)
+        if not off.any():
+            break
+        settled = np.flatnonzero(~off)
+        cells = _cells(surface, anchor[settled])
+        owner = np.where(cells >= 0, settled[np.maximum(cells, 0)], -1)  # (V_s,) a settled remeshed vertex
+        todo = np.flatnonzero(off)
+        for ring in (1, 2):
+            if len(todo) == 0:
+                break
+            if ring not in rings:
+                rings[ring] = VertexRings(f, n, ring)
+
+            def accept(rows, cand, near=rings[ring], todo=todo, owner=owner):
+                return near.near(todo[rows][:, None, None], owner[surface.faces[cand]]).any(axis=2)
+
+            fc, wc, dc, lost = locator.closest_near(v[todo], accept)
+            done = todo[~lost]
+            face[done], weights[done], dist[done] = fc[~lost], wc[~lost], dc[~lost]
+            moved[done] = True
+            todo = todo[lost]
+        unresolved[:] = False
+        unresolved[todo] = True
+    return face, weights, dist, int(moved.sum()), int(unresolved.sum())
+
+
 def _content_key(mesh: TriMesh) -> str:
     h = hashlib.sha1()
     h.update(mesh.vertices.tobytes())
@@ -280,6 +430,9 @@ def remesh_with_stats(mesh: TriMesh, target_vertices: int | None = None, target_
     """:func:`remesh`, also returning a dict of diagnostics (stage times in s, snap distances in input
     units, dropped faces, decimation attempts, ``vertices_off_target`` (0 when the vertex target is
     met exactly), ``unsnapped_vertices`` and ``snap_flipped_faces`` (always 0 after the fix-up),
+    ``snap_moved_off_other_part`` / ``snap_off_part_unresolved`` (step 6's re-snap onto a vertex's own
+    part), ``from_original_unresolved`` (original vertices with no remeshed face near them along the
+    surface; their normal-aware closest point is kept),
     ``input_repair``: the counts of :class:`becos.mesh.MeshRepair` for step 0).
 
     ``jitter`` (fraction, see :data:`DEFAULT_JITTER`; 0 disables it) and ``seed`` (default: derived
@@ -330,6 +483,9 @@ def remesh_with_stats(mesh: TriMesh, target_vertices: int | None = None, target_
     # snap again with normals: where two parts touch (a hand on a hip, a horse's legs) the plain
     # closest point can sit on the other part; their normals are opposite there
     face, weights, dist = locator.closest(v, _vertex_normals(v, f))
+    # ... and keep each vertex on its own part: normals do not separate parts that meet at an angle
+    face, weights, dist, moved, unresolved = _snap_onto_own_part(surface, locator, v, f, face, weights, dist)
+    stats["snap_moved_off_other_part"], stats["snap_off_part_unresolved"] = moved, unresolved
     stats["snap_distance_mean"] = float(dist.mean())
     stats["snap_distance_max"] = float(dist.max())
     snapped = points_on_surface(surface, face, weights)
@@ -351,8 +507,12 @@ def remesh_with_stats(mesh: TriMesh, target_vertices: int | None = None, target_
     # snapped vertices ARE their image (distance 0); unsnapped ones keep their projection distance.
     # Faces are rows of the input as given (the copy keeps each kept row's columns).
     to_original = SurfaceMap(repair.face_index[face], weights, np.where(kept, dist, 0.0))
-    # 7. original vertices -> remeshed surface; vertices the copy dropped have no image
-    rf, rw, rd = SurfaceLocator(remeshed).closest(surface.vertices, _original_vertex_normals(surface))
+    # 7. original vertices -> remeshed surface; vertices the copy dropped have no image. A vertex
+    # lands only in a remeshed face whose corners sit (by ``to_original``) within a few edge rings of
+    # it on the original: never on a part that merely touches it in space (a hand on a hip, the two
+    # sheets of a foot's arch), where distance and normals cannot tell the parts apart.
+    rf, rw, rd, unresolved = _from_original(surface, remeshed, face, weights)
+    stats["from_original_unresolved"] = int(unresolved.sum())
     of = np.full(mesh.n_vertices, -1, dtype=np.int64)
     ow = np.zeros((mesh.n_vertices, 3))
     od = np.full(mesh.n_vertices, np.nan)

@@ -8,7 +8,8 @@ becos; vertex-index form (``-1`` = none) is derived from it only at the end
 
 Composition (:func:`compose`) follows the issue's rule: the image of a point (face f, weights w)
 of the middle surface is the w-weighted combination of the images of f's vertices, projected to
-the closest point of the target surface; if f's largest-weight vertex has no image the point has
+the closest point of the target surface among the faces near the images' faces along the target's
+connectivity (:data:`COMPOSE_RINGS`; never onto another part that touches them in space); if f's largest-weight vertex has no image the point has
 none, otherwise the weights are renormalised over the vertices that have one. Maps are composed
 from the target end backwards, so that only the *faces* of intermediate templates are needed (the
 BeCoS annotation folder ships those for templates whose datasets a user may not have) and every
@@ -26,6 +27,10 @@ from becos.mesh import TriMesh
 
 NONE = -1
 """Face (or vertex) index meaning "no counterpart"."""
+
+COMPOSE_RINGS = 2
+"""A composed point that needs a projection lands in a target face with a corner within this many
+edge rings of a corner of its images' faces (:func:`compose`)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -165,10 +170,22 @@ def compose(first: SurfaceMap, middle_faces: np.ndarray, second: SurfaceMap, tar
         target_vertices = target.vertices[target.faces[np.where(image_face[loose] >= 0, image_face[loose], 0)]]
         image_points = np.einsum("mkj,mkjd->mkd", image_weights[loose], target_vertices)   # (L, 3, 3)
         points = np.einsum("mk,mkd->md", w[loose], image_points)
-        # the images' own face normals say which side of a touching contact the point belongs to
+        # the point lies between its images: it may only land near their faces along the target's
+        # connectivity, never on another part that touches them in space (normals alone are misled
+        # where parts pass through each other or meet at an angle)
         locator = locator if locator is not None else SurfaceLocator(target)
-        normals = np.einsum("mk,mkd->md", w[loose], locator.face_normals[np.where(image_face[loose] >= 0, image_face[loose], 0)])
-        f, bw, d = locator.closest(points, normals)
+        safe_face = np.where(image_face[loose] >= 0, image_face[loose], 0)
+        normals = np.einsum("mk,mkd->md", w[loose], locator.face_normals[safe_face])
+        near_vertices = np.asarray(target.faces)[safe_face].reshape(-1, 9)           # (L, 9) image corners
+        used = np.repeat(w[loose] > 0, 3, axis=1)                                     # (L, 9)
+        near_vertices = np.where(used, near_vertices, near_vertices[np.arange(len(used)), used.argmax(axis=1)][:, None])
+        rings = locator.rings(COMPOSE_RINGS)
+
+        def accept(rows, cand):
+            corners = np.asarray(target.faces)[cand]                                  # (M, K, 3)
+            return rings.near(near_vertices[rows][:, None, :, None], corners[:, :, None, :]).any(axis=(2, 3))
+
+        f, bw, d, _ = locator.closest_near(points, accept, normals)
         face[alive[loose]] = f
         weights[alive[loose]] = bw
         distance[alive[loose]] = d
