@@ -205,6 +205,20 @@ def _original_vertex_normals(mesh: TriMesh) -> np.ndarray:
     return np.divide(normals, length, out=np.zeros_like(normals), where=length > 0)
 
 
+class _CpuSteps:
+    """CPU seconds (``time.process_time``: this process, all threads) per pipeline step, into
+    ``stats["cpu_seconds"]`` in call order."""
+
+    def __init__(self, stats: dict):
+        self.seconds = stats.setdefault("cpu_seconds", {})
+        self._last = time.process_time()
+
+    def lap(self, step: str) -> None:
+        now = time.process_time()
+        self.seconds[step] = self.seconds.get(step, 0.0) + now - self._last
+        self._last = now
+
+
 def _content_key(mesh: TriMesh) -> str:
     h = hashlib.sha1()
     h.update(mesh.vertices.tobytes())
@@ -293,10 +307,12 @@ def remesh_with_stats(mesh: TriMesh, target_vertices: int | None = None, target_
         raise ValueError(f"remesh target must be at least 4, got {target}")
     t0 = time.perf_counter()
     stats: dict = {"dropped_faces": 0, "attempts": 1}
+    cpu = _CpuSteps(stats)
     face_goal = int(target_faces) if target_faces is not None else 2 * int(target_vertices)
 
     # 0. the surface to remesh: a repaired copy (the input itself when clean)
     surface, repair = surface_for_remeshing(mesh, source=source)
+    cpu.lap("repair")
     stats["input_repair"] = repair.counts()
     where = str(source) if source is not None else f"remesh input ({mesh.n_vertices} vertices, {mesh.n_faces} faces)"
     if repair.changed or repair.zero_area_faces:
@@ -306,7 +322,8 @@ def remesh_with_stats(mesh: TriMesh, target_vertices: int | None = None, target_
     import pymeshlab
 
     try:
-        v, f = _remesh_surface(mesh, surface, target_vertices, target_faces, face_goal, jitter, seed, stats, t0)
+        v, f = _remesh_surface(mesh, surface, target_vertices, target_faces, face_goal, jitter, seed, stats, t0,
+                               cpu)
     except pymeshlab.PyMeshLabException as exc:
         message = " ".join(str(exc).split())
         raise InputFileError(Path(where), f"the remesher (pymeshlab) failed on this surface: {message}",
@@ -347,6 +364,7 @@ def remesh_with_stats(mesh: TriMesh, target_vertices: int | None = None, target_
         snapped[back] = v[back]
     stats["snap_flipped_faces"] = int(flipped.sum())
     stats["unsnapped_vertices"] = int(kept.sum())
+    cpu.lap("snap")
     remeshed = TriMesh(snapped, f)
     # snapped vertices ARE their image (distance 0); unsnapped ones keep their projection distance.
     # Faces are rows of the input as given (the copy keeps each kept row's columns).
@@ -358,6 +376,7 @@ def remesh_with_stats(mesh: TriMesh, target_vertices: int | None = None, target_
     od = np.full(mesh.n_vertices, np.nan)
     of[repair.vertex_index], ow[repair.vertex_index], od[repair.vertex_index] = rf, rw, rd
     from_original = SurfaceMap(of, ow, od)
+    cpu.lap("from_original")
     seconds = time.perf_counter() - t0
     stats["seconds"] = seconds
     result = Remeshed(remeshed, to_original, from_original,
@@ -368,7 +387,7 @@ def remesh_with_stats(mesh: TriMesh, target_vertices: int | None = None, target_
 
 def _remesh_surface(mesh: TriMesh, surface: TriMesh, target_vertices: int | None, target_faces: int | None,
                     face_goal: int, jitter: float, seed: int | None, stats: dict,
-                    t0: float) -> tuple[np.ndarray, np.ndarray]:
+                    t0: float, cpu: _CpuSteps) -> tuple[np.ndarray, np.ndarray]:
     """Steps 1-5 on the repaired copy ``surface``: (V_r, 3) vertices and (F_r, 3) faces of the remesh
     before the snap (diagnostics go into ``stats``). The jitter seed is derived from the INPUT
     ``mesh`` (as before the repair step); ``t0`` is the start time of the whole remesh."""
@@ -376,11 +395,13 @@ def _remesh_surface(mesh: TriMesh, surface: TriMesh, target_vertices: int | None
     ms = _meshset(surface.vertices, surface.faces)
     ms.meshing_re_orient_faces_coherently()
     v, f = _arrays(ms)
+    cpu.lap("orient")
     # 2. seeded jitter on the surface
     if seed is None:
         seed = stable_hash("remesh-jitter", _content_key(mesh), target_vertices, target_faces)
     if jitter > 0:
         v = _jitter_on_surface(v, f, float(jitter), rng_for(seed, "jitter"))
+    cpu.lap("jitter")
     # 3.-4. pre-decimation of large inputs, one Loop subdivision
     import pymeshlab
 
@@ -389,6 +410,7 @@ def _remesh_surface(mesh: TriMesh, surface: TriMesh, target_vertices: int | None
         _decimate(ms, int(PRE_DECIMATION_FACTOR * face_goal))
     ms.meshing_surface_subdivision_loop(iterations=1, threshold=pymeshlab.PercentageValue(0))
     stats["seconds_prepare"] = time.perf_counter() - t0
+    cpu.lap("subdivide")
     # decimation to the target
     if target_vertices is not None:
         v, f = _to_vertex_target(*_arrays(ms), int(target_vertices), stats)
@@ -400,6 +422,7 @@ def _remesh_surface(mesh: TriMesh, surface: TriMesh, target_vertices: int | None
     if stats["dropped_faces"]:
         log.warning("remesh: decimation left %d faces in small components; kept the largest component",
                     stats["dropped_faces"])
+    cpu.lap("decimate")
     return v, f
 
 
