@@ -16,19 +16,24 @@ both:
 1. the copy is re-oriented coherently (pymeshlab ``meshing_re_orient_faces_coherently``;
    TOSCA michael0/david0/horse5/6/centaur3/4 have inconsistently wound faces). The input's vertex
    order and face rows are never touched: both maps are computed against the input as given.
-2. seeded jitter: every non-boundary vertex of the copy moves to a random point of one of its own
-   incident triangles, at most :data:`DEFAULT_JITTER` of the way to the triangle's other corners.
+2. seeded jitter: every interior vertex of the copy moves to a random point of one of its own
+   incident triangles, at most :data:`DEFAULT_JITTER` of the way to the triangle's other corners;
+   every boundary vertex moves along one of its boundary edges (the boundary curve is kept).
    Each vertex therefore stays exactly ON the original surface; only the triangulation between them
    is perturbed (by less than the local edge length), which changes the quadric errors and the
    collapse order. The seed is derived from the mesh content and the target, so the same input and
    target give byte-identical output, and different targets (the remesh variants of one shape) or
    different poses of one class give unrelated samplings.
-3. a large input (more than ``PRE_DECIMATION_FACTOR`` × the face target faces) is first decimated to
-   that size — a speed measure: the final remesh is as good, in 40 % of the time on TOSCA humans.
-4. ONE Loop subdivision with threshold 0 (every edge split; every old vertex moved by the Loop
-   smoothing), then quadric edge-collapse decimation with optimal placement and topology
-   preservation to the target; the vertex target is reached by continuing the decimation
-   (each interior collapse removes one vertex and two faces).
+3. an input with at least ``DIRECT_DECIMATION_FACTOR`` (1.5) × the face target faces (TOSCA: every
+   shape but wolf) goes to step 4's decimation as it is: a third or more of its vertices are
+   collapsed away and the others are jittered, so no sample is shared, and the decimation's cost grows
+   with its input (a Loop subdivision first would quadruple it: 5 CPU-s per TOSCA human before, of
+   which 2.6 s in the decimation). A smaller input gets ONE Loop subdivision with threshold 0 (every
+   edge split; every old vertex moved by the Loop smoothing) first, so that the decimation has
+   samples to choose from.
+4. quadric edge-collapse decimation (pymeshlab) with optimal placement and topology preservation to
+   the target; the vertex target is reached by continuing the decimation (each interior collapse
+   removes one vertex and two faces).
 5. only the largest connected component (by area) is kept if decimation left specks (a warning is
    logged and the count is recorded), unreferenced vertices are dropped.
 6. the remesh is oriented like the majority of the input (area-weighted vote of face normals against
@@ -72,8 +77,11 @@ log = logging.getLogger(__name__)
 DEFAULT_JITTER = 0.3
 """Largest fraction of the way towards the other two corners of an incident triangle a vertex moves."""
 
-PRE_DECIMATION_FACTOR = 2.0
-"""Inputs with more faces than this × the face target are decimated to that size before subdividing."""
+DIRECT_DECIMATION_FACTOR = 1.5
+"""Inputs with at least this × the face target faces are decimated directly: at least a third of their
+vertices are collapsed away and the rest are jittered, so no sample is shared (measured by
+``benchmarks/remesh.py``), and decimating the input itself keeps thin parts better than decimating a
+Loop-smoothed copy. Smaller inputs are subdivided once first (at most 6 × the face target faces)."""
 
 VERTEX_TARGET_RANGE = (9000, 10000)
 """The paper's vertex-count rule: a remesh has a count drawn uniformly in this range (inclusive)."""
@@ -164,10 +172,11 @@ def _largest_component(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndar
 
 def _jitter_on_surface(vertices: np.ndarray, faces: np.ndarray, amount: float,
                        rng: np.random.Generator) -> np.ndarray:
-    """Move each non-boundary vertex to a random point of one of its incident triangles.
+    """Move each vertex to a random point of the surface near it.
 
-    Vertex p of a randomly chosen incident face (p, q, r) goes to p + a (q - p) + b (r - p) with
-    a, b ~ U(0, amount / 2): a point of that triangle, hence of the surface. Boundary vertices stay.
+    Interior vertex p of a randomly chosen incident face (p, q, r) goes to p + a (q - p) + b (r - p)
+    with a, b ~ U(0, amount / 2): a point of that triangle, hence of the surface. Boundary vertex p
+    goes to p + a (q - p) along a randomly chosen boundary edge (p, q): the boundary curve is kept.
     Returns new (V, 3) positions.
     """
     n = len(vertices)
@@ -175,7 +184,11 @@ def _jitter_on_surface(vertices: np.ndarray, faces: np.ndarray, amount: float,
     slot_order = np.argsort(rng.random(len(flat)), kind="stable")
     incident_slot = np.full(n, -1, dtype=np.int64)
     incident_slot[flat[slot_order]] = slot_order           # last write wins: a random incident slot
-    move = (incident_slot >= 0) & ~boundary_vertices(faces, n)
+    edges, counts = undirected_edges(faces)
+    boundary_edges = edges[counts == 1]
+    on_boundary = np.zeros(n, dtype=bool)
+    on_boundary[boundary_edges.ravel()] = True
+    move = (incident_slot >= 0) & ~on_boundary
     idx = np.flatnonzero(move)
     slot = incident_slot[idx]
     face, corner = slot // 3, slot % 3
@@ -185,6 +198,14 @@ def _jitter_on_surface(vertices: np.ndarray, faces: np.ndarray, amount: float,
     out = vertices.copy()
     p = vertices[idx]
     out[idx] = p + ab[:, :1] * (vertices[q] - p) + ab[:, 1:] * (vertices[r] - p)
+    if len(boundary_edges):
+        ends = np.concatenate([boundary_edges, boundary_edges[:, ::-1]])     # (p, q) both ways
+        ends = ends[np.argsort(rng.random(len(ends)), kind="stable")]
+        other = np.full(n, -1, dtype=np.int64)
+        other[ends[:, 0]] = ends[:, 1]                      # last write wins: a random boundary edge
+        b_idx = np.flatnonzero(on_boundary)
+        a = rng.random(n)[b_idx, None] * (amount / 2.0)
+        out[b_idx] = vertices[b_idx] + a * (vertices[other[b_idx]] - vertices[b_idx])
     return out
 
 
@@ -195,12 +216,18 @@ def _vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     return vertex_normals(TriMesh(vertices, faces))
 
 
-def _original_vertex_normals(mesh: TriMesh) -> np.ndarray:
-    """(V, 3) vertex normals of the input after orienting its faces consistently (on a copy)."""
+def _original_vertex_normals(mesh: TriMesh, face_normals: np.ndarray | None = None) -> np.ndarray:
+    """(V, 3) vertex normals of the input after orienting its faces consistently (on a copy).
+
+    ``face_normals``: :func:`becos.geometry.oriented_face_normals` of ``mesh`` when already computed."""
     from becos.geometry import oriented_face_normals
 
-    normals = np.zeros((mesh.n_vertices, 3))
-    np.add.at(normals, mesh.faces.ravel(), np.repeat(oriented_face_normals(mesh), 3, axis=0))
+    if face_normals is None:
+        face_normals = oriented_face_normals(mesh)
+    # bincount adds in index order, as np.add.at does (the same sums), ~10x faster
+    index = mesh.faces.ravel()
+    normals = np.stack([np.bincount(index, weights=np.repeat(face_normals[:, k], 3), minlength=mesh.n_vertices)
+                        for k in range(3)], axis=1)
     length = np.linalg.norm(normals, axis=1, keepdims=True)
     return np.divide(normals, length, out=np.zeros_like(normals), where=length > 0)
 
@@ -248,15 +275,18 @@ def _decimate(ms, target_faces: int) -> None:
     ms.meshing_decimation_quadric_edge_collapse(targetfacenum=int(max(target_faces, 4)), **_DECIMATION)
 
 
-def _to_vertex_target(sub_v: np.ndarray, sub_f: np.ndarray, target_vertices: int,
-                      stats: dict) -> tuple[np.ndarray, np.ndarray]:
-    """Decimate the subdivided mesh until it has ``target_vertices`` vertices (one component)."""
-    # Euler: V - E + F = chi and 2E = 3F + B  =>  F = 2 (V - chi) - B. Start a little above, so that
-    # the continuation (cheap: the mesh is already small) only ever removes vertices.
-    first_faces = 2 * target_vertices + 16
+def _to_vertex_target(start, target_vertices: int, stats: dict) -> tuple[np.ndarray, np.ndarray]:
+    """Decimate the mesh of the pymeshlab MeshSet ``start`` until it has ``target_vertices`` vertices
+    (one component). ``start`` is used by the first attempt; a retry starts from a copy of its mesh."""
+    # Euler: V - E + F = chi and 2E = 3F + B  =>  F = 2 (V - chi) - B. Topology preservation keeps chi,
+    # so asking for 2 (V - chi) + 2 faces stops at V or above (B >= 0): exactly at V on a closed
+    # surface, else the continuation (cheap: the mesh is already small) removes the rest.
+    start_arrays = _arrays(start)
+    chi = len(start_arrays[0]) - len(undirected_edges(start_arrays[1])[0]) + len(start_arrays[1])
+    first_faces = 2 * (target_vertices - chi) + 2
     best = None
     for attempt in range(6):
-        ms = _meshset(sub_v, sub_f)
+        ms = start if attempt == 0 else _meshset(*start_arrays)
         _decimate(ms, first_faces)
         for _ in range(40):
             m = ms.current_mesh()
@@ -294,7 +324,8 @@ def remesh_with_stats(mesh: TriMesh, target_vertices: int | None = None, target_
     """:func:`remesh`, also returning a dict of diagnostics (stage times in s, snap distances in input
     units, dropped faces, decimation attempts, ``vertices_off_target`` (0 when the vertex target is
     met exactly), ``unsnapped_vertices`` and ``snap_flipped_faces`` (always 0 after the fix-up),
-    ``input_repair``: the counts of :class:`becos.mesh.MeshRepair` for step 0).
+    ``input_repair``: the counts of :class:`becos.mesh.MeshRepair` for step 0, ``cpu_seconds``: CPU
+    seconds of this process by step: repair, orient, jitter, subdivide, decimate, snap, from_original).
 
     ``jitter`` (fraction, see :data:`DEFAULT_JITTER`; 0 disables it) and ``seed`` (default: derived
     from the mesh content and the target) control step 2 of the pipeline. ``source`` (the mesh's
@@ -370,7 +401,10 @@ def remesh_with_stats(mesh: TriMesh, target_vertices: int | None = None, target_
     # Faces are rows of the input as given (the copy keeps each kept row's columns).
     to_original = SurfaceMap(repair.face_index[face], weights, np.where(kept, dist, 0.0))
     # 7. original vertices -> remeshed surface; vertices the copy dropped have no image
-    rf, rw, rd = SurfaceLocator(remeshed).closest(surface.vertices, _original_vertex_normals(surface))
+    # the snap's locator already oriented the surface's face normals (the same ones when no face row
+    # was left out of its search)
+    known = locator.face_normals if locator.searches_every_face else None
+    rf, rw, rd = SurfaceLocator(remeshed).closest(surface.vertices, _original_vertex_normals(surface, known))
     of = np.full(mesh.n_vertices, -1, dtype=np.int64)
     ow = np.zeros((mesh.n_vertices, 3))
     od = np.full(mesh.n_vertices, np.nan)
@@ -402,18 +436,17 @@ def _remesh_surface(mesh: TriMesh, surface: TriMesh, target_vertices: int | None
     if jitter > 0:
         v = _jitter_on_surface(v, f, float(jitter), rng_for(seed, "jitter"))
     cpu.lap("jitter")
-    # 3.-4. pre-decimation of large inputs, one Loop subdivision
-    import pymeshlab
-
+    # 3.-4. large inputs are decimated directly; smaller ones get one Loop subdivision first
     ms = _meshset(v, f)
-    if len(f) > PRE_DECIMATION_FACTOR * face_goal:
-        _decimate(ms, int(PRE_DECIMATION_FACTOR * face_goal))
-    ms.meshing_surface_subdivision_loop(iterations=1, threshold=pymeshlab.PercentageValue(0))
+    if len(f) < DIRECT_DECIMATION_FACTOR * face_goal:
+        import pymeshlab
+
+        ms.meshing_surface_subdivision_loop(iterations=1, threshold=pymeshlab.PercentageValue(0))
     stats["seconds_prepare"] = time.perf_counter() - t0
     cpu.lap("subdivide")
     # decimation to the target
     if target_vertices is not None:
-        v, f = _to_vertex_target(*_arrays(ms), int(target_vertices), stats)
+        v, f = _to_vertex_target(ms, int(target_vertices), stats)
     else:
         _decimate(ms, int(target_faces))
         v, f = _arrays(ms)

@@ -169,7 +169,7 @@ def _run_job(tree: Path, config: dict, row: dict, token: str, out: Path) -> str:
            "--shape", json.dumps(row, sort_keys=True), "--token", token, "--out", str(out),
            "--ply", str(out.with_suffix(".ply"))]
     env = {**os.environ, "PYTHONPATH": str(tree), "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
-    proc = subprocess.run(cmd, env=env, capture_output=True, text=True)
+    proc = subprocess.run(cmd, env=env, capture_output=True, text=True, check=False)
     if proc.returncode:
         raise SystemExit(f"becos remesh {row['name']} {token} ({tree}) failed:\n{proc.stderr[-3000:]}")
     return proc.stderr
@@ -217,7 +217,7 @@ def step_benchmark(trees: dict[str, Path], names: list[str], variants: int, work
     import tempfile
 
     from becos.mesh import read_mesh
-    from becos.remesh import load_remeshed, shared_vertex_share, variant_target_vertices
+    from becos.remesh import intrinsic_coincidence, load_remeshed, shared_vertex_share
     from becos.workflow import build_catalog, remesh_target, resolve_config
 
     becos_code = _tosca_dir().parents[1]
@@ -258,14 +258,20 @@ def step_benchmark(trees: dict[str, Path], names: list[str], variants: int, work
             "jobs": jobs[label]}
         g = guarantees[label]
         originals = {n: read_mesh(_tosca_dir() / f"{n}.off") for n in names}
-        variant_share = [shared_vertex_share(files[label][(n, 0)], originals[n].faces, files[label][(n, 1)],
-                                             originals[n].faces) for n in names if variants > 1]
+        fl = files[label]
+        variant_share = [shared_vertex_share(fl[(n, 0)], originals[n].faces, fl[(n, 1)], originals[n].faces)
+                         for n in names if variants > 1]
+        variant_intrinsic = [intrinsic_coincidence(fl[(n, 0)], originals[n].faces, fl[(n, 1)], originals[n])
+                             for n in names if variants > 1]
         classes: dict[str, list[str]] = {}
         for n in names:
             classes.setdefault(re.sub(r"\d+$", "", n), []).append(n)
-        pose_share = [shared_vertex_share(files[label][(a, 0)], originals[a].faces, files[label][(b, 0)],
-                                          originals[b].faces)
-                      for members in classes.values() for a in members[:1] for b in members[1:]]
+        pose_pairs = [(a, b) for members in classes.values() for a in members[:1] for b in members[1:]]
+        pose_share = [shared_vertex_share(fl[(a, 0)], originals[a].faces, fl[(b, 0)], originals[b].faces)
+                      for a, b in pose_pairs]
+        pose_intrinsic = [max(intrinsic_coincidence(fl[(a, 0)], originals[a].faces, fl[(b, 0)], originals[b]),
+                              intrinsic_coincidence(fl[(b, 0)], originals[b].faces, fl[(a, 0)], originals[a]))
+                          for a, b in pose_pairs]
         out["guarantees"][label] = {
             "all_exact_vertex_target": all(x["exact_vertex_target"] for x in g.values()),
             "all_single_component": all(x["single_component"] for x in g.values()),
@@ -278,6 +284,8 @@ def step_benchmark(trees: dict[str, Path], names: list[str], variants: int, work
             "from_original_distance_max_rel_max": max(x["from_original_distance_max_rel"] for x in g.values()),
             "variants_shared_original_vertex_max": max(variant_share, default=None),
             "poses_shared_original_vertex_max": max(pose_share, default=None),
+            "variants_intrinsic_coincidence_max": max(variant_intrinsic, default=None),
+            "poses_intrinsic_coincidence_max": max(pose_intrinsic, default=None),
         }
     if len(trees) == 2:
         a, b = list(trees)
