@@ -151,7 +151,7 @@ def remesh_benchmark(names: list[str] | None = None, variant_shapes: list[str] |
     return {"summary": summary, "shapes": rows, "same_class": same_class, "variants": variants}
 
 
-STEP_SAMPLE = ["michael0", "michael5", "michael11", "victoria0", "victoria6", "david0", "cat0", "cat5",
+STEP_SAMPLE = ["michael0", "michael5", "michael11", "victoria0", "victoria7", "david0", "cat0", "cat5",
                "dog0", "horse5", "centaur3", "wolf0"]
 """The ``--steps`` shapes: TOSCA's classes in about their proportions (humans are half of its 76)."""
 
@@ -169,7 +169,8 @@ def _run_job(tree: Path, config: dict, row: dict, token: str, out: Path) -> str:
            "--shape", json.dumps(row, sort_keys=True), "--token", token, "--out", str(out),
            "--ply", str(out.with_suffix(".ply"))]
     env = {**os.environ, "PYTHONPATH": str(tree), "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
-    proc = subprocess.run(cmd, env=env, capture_output=True, text=True, check=False)
+    # cwd: ``python -m`` puts the working directory first on the path, before PYTHONPATH
+    proc = subprocess.run(cmd, env=env, cwd=tree, capture_output=True, text=True, check=False)
     if proc.returncode:
         raise SystemExit(f"becos remesh {row['name']} {token} ({tree}) failed:\n{proc.stderr[-3000:]}")
     return proc.stderr
@@ -229,6 +230,9 @@ def step_benchmark(trees: dict[str, Path], names: list[str], variants: int, work
                for label in trees}
     catalog = build_catalog(next(iter(configs.values())))
     rows = {r["name"]: r for r in catalog.to_dict("records")}
+    unknown = sorted(set(names) - set(rows))
+    if unknown:
+        raise SystemExit(f"not TOSCA shapes: {unknown}")
     jobs: dict[str, list[dict]] = {label: [] for label in trees}
     guarantees: dict[str, dict] = {label: {} for label in trees}
     files: dict[str, dict] = {label: {} for label in trees}
