@@ -217,9 +217,8 @@ def step_benchmark(trees: dict[str, Path], names: list[str], variants: int, work
     """The ``--steps`` figures (module docstring) for each code tree, jobs interleaved over trees."""
     import tempfile
 
-    from becos.mesh import read_mesh
     from becos.remesh import intrinsic_coincidence, load_remeshed, shared_vertex_share
-    from becos.workflow import build_catalog, remesh_target, resolve_config
+    from becos.workflow import ShapeStore, build_catalog, remesh_target, resolve_config
 
     becos_code = _tosca_dir().parents[1]
     work = Path(tempfile.mkdtemp(prefix="remesh-steps-", dir=workdir))
@@ -236,8 +235,11 @@ def step_benchmark(trees: dict[str, Path], names: list[str], variants: int, work
     jobs: dict[str, list[dict]] = {label: [] for label in trees}
     guarantees: dict[str, dict] = {label: {} for label in trees}
     files: dict[str, dict] = {label: {} for label in trees}
+    # the job remeshes the PREPARED mesh (common frame, dataset scale): the guarantees compare with it
+    prepared = {name: ShapeStore(configs[next(iter(trees))], [rows[name]]).prepared("tosca", name).mesh
+                for name in names}
     for name in names:
-        original = read_mesh(_tosca_dir() / f"{name}.off")
+        original = prepared[name]
         for v in range(variants):
             token = f"v{v}"
             for label, tree in trees.items():
@@ -261,7 +263,7 @@ def step_benchmark(trees: dict[str, Path], names: list[str], variants: int, work
             "median_without_startup": round(float(np.median(remesh_only)), 3),
             "jobs": jobs[label]}
         g = guarantees[label]
-        originals = {n: read_mesh(_tosca_dir() / f"{n}.off") for n in names}
+        originals = prepared
         fl = files[label]
         variant_share = [shared_vertex_share(fl[(n, 0)], originals[n].faces, fl[(n, 1)], originals[n].faces)
                          for n in names if variants > 1]
