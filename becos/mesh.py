@@ -102,14 +102,19 @@ def read_mesh(path: str | Path) -> TriMesh:
     Raises:
         InputFileError: missing file, unknown type, unreadable or inconsistent content.
     """
-    import trimesh
-
     path = Path(path)
     if not path.is_file():
         raise InputFileError(path, "mesh file not found",
                              "check the dataset folder in the config (data_dir) and that the download is complete")
     if path.suffix.lower() not in MESH_SUFFIXES:
         raise InputFileError(path, f"unknown mesh type '{path.suffix}'", f"convert it to one of {MESH_SUFFIXES}")
+    if path.suffix.lower() == ".off":
+        plain = _read_plain_triangle_off(path)
+        if plain is not None:
+            check_mesh_arrays(path, *plain)
+            return TriMesh(*plain)
+    import trimesh
+
     try:
         loaded = trimesh.load(path, process=False, maintain_order=True, force="mesh", skip_materials=True)
         vertices = np.asarray(loaded.vertices, dtype=np.float64)
@@ -122,6 +127,41 @@ def read_mesh(path: str | Path) -> TriMesh:
     if path.suffix.lower() == ".off":
         _check_off_header(path, len(vertices), len(faces))
     return TriMesh(vertices, faces)
+
+
+def _read_plain_triangle_off(path: Path) -> tuple[np.ndarray, np.ndarray] | None:
+    """(V, 3) float64 vertices and (F, 3) int64 faces of a PLAIN triangle OFF file, else None.
+
+    Plain: ASCII, no comment, an ``OFF`` line, a line of three counts, exactly the announced number
+    of vertex lines (three numbers each) and face lines (``3 i j k``), nothing else. The values are
+    those trimesh reads (the same ``np.array`` conversion of the same text), without importing it
+    (~1 s of a remesh job) and without its second pass over the file for the header check (the
+    counts are checked here). Anything else returns None: :func:`read_mesh` then parses it with trimesh
+    and reports faults precisely.
+    """
+    data = path.read_bytes()
+    if b"#" in data:
+        return None
+    try:
+        lines = [line for line in data.decode("ascii").split("\n") if line.strip()]
+    except UnicodeDecodeError:
+        return None
+    if len(lines) < 2 or lines[0].strip() != "OFF":
+        return None
+    counts = lines[1].split()
+    if len(counts) != 3 or not all(c.isdigit() for c in counts):
+        return None
+    n_vertices, n_faces = int(counts[0]), int(counts[1])
+    if len(lines) != 2 + n_vertices + n_faces or n_vertices == 0 or n_faces == 0:
+        return None
+    try:
+        vertices = np.array([line.split() for line in lines[2:2 + n_vertices]], dtype=np.float64)
+        faces = np.array([line.split() for line in lines[2 + n_vertices:]], dtype=np.int64)
+    except ValueError:                                   # ragged rows or a non-number
+        return None
+    if vertices.shape != (n_vertices, 3) or faces.shape != (n_faces, 4) or (faces[:, 0] != 3).any():
+        return None
+    return vertices, np.ascontiguousarray(faces[:, 1:])
 
 
 def _raise_precise(path: Path, exc: Exception) -> None:
@@ -270,16 +310,24 @@ def surface_faces(mesh: TriMesh) -> np.ndarray:
     return usable
 
 
+def _unique_pairs(pairs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``np.unique(pairs, axis=0, return_counts=True)`` for (N, 2) non-negative int64 pairs, through
+    one int64 key per pair (a sort of scalars: ~10x faster than the row-wise unique)."""
+    n = int(pairs.max()) + 1 if len(pairs) else 1
+    keys, counts = np.unique(pairs[:, 0] * n + pairs[:, 1], return_counts=True)
+    return np.stack([keys // n, keys % n], axis=1), counts
+
+
 def undirected_edges(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(E, 2) sorted unique undirected edges and (E,) how many faces use each."""
     e = np.sort(np.asarray(faces, dtype=np.int64)[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
-    return np.unique(e, axis=0, return_counts=True)
+    return _unique_pairs(e)
 
 
 def misoriented_edge_count(faces: np.ndarray) -> int:
     """Directed edges used by two faces (two neighbours wound against each other); 0 when consistent."""
     directed = np.asarray(faces, dtype=np.int64)[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
-    _, counts = np.unique(directed, axis=0, return_counts=True)
+    _, counts = _unique_pairs(directed)
     return int((counts > 1).sum())
 
 

@@ -52,3 +52,38 @@ def test_bad_mesh_files_raise_errors_naming_the_file(fault, message, tosca_dir, 
     with pytest.raises(InputFileError, match=message) as info:
         read_mesh(path)
     assert str(path) in str(info.value) and "Fix:" in str(info.value)
+
+
+@pytest.mark.parametrize("name", ["wolf0", "centaur0"])
+def test_plain_off_reader_gives_trimeshs_arrays_and_other_files_fall_back(name, tosca_dir, tmp_path):
+    """The numpy reader of plain triangle OFF files (no trimesh import in a remesh job) reads exactly
+    the bytes trimesh reads; a file with a comment, a quad or a ragged vertex line goes to trimesh."""
+    import trimesh
+
+    from becos.mesh import _read_plain_triangle_off
+
+    path = tosca_dir / f"{name}.off"
+    loaded = trimesh.load(path, process=False, maintain_order=True, force="mesh", skip_materials=True)
+    plain = _read_plain_triangle_off(path)
+    assert plain is not None
+    assert plain[0].dtype == np.float64 and plain[0].tobytes() == np.asarray(loaded.vertices, np.float64).tobytes()
+    assert plain[1].dtype == np.int64 and plain[1].tobytes() == np.asarray(loaded.faces, np.int64).tobytes()
+    mesh = read_mesh(path)
+    assert mesh.vertices.tobytes() == plain[0].tobytes() and mesh.faces.tobytes() == plain[1].tobytes()
+
+    lines = path.read_text().splitlines()
+    n_vertices = int(lines[1].split()[0])
+    variants = {
+        "comment": [lines[0], "# a comment", *lines[1:]],
+        "quad": lines[:-1] + ["4 0 1 2 3"],
+        "ragged": lines[:2] + [lines[2] + " 1.0", " ".join(lines[3].split()[:2])] + lines[4:],
+        "extra_line": lines + [lines[-1]],
+    }
+    for label, text in variants.items():
+        other = tmp_path / f"{label}.off"
+        other.write_text("\n".join(text) + "\n")
+        assert _read_plain_triangle_off(other) is None, label
+    # the commented file is still read (by trimesh), with the same arrays
+    again = read_mesh(tmp_path / "comment.off")
+    assert np.array_equal(again.vertices, mesh.vertices) and np.array_equal(again.faces, mesh.faces)
+    assert n_vertices == mesh.n_vertices
