@@ -29,7 +29,7 @@ class RigidTransform:
         object.__setattr__(self, "translation", np.asarray(self.translation, dtype=np.float64).reshape(3))
 
     @classmethod
-    def identity(cls) -> "RigidTransform":
+    def identity(cls) -> RigidTransform:
         return cls(np.eye(3), np.zeros(3))
 
     def apply(self, points: np.ndarray) -> np.ndarray:
@@ -37,11 +37,11 @@ class RigidTransform:
         points = np.asarray(points, dtype=np.float64)
         return points @ self.rotation.T + self.translation
 
-    def inverse(self) -> "RigidTransform":
+    def inverse(self) -> RigidTransform:
         """The motion undoing this one: ``q -> (q - t) @ R``."""
         return RigidTransform(self.rotation.T, -self.translation @ self.rotation)
 
-    def then(self, other: "RigidTransform") -> "RigidTransform":
+    def then(self, other: RigidTransform) -> RigidTransform:
         """The motion ``other ∘ self`` (first this one, then ``other``)."""
         return RigidTransform(other.rotation @ self.rotation, self.translation @ other.rotation.T + other.translation)
 
@@ -53,8 +53,12 @@ class RigidTransform:
         return m
 
 
-def procrustes(source_points: np.ndarray, target_points: np.ndarray, mask: np.ndarray | None = None,
-               weights: np.ndarray | None = None) -> RigidTransform:
+def procrustes(
+    source_points: np.ndarray,
+    target_points: np.ndarray,
+    mask: np.ndarray | None = None,
+    weights: np.ndarray | None = None,
+) -> RigidTransform:
     """The rigid motion minimising ``Σ w_i |source_i @ R.T + t - target_i|²`` (Kabsch, reflection-fixed).
 
     Args:
@@ -90,7 +94,7 @@ def procrustes(source_points: np.ndarray, target_points: np.ndarray, mask: np.nd
     w = w / w.sum()
     mu_s = w @ src
     mu_t = w @ tgt
-    cov = (src - mu_s).T @ ((tgt - mu_t) * w[:, None])   # (3, 3): Σ w s_c t_c^T
+    cov = (src - mu_s).T @ ((tgt - mu_t) * w[:, None])  # (3, 3): Σ w s_c t_c^T
     u, _, vt = np.linalg.svd(cov)
     d = np.sign(np.linalg.det(vt.T @ u.T))
     if d == 0:

@@ -62,8 +62,10 @@ DEFAULT_FACES_DIR = Path("corres_comp") / "default_faces"
 CHIRALITY_DIR = Path("precomputed_chirality_templates")
 SMAL_CLASSES = ("big_cats", "cows", "dogs", "hippos", "horses")
 
-_FIX_FOLDER = ("point becos at an unmodified BeCoS annotation folder (e.g. the path printed by "
-               "`../shared/unpack`, or a fresh clone of github.com/NafieAmrani/becos-code)")
+_FIX_FOLDER = (
+    "point becos at an unmodified BeCoS annotation folder (e.g. the path printed by "
+    "`../shared/unpack`, or a fresh clone of github.com/NafieAmrani/becos-code)"
+)
 _CACHE_VERSION = 4
 _warned_zero_weight: set[str] = set()
 
@@ -123,8 +125,10 @@ def dataset_of_key(key: str) -> str:
     for ds in sorted(known, key=len, reverse=True):
         if key == ds or key.startswith(ds + "_"):
             return ds
-    raise BecosError(f"'{key}' does not start with a known dataset name {sorted(known)}. "
-                     f"Fix: use keys/nodes of the BeCoS template table and network")
+    raise BecosError(
+        f"'{key}' does not start with a known dataset name {sorted(known)}. "
+        f"Fix: use keys/nodes of the BeCoS template table and network"
+    )
 
 
 def file_name_part(dataset: str, template: str) -> str:
@@ -173,17 +177,23 @@ def parse_edge_file(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
     except pd.errors.EmptyDataError:
         raise InputFileError(path, "the edge file is empty", fix) from None
     except pd.errors.ParserError as exc:
-        raise InputFileError(path, f"rows have different numbers of columns ({str(exc).strip()}); "
-                             "every row must hold 4 columns: face index and 3 barycentric weights", fix) from None
+        raise InputFileError(
+            path,
+            f"rows have different numbers of columns ({str(exc).strip()}); "
+            "every row must hold 4 columns: face index and 3 barycentric weights",
+            fix,
+        ) from None
     if df.shape[1] != 4:
-        raise InputFileError(path, f"has {df.shape[1]} columns; every row must hold 4: face index and "
-                             "3 barycentric weights", fix)
+        raise InputFileError(
+            path, f"has {df.shape[1]} columns; every row must hold 4: face index and 3 barycentric weights", fix
+        )
     for col in range(4):
         if not pd.api.types.is_numeric_dtype(df[col]):
             numeric = pd.to_numeric(df[col], errors="coerce")
             bad = int(np.flatnonzero(numeric.isna().to_numpy())[0])
-            raise InputFileError(path, f"line {bad + 1} holds non-numeric text {str(df[col].iat[bad])!r} "
-                                 f"in column {col + 1}", fix)
+            raise InputFileError(
+                path, f"line {bad + 1} holds non-numeric text {str(df[col].iat[bad])!r} in column {col + 1}", fix
+            )
     values = df.to_numpy(dtype=np.float64)
     if np.isnan(values).any():
         bad = int(np.flatnonzero(np.isnan(values).any(axis=1))[0])
@@ -198,8 +208,12 @@ def parse_edge_file(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
     face = face_f.astype(np.int64)
     if (face < -1).any():
         bad = int(np.flatnonzero(face < -1)[0])
-        raise InputFileError(path, f"line {bad + 1}: face index {face[bad]} is below -1 (-1 is the only "
-                             "allowed negative value, meaning 'no counterpart')", fix)
+        raise InputFileError(
+            path,
+            f"line {bad + 1}: face index {face[bad]} is below -1 (-1 is the only "
+            "allowed negative value, meaning 'no counterpart')",
+            fix,
+        )
     weights = values[:, 1:]
     if (weights < 0).any():
         bad = int(np.flatnonzero((weights < 0).any(axis=1))[0])
@@ -243,9 +257,13 @@ def _process_edge(face: np.ndarray, weights: np.ndarray) -> tuple[np.ndarray, np
 def _warn_zero_weights(path: Path, report: dict) -> None:
     if report["zero_weight_rows"] and str(path) not in _warned_zero_weight:
         _warned_zero_weight.add(str(path))
-        log.warning("%s: %d of %d matched rows have all-zero barycentric weights; using the face centroid "
-                    "for them (reference quirk: weights truncated to 0/1)", path, report["zero_weight_rows"],
-                    report["matched"])
+        log.warning(
+            "%s: %d of %d matched rows have all-zero barycentric weights; using the face centroid "
+            "for them (reference quirk: weights truncated to 0/1)",
+            path,
+            report["zero_weight_rows"],
+            report["matched"],
+        )
 
 
 @dataclass(frozen=True)
@@ -271,8 +289,9 @@ class AnnotationSource:
         cache_dir: the edge-file cache folder.
     """
 
-    def __init__(self, root: str | Path, cache_dir: str | Path | None = None,
-                 template_table: str = "templates_all.csv"):
+    def __init__(
+        self, root: str | Path, cache_dir: str | Path | None = None, template_table: str = "templates_all.csv"
+    ):
         self.root = Path(root).expanduser()
         if not self.root.is_dir():
             raise InputFileError(self.root, "annotation folder not found", _FIX_FOLDER)
@@ -310,9 +329,11 @@ class AnnotationSource:
         try:
             return self._rows[key]
         except KeyError:
-            raise BecosError(f"{self.template_table_path}: no row for '{key}' (the table has "
-                             f"{len(self._rows)} keys). Fix: add a row for it or check the dataset's "
-                             f"template-key rule") from None
+            raise BecosError(
+                f"{self.template_table_path}: no row for '{key}' (the table has "
+                f"{len(self._rows)} keys). Fix: add a row for it or check the dataset's "
+                f"template-key rule"
+            ) from None
 
     def node_of_key(self, key: str) -> str:
         """The network node of a template key.
@@ -331,15 +352,19 @@ class AnnotationSource:
     def _node_of_key(self, key: str) -> str:
         row = self.template_row(key)
         if not row.has_template:
-            raise BecosError(f"{self.template_table_path}: '{key}' has no template ('{row.template}'), so its "
-                             f"shapes cannot be placed in the network. Fix: exclude these shapes (the reference "
-                             f"excludes them) or give the row a template")
+            raise BecosError(
+                f"{self.template_table_path}: '{key}' has no template ('{row.template}'), so its "
+                f"shapes cannot be placed in the network. Fix: exclude these shapes (the reference "
+                f"excludes them) or give the row a template"
+            )
         dataset = dataset_of_key(key)
         node = key if dataset.startswith("dt4d") else f"{dataset}_{row.template.replace('/', '_')}"
         if node not in self.graph:
-            raise BecosError(f"{self.template_table_path}: template '{row.template}' of '{key}' is node '{node}', "
-                             f"which {self.root / ADJACENCY_CSV} does not contain. Fix: use a template that is a "
-                             f"network node, or add the node and its edge files")
+            raise BecosError(
+                f"{self.template_table_path}: template '{row.template}' of '{key}' is node '{node}', "
+                f"which {self.root / ADJACENCY_CSV} does not contain. Fix: use a template that is a "
+                f"network node, or add the node and its edge files"
+            )
         return node
 
     def _rows_by_node(self) -> dict[str, TemplateRow]:
@@ -368,29 +393,36 @@ class AnnotationSource:
 
     def _node_template(self, node: str) -> tuple[str, str]:
         if node not in self.graph:
-            raise BecosError(f"{self.root / ADJACENCY_CSV}: no network node '{node}'. "
-                             f"Fix: use one of its {self.graph.number_of_nodes()} node names")
+            raise BecosError(
+                f"{self.root / ADJACENCY_CSV}: no network node '{node}'. "
+                f"Fix: use one of its {self.graph.number_of_nodes()} node names"
+            )
         dataset = dataset_of_key(node)
         row = self._rows_by_node().get(node)
         if row is not None:
             return dataset, row.template
         if dataset.startswith("dt4d") or dataset == "smal":
-            raise BecosError(f"{self.template_table_path}: no row has network node '{node}' as template, so "
-                             f"its shape name (with its '/' sub-folder) is unknown. Fix: add its row to the table")
-        return dataset, node[len(dataset) + 1:]
+            raise BecosError(
+                f"{self.template_table_path}: no row has network node '{node}' as template, so "
+                f"its shape name (with its '/' sub-folder) is unknown. Fix: add its row to the table"
+            )
+        return dataset, node[len(dataset) + 1 :]
 
     # --- network ------------------------------------------------------------------------------------
     def path(self, node_a: str, node_b: str) -> list[str]:
         """The unique tree path of nodes from ``node_a`` to ``node_b`` (both included)."""
         for node in (node_a, node_b):
             if node not in self.graph:
-                raise BecosError(f"{self.root / ADJACENCY_CSV}: no network node '{node}' (path {node_a} -> "
-                                 f"{node_b}). Fix: check the template key rule / template table row")
+                raise BecosError(
+                    f"{self.root / ADJACENCY_CSV}: no network node '{node}' (path {node_a} -> "
+                    f"{node_b}). Fix: check the template key rule / template table row"
+                )
         try:
             return nx.shortest_path(self.graph, node_a, node_b)
         except nx.NetworkXNoPath:
-            raise BecosError(f"{self.root / ADJACENCY_CSV}: no path between '{node_a}' and '{node_b}'. "
-                             f"Fix: {_FIX_FOLDER}") from None
+            raise BecosError(
+                f"{self.root / ADJACENCY_CSV}: no path between '{node_a}' and '{node_b}'. Fix: {_FIX_FOLDER}"
+            ) from None
 
     def _identity(self) -> set[frozenset[str]]:
         if self._identity_pairs is None:
@@ -404,14 +436,20 @@ class AnnotationSource:
                         continue
                     parts = [p.strip() for p in line.split(",")]
                     if len(parts) != 2 or not all(p.startswith("dt4d_") for p in parts):
-                        raise InputFileError(path, f"line {i + 1} {line!r} is not 'dt4d_<classA>,dt4d_<classB>'",
-                                             f"restore the file; {_FIX_FOLDER}")
+                        raise InputFileError(
+                            path,
+                            f"line {i + 1} {line!r} is not 'dt4d_<classA>,dt4d_<classB>'",
+                            f"restore the file; {_FIX_FOLDER}",
+                        )
                     nodes = []
                     for p in parts:
-                        cls = p[len("dt4d_"):]
+                        cls = p[len("dt4d_") :]
                         if cls not in dt4d_nodes:
-                            raise InputFileError(path, f"line {i + 1}: class '{cls}' is no DT4D network node",
-                                                 f"restore the file; {_FIX_FOLDER}")
+                            raise InputFileError(
+                                path,
+                                f"line {i + 1}: class '{cls}' is no DT4D network node",
+                                f"restore the file; {_FIX_FOLDER}",
+                            )
                         nodes.append(dt4d_nodes[cls])
                     pairs.add(frozenset(nodes))
             self._identity_pairs = pairs
@@ -434,8 +472,10 @@ class AnnotationSource:
             for node in (a, b):
                 if node not in self.graph:
                     raise BecosError(f"{self.root / ADJACENCY_CSV}: no network node '{node}'. Fix: use node names")
-            raise BecosError(f"{self.root / ADJACENCY_CSV}: '{a}' and '{b}' are not adjacent, so no edge file "
-                             f"links them. Fix: go through AnnotationSource.path({a!r}, {b!r})")
+            raise BecosError(
+                f"{self.root / ADJACENCY_CSV}: '{a}' and '{b}' are not adjacent, so no edge file "
+                f"links them. Fix: go through AnnotationSource.path({a!r}, {b!r})"
+            )
         if a.startswith("dt4d_") and b.startswith("dt4d_") and frozenset((a, b)) in self._identity():
             source = EdgeSource(a, b, "identity", None)
         else:
@@ -445,13 +485,17 @@ class AnnotationSource:
             pattern = f"{glob.escape(pa)}*_{glob.escape(pb)}*_corres.txt"
             hits = sorted(Path(p) for p in glob.glob(str(folder / pattern)))
             if not hits:
-                raise InputFileError(folder / f"{pa}*_{pb}*_corres.txt",
-                                     f"no edge file for network edge {a} -> {b}",
-                                     f"restore the annotation folder's precomputed_corr_templates; {_FIX_FOLDER}")
+                raise InputFileError(
+                    folder / f"{pa}*_{pb}*_corres.txt",
+                    f"no edge file for network edge {a} -> {b}",
+                    f"restore the annotation folder's precomputed_corr_templates; {_FIX_FOLDER}",
+                )
             if len(hits) > 1:
-                raise InputFileError(folder / f"{pa}*_{pb}*_corres.txt",
-                                     f"edge {a} -> {b} is ambiguous: {[h.name for h in hits]} all match",
-                                     "remove or rename the extra files (keep the one shipped with BeCoS)")
+                raise InputFileError(
+                    folder / f"{pa}*_{pb}*_corres.txt",
+                    f"edge {a} -> {b} is ambiguous: {[h.name for h in hits]} all match",
+                    "remove or rename the extra files (keep the one shipped with BeCoS)",
+                )
             source = EdgeSource(a, b, "file", hits[0])
         self._edge_sources[key] = source
         return source
@@ -480,8 +524,11 @@ class AnnotationSource:
             try:
                 with np.load(cached) as data:
                     counts = data["report"]
-                    loaded = (data["face"].astype(np.int64), data["weights"].astype(np.float64),
-                              dict(zip(_REPORT_KEYS, counts.tolist())))
+                    loaded = (
+                        data["face"].astype(np.int64),
+                        data["weights"].astype(np.float64),
+                        dict(zip(_REPORT_KEYS, counts.tolist())),
+                    )
             except Exception:  # a damaged cache entry is re-parsed
                 loaded = None
         if loaded is None:
@@ -489,8 +536,12 @@ class AnnotationSource:
             face, weights, report = loaded
             try:
                 # weights stay float64: a cached load must equal a fresh parse
-                save_npz(cached, face=face.astype(np.int32), weights=weights,
-                         report=np.array([report[k] for k in _REPORT_KEYS], dtype=np.int64))
+                save_npz(
+                    cached,
+                    face=face.astype(np.int32),
+                    weights=weights,
+                    report=np.array([report[k] for k in _REPORT_KEYS], dtype=np.int64),
+                )
             except OSError as exc:
                 log.warning("could not write the edge cache %s (%s); parsing each time", cached, exc)
         face, weights, report = loaded
@@ -517,8 +568,16 @@ class AnnotationSource:
         ``renormalised_rows`` (sum off 1 by > 1e-4), ``max_face``, ``path``, ``kind``."""
         source = self.edge_source(a, b)
         if source.kind == "identity":
-            return {"kind": "identity", "path": None, "rows": None, "matched": None, "missing": 0,
-                    "zero_weight_rows": 0, "renormalised_rows": 0, "max_face": None}
+            return {
+                "kind": "identity",
+                "path": None,
+                "rows": None,
+                "matched": None,
+                "missing": 0,
+                "zero_weight_rows": 0,
+                "renormalised_rows": 0,
+                "max_face": None,
+            }
         return {"kind": "file", **self._load_edge(source.path).report}
 
     def check_edge(self, a: str, b: str, n_source_vertices: int, n_target_faces: int) -> None:
@@ -530,13 +589,19 @@ class AnnotationSource:
         edge = self._load_edge(source.path)
         rows, max_face = edge.report["rows"], edge.report["max_face"]
         if rows != n_source_vertices:
-            raise InputFileError(source.path, f"has {rows} rows but template {a} has {n_source_vertices} vertices",
-                                 "the edge file and the template mesh come from different versions: restore the "
-                                 "annotation folder's file or use the dataset's original mesh")
+            raise InputFileError(
+                source.path,
+                f"has {rows} rows but template {a} has {n_source_vertices} vertices",
+                "the edge file and the template mesh come from different versions: restore the "
+                "annotation folder's file or use the dataset's original mesh",
+            )
         if max_face >= n_target_faces:
-            raise InputFileError(source.path, f"face index {max_face} is out of range for template {b} "
-                                 f"({n_target_faces} faces)", "restore the annotation folder's original file, "
-                                 "or use the dataset's original (unprocessed) mesh of the target template")
+            raise InputFileError(
+                source.path,
+                f"face index {max_face} is out of range for template {b} ({n_target_faces} faces)",
+                "restore the annotation folder's original file, "
+                "or use the dataset's original (unprocessed) mesh of the target template",
+            )
 
     # --- faces and labels ---------------------------------------------------------------------------
     def default_faces(self, template_name: str, dataset: str | None = None) -> np.ndarray | None:
@@ -558,10 +623,15 @@ class AnnotationSource:
         try:
             faces = np.load(path, allow_pickle=False)
         except Exception as exc:
-            raise InputFileError(path, f"cannot be read as a numpy array ({exc})", f"restore it; {_FIX_FOLDER}") from exc
+            raise InputFileError(
+                path, f"cannot be read as a numpy array ({exc})", f"restore it; {_FIX_FOLDER}"
+            ) from exc
         if faces.ndim != 2 or faces.shape[1] != 3 or not np.issubdtype(faces.dtype, np.integer) or faces.min() < 0:
-            raise InputFileError(path, f"is not an (F, 3) array of non-negative integers (shape {faces.shape}, "
-                                 f"dtype {faces.dtype})", f"restore it; {_FIX_FOLDER}")
+            raise InputFileError(
+                path,
+                f"is not an (F, 3) array of non-negative integers (shape {faces.shape}, dtype {faces.dtype})",
+                f"restore it; {_FIX_FOLDER}",
+            )
         return faces.astype(np.int64)
 
     def chirality_table(self) -> dict[str, str]:
@@ -578,17 +648,23 @@ class AnnotationSource:
         ``precomputed_chirality_templates/<dataset>_<template with / -> _>.txt``."""
         path = self.root / CHIRALITY_DIR / f"{dataset}_{template.replace('/', '_')}.txt"
         if not path.is_file():
-            raise InputFileError(path, f"no left/right labels for {dataset}/{template}",
-                                 f"use a template listed in {CHIRALITY_CSV}, or restore the file; {_FIX_FOLDER}")
+            raise InputFileError(
+                path,
+                f"no left/right labels for {dataset}/{template}",
+                f"use a template listed in {CHIRALITY_CSV}, or restore the file; {_FIX_FOLDER}",
+            )
         import pandas as pd
 
         try:
             values = pd.read_csv(path, sep=r"\s+", header=None, engine="c").to_numpy()
         except Exception as exc:
-            raise InputFileError(path, f"cannot be parsed ({type(exc).__name__}: {exc})", f"restore it; {_FIX_FOLDER}") from exc
+            raise InputFileError(
+                path, f"cannot be parsed ({type(exc).__name__}: {exc})", f"restore it; {_FIX_FOLDER}"
+            ) from exc
         if values.ndim != 2 or values.shape[1] != 1 or not np.isin(values, (0, 1)).all():
-            raise InputFileError(path, "must hold one 0 or 1 per line (one label per template vertex)",
-                                 f"restore it; {_FIX_FOLDER}")
+            raise InputFileError(
+                path, "must hold one 0 or 1 per line (one label per template vertex)", f"restore it; {_FIX_FOLDER}"
+            )
         return values[:, 0].astype(np.int8)
 
 
@@ -601,14 +677,18 @@ def _read_csv_rows(path: Path, columns: tuple[str, ...]) -> list[dict[str, str]]
         header = [h.strip() for h in (reader.fieldnames or [])]
         missing = [c for c in columns if c not in header]
         if missing:
-            raise InputFileError(path, f"lacks columns {missing} (header: {header})",
-                                 f"the header must be {','.join(columns)}")
+            raise InputFileError(
+                path, f"lacks columns {missing} (header: {header})", f"the header must be {','.join(columns)}"
+            )
         rows = []
         for i, raw in enumerate(reader):
             row = {k.strip(): (v or "").strip() for k, v in raw.items() if k is not None}
             if any(not row.get(c) for c in columns):
-                raise InputFileError(path, f"line {i + 2} has an empty field: {raw}",
-                                     f"fill every column ({','.join(columns)}); use 'undefined' or '-' for none")
+                raise InputFileError(
+                    path,
+                    f"line {i + 2} has an empty field: {raw}",
+                    f"fill every column ({','.join(columns)}); use 'undefined' or '-' for none",
+                )
             rows.append(row)
     return rows
 
@@ -620,8 +700,9 @@ def read_template_table(path: str | Path) -> tuple[dict[str, TemplateRow], list[
     rows: dict[str, TemplateRow] = {}
     duplicates: list[str] = []
     for raw in _read_csv_rows(path, fields):
-        row = TemplateRow(raw["dataset"], raw["template"], raw["split"], raw["partial_full_template"],
-                          raw["partial_full_dataset"])
+        row = TemplateRow(
+            raw["dataset"], raw["template"], raw["split"], raw["partial_full_template"], raw["partial_full_dataset"]
+        )
         if row.split not in (*SPLITS, NO_TEMPLATE):
             raise InputFileError(path, f"row '{row.key}' has split '{row.split}'", "use train, val, test or -")
         if row.key in rows:
@@ -653,9 +734,12 @@ def read_adjacency(path: str | Path) -> nx.Graph:
     rows = [str(r).strip() for r in df.index]
     cols = [str(c).strip() for c in df.columns]
     if rows != cols:
-        raise InputFileError(path, f"row names and column names differ (first difference: "
-                             f"{next(((r, c) for r, c in zip(rows, cols) if r != c), (len(rows), len(cols)))})",
-                             "the first column and the header must list the same nodes in the same order")
+        raise InputFileError(
+            path,
+            f"row names and column names differ (first difference: "
+            f"{next(((r, c) for r, c in zip(rows, cols) if r != c), (len(rows), len(cols)))})",
+            "the first column and the header must list the same nodes in the same order",
+        )
     if len(set(rows)) != len(rows):
         raise InputFileError(path, "node names repeat", fix)
     values = df.apply(pd.to_numeric, errors="coerce").to_numpy(dtype=np.float64)
@@ -664,8 +748,12 @@ def read_adjacency(path: str | Path) -> nx.Graph:
         raise InputFileError(path, f"entry ({rows[i]}, {cols[j]}) is {df.iat[i, j]!r}; only 0 and 1 are allowed", fix)
     if not (values == values.T).all():
         i, j = np.argwhere(values != values.T)[0]
-        raise InputFileError(path, f"the matrix is not symmetric: ({rows[i]}, {cols[j]}) = {values[i, j]:g} but "
-                             f"({cols[j]}, {rows[i]}) = {values[j, i]:g}", "make the edge two-way (set both entries)")
+        raise InputFileError(
+            path,
+            f"the matrix is not symmetric: ({rows[i]}, {cols[j]}) = {values[i, j]:g} but "
+            f"({cols[j]}, {rows[i]}) = {values[j, i]:g}",
+            "make the edge two-way (set both entries)",
+        )
     if np.diag(values).any():
         i = int(np.flatnonzero(np.diag(values))[0])
         raise InputFileError(path, f"node {rows[i]} is linked to itself", "set the diagonal to 0")
@@ -675,11 +763,17 @@ def read_adjacency(path: str | Path) -> nx.Graph:
     graph.add_edges_from((rows[i], rows[j]) for i, j in zip(iu, ju))
     if not nx.is_connected(graph):
         parts = sorted(nx.connected_components(graph), key=len)
-        raise InputFileError(path, f"the network is not connected ({len(parts)} parts; smallest: "
-                             f"{sorted(parts[0])[:5]})", "add the missing edges so every template is reachable")
+        raise InputFileError(
+            path,
+            f"the network is not connected ({len(parts)} parts; smallest: {sorted(parts[0])[:5]})",
+            "add the missing edges so every template is reachable",
+        )
     if graph.number_of_edges() != graph.number_of_nodes() - 1:
         cycle = nx.find_cycle(graph)
-        raise InputFileError(path, f"the network is not a tree ({graph.number_of_edges()} edges over "
-                             f"{graph.number_of_nodes()} nodes; cycle {[u for u, _ in cycle]})",
-                             "remove edges until paths between templates are unique")
+        raise InputFileError(
+            path,
+            f"the network is not a tree ({graph.number_of_edges()} edges over "
+            f"{graph.number_of_nodes()} nodes; cycle {[u for u, _ in cycle]})",
+            "remove edges until paths between templates are unique",
+        )
     return graph

@@ -10,9 +10,9 @@ import errno
 import os
 import shutil
 import tempfile
+from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Iterable, Iterator
 
 import numpy as np
 
@@ -64,7 +64,7 @@ def remove_stale_temporaries(folder: str | Path, names: Iterable[str]) -> int:
         if not entry.name.startswith(".") or ".tmp" not in entry.name:
             continue
         # ".<name>.<mkstemp's random part, no dots><suffix starting .tmp>"
-        target = entry.name[1:entry.name.rindex(".tmp")].rpartition(".")[0]
+        target = entry.name[1 : entry.name.rindex(".tmp")].rpartition(".")[0]
         if target in names:
             if entry.is_dir(follow_symlinks=False):
                 shutil.rmtree(entry.path, ignore_errors=True)
@@ -95,7 +95,7 @@ def save_npz(path: str | Path, compressed: bool = False, **arrays: np.ndarray) -
                 value = np.asanyarray(value)
                 member: str | zipfile.ZipInfo = f"{key}.npy"
                 if value.dtype.kind in "fc":
-                    member = zipfile.ZipInfo(member)            # default timestamp 1980-01-01, as numpy's
+                    member = zipfile.ZipInfo(member)  # default timestamp 1980-01-01, as numpy's
                     member.compress_type = zipfile.ZIP_STORED
                 with z.open(member, "w", force_zip64=True) as fh:
                     np.lib.format.write_array(fh, value, allow_pickle=False)

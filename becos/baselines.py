@@ -149,8 +149,9 @@ def eigenpairs(vertices: np.ndarray, faces: np.ndarray, k: int) -> tuple[np.ndar
     """
     import robust_laplacian
 
-    stiffness, mass = robust_laplacian.mesh_laplacian(np.asarray(vertices, dtype=np.float64),
-                                                      np.asarray(faces, dtype=np.int64))
+    stiffness, mass = robust_laplacian.mesh_laplacian(
+        np.asarray(vertices, dtype=np.float64), np.asarray(faces, dtype=np.int64)
+    )
     k = min(k, len(vertices) - 2)
     area = float(mass.diagonal().sum())
     start = np.random.default_rng(0).standard_normal(len(vertices))  # ARPACK's start: fixed, for repeatable runs
@@ -159,14 +160,15 @@ def eigenpairs(vertices: np.ndarray, faces: np.ndarray, k: int) -> tuple[np.ndar
     return np.maximum(evals[order], 0.0), evecs[:, order], mass.diagonal().copy()
 
 
-def wave_kernel_signature(evals: np.ndarray, evecs: np.ndarray, mass: np.ndarray, energies: np.ndarray,
-                          sigma: float) -> np.ndarray:
+def wave_kernel_signature(
+    evals: np.ndarray, evecs: np.ndarray, mass: np.ndarray, energies: np.ndarray, sigma: float
+) -> np.ndarray:
     """(V, E) WKS at log-energies ``energies`` with bandwidth ``sigma`` (the zero eigenpair skipped),
     each column scaled to unit M-norm."""
     log_l = np.log(np.maximum(evals[1:], 1e-12))
-    coefs = np.exp(-((energies[None, :] - log_l[:, None]) ** 2) / (2.0 * sigma ** 2))  # (k-1, E)
+    coefs = np.exp(-((energies[None, :] - log_l[:, None]) ** 2) / (2.0 * sigma**2))  # (k-1, E)
     desc = (evecs[:, 1:] ** 2) @ coefs / np.maximum(coefs.sum(axis=0), 1e-300)
-    norms = np.sqrt(mass @ desc ** 2)
+    norms = np.sqrt(mass @ desc**2)
     return desc / np.maximum(norms, 1e-300)
 
 
@@ -178,8 +180,8 @@ def _nearest_rows(targets: np.ndarray, queries: np.ndarray, block: int = 2048) -
     half_sq = 0.5 * np.einsum("ij,ij->i", t, t)
     out = np.empty(len(q), dtype=np.int64)
     for start in range(0, len(q), block):
-        scores = q[start:start + block] @ t.T - half_sq[None, :]
-        out[start:start + block] = scores.argmax(axis=1)
+        scores = q[start : start + block] @ t.T - half_sq[None, :]
+        out[start : start + block] = scores.argmax(axis=1)
     return out
 
 
@@ -196,8 +198,9 @@ def face_gradients(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray,
     return grad, 0.5 * double_area
 
 
-def orientation_operators(vertices: np.ndarray, faces: np.ndarray, normals: np.ndarray, evecs: np.ndarray,
-                          descriptors: np.ndarray) -> np.ndarray:
+def orientation_operators(
+    vertices: np.ndarray, faces: np.ndarray, normals: np.ndarray, evecs: np.ndarray, descriptors: np.ndarray
+) -> np.ndarray:
     """(D, k, k) reduced orientation operators (Ren et al. 2018): for each descriptor f, the operator
     ``g -> <n x grad f / |grad f|, grad g>`` in the basis ``evecs`` (V, k), integrated with face areas;
     ``normals`` (F, 3) are consistently oriented unit face normals. A reflection flips its sign, so
@@ -239,9 +242,17 @@ def _balanced(ops_x: np.ndarray, ops_y: np.ndarray, a: np.ndarray) -> tuple[np.n
     return ops_x * scale[:, None, None], ops_y * scale[:, None, None]
 
 
-def functional_map(a: np.ndarray, b: np.ndarray, evals_x: np.ndarray, evals_y: np.ndarray,
-                   commute_x: np.ndarray, commute_y: np.ndarray, orient_x: np.ndarray, orient_y: np.ndarray,
-                   weights: tuple[float, float, float]) -> np.ndarray:
+def functional_map(
+    a: np.ndarray,
+    b: np.ndarray,
+    evals_x: np.ndarray,
+    evals_y: np.ndarray,
+    commute_x: np.ndarray,
+    commute_y: np.ndarray,
+    orient_x: np.ndarray,
+    orient_y: np.ndarray,
+    weights: tuple[float, float, float],
+) -> np.ndarray:
     """(k, k) map C from X's to Y's spectral coefficients: the minimiser of
     ``|C A - B|² + w_lap |A|²/k Σ C_ij² (λY_i - λX_j)² / s + w_comm Σ_d |C P_d - Q_d C|²
     + w_orient Σ_d |C O_d - O'_d C|²`` (pyFM's energy: descriptor preservation, Laplacian
@@ -264,7 +275,7 @@ def functional_map(a: np.ndarray, b: np.ndarray, evals_x: np.ndarray, evals_y: n
     h = np.kron(eye, a @ a.T)
     rhs = (b @ a.T).ravel()
     diff = (evals_y[:k, None] - evals_x[None, :k]) ** 2
-    h[np.diag_indices_from(h)] += w_lap * (np.sum(a ** 2) / k) * (diff / max(float(diff.mean()), 1e-300)).ravel()
+    h[np.diag_indices_from(h)] += w_lap * (np.sum(a**2) / k) * (diff / max(float(diff.mean()), 1e-300)).ravel()
     for p, q in zip(commute_x, commute_y):
         h += w_comm * _sylvester_normal(p, q)
     for p, q in zip(orient_x, orient_y):
@@ -272,8 +283,9 @@ def functional_map(a: np.ndarray, b: np.ndarray, evals_x: np.ndarray, evals_y: n
     return np.linalg.solve(h, rhs).reshape(k, k)
 
 
-def zoomout_refine(c: np.ndarray, evecs_x: np.ndarray, evecs_y: np.ndarray, k_final: int, k_step: int,
-                   sample: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def zoomout_refine(
+    c: np.ndarray, evecs_x: np.ndarray, evecs_y: np.ndarray, k_final: int, k_step: int, sample: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """ZoomOut from ``c`` (k0, k0) up to ``k_final``.
 
     ``c`` maps X's spectral coefficients to Y's (the pull-back of a map T: Y -> X, ``Φ_Y C ≈ Φ_X[T]``).
@@ -336,8 +348,8 @@ def spectral_map(record: PairRecord, options: ZoomOutOptions = ZoomOutOptions())
     hi = np.log(max(ex[k_eig - 1], ey[k_eig - 1], 1e-12))
     sigma = options.wks_variance * (hi - lo) / options.n_energies
     energies = np.linspace(lo + 2 * sigma, hi - 2 * sigma, options.n_energies)
-    dx = wave_kernel_signature(ex[:k_eig], vx[:, :k_eig], mx, energies, sigma)[:, ::options.descriptor_step]
-    dy = wave_kernel_signature(ey[:k_eig], vy[:, :k_eig], my, energies, sigma)[:, ::options.descriptor_step]
+    dx = wave_kernel_signature(ex[:k_eig], vx[:, :k_eig], mx, energies, sigma)[:, :: options.descriptor_step]
+    dy = wave_kernel_signature(ey[:k_eig], vy[:, :k_eig], my, energies, sigma)[:, :: options.descriptor_step]
     k0 = min(options.k_init, k_eig)
     bx, by = vx[:, :k0], vy[:, :k0]
     a = bx.T @ (mx[:, None] * dx)
@@ -345,8 +357,17 @@ def spectral_map(record: PairRecord, options: ZoomOutOptions = ZoomOutOptions())
     n_orient = options.orient_descriptors
     orient_x = orientation_operators(x, record["x_faces"], _oriented_normals(record, "x", x), bx, dx[:, :n_orient])
     orient_y = orientation_operators(y, record["y_faces"], _oriented_normals(record, "y", y), by, dy[:, :n_orient])
-    c = functional_map(a, b, ex, ey, multiplication_operators(bx, mx, dx), multiplication_operators(by, my, dy),
-                       orient_x, orient_y, (options.w_lap, options.w_comm, options.w_orient))
+    c = functional_map(
+        a,
+        b,
+        ex,
+        ey,
+        multiplication_operators(bx, mx, dx),
+        multiplication_operators(by, my, dy),
+        orient_x,
+        orient_y,
+        (options.w_lap, options.w_comm, options.w_orient),
+    )
     rng = np.random.default_rng(options.seed)
     n_y = len(y)
     sample = np.sort(rng.choice(n_y, options.n_samples, replace=False)) if n_y > options.n_samples else np.arange(n_y)
@@ -402,17 +423,24 @@ def run_baseline(name: str, records, out: str | Path, options=None, progress: bo
         count += 1
         if progress:
             print(f"becos baseline {name}: {count} pairs, last {seconds[-1]:.2f} s", file=sys.stderr)
-    facts = {"baseline": name, "options": asdict(options), "n_pairs": count,
-             "seconds_total": round(time.perf_counter() - started, 2),
-             "seconds_per_pair_median": round(float(np.median(seconds)), 3) if seconds else None}
+    facts = {
+        "baseline": name,
+        "options": asdict(options),
+        "n_pairs": count,
+        "seconds_total": round(time.perf_counter() - started, 2),
+        "seconds_per_pair_median": round(float(np.median(seconds)), 3) if seconds else None,
+    }
     write_text(out / "baseline.json", json.dumps(facts, indent=2, sort_keys=True) + "\n")
     return facts
 
 
 def configure_parser(parser: argparse.ArgumentParser) -> None:
     parser.description = "Run a baseline matcher on a benchmark store; write per-pair .npy predictions."
-    parser.add_argument("name", choices=sorted(BASELINES), help="nn: nearest neighbour in 3D (a floor); "
-                        "zoomout: WKS functional map + ZoomOut")
+    parser.add_argument(
+        "name",
+        choices=sorted(BASELINES),
+        help="nn: nearest neighbour in 3D (a floor); zoomout: WKS functional map + ZoomOut",
+    )
     parser.add_argument("store", type=Path, help="benchmark store (becos export-zarr)")
     parser.add_argument("--out", type=Path, required=True, help="prediction folder to write")
     parser.add_argument("--split", default="test", help="split to run on, or 'all' (default: test)")
@@ -423,8 +451,11 @@ def run_cli(args: argparse.Namespace) -> int:
 
     benchmark = open_benchmark(args.store)
     if args.split != "all" and args.split not in benchmark.splits():
-        raise InputFileError(args.store, f"has no split {args.split!r} (splits: {benchmark.splits()})",
-                             "pass --split with one of them, or 'all'")
+        raise InputFileError(
+            args.store,
+            f"has no split {args.split!r} (splits: {benchmark.splits()})",
+            "pass --split with one of them, or 'all'",
+        )
     records = benchmark.records(None if args.split == "all" else args.split)
     facts = run_baseline(args.name, records, args.out, progress=True)
     print(json.dumps(facts))

@@ -158,14 +158,18 @@ class Camera:
         depth = c[:, 2]
         return (depth > 0) & (np.abs(c[:, 0]) <= half * depth) & (np.abs(c[:, 1]) <= half * depth)
 
-    def transformed(self, rotation: np.ndarray | None = None, translation: np.ndarray | None = None,
-                    scale: float = 1.0) -> "Camera":
+    def transformed(
+        self, rotation: np.ndarray | None = None, translation: np.ndarray | None = None, scale: float = 1.0
+    ) -> Camera:
         """The same camera in another frame, where a point ``p`` becomes ``scale · p @ R.T + t``."""
         rotation = np.eye(3) if rotation is None else np.asarray(rotation, dtype=np.float64)
         translation = np.zeros(3) if translation is None else np.asarray(translation, dtype=np.float64)
-        return Camera(scale * self.position @ rotation.T + translation,
-                      scale * self.target @ rotation.T + translation,
-                      self.up @ rotation.T, self.fov_deg)
+        return Camera(
+            scale * self.position @ rotation.T + translation,
+            scale * self.target @ rotation.T + translation,
+            self.up @ rotation.T,
+            self.fov_deg,
+        )
 
 
 def axis_frame(up_axis: str = "y") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -178,8 +182,9 @@ def axis_frame(up_axis: str = "y") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return eye[(k + 1) % 3], eye[(k + 2) % 3], eye[k]
 
 
-def camera_from_angles(azimuth: float, elevation: float, up_axis: str = "y", distance: float = 1.0,
-                       fov_deg: float = 90.0) -> Camera:
+def camera_from_angles(
+    azimuth: float, elevation: float, up_axis: str = "y", distance: float = 1.0, fov_deg: float = 90.0
+) -> Camera:
     """The camera at ``azimuth``, ``elevation`` (radians) looking at the origin (see module doc)."""
     e1, e2, u = axis_frame(up_axis)
     horizontal = np.cos(azimuth) * e1 + np.sin(azimuth) * e2
@@ -211,15 +216,17 @@ def draw_camera(rng: np.random.Generator, up_axis: str = "y", distance: float = 
     return camera_from_angles(azimuth, elevation, up_axis, distance)
 
 
-def draw_camera_pair(rng: np.random.Generator, regime: str = "high", up_axis: str = "y",
-                     distance: float = 1.0) -> tuple[Camera, Camera]:
+def draw_camera_pair(
+    rng: np.random.Generator, regime: str = "high", up_axis: str = "y", distance: float = 1.0
+) -> tuple[Camera, Camera]:
     """Two cameras (one per shape of a partial-to-partial pair, in a shared frame) for ``regime``.
 
     See the module doc for the distribution. Both cameras look at the origin from ``distance``.
     """
     if regime in REFERENCE_REGIMES:
-        return tuple(_camera_at(p, up_axis, distance)
-                     for p in reference_directions(rng, REFERENCE_REGIMES[regime], up_axis))
+        return tuple(
+            _camera_at(p, up_axis, distance) for p in reference_directions(rng, REFERENCE_REGIMES[regime], up_axis)
+        )
     if regime not in REGIMES:
         raise ValueError(f"regime must be one of {list(CAMERA_REGIMES)}, got {regime!r}")
     axis_frame(up_axis)
@@ -232,8 +239,10 @@ def draw_camera_pair(rng: np.random.Generator, regime: str = "high", up_axis: st
         if len(ok):
             elevation1, elevation2 = phi[ok[0]]
             break
-    return (camera_from_angles(azimuth1, elevation1, up_axis, distance),
-            camera_from_angles(azimuth2, elevation2, up_axis, distance))
+    return (
+        camera_from_angles(azimuth1, elevation1, up_axis, distance),
+        camera_from_angles(azimuth2, elevation2, up_axis, distance),
+    )
 
 
 def reference_directions(rng: np.random.Generator, r: float, up_axis: str = "y") -> np.ndarray:

@@ -27,8 +27,9 @@ then the raw name, so listing order and file-system order never leak into the ta
 from __future__ import annotations
 
 import re
+from collections.abc import Iterable
 from pathlib import Path
-from typing import TYPE_CHECKING, Iterable
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -39,8 +40,7 @@ if TYPE_CHECKING:
     import pandas as pd  # imported where used: a remesh job reads one catalog row and needs no pandas
 
 ROTATION_COLUMNS = tuple(f"frame_rotation_{i}" for i in range(9))
-COLUMNS = ("dataset", "name", "category", "class", "split", "file", "template_key", "scale",
-           *ROTATION_COLUMNS, "usage")
+COLUMNS = ("dataset", "name", "category", "class", "split", "file", "template_key", "scale", *ROTATION_COLUMNS, "usage")
 STRING_COLUMNS = ("dataset", "name", "category", "class", "split", "file", "template_key")
 CATEGORIES = ("human", "four-legged", "centaur")
 SPLITS = (*BENCHMARK_SPLITS, "excluded")

@@ -62,8 +62,15 @@ from pathlib import Path
 import numpy as np
 
 from becos.atomic import remove_stale_temporaries, write_text
-from becos.download import (RECORD_NAME, CorruptArchiveError, UnsafeArchiveError, discard_partial, extract_archive,
-                            fetch, partial_path)
+from becos.download import (
+    RECORD_NAME,
+    CorruptArchiveError,
+    UnsafeArchiveError,
+    discard_partial,
+    extract_archive,
+    fetch,
+    partial_path,
+)
 from becos.errors import BecosError, ConfigError, InputFileError
 
 MAX_LISTED_MESHES = 20
@@ -73,11 +80,42 @@ MARKER_NAME = RECORD_NAME
 """File written into a fetched annotation folder: ``{"url", "sha256", "fetched_at"}``."""
 
 _WHITESPACE = np.array([9, 10, 11, 12, 13, 32], dtype=np.uint8)
-_PLY_SIZES = {"char": 1, "uchar": 1, "int8": 1, "uint8": 1, "short": 2, "ushort": 2, "int16": 2, "uint16": 2,
-              "int": 4, "uint": 4, "int32": 4, "uint32": 4, "float": 4, "float32": 4, "double": 8, "float64": 8}
-_PLY_DTYPES = {"char": "i1", "uchar": "u1", "int8": "i1", "uint8": "u1", "short": "i2", "ushort": "u2",
-               "int16": "i2", "uint16": "u2", "int": "i4", "uint": "u4", "int32": "i4", "uint32": "u4",
-               "float": "f4", "float32": "f4", "double": "f8", "float64": "f8"}
+_PLY_SIZES = {
+    "char": 1,
+    "uchar": 1,
+    "int8": 1,
+    "uint8": 1,
+    "short": 2,
+    "ushort": 2,
+    "int16": 2,
+    "uint16": 2,
+    "int": 4,
+    "uint": 4,
+    "int32": 4,
+    "uint32": 4,
+    "float": 4,
+    "float32": 4,
+    "double": 8,
+    "float64": 8,
+}
+_PLY_DTYPES = {
+    "char": "i1",
+    "uchar": "u1",
+    "int8": "i1",
+    "uint8": "u1",
+    "short": "i2",
+    "ushort": "u2",
+    "int16": "i2",
+    "uint16": "u2",
+    "int": "i4",
+    "uint": "u4",
+    "int32": "i4",
+    "uint32": "u4",
+    "float": "f4",
+    "float32": "f4",
+    "double": "f8",
+    "float64": "f8",
+}
 
 
 class DatasetCheckError(ConfigError):
@@ -106,21 +144,23 @@ class _MeshProblem(ValueError):
 _NON_FINITE = re.compile(rb"\b(?:nan|inf|infinity)\b", re.IGNORECASE)  # whole words: not "info" in a comment
 
 
-def _check_finite_text(data: bytes, start: int, end: int, first_line: int, line_starts: np.ndarray,
-                       what: str) -> None:
+def _check_finite_text(data: bytes, start: int, end: int, first_line: int, line_starts: np.ndarray, what: str) -> None:
     """Raise if ``data[start:end]`` (vertex lines) holds a NaN or infinite value (text formats)."""
     hit = _NON_FINITE.search(data, start, end)
     if hit is not None:
         line = int(np.searchsorted(line_starts, hit.start(), side="right")) - 1
-        raise _MeshProblem(f"{what} {line - first_line + 1} holds a NaN or infinite coordinate "
-                           f"({_line_at(data, int(line_starts[line]))!r})", _NAN_FIX)
+        raise _MeshProblem(
+            f"{what} {line - first_line + 1} holds a NaN or infinite coordinate "
+            f"({_line_at(data, int(line_starts[line]))!r})",
+            _NAN_FIX,
+        )
 
 
 def _line_at(data: bytes, position: int) -> bytes:
     """The (stripped, at most 80 bytes) text line of ``data`` holding byte ``position``."""
     start = data.rfind(b"\n", 0, position) + 1
     end = data.find(b"\n", position)
-    return data[start:end if end >= 0 else len(data)].strip()[:80]
+    return data[start : end if end >= 0 else len(data)].strip()[:80]
 
 
 class _Lines:
@@ -145,7 +185,7 @@ class _Lines:
 
     def token_counts(self, lo: int, hi: int) -> np.ndarray:
         """(hi - lo,) number of whitespace-separated tokens of lines ``lo..hi-1``."""
-        arr = self._arr[self.starts[lo]:self.ends[hi - 1]] if hi > lo else self._arr[:0]
+        arr = self._arr[self.starts[lo] : self.ends[hi - 1]] if hi > lo else self._arr[:0]
         solid = ~np.isin(arr, _WHITESPACE)
         token_start = solid & np.concatenate(([True], ~solid[:-1])) if len(arr) else solid
         cs = np.concatenate(([0], np.cumsum(token_start, dtype=np.int64)))
@@ -169,7 +209,7 @@ class _Lines:
         return self.data.count(b"\n", 0, int(self.starts[i])) + 1
 
     def tokens(self, i: int) -> list[bytes]:
-        return self.data[self.starts[i]:self.ends[i]].split()
+        return self.data[self.starts[i] : self.ends[i]].split()
 
 
 def _parse_numbers(tokens: list[bytes], kind, what: str) -> list:
@@ -194,12 +234,15 @@ def _check_face_tokens(tokens: list[bytes], n_vertices: int, what: str) -> None:
         raise ValueError(f"{what} {b' '.join(tokens)[:80]!r} holds non-integers")
     k = values[0]
     if k < 3 or len(values) < 1 + k:
-        raise ValueError(f"{what} {b' '.join(tokens)[:80]!r} announces {k} corners but holds {len(values) - 1} "
-                         "(truncated file)")
-    idx = np.asarray(values[1:1 + k])
+        raise ValueError(
+            f"{what} {b' '.join(tokens)[:80]!r} announces {k} corners but holds {len(values) - 1} (truncated file)"
+        )
+    idx = np.asarray(values[1 : 1 + k])
     if idx.min() < 0 or idx.max() >= n_vertices:
-        raise ValueError(f"{what} uses vertex {int(idx.max()) if idx.max() >= n_vertices else int(idx.min())} "
-                         f"outside [0, {n_vertices})")
+        raise ValueError(
+            f"{what} uses vertex {int(idx.max()) if idx.max() >= n_vertices else int(idx.min())} "
+            f"outside [0, {n_vertices})"
+        )
 
 
 def _check_text_body(lines: _Lines, first: int, n_vertices: int, n_faces: int, fmt: str, exact: bool = True) -> None:
@@ -209,38 +252,52 @@ def _check_text_body(lines: _Lines, first: int, n_vertices: int, n_faces: int, f
         raise ValueError(f"the {fmt} header announces {n_vertices} vertices and {n_faces} faces (empty mesh)")
     have = len(lines) - first
     if have < n_vertices + n_faces:
-        raise ValueError(f"the {fmt} header announces {n_vertices} vertices and {n_faces} faces but only {have} "
-                         f"data lines follow (truncated file)")
+        raise ValueError(
+            f"the {fmt} header announces {n_vertices} vertices and {n_faces} faces but only {have} "
+            f"data lines follow (truncated file)"
+        )
     if have > n_vertices + n_faces and exact:
-        raise _MeshProblem(f"the {fmt} header announces {n_vertices} vertices and {n_faces} faces but {have} data "
-                           f"lines follow, {have - n_vertices - n_faces} more than announced: a reader would silently "
-                           f"ignore the last {have - n_vertices - n_faces} lines (after the vertex block there are "
-                           f"{have - n_vertices} lines, not {n_faces})",
-                           f"if the file is otherwise intact, correct the header's counts (e.g. {n_vertices} "
-                           f"{have - n_vertices} for an OFF whose extra lines are faces); else re-download or "
-                           f"re-extract it")
+        raise _MeshProblem(
+            f"the {fmt} header announces {n_vertices} vertices and {n_faces} faces but {have} data "
+            f"lines follow, {have - n_vertices - n_faces} more than announced: a reader would silently "
+            f"ignore the last {have - n_vertices - n_faces} lines (after the vertex block there are "
+            f"{have - n_vertices} lines, not {n_faces})",
+            f"if the file is otherwise intact, correct the header's counts (e.g. {n_vertices} "
+            f"{have - n_vertices} for an OFF whose extra lines are faces); else re-download or "
+            f"re-extract it",
+        )
     _check_vertex_line(lines, first, "the first vertex line")
     _check_vertex_line(lines, first + n_vertices - 1, "the last vertex line")
     short = np.flatnonzero(lines.token_counts(first, first + n_vertices) < 3)
     if len(short):
         i = first + int(short[0])
-        raise _MeshProblem(f"vertex line {short[0] + 1} (line {lines.file_line(i)} of the file: "
-                           f"{b' '.join(lines.tokens(i))[:80]!r}) holds {len(lines.tokens(i))} values instead of x y z"
-                           + (f" ({len(short)} such lines)" if len(short) > 1 else ""),
-                           "re-export or re-download the mesh; becos cannot guess the missing coordinate")
+        raise _MeshProblem(
+            f"vertex line {short[0] + 1} (line {lines.file_line(i)} of the file: "
+            f"{b' '.join(lines.tokens(i))[:80]!r}) holds {len(lines.tokens(i))} values instead of x y z"
+            + (f" ({len(short)} such lines)" if len(short) > 1 else ""),
+            "re-export or re-download the mesh; becos cannot guess the missing coordinate",
+        )
     not_triangles = np.flatnonzero(~lines.first_token_is(first + n_vertices, first + n_vertices + n_faces, b"3"))
     if len(not_triangles):
         i = first + n_vertices + int(not_triangles[0])
         tokens = lines.tokens(i)
-        raise _MeshProblem(f"face line {not_triangles[0] + 1} (line {lines.file_line(i)} of the file: "
-                           f"{b' '.join(tokens)[:80]!r}) has {tokens[0].decode(errors='replace')} corners, not 3"
-                           + (f" ({len(not_triangles)} such faces)" if len(not_triangles) > 1 else "")
-                           + "; becos needs triangle meshes",
-                           "use the dataset's original triangle mesh (re-download it); a polygon mesh must be "
-                           "triangulated, the same way for every shape of its class, e.g. MeshLab: Filters > "
-                           "Polygonal and Quad Mesh > Turn into a Pure-Triangular mesh")
-    _check_finite_text(lines.data, int(lines.starts[first]), int(lines.ends[first + n_vertices - 1]), first,
-                       lines.starts, "vertex line")
+        raise _MeshProblem(
+            f"face line {not_triangles[0] + 1} (line {lines.file_line(i)} of the file: "
+            f"{b' '.join(tokens)[:80]!r}) has {tokens[0].decode(errors='replace')} corners, not 3"
+            + (f" ({len(not_triangles)} such faces)" if len(not_triangles) > 1 else "")
+            + "; becos needs triangle meshes",
+            "use the dataset's original triangle mesh (re-download it); a polygon mesh must be "
+            "triangulated, the same way for every shape of its class, e.g. MeshLab: Filters > "
+            "Polygonal and Quad Mesh > Turn into a Pure-Triangular mesh",
+        )
+    _check_finite_text(
+        lines.data,
+        int(lines.starts[first]),
+        int(lines.ends[first + n_vertices - 1]),
+        first,
+        lines.starts,
+        "vertex line",
+    )
     _check_face_tokens(lines.tokens(first + n_vertices), n_vertices, "the first face line")
     _check_face_tokens(lines.tokens(first + n_vertices + n_faces - 1), n_vertices, "the last face line")
 
@@ -316,8 +373,10 @@ def _check_ply(path: Path, size: int) -> tuple[int, int]:
         if [e[0] for e in elements][:2] != ["vertex", "face"]:  # unusual element order: count rows only
             total = sum(e[1] for e in elements)
             if len(lines) < total:
-                raise ValueError(f"the PLY header announces {total} element rows but only {len(lines)} data lines "
-                                 "follow (truncated file)")
+                raise ValueError(
+                    f"the PLY header announces {total} element rows but only {len(lines)} data lines "
+                    "follow (truncated file)"
+                )
             return n_vertices, n_faces
         _check_text_body(lines, 0, n_vertices, n_faces, "PLY", exact=len(elements) == 2)
         return n_vertices, n_faces
@@ -334,8 +393,10 @@ def _check_ply(path: Path, size: int) -> tuple[int, int]:
                 row += _PLY_SIZES.get(prop[1], 1) + corners * _PLY_SIZES.get(prop[2], 4)
         need += row * count
     if size < need:
-        raise ValueError(f"the binary PLY header announces {n_vertices} vertices and {n_faces} triangles, which need "
-                         f"at least {need} bytes, but the file has {size} (truncated file)")
+        raise ValueError(
+            f"the binary PLY header announces {n_vertices} vertices and {n_faces} triangles, which need "
+            f"at least {need} bytes, but the file has {size} (truncated file)"
+        )
     order = "<" if fmt == "binary_little_endian" else ">"
     first_element = elements[0]
     if first_element[0] == "vertex" and first_element[2] and all(p[0] == "scalar" for p in first_element[2]):
@@ -374,8 +435,9 @@ def _check_obj(data: bytes) -> tuple[int, int]:
     bad = re.search(rb"^v[ \t][^\n]*?(nan|inf)", data, re.MULTILINE | re.IGNORECASE)
     if bad is not None:
         line = data.count(b"\n", 0, bad.start()) + 1
-        raise _MeshProblem(f"line {line} ({_line_at(data, bad.start())!r}) holds a NaN or infinite coordinate",
-                           _NAN_FIX)
+        raise _MeshProblem(
+            f"line {line} ({_line_at(data, bad.start())!r}) holds a NaN or infinite coordinate", _NAN_FIX
+        )
     lines = _Lines(data)
     tokens = lines.tokens(len(lines) - 1)
     if tokens[0] == b"v":
@@ -467,9 +529,9 @@ def mesh_arrays(path: Path) -> tuple[np.ndarray, np.ndarray]:
         data = path.read_bytes()
         lines = _Lines(data)
         n_vertices, n_faces, first = _off_header(lines)
-        v = np.array(data[lines.starts[first]:lines.ends[first + n_vertices - 1]].split(), dtype=np.float64)
+        v = np.array(data[lines.starts[first] : lines.ends[first + n_vertices - 1]].split(), dtype=np.float64)
         last = first + n_vertices + n_faces - 1
-        f = np.array(data[lines.starts[first + n_vertices]:lines.ends[last]].split(), dtype=np.int64)
+        f = np.array(data[lines.starts[first + n_vertices] : lines.ends[last]].split(), dtype=np.int64)
         if v.size == 3 * n_vertices and f.size == 4 * n_faces and (f[::4] == 3).all():
             return v.reshape(n_vertices, 3), f.reshape(n_faces, 4)[:, 1:]
     from becos.mesh import read_mesh
@@ -489,11 +551,15 @@ def compare_with_class_template(path: Path, template_path: Path, shape_arrays, t
 
     (v, f), (tv, tf) = shape_arrays, template_arrays
     if flatness(v) <= FLAT_RTOL:
-        return (f"all its {len(v)} vertices lie in one plane (thickness {flatness(v):.2g} of its largest extent): a "
-                f"flattened or 2-D mesh, and becos matches 3-D surfaces")
+        return (
+            f"all its {len(v)} vertices lie in one plane (thickness {flatness(v):.2g} of its largest extent): a "
+            f"flattened or 2-D mesh, and becos matches 3-D surfaces"
+        )
     if len(v) != len(tv):
-        return (f"has {len(v)} vertices but its class template {template_path} has {len(tv)}; the shapes of a class "
-                f"share one triangulation (vertex i = vertex i)")
+        return (
+            f"has {len(v)} vertices but its class template {template_path} has {len(tv)}; the shapes of a class "
+            f"share one triangulation (vertex i = vertex i)"
+        )
     # faces as vertex sets; rows that remeshing drops or ignores (a repeated index, duplicates) and faces
     # the file lost (a subset) are repairs, a triple the template lacks is not
     f = np.asarray(f, dtype=np.int64)
@@ -501,22 +567,28 @@ def compare_with_class_template(path: Path, template_path: Path, shape_arrays, t
     keys, template_keys = np.unique(vertex_set_keys(f, len(v))), np.unique(vertex_set_keys(tf, len(tv)))
     foreign = len(np.setdiff1d(keys, template_keys, assume_unique=True))
     if foreign:
-        return (f"has the vertex count of its class template {template_path} but {foreign} of its {len(keys)} "
-                f"distinct faces name vertex triples the template has not: its vertex lines are re-ordered (or it "
-                f"was re-triangulated), so vertex i no longer corresponds to vertex i of the class")
+        return (
+            f"has the vertex count of its class template {template_path} but {foreign} of its {len(keys)} "
+            f"distinct faces name vertex triples the template has not: its vertex lines are re-ordered (or it "
+            f"was re-triangulated), so vertex i no longer corresponds to vertex i of the class"
+        )
     edges, _ = undirected_edges(tf)
     lengths = np.linalg.norm(v[edges[:, 0]] - v[edges[:, 1]], axis=1)
     template_lengths = np.linalg.norm(tv[edges[:, 0]] - tv[edges[:, 1]], axis=1)
     ratio = float(np.median(lengths[template_lengths > 0] / template_lengths[template_lengths > 0]))
     if not 1 / CLASS_EDGE_RATIO <= ratio <= CLASS_EDGE_RATIO:
-        return (f"its edges are {ratio:.3g} times as long as those of its class template {template_path} "
-                f"(median; poses of a class keep edge lengths, within {CLASS_EDGE_RATIO}x): the file is "
-                f"scaled or in other units")
+        return (
+            f"its edges are {ratio:.3g} times as long as those of its class template {template_path} "
+            f"(median; poses of a class keep edge lengths, within {CLASS_EDGE_RATIO}x): the file is "
+            f"scaled or in other units"
+        )
     return None
 
 
-_CLASS_FIX = ("restore the original file (re-download or re-extract it); never rescale or re-order a dataset's "
-              "files: becos applies each dataset's scale itself (`scale` in config/datasets/<dataset>.yaml)")
+_CLASS_FIX = (
+    "restore the original file (re-download or re-extract it); never rescale or re-order a dataset's "
+    "files: becos applies each dataset's scale itself (`scale` in config/datasets/<dataset>.yaml)"
+)
 
 
 def _check_classes(shapes: list, annotations, skip: set[str]) -> list[dict]:
@@ -582,8 +654,10 @@ def _published_names(root: Path | None) -> dict[str, set[str]]:
 
 def _missing_dataset_text(spec, folder: Path, data_dir: Path) -> str:
     s = spec.source
-    parts = [f"dataset '{spec.name}' ({spec.title}) not found: folder {folder} does not exist.",
-             f"Get it: {s.get('instructions', '').strip().rstrip('.')}."]
+    parts = [
+        f"dataset '{spec.name}' ({spec.title}) not found: folder {folder} does not exist.",
+        f"Get it: {s.get('instructions', '').strip().rstrip('.')}.",
+    ]
     if s.get("url"):
         parts.append(f"Site: {s['url']} .")
     if s.get("licence"):
@@ -593,33 +667,60 @@ def _missing_dataset_text(spec, folder: Path, data_dir: Path) -> str:
 
         kind = dataset_kind(spec)
         source = source_folder(data_dir, kind)
-        parts.append(f"Put it there: unpack the download into {data_dir / 'DeformingThings4D'} (data_dir + "
-                     f"'DeformingThings4D'); the workflow then prepares {folder} from {source} "
-                     f"(`becos prepare-dt4d`).")
+        parts.append(
+            f"Put it there: unpack the download into {data_dir / 'DeformingThings4D'} (data_dir + "
+            f"'DeformingThings4D'); the workflow then prepares {folder} from {source} "
+            f"(`becos prepare-dt4d`)."
+        )
         if source.is_dir():
-            parts.append(f"{source} is present but not prepared yet: run the workflow (it plans one preparation "
-                         f"job per class once the annotation folder's data/{spec.info_file} exists), or "
-                         f"`becos prepare-dt4d --data-dir {data_dir} --info <annotations>/data/{spec.info_file} "
-                         f"--kind {kind}`.")
+            parts.append(
+                f"{source} is present but not prepared yet: run the workflow (it plans one preparation "
+                f"job per class once the annotation folder's data/{spec.info_file} exists), or "
+                f"`becos prepare-dt4d --data-dir {data_dir} --info <annotations>/data/{spec.info_file} "
+                f"--kind {kind}`."
+            )
     else:
-        parts.append(f"Put it there: create {folder} (data_dir {data_dir} + '{spec.folder}') and place the "
-                     f"{spec.file_type.upper()} files in it.")
+        parts.append(
+            f"Put it there: create {folder} (data_dir {data_dir} + '{spec.folder}') and place the "
+            f"{spec.file_type.upper()} files in it."
+        )
     if spec.archive is not None:
-        parts.append(f"Or let the workflow download it: add '{spec.name}' to the config key `download` (you accept "
-                     f"its licence), or run `becos download-dataset {spec.name} --data-dir {data_dir}`.")
-    parts.append(f"Or change the config: set `data_dir` to the folder that holds '{spec.folder}', or remove "
-                 f"'{spec.name}' from `datasets`.")
+        parts.append(
+            f"Or let the workflow download it: add '{spec.name}' to the config key `download` (you accept "
+            f"its licence), or run `becos download-dataset {spec.name} --data-dir {data_dir}`."
+        )
+    parts.append(
+        f"Or change the config: set `data_dir` to the folder that holds '{spec.folder}', or remove "
+        f"'{spec.name}' from `datasets`."
+    )
     return " ".join(parts)
 
 
-def _check_one_dataset(name: str, data_dir: Path, annotations, read_meshes: bool, full_parse: bool,
-                       config_dir, compare_geometry: bool = True) -> tuple[dict, list[str], list]:
+def _check_one_dataset(
+    name: str,
+    data_dir: Path,
+    annotations,
+    read_meshes: bool,
+    full_parse: bool,
+    config_dir,
+    compare_geometry: bool = True,
+) -> tuple[dict, list[str], list]:
     """Report entry, problem texts and the listed ShapeEntry rows (empty unless the listing succeeded)."""
     from becos.catalog import natural_key
     from becos.datasets import DatasetSpec
 
-    entry: dict = {"ok": False, "path": None, "folder": None, "found": 0, "expected": None, "excluded_found": 0,
-                   "meshes_checked": 0, "bad_meshes": [], "repairs": [], "problems": []}
+    entry: dict = {
+        "ok": False,
+        "path": None,
+        "folder": None,
+        "found": 0,
+        "expected": None,
+        "excluded_found": 0,
+        "meshes_checked": 0,
+        "bad_meshes": [],
+        "repairs": [],
+        "problems": [],
+    }
     problems: list[str] = []
 
     def stop(problem: str) -> tuple[dict, list[str], list]:
@@ -643,8 +744,10 @@ def _check_one_dataset(name: str, data_dir: Path, annotations, read_meshes: bool
         return stop(f"dataset '{name}': {exc}")
     dangling = sorted(p for p in folder.glob(spec.file_glob) if p.is_symlink() and not p.exists())
     for p in dangling:
-        problems.append(f"{p}: is a symbolic link to {os.readlink(p)}, which does not exist (a dangling link). Fix: "
-                        f"point the link at the real file, or put the file itself there")
+        problems.append(
+            f"{p}: is a symbolic link to {os.readlink(p)}, which does not exist (a dangling link). Fix: "
+            f"point the link at the real file, or put the file itself there"
+        )
     stray = []
     for n in names:
         try:
@@ -654,10 +757,12 @@ def _check_one_dataset(name: str, data_dir: Path, annotations, read_meshes: bool
             stray.append(n)
     if stray:
         shown = ", ".join(f"{n}.{spec.file_type}" for n in stray[:MAX_LISTED_MESHES])
-        problems.append(f"{folder}: {len(stray)} file(s) there are not shapes of dataset '{name}': {shown} (their "
-                        f"names match no class rule of the dataset registry {spec.path}). Fix: move them out of {folder} "
-                        f"(stray files); only if they are shapes of '{name}', add class and category rules for them "
-                        f"to {spec.path}")
+        problems.append(
+            f"{folder}: {len(stray)} file(s) there are not shapes of dataset '{name}': {shown} (their "
+            f"names match no class rule of the dataset registry {spec.path}). Fix: move them out of {folder} "
+            f"(stray files); only if they are shapes of '{name}', add class and category rules for them "
+            f"to {spec.path}"
+        )
         entry["stray_files"] = [f"{n}.{spec.file_type}" for n in stray]
         names = [n for n in names if n not in stray]
     used = [n for n in names if n not in spec.excluded]
@@ -675,22 +780,28 @@ def _check_one_dataset(name: str, data_dir: Path, annotations, read_meshes: bool
             shown = ", ".join(f"{n}.{spec.file_type}" for n in absent[:MAX_LISTED_MESHES])
             more = f" and {len(absent) - MAX_LISTED_MESHES} more" if len(absent) > MAX_LISTED_MESHES else ""
             named = f"; missing files named by the published BeCoS pair lists: {shown}{more}"
-        problems.append(f"dataset '{name}': found {len(used)} shapes ({spec.file_glob}) in {folder}, expected "
-                        f"{spec.expected_count}{named}. Fix: complete or re-extract the download "
-                        f"({spec.download_help()}), or check `data_dir`")
+        problems.append(
+            f"dataset '{name}': found {len(used)} shapes ({spec.file_glob}) in {folder}, expected "
+            f"{spec.expected_count}{named}. Fix: complete or re-extract the download "
+            f"({spec.download_help()}), or check `data_dir`"
+        )
     if spec.expected_per_class:
         per_class: dict[str, int] = {}
         for n in used:
             c = spec.class_of(n)
             per_class[c] = per_class.get(c, 0) + 1
         entry["found_per_class"] = per_class
-        diff = {c: (per_class.get(c, 0), spec.expected_per_class.get(c, 0))
-                for c in sorted(set(per_class) | set(spec.expected_per_class))
-                if per_class.get(c, 0) != spec.expected_per_class.get(c, 0)}
+        diff = {
+            c: (per_class.get(c, 0), spec.expected_per_class.get(c, 0))
+            for c in sorted(set(per_class) | set(spec.expected_per_class))
+            if per_class.get(c, 0) != spec.expected_per_class.get(c, 0)
+        }
         if diff:
             counts_ok = False
-            problems.append(f"dataset '{name}': shapes per class (found, expected) differ in {folder}: {diff}. "
-                            f"Fix: complete or re-extract the download")
+            problems.append(
+                f"dataset '{name}': shapes per class (found, expected) differ in {folder}: {diff}. "
+                f"Fix: complete or re-extract the download"
+            )
     if read_meshes:
         for n in names:
             path = folder / f"{n}.{spec.file_type}"
@@ -706,12 +817,17 @@ def _check_one_dataset(name: str, data_dir: Path, annotations, read_meshes: bool
             entry["meshes_checked"] += 1
         bad = entry["bad_meshes"]
         if bad:
-            listed = "; ".join(f"{b['path']}: {b['problem']}" + (f" (fix: {b['fix']})" if b["fix"] != _TRUNCATED_FIX
-                                                                else "")
-                               for b in bad[:MAX_LISTED_MESHES])
-            more = f"; and {len(bad) - MAX_LISTED_MESHES} more (all in the report)" if len(bad) > MAX_LISTED_MESHES else ""
-            problems.append(f"dataset '{name}': {len(bad)} of {len(names)} mesh files are empty, truncated or corrupt: "
-                            f"{listed}{more}. Fix: re-download or re-extract them ({spec.download_help()})")
+            listed = "; ".join(
+                f"{b['path']}: {b['problem']}" + (f" (fix: {b['fix']})" if b["fix"] != _TRUNCATED_FIX else "")
+                for b in bad[:MAX_LISTED_MESHES]
+            )
+            more = (
+                f"; and {len(bad) - MAX_LISTED_MESHES} more (all in the report)" if len(bad) > MAX_LISTED_MESHES else ""
+            )
+            problems.append(
+                f"dataset '{name}': {len(bad)} of {len(names)} mesh files are empty, truncated or corrupt: "
+                f"{listed}{more}. Fix: re-download or re-extract them ({spec.download_help()})"
+            )
     shapes: list = []
     if counts_ok and not stray:
         try:
@@ -723,10 +839,15 @@ def _check_one_dataset(name: str, data_dir: Path, annotations, read_meshes: bool
         entry["class_mismatches"] = mismatched
         if mismatched:
             listed = "; ".join(f"{b['path']}: {b['problem']}" for b in mismatched[:MAX_LISTED_MESHES])
-            more = (f"; and {len(mismatched) - MAX_LISTED_MESHES} more (all in the report)"
-                    if len(mismatched) > MAX_LISTED_MESHES else "")
-            problems.append(f"dataset '{name}': {len(mismatched)} mesh files do not fit their class template: "
-                            f"{listed}{more}. Fix: {_CLASS_FIX}")
+            more = (
+                f"; and {len(mismatched) - MAX_LISTED_MESHES} more (all in the report)"
+                if len(mismatched) > MAX_LISTED_MESHES
+                else ""
+            )
+            problems.append(
+                f"dataset '{name}': {len(mismatched)} mesh files do not fit their class template: "
+                f"{listed}{more}. Fix: {_CLASS_FIX}"
+            )
     entry["problems"] = problems
     entry["ok"] = not problems
     return entry, problems, shapes
@@ -745,8 +866,13 @@ edge files into a TOSCA template whose source faces are known (mesh or default f
 swapped file above: 4.85."""
 
 
-def edge_plausibility(edge, target_vertices: np.ndarray, target_faces: np.ndarray, source_faces: np.ndarray | None,
-                      source_vertices: np.ndarray | None = None) -> dict:
+def edge_plausibility(
+    edge,
+    target_vertices: np.ndarray,
+    target_faces: np.ndarray,
+    source_faces: np.ndarray | None,
+    source_vertices: np.ndarray | None = None,
+) -> dict:
     """How well an edge map (:class:`becos.surface_map.SurfaceMap`, source template vertex -> point on
     the target template) fits the two templates' geometry. Scale- and pose-free statistics over the
     matched rows (``face >= 0``), ``P_i`` being the mapped point of source vertex ``i``:
@@ -773,8 +899,8 @@ def edge_plausibility(edge, target_vertices: np.ndarray, target_faces: np.ndarra
     if source_vertices is not None and len(source_vertices) == len(edge.face):
         a = source_vertices[ok] - source_vertices[ok].mean(axis=0)
         p = points[ok] - points[ok].mean(axis=0)
-        a /= np.sqrt((a ** 2).sum(axis=1).mean())
-        p /= np.sqrt((p ** 2).sum(axis=1).mean())
+        a /= np.sqrt((a**2).sum(axis=1).mean())
+        p /= np.sqrt((p**2).sum(axis=1).mean())
         out["residual"] = float(np.median(np.linalg.norm(procrustes(a, p).apply(a) - p, axis=1)))
     if source_faces is not None and len(source_faces) and source_faces.max() < len(edge.face):
         pairs, _ = undirected_edges(source_faces)
@@ -782,8 +908,10 @@ def edge_plausibility(edge, target_vertices: np.ndarray, target_faces: np.ndarra
         tri = target_vertices[target_faces]
         area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1).sum()
         if len(pairs) and area > 0:
-            out["stretch"] = float(np.median(np.linalg.norm(points[pairs[:, 0]] - points[pairs[:, 1]], axis=1))
-                                   / np.sqrt(area / len(edge.face)))
+            out["stretch"] = float(
+                np.median(np.linalg.norm(points[pairs[:, 0]] - points[pairs[:, 1]], axis=1))
+                / np.sqrt(area / len(edge.face))
+            )
     return out
 
 
@@ -798,19 +926,28 @@ def require_plausible_edge(path: Path, a: str, b: str, stats: dict) -> None:
         return
     found = []
     if stats["residual"] is not None:
-        found.append(f"after the best rigid alignment (scale-normalised Procrustes) the vertices of template {a} lie "
-                     f"a median {stats['residual']:.3g} RMS radii from their mapped points on {b} (real BeCoS edge "
-                     f"files: at most 0.17; limit {EDGE_MAX_RESIDUAL})")
+        found.append(
+            f"after the best rigid alignment (scale-normalised Procrustes) the vertices of template {a} lie "
+            f"a median {stats['residual']:.3g} RMS radii from their mapped points on {b} (real BeCoS edge "
+            f"files: at most 0.17; limit {EDGE_MAX_RESIDUAL})"
+        )
     if stats["stretch"] is not None:
-        found.append(f"neighbouring vertices land a median {stats['stretch']:.3g} mesh edges apart (real files: at "
-                     f"most 1.38; limit {EDGE_MAX_STRETCH})")
-    raise InputFileError(path, "the map does not land where its template belongs: " + " and ".join(found)
-                         + "; the file probably holds another edge's map",
-                         f"restore the annotation folder's original file; {_FIX_FOLDER}")
+        found.append(
+            f"neighbouring vertices land a median {stats['stretch']:.3g} mesh edges apart (real files: at "
+            f"most 1.38; limit {EDGE_MAX_STRETCH})"
+        )
+    raise InputFileError(
+        path,
+        "the map does not land where its template belongs: "
+        + " and ".join(found)
+        + "; the file probably holds another edge's map",
+        f"restore the annotation folder's original file; {_FIX_FOLDER}",
+    )
 
 
-def _check_edge_contents(source, edges: list[tuple[str, str]], present: dict[str, list],
-                         compare_geometry: bool = True) -> tuple[dict, list[str]]:
+def _check_edge_contents(
+    source, edges: list[tuple[str, str]], present: dict[str, list], compare_geometry: bool = True
+) -> tuple[dict, list[str]]:
     """Parse each needed edge file (non-numeric text, columns, face indices below -1...) and, where both
     templates' mesh files are present, compare its rows with the source template's vertex count and
     its face indices with the target template's face count (counts from the file headers); where the
@@ -838,12 +975,12 @@ def _check_edge_contents(source, edges: list[tuple[str, str]], present: dict[str
         return arrays[key]
 
     problems, bad, compared, plausible = [], [], 0, {}
-    for a, b in sorted(edges):                         # sorted: the report is byte-identical between runs
+    for a, b in sorted(edges):  # sorted: the report is byte-identical between runs
         try:
             edge_source = source.edge_source(a, b)
             if edge_source.kind != "file":
                 continue
-            source.edge_report(a, b)                      # parses (and validates) the file once
+            source.edge_report(a, b)  # parses (and validates) the file once
             ca, cb = mesh_counts(a), mesh_counts(b)
             if ca is not None and cb is not None:
                 source.check_edge(a, b, ca[0], cb[1])
@@ -852,13 +989,15 @@ def _check_edge_contents(source, edges: list[tuple[str, str]], present: dict[str
                 continue
             target = mesh_of(b)
             source_mesh = mesh_of(a) if ca is not None else None
-            source_faces = source_mesh[1] if source_mesh is not None else source.default_faces(
-                *source.node_template(a)[::-1])
+            source_faces = (
+                source_mesh[1] if source_mesh is not None else source.default_faces(*source.node_template(a)[::-1])
+            )
             edge = source.edge_map(a, b)
             if len(edge) and edge.face.max() >= len(target[1]):
-                continue                                   # named by check_edge / the ground truth
-            stats = edge_plausibility(edge, target[0], target[1], source_faces,
-                                      source_mesh[0] if source_mesh is not None else None)
+                continue  # named by check_edge / the ground truth
+            stats = edge_plausibility(
+                edge, target[0], target[1], source_faces, source_mesh[0] if source_mesh is not None else None
+            )
             plausible[f"{a} -> {b}"] = stats
             require_plausible_edge(edge_source.path, a, b, stats)
         except BecosError as exc:
@@ -867,19 +1006,41 @@ def _check_edge_contents(source, edges: list[tuple[str, str]], present: dict[str
     return {"parsed": len(edges), "compared_with_meshes": compared, "bad": bad, "plausibility": plausible}, problems
 
 
-def _check_annotations(root: Path, template_table: str, enabled: list[str], present: dict[str, list],
-                       specs: dict, check_edges: bool = True, compare_geometry: bool = True) -> tuple[dict, list[str]]:
+def _check_annotations(
+    root: Path,
+    template_table: str,
+    enabled: list[str],
+    present: dict[str, list],
+    specs: dict,
+    check_edges: bool = True,
+    compare_geometry: bool = True,
+) -> tuple[dict, list[str]]:
     """Annotation-folder part of the report; ``present`` maps found datasets to their ShapeEntry rows.
     ``check_edges`` also parses the needed edge files and compares them with the present meshes."""
-    from becos.annotations import (ADJACENCY_CSV, CHIRALITY_CSV, DEFAULT_FACES_DIR, EDGE_DIR, AnnotationSource,
-                                   _user_cache_dir)
+    from becos.annotations import (
+        ADJACENCY_CSV,
+        CHIRALITY_CSV,
+        DEFAULT_FACES_DIR,
+        EDGE_DIR,
+        AnnotationSource,
+        _user_cache_dir,
+    )
 
-    fix_key = "set `annotations` to a BeCoS annotation folder (a clone of github.com/NafieAmrani/becos-code, " \
-              "or `becos fetch-annotations`)"
+    fix_key = (
+        "set `annotations` to a BeCoS annotation folder (a clone of github.com/NafieAmrani/becos-code, "
+        "or `becos fetch-annotations`)"
+    )
     table = Path(template_table)
     table_rel = table if table.is_absolute() else Path("config") / table
-    report: dict = {"ok": False, "path": str(root), "found": root.is_dir(), "template_table": str(table_rel),
-                    "files": {}, "problems": [], "notes": []}
+    report: dict = {
+        "ok": False,
+        "path": str(root),
+        "found": root.is_dir(),
+        "template_table": str(table_rel),
+        "files": {},
+        "problems": [],
+        "notes": [],
+    }
     problems: list[str] = []
     if not root.is_dir():
         problems.append(f"annotation folder {root} not found. Fix: {fix_key}")
@@ -908,8 +1069,11 @@ def _check_annotations(root: Path, template_table: str, enabled: list[str], pres
             problems.append(f"annotation folder: {exc}")
         report["problems"] = problems
         return report, problems
-    report.update(nodes=source.graph.number_of_nodes(), edges=source.graph.number_of_edges(),
-                  template_rows=len(source.template_rows()))
+    report.update(
+        nodes=source.graph.number_of_nodes(),
+        edges=source.graph.number_of_edges(),
+        template_rows=len(source.template_rows()),
+    )
 
     # template nodes of the found datasets (enabled but absent ones are reported above already)
     terminals: set[str] = set()
@@ -968,19 +1132,29 @@ def _check_annotations(root: Path, template_table: str, enabled: list[str], pres
             continue
         if faces is None:
             missing_faces.append(node)
-            problems.append(f"annotation folder {root}: the ground-truth paths of the enabled datasets pass through "
-                            f"template {node} of dataset '{ds}', which is not available, and "
-                            f"{DEFAULT_FACES_DIR}/ has no faces for '{template}'. Fix: add '{ds}' to `datasets` "
-                            f"(and download it), or restore the annotation folder's default faces")
+            problems.append(
+                f"annotation folder {root}: the ground-truth paths of the enabled datasets pass through "
+                f"template {node} of dataset '{ds}', which is not available, and "
+                f"{DEFAULT_FACES_DIR}/ has no faces for '{template}'. Fix: add '{ds}' to `datasets` "
+                f"(and download it), or restore the annotation folder's default faces"
+            )
     report["default_faces"] = {"needed": n_faces, "missing": missing_faces}
     report["problems"] = problems
     report["ok"] = not problems
     return report, problems
 
 
-def check_datasets(datasets: list[str], data_dir: str | Path, annotations_dir: str | Path | None, *,
-                   read_meshes: bool = True, full_parse: bool = False, template_table: str = "templates_all.csv",
-                   config_dir: str | Path | None = None, compare_geometry: bool = True) -> dict:
+def check_datasets(
+    datasets: list[str],
+    data_dir: str | Path,
+    annotations_dir: str | Path | None,
+    *,
+    read_meshes: bool = True,
+    full_parse: bool = False,
+    template_table: str = "templates_all.csv",
+    config_dir: str | Path | None = None,
+    compare_geometry: bool = True,
+) -> dict:
     """Check the enabled datasets and the annotation folder; return the report (module docstring).
 
     Args:
@@ -1011,11 +1185,15 @@ def check_datasets(datasets: list[str], data_dir: str | Path, annotations_dir: s
     if not enabled:
         problems.append("no dataset is enabled. Fix: list at least one dataset under `datasets`")
     if "annotations" in enabled or "ok" in enabled or "data_dir" in enabled:
-        problems.append("dataset names 'annotations', 'ok' and 'data_dir' are reserved in the check report. "
-                        "Fix: rename the dataset YAML")
+        problems.append(
+            "dataset names 'annotations', 'ok' and 'data_dir' are reserved in the check report. "
+            "Fix: rename the dataset YAML"
+        )
     if not data_dir.is_dir():
-        problems.append(f"data root {data_dir} does not exist. Fix: set `data_dir` to the folder that holds the "
-                        f"dataset folders (e.g. tosca-off, MPI-FAUST)")
+        problems.append(
+            f"data root {data_dir} does not exist. Fix: set `data_dir` to the folder that holds the "
+            f"dataset folders (e.g. tosca-off, MPI-FAUST)"
+        )
 
     source = None
     root = Path(annotations_dir).expanduser().absolute() if annotations_dir is not None else None
@@ -1027,8 +1205,9 @@ def check_datasets(datasets: list[str], data_dir: str | Path, annotations_dir: s
     specs = {}
     present: dict[str, list] = {}
     for name in enabled:
-        entry, ds_problems, shapes = _check_one_dataset(name, data_dir, source, read_meshes, full_parse, config_dir,
-                                                        compare_geometry)
+        entry, ds_problems, shapes = _check_one_dataset(
+            name, data_dir, source, read_meshes, full_parse, config_dir, compare_geometry
+        )
         report[name] = entry
         problems += ds_problems
         try:
@@ -1040,16 +1219,20 @@ def check_datasets(datasets: list[str], data_dir: str | Path, annotations_dir: s
     if root is None:
         report["annotations"] = {"ok": None, "path": None, "notes": ["not checked (no annotation folder given)"]}
     else:
-        report["annotations"], ann_problems = _check_annotations(root, template_table, enabled, present, specs,
-                                                                 check_edges=read_meshes,
-                                                                 compare_geometry=compare_geometry)
+        report["annotations"], ann_problems = _check_annotations(
+            root, template_table, enabled, present, specs, check_edges=read_meshes, compare_geometry=compare_geometry
+        )
         problems += ann_problems
     report["ok"] = not problems
     report["data_dir"] = str(data_dir)
     if problems:
         lines = "\n".join(f"  {i + 1}. {p}" for i, p in enumerate(problems))
-        raise DatasetCheckError(f"the dataset check found {len(problems)} problem(s) (data_dir {data_dir}, "
-                                f"annotations {root}, datasets {enabled}):\n{lines}", report, problems)
+        raise DatasetCheckError(
+            f"the dataset check found {len(problems)} problem(s) (data_dir {data_dir}, "
+            f"annotations {root}, datasets {enabled}):\n{lines}",
+            report,
+            problems,
+        )
     return report
 
 
@@ -1082,20 +1265,28 @@ def fetch_annotations(url: str, sha256: str, dest: str | Path) -> Path:
     dest = Path(dest).expanduser().resolve()
     expected = str(sha256).strip().lower()
     if not re.fullmatch(r"[0-9a-f]{64}", expected):
-        raise ConfigError(f"'{sha256}' is not a SHA-256 digest (64 hex digits). Fix: pin the archive's digest "
-                          f"(sha256sum ARCHIVE)")
+        raise ConfigError(
+            f"'{sha256}' is not a SHA-256 digest (64 hex digits). Fix: pin the archive's digest (sha256sum ARCHIVE)"
+        )
     marker = _read_marker(dest) if dest.is_dir() else None
     if marker is not None and marker.get("sha256") == expected:
         print(f"fetch-annotations: {dest} already holds {expected[:12]}...; nothing to do", file=sys.stderr)
         return dest
     if dest.exists() and marker is None and (not dest.is_dir() or any(dest.iterdir())):
-        raise ConfigError(f"{dest} already exists and was not made by `becos fetch-annotations` (no {MARKER_NAME}). "
-                          f"Fix: choose another --dest, or remove {dest} yourself")
+        raise ConfigError(
+            f"{dest} already exists and was not made by `becos fetch-annotations` (no {MARKER_NAME}). "
+            f"Fix: choose another --dest, or remove {dest} yourself"
+        )
     dest.parent.mkdir(parents=True, exist_ok=True)
     part = partial_path(dest.parent / f"{dest.name}.{Path(urllib.parse.urlparse(url).path).name or 'archive'}")
-    fetch(url, part, expected, label="annotations",
-          fix="check the URL and the network connection, or download it by hand and pass a file:// URL",
-          pinned_in="the annotations_archive config / --sha256")
+    fetch(
+        url,
+        part,
+        expected,
+        label="annotations",
+        fix="check the URL and the network connection, or download it by hand and pass a file:// URL",
+        pinned_in="the annotations_archive config / --sha256",
+    )
     remove_stale_temporaries(dest.parent, [dest.name])  # extraction folders of killed fetches
     work = Path(tempfile.mkdtemp(dir=dest.parent, prefix=f".{dest.name}.", suffix=".tmp-fetch"))
     try:
@@ -1112,8 +1303,11 @@ def fetch_annotations(url: str, sha256: str, dest: str | Path) -> Path:
         if not entries:
             raise ConfigError(f"{label} is empty. Fix: check the URL")
         root = entries[0] if len(entries) == 1 and entries[0].is_dir() and not entries[0].is_symlink() else out
-        write_text(root / MARKER_NAME, json.dumps({"url": url, "sha256": expected,
-                                                   "fetched_at": time.strftime("%Y-%m-%dT%H:%M:%S%z")}, indent=2) + "\n")
+        write_text(
+            root / MARKER_NAME,
+            json.dumps({"url": url, "sha256": expected, "fetched_at": time.strftime("%Y-%m-%dT%H:%M:%S%z")}, indent=2)
+            + "\n",
+        )
         os.chmod(root, 0o755)
         old = None
         if dest.exists():  # a previous download (other digest) or an empty folder: swap it out
@@ -1136,22 +1330,42 @@ def fetch_annotations(url: str, sha256: str, dest: str | Path) -> Path:
 def configure_parser(parser: argparse.ArgumentParser, name: str = "check") -> argparse.ArgumentParser:
     """Arguments of ``becos check`` or ``becos fetch-annotations`` (``name``)."""
     if name == "check":
-        parser.add_argument("--datasets", nargs="+", required=True, metavar="NAME",
-                            help="enabled datasets (config key `datasets`), e.g. tosca faust")
+        parser.add_argument(
+            "--datasets",
+            nargs="+",
+            required=True,
+            metavar="NAME",
+            help="enabled datasets (config key `datasets`), e.g. tosca faust",
+        )
         parser.add_argument("--data-dir", type=Path, required=True, help="data root (config key `data_dir`)")
-        parser.add_argument("--annotations", type=Path, required=True,
-                            help="BeCoS annotation folder (config key `annotations`)")
-        parser.add_argument("--template-table", default="templates_all.csv",
-                            help="template table in <annotations>/config (default templates_all.csv)")
+        parser.add_argument(
+            "--annotations", type=Path, required=True, help="BeCoS annotation folder (config key `annotations`)"
+        )
+        parser.add_argument(
+            "--template-table",
+            default="templates_all.csv",
+            help="template table in <annotations>/config (default templates_all.csv)",
+        )
         parser.add_argument("--out", type=Path, help="write the JSON report here (also on failure)")
-        parser.add_argument("--no-mesh-check", dest="read_meshes", action="store_false",
-                            help="only check folders and counts, not the mesh files")
-        parser.add_argument("--no-geometry-check", dest="compare_geometry", action="store_false",
-                            help="do not compare shapes with their class template nor check edge files for "
-                                 "plausibility (only for stand-in meshes; config key `check_geometry`)")
-        parser.add_argument("--full-parse", action="store_true",
-                            help="also parse every mesh completely with read_mesh and list the repairs remeshing "
-                                 "applies to a copy (slow: ~35 s for TOSCA)")
+        parser.add_argument(
+            "--no-mesh-check",
+            dest="read_meshes",
+            action="store_false",
+            help="only check folders and counts, not the mesh files",
+        )
+        parser.add_argument(
+            "--no-geometry-check",
+            dest="compare_geometry",
+            action="store_false",
+            help="do not compare shapes with their class template nor check edge files for "
+            "plausibility (only for stand-in meshes; config key `check_geometry`)",
+        )
+        parser.add_argument(
+            "--full-parse",
+            action="store_true",
+            help="also parse every mesh completely with read_mesh and list the repairs remeshing "
+            "applies to a copy (slow: ~35 s for TOSCA)",
+        )
     elif name == "fetch-annotations":
         parser.add_argument("--url", required=True, help="archive URL (http, https or file://)")
         parser.add_argument("--sha256", required=True, help="pinned SHA-256 of the archive")
@@ -1172,9 +1386,15 @@ def run_cli(args: argparse.Namespace) -> int:
         raise ValueError(f"becos.check cannot run command {command!r}")
     start = time.perf_counter()
     try:
-        report = check_datasets(args.datasets, args.data_dir, args.annotations, read_meshes=args.read_meshes,
-                                full_parse=args.full_parse, template_table=args.template_table,
-                                compare_geometry=args.compare_geometry)
+        report = check_datasets(
+            args.datasets,
+            args.data_dir,
+            args.annotations,
+            read_meshes=args.read_meshes,
+            full_parse=args.full_parse,
+            template_table=args.template_table,
+            compare_geometry=args.compare_geometry,
+        )
     except DatasetCheckError as exc:
         if args.out is not None:
             write_text(args.out, json.dumps(exc.report, indent=2) + "\n")
@@ -1184,8 +1404,11 @@ def run_cli(args: argparse.Namespace) -> int:
         r = report[name]
         print(f"check: {name}: {r['found']} shapes in {r['path']}", file=sys.stderr)
         if r.get("repairs"):
-            print(f"check: {name}: {len(r['repairs'])} meshes are repaired on a copy before remeshing (the files "
-                  f"are not changed):", file=sys.stderr)
+            print(
+                f"check: {name}: {len(r['repairs'])} meshes are repaired on a copy before remeshing (the files "
+                f"are not changed):",
+                file=sys.stderr,
+            )
             for item in r["repairs"]:
                 print(f"  {item['path']}: {item['repair']}", file=sys.stderr)
     print(f"check: all ok in {time.perf_counter() - start:.1f} s", file=sys.stderr)

@@ -81,9 +81,19 @@ CANONICAL_RTOL = 1e-9
 geometry (two rotations of one shape never agree to the last bit)."""
 MESH_KEYS = ("vertices", "faces")
 """Side keys whose reason depends on the shape: remeshing when full, partial view when partial."""
-REASONS = ("remeshing of X differs", "remeshing of Y differs", "partial view of X differs",
-           "partial view of Y differs", "ground truth differs", "rotations of X differ", "rotations of Y differ",
-           "annotations differ", "scalars differ", "meta differs", "other arrays differ")
+REASONS = (
+    "remeshing of X differs",
+    "remeshing of Y differs",
+    "partial view of X differs",
+    "partial view of Y differs",
+    "ground truth differs",
+    "rotations of X differ",
+    "rotations of Y differ",
+    "annotations differ",
+    "scalars differ",
+    "meta differs",
+    "other arrays differ",
+)
 """Every reason, in the order the summary lists them (roughly cause before effect)."""
 
 
@@ -216,10 +226,15 @@ class StoreComparison:
             m = self.max_abs.get(key)
             finite = m[hit][~np.isnan(m[hit])] if m is not None else np.zeros(0)
             moved = self.moved[key] & hit if key in self.moved else np.zeros(len(v), dtype=bool)
-            out[key] = {"pairs": int(hit.sum()), "values": int(v[v > 0].sum()),
-                        "shape_differs": int((v < 0).sum()), "same_in_common_frame": int(moved.sum()),
-                        "max_abs": _json_float(finite.max()) if len(finite) else None,
-                        "example": str(self.common[np.flatnonzero(hit)[0]]), "reason": key_reason(key)}
+            out[key] = {
+                "pairs": int(hit.sum()),
+                "values": int(v[v > 0].sum()),
+                "shape_differs": int((v < 0).sum()),
+                "same_in_common_frame": int(moved.sum()),
+                "max_abs": _json_float(finite.max()) if len(finite) else None,
+                "example": str(self.common[np.flatnonzero(hit)[0]]),
+                "reason": key_reason(key),
+            }
         return out
 
     def _key_reasons(self, key: str) -> set[str]:
@@ -232,8 +247,9 @@ class StoreComparison:
         if side in ("x", "y") and rest in MESH_KEYS:
             partial = self.partial.get(side, np.zeros(len(hit), dtype=bool))
             S = side.upper()
-            out |= ({f"remeshing of {S} differs"} if (hit & ~partial).any() else set()) | \
-                ({f"partial view of {S} differs"} if (hit & partial).any() else set())
+            out |= ({f"remeshing of {S} differs"} if (hit & ~partial).any() else set()) | (
+                {f"partial view of {S} differs"} if (hit & partial).any() else set()
+            )
         elif hit.any():
             out.add(key_reason(key))
         return out
@@ -244,23 +260,42 @@ class StoreComparison:
         pairs = {}
         for i in np.flatnonzero(self.differing):
             pid = str(self.common[i])
-            entry = {"reasons": [r for r, hit in zip(REASONS, self.reasons[i]) if hit],
-                     "arrays": self._row_keys(int(i))}
+            entry = {
+                "reasons": [r for r, hit in zip(REASONS, self.reasons[i]) if hit],
+                "arrays": self._row_keys(int(i)),
+            }
             if pid in self.meta:
                 entry["meta"] = self.meta[pid]
             pairs[pid] = entry
-        reason_pairs = {r: [str(p) for p in self.common[self.reasons[:, j]]] for j, r in enumerate(REASONS)
-                        if self.reasons[:, j].any()}
-        return {"store_a": str(self.path_a), "store_b": str(self.path_b), "identical": self.identical,
-                "data_identical": self.data_identical, "setting": [self.setting_a, self.setting_b],
-                "n_pairs": [self.n_a, self.n_b], "n_common": int(len(self.common)),
-                "n_differing": int(self.differing.sum()), "only_a": self.only_a, "only_b": self.only_b,
-                "reasons": reason_pairs, "arrays": self.key_stats(), "attributes": self.attributes,
-                "versions": self.version_differences, "layout": self.layout, "atol": self.atol, "pairs": pairs}
+        reason_pairs = {
+            r: [str(p) for p in self.common[self.reasons[:, j]]]
+            for j, r in enumerate(REASONS)
+            if self.reasons[:, j].any()
+        }
+        return {
+            "store_a": str(self.path_a),
+            "store_b": str(self.path_b),
+            "identical": self.identical,
+            "data_identical": self.data_identical,
+            "setting": [self.setting_a, self.setting_b],
+            "n_pairs": [self.n_a, self.n_b],
+            "n_common": int(len(self.common)),
+            "n_differing": int(self.differing.sum()),
+            "only_a": self.only_a,
+            "only_b": self.only_b,
+            "reasons": reason_pairs,
+            "arrays": self.key_stats(),
+            "attributes": self.attributes,
+            "versions": self.version_differences,
+            "layout": self.layout,
+            "atol": self.atol,
+            "pairs": pairs,
+        }
 
     def summary(self) -> str:
         """A readable multi-line summary: pair counts, reasons with example pairs and the arrays behind
         them, layout and metadata (versions, config) differences, and the verdict."""
+
         def examples(ids) -> str:
             ids = [str(p) for p in ids]
             return ", ".join(ids[:MAX_EXAMPLES]) + (" ..." if len(ids) > MAX_EXAMPLES else "")
@@ -269,12 +304,16 @@ class StoreComparison:
             return "n/a" if x is None else (x if isinstance(x, str) else f"{x:.3g}")
 
         n_diff = int(self.differing.sum())
-        lines = [f"compare: {self.path_a} ({self.n_a} pairs, {self.setting_a}) against {self.path_b} "
-                 f"({self.n_b} pairs, {self.setting_b})"]
+        lines = [
+            f"compare: {self.path_a} ({self.n_a} pairs, {self.setting_a}) against {self.path_b} "
+            f"({self.n_b} pairs, {self.setting_b})"
+        ]
         if self.setting_a != self.setting_b:
             lines.append(f"  settings differ: {self.setting_a} vs {self.setting_b} (compare stores of one setting)")
-        lines.append(f"  pairs: {len(self.common)} in both ({len(self.common) - n_diff} identical, {n_diff} differ), "
-                     f"{len(self.only_a)} only in {self.path_a.name}, {len(self.only_b)} only in {self.path_b.name}")
+        lines.append(
+            f"  pairs: {len(self.common)} in both ({len(self.common) - n_diff} identical, {n_diff} differ), "
+            f"{len(self.only_a)} only in {self.path_a.name}, {len(self.only_b)} only in {self.path_b.name}"
+        )
         if self.only_a:
             lines.append(f"  only in {self.path_a}: {len(self.only_a)} pair(s), e.g. {examples(self.only_a)}")
         if self.only_b:
@@ -299,11 +338,17 @@ class StoreComparison:
                         if key in self.max_abs:
                             text += f", max |diff| {number(st['max_abs'])}"
                     if st["shape_differs"]:
-                        text += (", row count differs" if st["shape_differs"] == st["pairs"] else
-                                 f", row count differs in {st['shape_differs']}")
+                        text += (
+                            ", row count differs"
+                            if st["shape_differs"] == st["pairs"]
+                            else f", row count differs in {st['shape_differs']}"
+                        )
                     if st["same_in_common_frame"] and reason.startswith("rotations"):
-                        text += (", same in the common frame" if st["same_in_common_frame"] == st["pairs"] else
-                                 f", same in the common frame in {st['same_in_common_frame']}")
+                        text += (
+                            ", same in the common frame"
+                            if st["same_in_common_frame"] == st["pairs"]
+                            else f", same in the common frame in {st['same_in_common_frame']}"
+                        )
                     # under a rotations reason, the rotations before the coordinates they moved
                     parts.append((reason.startswith("rotations") and _is_coordinate_key(key), text))
                 parts = [text for _, text in sorted(parts, key=lambda p: p[0])]
@@ -314,8 +359,9 @@ class StoreComparison:
             lines.append(f"  layout of {key} differs: {d['a']} vs {d['b']}")
         versions = self.version_differences
         if versions:
-            lines.append("  versions differ: " + "; ".join(f"{k} {_show(a)} -> {_show(b)}"
-                                                       for k, (a, b) in versions.items()))
+            lines.append(
+                "  versions differ: " + "; ".join(f"{k} {_show(a)} -> {_show(b)}" for k, (a, b) in versions.items())
+            )
         other = {k: v for k, v in self.attributes.items() if not k.startswith("versions.")}
         for key, (a, b) in list(other.items())[:12]:
             lines.append(f"  metadata {key}: {_show(a)} -> {_show(b)}")
@@ -326,8 +372,10 @@ class StoreComparison:
         elif self.data_identical:
             verdict = "same pairs and arrays, but the metadata differs"
         else:
-            verdict = (f"the stores differ: {n_diff} pair(s) differ, {len(self.only_a) + len(self.only_b)} "
-                       f"in one store only{', layouts differ' if self.layout else ''}")
+            verdict = (
+                f"the stores differ: {n_diff} pair(s) differ, {len(self.only_a) + len(self.only_b)} "
+                f"in one store only{', layouts differ' if self.layout else ''}"
+            )
         lines.append(f"  result: {verdict}")
         return "\n".join(lines)
 
@@ -385,8 +433,9 @@ def _open(path):
     return bench
 
 
-def _batches(rows_a: np.ndarray, rows_b: np.ndarray, bytes_a: np.ndarray, bytes_b: np.ndarray,
-             max_bytes: int) -> list[tuple[int, int]]:
+def _batches(
+    rows_a: np.ndarray, rows_b: np.ndarray, bytes_a: np.ndarray, bytes_b: np.ndarray, max_bytes: int
+) -> list[tuple[int, int]]:
     """Consecutive runs ``k0:k1`` of the common pairs (sorted by A row) whose spans of rows in A and in
     B each hold about ``max_bytes`` at most (at least one pair per run): one read per store and run.
     When the two stores share an order the runs are contiguous in both; otherwise they shrink."""
@@ -433,13 +482,14 @@ def _compare_rows(xa: np.ndarray, xb: np.ndarray, atol: float) -> tuple[np.ndarr
         with np.errstate(invalid="ignore", over="ignore"):
             d = np.abs(xa.astype(np.float64, copy=False) - xb.astype(np.float64, copy=False))
         d[np.isnan(xa) & np.isnan(xb)] = 0.0
-        d[np.isnan(d)] = np.inf             # NaN in one store only, or inf - inf
+        d[np.isnan(d)] = np.inf  # NaN in one store only, or inf - inf
         return (d > atol).sum(axis=1), (d.max(axis=1) if width else np.zeros(len(d)))
     return neq.sum(axis=1), None
 
 
-def compare_stores(a: str | Path, b: str | Path, *, atol: float = 0.0,
-                   max_bytes: int = COMPARE_BLOCK_BYTES) -> StoreComparison:
+def compare_stores(
+    a: str | Path, b: str | Path, *, atol: float = 0.0, max_bytes: int = COMPARE_BLOCK_BYTES
+) -> StoreComparison:
     """Compare store ``a`` with store ``b`` pair by pair (module docstring).
 
     Args:
@@ -465,8 +515,10 @@ def compare_stores(a: str | Path, b: str | Path, *, atol: float = 0.0,
     keys = []
     for key in list(A.layout) + [k for k in B.layout if k not in A.layout]:
         if key not in A.layout or key not in B.layout:
-            layout[key] = {"a": "present" if key in A.layout else "absent",
-                           "b": "present" if key in B.layout else "absent"}
+            layout[key] = {
+                "a": "present" if key in A.layout else "absent",
+                "b": "present" if key in B.layout else "absent",
+            }
             continue
         arr_a, arr_b = A.array(key), B.array(key)
         ga, gb = A.layout[key], B.layout[key]
@@ -474,7 +526,7 @@ def compare_stores(a: str | Path, b: str | Path, *, atol: float = 0.0,
         desc_b = {"dtype": str(arr_b.dtype), "row_shape": list(arr_b.shape[1:]), "group": gb}
         if desc_a != desc_b:
             layout[key] = {"a": desc_a, "b": desc_b}
-        keys.append(key)      # rows of another shape or kind: every common pair marked (_compare_key)
+        keys.append(key)  # rows of another shape or kind: every common pair marked (_compare_key)
 
     m = len(common)
     values = {k: np.zeros(m, dtype=np.int64) for k in keys}
@@ -507,8 +559,10 @@ def compare_stores(a: str | Path, b: str | Path, *, atol: float = 0.0,
             _explain_by_transforms(s, block_a, block_b, la, lb, values, sel, moved, atol)
         for j, (i_a, i_b) in enumerate(zip(la, lb)):
             # the record's content digest follows from its arrays and meta: a difference there says nothing new
-            ma, mb = ({k: v for k, v in meta.items() if k != "content_digest"}
-                      for meta in (block_a.metas[i_a], block_b.metas[i_b]))
+            ma, mb = (
+                {k: v for k, v in meta.items() if k != "content_digest"}
+                for meta in (block_a.metas[i_a], block_b.metas[i_b])
+            )
             if ma != mb:
                 diff = dict_differences(ma, mb)
                 if diff:
@@ -528,8 +582,26 @@ def compare_stores(a: str | Path, b: str | Path, *, atol: float = 0.0,
     reasons[:, REASONS.index("meta differs")] = meta_differs
 
     attributes = dict_differences(A.metadata, B.metadata, ignore=IGNORED_ATTRIBUTES)
-    return StoreComparison(Path(a), Path(b), A.setting, B.setting, len(A), len(B), only_a, only_b, common,
-                           values, max_abs, reasons, meta_diffs, attributes, layout, float(atol), partial, moved)
+    return StoreComparison(
+        Path(a),
+        Path(b),
+        A.setting,
+        B.setting,
+        len(A),
+        len(B),
+        only_a,
+        only_b,
+        common,
+        values,
+        max_abs,
+        reasons,
+        meta_diffs,
+        attributes,
+        layout,
+        float(atol),
+        partial,
+        moved,
+    )
 
 
 def _is_coordinate_key(key: str) -> bool:
@@ -542,7 +614,7 @@ def _canonical(block, i: int, s: str, key: str) -> np.ndarray:
     area normalisation and random rotation): ``((v @ R.T) * norm - t) @ A.T`` (record docstring)."""
     group = block.layout[key]
     o = block.offsets[group]
-    v = block.arrays[key][o[i]:o[i + 1]]
+    v = block.arrays[key][o[i] : o[i + 1]]
     R = block.arrays[f"{s}_random_rotation"][i]
     A = block.arrays[f"{s}_align_rotation"][i]
     t = block.arrays[f"{s}_align_translation"][i]
@@ -550,14 +622,14 @@ def _canonical(block, i: int, s: str, key: str) -> np.ndarray:
     return ((v @ R.T) * norm - t) @ A.T
 
 
-def _explain_by_transforms(s: str, block_a, block_b, la: np.ndarray, lb: np.ndarray, values: dict, sel: slice,
-                           moved: dict, atol: float) -> None:
+def _explain_by_transforms(
+    s: str, block_a, block_b, la: np.ndarray, lb: np.ndarray, values: dict, sel: slice, moved: dict, atol: float
+) -> None:
     """Mark in ``moved`` the pairs of this batch whose side-``s`` coordinates differ only through the
     pair's transforms (random rotation, alignment, area normalisation): equal, to
     :data:`CANONICAL_RTOL` of their extent, once taken back to the common frame."""
     needed = [f"{s}_{k}" for k in TRANSFORM_KEYS]
-    if not all(k in values and block_a.layout.get(k, 0) is None and block_b.layout.get(k, 0) is None
-               for k in needed):
+    if not all(k in values and block_a.layout.get(k, 0) is None and block_b.layout.get(k, 0) is None for k in needed):
         return
     transformed = np.zeros(len(la), dtype=bool)
     for key in needed:
@@ -567,7 +639,7 @@ def _explain_by_transforms(s: str, block_a, block_b, la: np.ndarray, lb: np.ndar
     for key in (f"{s}_{k}" for k in COORDINATE_KEYS):
         if key not in moved or block_a.layout.get(key) is None or block_b.layout.get(key) is None:
             continue
-        for j in np.flatnonzero(transformed & (values[key][sel] > 0)):   # same rows, values differ
+        for j in np.flatnonzero(transformed & (values[key][sel] > 0)):  # same rows, values differ
             ca = _canonical(block_a, int(la[j]), s, key)
             cb = _canonical(block_b, int(lb[j]), s, key)
             scale = max(float(np.abs(ca).max(initial=0.0)), 1e-300)
@@ -575,8 +647,9 @@ def _explain_by_transforms(s: str, block_a, block_b, la: np.ndarray, lb: np.ndar
                 moved[key][sel.start + j] = True
 
 
-def _compare_key(key: str, block_a, block_b, la: np.ndarray, lb: np.ndarray,
-                 atol: float) -> tuple[np.ndarray, np.ndarray]:
+def _compare_key(
+    key: str, block_a, block_b, la: np.ndarray, lb: np.ndarray, atol: float
+) -> tuple[np.ndarray, np.ndarray]:
     """(differing values per pair (-1: shape differs), largest |difference| per pair (NaN: n/a))."""
     n = len(la)
     data_a, data_b = block_a.arrays[key], block_b.arrays[key]
@@ -586,7 +659,7 @@ def _compare_key(key: str, block_a, block_b, la: np.ndarray, lb: np.ndarray,
     if (ga is None) != (gb is None) or data_a.shape[1:] != data_b.shape[1:]:
         return n_diff, dmax
     is_float = data_a.dtype.kind == "f" or data_b.dtype.kind == "f"
-    if ga is None:                                    # stacked: one row per pair
+    if ga is None:  # stacked: one row per pair
         counts, rowmax = _compare_rows(data_a[la], data_b[lb], atol)
         if counts is None:
             return np.zeros(n, dtype=np.int64), (np.zeros(n) if is_float else dmax)
@@ -598,7 +671,7 @@ def _compare_key(key: str, block_a, block_b, la: np.ndarray, lb: np.ndarray,
     sa, sb = oa[:-1][la][same], ob[:-1][lb][same]
     total = int(cnt.sum())
     if len(cnt) and (np.diff(sa) == cnt[:-1]).all() and (np.diff(sb) == cnt[:-1]).all():
-        xa, xb = data_a[sa[0]:sa[0] + total], data_b[sb[0]:sb[0] + total]     # one run in each block: views
+        xa, xb = data_a[sa[0] : sa[0] + total], data_b[sb[0] : sb[0] + total]  # one run in each block: views
     else:
         xa, xb = data_a[_row_index(sa, cnt)], data_b[_row_index(sb, cnt)]
     counts, rowmax = _compare_rows(xa, xb, atol)

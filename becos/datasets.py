@@ -83,8 +83,22 @@ CATEGORIES = ("human", "four-legged", "centaur")
 EXCLUDED = "excluded"
 LAYOUTS = ("flat", "class_folders", "dt4d")
 SPLIT_RULES = ("by_class", "by_name", "slices", "template_table")
-REQUIRED_KEYS = ("name", "title", "folder", "file_type", "layout", "expected_count", "scale", "rotation_deg",
-                 "category", "class", "template_key", "split", "usage", "source")
+REQUIRED_KEYS = (
+    "name",
+    "title",
+    "folder",
+    "file_type",
+    "layout",
+    "expected_count",
+    "scale",
+    "rotation_deg",
+    "category",
+    "class",
+    "template_key",
+    "split",
+    "usage",
+    "source",
+)
 
 
 # --- frames ----------------------------------------------------------------------------------------
@@ -323,17 +337,23 @@ class DatasetSpec:
         if sha256 is not None:
             sha256 = str(sha256).strip().lower()
             if not re.fullmatch(r"[0-9a-f]{64}", sha256):
-                self._fail(f"source.archive.sha256 {raw['sha256']!r} is not 64 hex digits",
-                           "pin the archive's digest (sha256sum ARCHIVE) or write null while it is unknown")
+                self._fail(
+                    f"source.archive.sha256 {raw['sha256']!r} is not 64 hex digits",
+                    "pin the archive's digest (sha256sum ARCHIVE) or write null while it is unknown",
+                )
         extract_to = str(raw["extract_to"]).strip("/")
         parts = extract_to.split("/")
         if not extract_to or ".." in parts or "" in parts:
-            self._fail(f"source.archive.extract_to {raw['extract_to']!r} is not a folder below the data root",
-                       "name a relative folder without '..' (e.g. KIDS)")
+            self._fail(
+                f"source.archive.extract_to {raw['extract_to']!r} is not a folder below the data root",
+                "name a relative folder without '..' (e.g. KIDS)",
+            )
         if self.folder != extract_to and not self.folder.startswith(extract_to + "/"):
-            self._fail(f"the dataset folder '{self.folder}' is not inside source.archive.extract_to '{extract_to}'",
-                       "extract the archive into a folder that holds the dataset folder")
-        inner = self.folder[len(extract_to):].strip("/")
+            self._fail(
+                f"the dataset folder '{self.folder}' is not inside source.archive.extract_to '{extract_to}'",
+                "extract the archive into a folder that holds the dataset folder",
+            )
+        inner = self.folder[len(extract_to) :].strip("/")
         expected = f"{inner}/{self.file_glob}" if inner else self.file_glob
         return DatasetArchive(url=url, sha256=sha256, extract_to=extract_to, expected=expected)
 
@@ -343,8 +363,10 @@ class DatasetSpec:
         rules = []
         for item in items:
             if not isinstance(item, dict) or "match" not in item or "value" not in item:
-                self._fail(f"'{key}' rules must be {{match: regex, value: text}} items, got {item!r}",
-                           "write each rule as a mapping with match and value")
+                self._fail(
+                    f"'{key}' rules must be {{match: regex, value: text}} items, got {item!r}",
+                    "write each rule as a mapping with match and value",
+                )
             try:
                 rules.append(_Rule(re.compile(str(item["match"]), re.IGNORECASE), str(item["value"])))
             except re.error as exc:
@@ -352,13 +374,15 @@ class DatasetSpec:
         return rules
 
     @classmethod
-    def load(cls, name: str, config_dir: Path | None = None) -> "DatasetSpec":
+    def load(cls, name: str, config_dir: Path | None = None) -> DatasetSpec:
         """The spec ``<config_dir>/<name>.yaml`` (default: the repository's ``config/datasets``)."""
         folder = _config_dir(config_dir)
         path = folder / f"{name}.yaml"
         if not path.is_file():
-            raise ConfigError(f"no dataset '{name}' in {folder} (available: {available_datasets(folder)}). "
-                              f"Fix: use one of those names or add {path}")
+            raise ConfigError(
+                f"no dataset '{name}' in {folder} (available: {available_datasets(folder)}). "
+                f"Fix: use one of those names or add {path}"
+            )
         try:
             raw = yaml.safe_load(path.read_text(encoding="utf-8"))
         except yaml.YAMLError as exc:
@@ -376,8 +400,10 @@ class DatasetSpec:
             m = rule.pattern.search(name)
             if m:
                 return rule.value.format(*([m.group(0)] + [g or "" for g in m.groups()]), name=name)
-        raise BecosError(f"{self.path}: no {what} rule matches shape name '{name}'. Fix: check the name "
-                         f"(dataset {self.name}) or add a rule")
+        raise BecosError(
+            f"{self.path}: no {what} rule matches shape name '{name}'. Fix: check the name "
+            f"(dataset {self.name}) or add a rule"
+        )
 
     def category_of(self, name: str) -> str:
         """``human``, ``four-legged`` or ``centaur``."""
@@ -390,7 +416,7 @@ class DatasetSpec:
         """Key of the template table (reference facts §3.2, "key per shape")."""
         return self.template_key_format.format(name=name, **{"class": self.class_of(name)})
 
-    def split_of(self, name: str, annotations: "AnnotationSource | None" = None) -> str:
+    def split_of(self, name: str, annotations: AnnotationSource | None = None) -> str:
         """Split of one shape for rules that depend on the name alone (by_class, by_name, template_table).
 
         Slices depend on the whole listing: use :meth:`assign_splits`.
@@ -399,27 +425,36 @@ class DatasetSpec:
             return EXCLUDED
         rule = self.split["rule"]
         if rule == "slices":
-            raise BecosError(f"{self.path}: split of '{name}' depends on the whole file list (count-based "
-                             f"slices). Fix: use DatasetSpec.assign_splits(names)")
+            raise BecosError(
+                f"{self.path}: split of '{name}' depends on the whole file list (count-based "
+                f"slices). Fix: use DatasetSpec.assign_splits(names)"
+            )
         if rule == "template_table":
             if annotations is None:
-                raise ConfigError(f"{self.path}: the split of dataset {self.name} comes from the template table's "
-                                  f"split column. Fix: pass an AnnotationSource")
+                raise ConfigError(
+                    f"{self.path}: the split of dataset {self.name} comes from the template table's "
+                    f"split column. Fix: pass an AnnotationSource"
+                )
             key = self.template_key_of(name)
             split = annotations.template_row(key).split
             if split not in SPLITS:
-                raise InputFileError(annotations.template_table_path, f"row '{key}' has split '{split}'",
-                                     "give DT4D rows train, val or test")
+                raise InputFileError(
+                    annotations.template_table_path,
+                    f"row '{key}' has split '{split}'",
+                    "give DT4D rows train, val or test",
+                )
             return split
         value = self.class_of(name) if rule == "by_class" else name
         hits = [s for s in SPLITS if value in [str(v) for v in (self.split.get(s) or ())]]
         if len(hits) != 1:
-            raise BecosError(f"{self.path}: {'class' if rule == 'by_class' else 'shape'} '{value}' (shape '{name}') "
-                             f"is in {len(hits)} of the split lists {SPLITS}. Fix: list it in exactly one "
-                             f"(or under excluded)")
+            raise BecosError(
+                f"{self.path}: {'class' if rule == 'by_class' else 'shape'} '{value}' (shape '{name}') "
+                f"is in {len(hits)} of the split lists {SPLITS}. Fix: list it in exactly one "
+                f"(or under excluded)"
+            )
         return hits[0]
 
-    def assign_splits(self, names: list[str], annotations: "AnnotationSource | None" = None) -> dict[str, str]:
+    def assign_splits(self, names: list[str], annotations: AnnotationSource | None = None) -> dict[str, str]:
         """Name -> split for a whole listing.
 
         ``slices``: the used names in :func:`reference_sort_key` order (of ``<name>.<file_type>``), the
@@ -432,17 +467,19 @@ class DatasetSpec:
             return out
         counts = [int(self.split[s]) for s in SPLITS]
         if sum(counts) != len(used):
-            raise BecosError(f"{self.path}: the split slices {dict(zip(SPLITS, counts))} cover {sum(counts)} shapes "
-                             f"but {len(used)} are listed. Fix: check the dataset download is complete")
+            raise BecosError(
+                f"{self.path}: the split slices {dict(zip(SPLITS, counts))} cover {sum(counts)} shapes "
+                f"but {len(used)} are listed. Fix: check the dataset download is complete"
+            )
         ordered = sorted(used, key=lambda n: reference_sort_key(f"{n}.{self.file_type}"))
         start = 0
         for split, n in zip(SPLITS, counts):
-            out.update({name: split for name in ordered[start:start + n]})
+            out.update({name: split for name in ordered[start : start + n]})
             start += n
         return out
 
     # --- frames ---------------------------------------------------------------------------------
-    def _shape_rotations(self, annotations: "AnnotationSource | None") -> tuple[dict[str, list], list]:
+    def _shape_rotations(self, annotations: AnnotationSource | None) -> tuple[dict[str, list], list]:
         spec = self.rotation_per_shape
         default = list(spec.get("default", [0, 0, 0]))
         if "values" in spec:
@@ -451,23 +488,29 @@ class DatasetSpec:
         if not ref:
             self._fail("rotation_per_shape needs 'values' or 'from_reference'", "give one of them")
         if annotations is None:
-            raise ConfigError(f"{self.path}: dataset {self.name} has one frame rotation per shape, read from the "
-                              f"BeCoS annotation folder's {ref}. Fix: pass an AnnotationSource of that folder")
+            raise ConfigError(
+                f"{self.path}: dataset {self.name} has one frame rotation per shape, read from the "
+                f"BeCoS annotation folder's {ref}. Fix: pass an AnnotationSource of that folder"
+            )
         path = Path(annotations.root) / ref
         if not path.is_file():
-            raise InputFileError(path, f"per-shape frame rotations of dataset {self.name} not found",
-                                 f"copy the reference checkout's {ref} there, or put the dict under "
-                                 f"rotation_per_shape.values in {self.path}")
+            raise InputFileError(
+                path,
+                f"per-shape frame rotations of dataset {self.name} not found",
+                f"copy the reference checkout's {ref} there, or put the dict under "
+                f"rotation_per_shape.values in {self.path}",
+            )
         try:
             values = (yaml.safe_load(path.read_text(encoding="utf-8")) or {}).get(spec.get("key", "rot"))
         except yaml.YAMLError as exc:
             raise InputFileError(path, f"is not valid YAML ({exc})", "restore the reference's file") from exc
         if not isinstance(values, dict):
-            raise InputFileError(path, f"key '{spec.get('key', 'rot')}' does not hold a per-shape dict",
-                                 "restore the reference's file")
+            raise InputFileError(
+                path, f"key '{spec.get('key', 'rot')}' does not hold a per-shape dict", "restore the reference's file"
+            )
         return values, default
 
-    def rotation_of(self, name: str, annotations: "AnnotationSource | None" = None) -> np.ndarray:
+    def rotation_of(self, name: str, annotations: AnnotationSource | None = None) -> np.ndarray:
         """(3, 3) frame rotation of a shape (per-shape dict where the dataset has one)."""
         if not self.rotation_per_shape:
             return frame_rotation_matrix(self.rotation_deg)
@@ -494,25 +537,36 @@ class DatasetSpec:
     def info_file_candidates(self, annotations_root: str | Path | None, data_root: str | Path) -> list[Path]:
         """Where a ``dt4d`` dataset's ``info_file`` is looked for, in order: the annotation folder's
         ``data/``, then the data root."""
-        return ([Path(annotations_root) / "data" / self.info_file] if annotations_root is not None else []) + \
-            [Path(data_root) / self.info_file]
+        return ([Path(annotations_root) / "data" / self.info_file] if annotations_root is not None else []) + [
+            Path(data_root) / self.info_file
+        ]
 
-    def _dt4d_names(self, annotations: "AnnotationSource | None", data_root: Path) -> tuple[list[str], Path]:
+    def _dt4d_names(self, annotations: AnnotationSource | None, data_root: Path) -> tuple[list[str], Path]:
         candidates = self.info_file_candidates(annotations.root if annotations is not None else None, data_root)
         path = next((p for p in candidates if p.is_file()), None)
         if path is None:
-            raise InputFileError(candidates[0], f"the DT4D class/frame list of {self.name} is missing",
-                                 "use the BeCoS annotation folder (it ships data/info_dt4d_*.json)")
+            raise InputFileError(
+                candidates[0],
+                f"the DT4D class/frame list of {self.name} is missing",
+                "use the BeCoS annotation folder (it ships data/info_dt4d_*.json)",
+            )
         try:
             info = json.loads(path.read_text(encoding="utf-8"))
-            names = [f"{cls}/{action}{int(frame):03d}" for cls, actions in info.items()
-                     for action, frames in actions.items() for frame in frames]
+            names = [
+                f"{cls}/{action}{int(frame):03d}"
+                for cls, actions in info.items()
+                for action, frames in actions.items()
+                for frame in frames
+            ]
         except (ValueError, AttributeError, TypeError) as exc:
-            raise InputFileError(path, f"is not a {{class: {{action: [frame ids]}}}} JSON ({exc})",
-                                 "restore the annotation folder's file") from exc
+            raise InputFileError(
+                path,
+                f"is not a {{class: {{action: [frame ids]}}}} JSON ({exc})",
+                "restore the annotation folder's file",
+            ) from exc
         return names, path
 
-    def list_names(self, data_root: str | Path, annotations: "AnnotationSource | None" = None) -> list[str]:
+    def list_names(self, data_root: str | Path, annotations: AnnotationSource | None = None) -> list[str]:
         """Shape names found below ``data_root`` (excluded ones included), in natural order.
 
         Raises:
@@ -521,8 +575,11 @@ class DatasetSpec:
         """
         folder = Path(data_root) / self.folder
         if not folder.is_dir():
-            raise InputFileError(folder, f"dataset folder of {self.name} not found",
-                                 f"download it and place it there. {self.download_help()}")
+            raise InputFileError(
+                folder,
+                f"dataset folder of {self.name} not found",
+                f"download it and place it there. {self.download_help()}",
+            )
         if self.layout == "flat":
             names = [p.name[: -len(p.suffix)] for p in folder.glob(self.file_glob) if p.is_file()]
         elif self.layout == "class_folders":
@@ -531,14 +588,17 @@ class DatasetSpec:
             names, info_path = self._dt4d_names(annotations, Path(data_root))
             missing = [n for n in names if not (folder / f"{n}.{self.file_type}").is_file()]
             if missing:
-                raise InputFileError(folder, f"{len(missing)} of the {len(names)} shapes listed in {info_path} are "
-                                     f"missing (e.g. {missing[0]}.{self.file_type})",
-                                     f"put the full DeformingThings4D download in "
-                                     f"{Path(data_root) / 'DeformingThings4D'} and run the workflow (or "
-                                     f"`becos prepare-dt4d`), which writes them. {self.download_help()}")
+                raise InputFileError(
+                    folder,
+                    f"{len(missing)} of the {len(names)} shapes listed in {info_path} are "
+                    f"missing (e.g. {missing[0]}.{self.file_type})",
+                    f"put the full DeformingThings4D download in "
+                    f"{Path(data_root) / 'DeformingThings4D'} and run the workflow (or "
+                    f"`becos prepare-dt4d`), which writes them. {self.download_help()}",
+                )
         return sorted(names, key=natural_key)
 
-    def list_shapes(self, data_root: str | Path, annotations: "AnnotationSource | None" = None) -> list[ShapeEntry]:
+    def list_shapes(self, data_root: str | Path, annotations: AnnotationSource | None = None) -> list[ShapeEntry]:
         """Every shape of the dataset below ``data_root`` as :class:`ShapeEntry` (natural name order).
 
         Excluded shapes that are present are listed with split ``excluded``. Counts are checked against
@@ -552,24 +612,35 @@ class DatasetSpec:
         names = self.list_names(data_root, annotations)
         used = [n for n in names if n not in self.excluded]
         if len(used) != self.expected_count:
-            raise InputFileError(folder, f"found {len(used)} {self.name} shapes ({self.file_glob}), expected "
-                                 f"{self.expected_count}", f"complete or re-extract the download. {self.download_help()}")
+            raise InputFileError(
+                folder,
+                f"found {len(used)} {self.name} shapes ({self.file_glob}), expected {self.expected_count}",
+                f"complete or re-extract the download. {self.download_help()}",
+            )
         if self.expected_per_class:
             counts: dict[str, int] = {}
             for n in used:
                 counts[self.class_of(n)] = counts.get(self.class_of(n), 0) + 1
             if counts != self.expected_per_class:
-                diff = {c: (counts.get(c, 0), self.expected_per_class.get(c, 0))
-                        for c in set(counts) | set(self.expected_per_class)
-                        if counts.get(c, 0) != self.expected_per_class.get(c, 0)}
-                raise InputFileError(folder, f"shapes per class (found, expected) differ: {diff}",
-                                     f"complete or re-extract the download. {self.download_help()}")
+                diff = {
+                    c: (counts.get(c, 0), self.expected_per_class.get(c, 0))
+                    for c in set(counts) | set(self.expected_per_class)
+                    if counts.get(c, 0) != self.expected_per_class.get(c, 0)
+                }
+                raise InputFileError(
+                    folder,
+                    f"shapes per class (found, expected) differ: {diff}",
+                    f"complete or re-extract the download. {self.download_help()}",
+                )
         if self.split["rule"] == "by_name":
             listed = {str(v) for s in SPLITS for v in (self.split.get(s) or ())}
             absent = sorted(listed - set(used))
             if absent:
-                raise InputFileError(folder, f"shapes named in the split lists are missing: {absent}",
-                                     f"complete the download. {self.download_help()}")
+                raise InputFileError(
+                    folder,
+                    f"shapes named in the split lists are missing: {absent}",
+                    f"complete the download. {self.download_help()}",
+                )
         splits = self.assign_splits(names, annotations)
         rotations = None
         if self.rotation_per_shape:
@@ -581,20 +652,30 @@ class DatasetSpec:
                 values, default = rotations
                 rot = values.get(n.replace("/", "_"))
                 if rot is None:
-                    log.warning("%s: no per-shape rotation for '%s'; using %s (reference behaviour)",
-                                self.path, n, default)
+                    log.warning(
+                        "%s: no per-shape rotation for '%s'; using %s (reference behaviour)", self.path, n, default
+                    )
                     rot = default
                 rotation = frame_rotation_matrix(rot)
             else:
                 rotation = fixed.copy()
-            entries.append(ShapeEntry(
-                dataset=self.name, name=n, path=folder / f"{n}.{self.file_type}", category=self.category_of(n),
-                shape_class=self.class_of(n), template_key=self.template_key_of(n), split=splits[n],
-                scale=self.scale, frame_rotation=rotation, usage=self.usage))
+            entries.append(
+                ShapeEntry(
+                    dataset=self.name,
+                    name=n,
+                    path=folder / f"{n}.{self.file_type}",
+                    category=self.category_of(n),
+                    shape_class=self.class_of(n),
+                    template_key=self.template_key_of(n),
+                    split=splits[n],
+                    scale=self.scale,
+                    frame_rotation=rotation,
+                    usage=self.usage,
+                )
+            )
         return entries
 
 
 def load_all(config_dir: Path | str | None = None) -> dict[str, DatasetSpec]:
     """Every registered dataset spec by name."""
     return {name: DatasetSpec.load(name, config_dir) for name in available_datasets(config_dir)}
-

@@ -159,13 +159,18 @@ def _start(url: str, offset: int, meta: dict, fix: str):
     if not offset:
         return response, 0, length
     if status != 206:
-        print(f"download: the server ignored the resume request (HTTP {status}); starting {url} again from "
-              f"byte 0", file=sys.stderr)
+        print(
+            f"download: the server ignored the resume request (HTTP {status}); starting {url} again from byte 0",
+            file=sys.stderr,
+        )
         return response, 0, length
     got = _content_range_start(response.headers.get("Content-Range"))
     if got is None or got[0] != offset:
-        print(f"download: asked {url} for the bytes from {offset}, got the range "
-              f"{response.headers.get('Content-Range')!r}; starting again", file=sys.stderr)
+        print(
+            f"download: asked {url} for the bytes from {offset}, got the range "
+            f"{response.headers.get('Content-Range')!r}; starting again",
+            file=sys.stderr,
+        )
         response.close()
         return _start(url, 0, meta, fix)
     print(f"download: resuming {url} at byte {offset}", file=sys.stderr)
@@ -178,9 +183,16 @@ def _hash_file(path: Path, h) -> None:
             h.update(block)
 
 
-def fetch(url: str, part: str | Path, sha256: str | None = None, *, label: str | None = None,
-          fix: str = "check the URL and the network connection, then run again", pinned_in: str | None = None,
-          progress: bool = True) -> str:
+def fetch(
+    url: str,
+    part: str | Path,
+    sha256: str | None = None,
+    *,
+    label: str | None = None,
+    fix: str = "check the URL and the network connection, then run again",
+    pinned_in: str | None = None,
+    progress: bool = True,
+) -> str:
     """Make ``part`` hold the complete download of ``url``; return its SHA-256 (hex).
 
     Resumes ``part`` if it holds the start of the same URL (``Range``); restarts when the server
@@ -210,8 +222,10 @@ def fetch(url: str, part: str | Path, sha256: str | None = None, *, label: str |
     meta = _read_json(sidecar) or {}
     offset = part.stat().st_size if part.is_file() else 0
     if offset and meta.get("url") != url:
-        print(f"download: the partial file {part} belongs to another URL ({meta.get('url')}); starting {url} "
-              f"from byte 0", file=sys.stderr)
+        print(
+            f"download: the partial file {part} belongs to another URL ({meta.get('url')}); starting {url} from byte 0",
+            file=sys.stderr,
+        )
         offset = 0
     response, mode, total = None, "wb", None
     if not (offset and meta.get("total") == offset):  # else complete already (killed before it was unpacked)
@@ -220,15 +234,36 @@ def fetch(url: str, part: str | Path, sha256: str | None = None, *, label: str |
     if response is not None:
         with response:
             headers = response.headers
-            write_text(sidecar, json.dumps({"url": url, "etag": headers.get("ETag"),
-                                            "last_modified": headers.get("Last-Modified"), "total": total}) + "\n")
+            write_text(
+                sidecar,
+                json.dumps(
+                    {
+                        "url": url,
+                        "etag": headers.get("ETag"),
+                        "last_modified": headers.get("Last-Modified"),
+                        "total": total,
+                    }
+                )
+                + "\n",
+            )
             read = getattr(response, "read1", response.read)
             done = offset
             tty = sys.stderr.isatty()
-            with open(part, mode) as fh, tqdm(total=total, initial=offset, unit="B", unit_scale=True,
-                                               unit_divisor=1024, desc=label or Path(url).name, file=sys.stderr,
-                                               disable=not progress, mininterval=0.5 if tty else 10.0,
-                                               ascii=not tty) as bar:
+            with (
+                open(part, mode) as fh,
+                tqdm(
+                    total=total,
+                    initial=offset,
+                    unit="B",
+                    unit_scale=True,
+                    unit_divisor=1024,
+                    desc=label or Path(url).name,
+                    file=sys.stderr,
+                    disable=not progress,
+                    mininterval=0.5 if tty else 10.0,
+                    ascii=not tty,
+                ) as bar,
+            ):
                 try:
                     for block in iter(lambda: read(CHUNK_BYTES), b""):
                         fh.write(block)
@@ -236,21 +271,27 @@ def fetch(url: str, part: str | Path, sha256: str | None = None, *, label: str |
                         done += len(block)
                         bar.update(len(block))
                 except (urllib.error.URLError, http.client.HTTPException, OSError, ValueError) as exc:
-                    raise DownloadError(url, f"the download broke off after {done} of {total or '?'} bytes ({exc})",
-                                        f"run again: it resumes from {part}") from None
+                    raise DownloadError(
+                        url,
+                        f"the download broke off after {done} of {total or '?'} bytes ({exc})",
+                        f"run again: it resumes from {part}",
+                    ) from None
             if total is not None and done != total:
-                raise DownloadError(url, f"the download ended after {done} of {total} bytes",
-                                    f"run again: it resumes from {part}")
+                raise DownloadError(
+                    url, f"the download ended after {done} of {total} bytes", f"run again: it resumes from {part}"
+                )
     h = hashlib.sha256()
     _hash_file(part, h)
     actual = h.hexdigest()
     if sha256 is not None and actual != sha256.lower():
         discard_partial(part)
         where = f" (pinned in {pinned_in})" if pinned_in else ""
-        raise ChecksumMismatchError(url, f"the downloaded file has SHA-256 {actual}, expected {sha256.lower()}{where}; "
-                                    f"nothing was installed",
-                                    "check that the URL and the pinned digest belong together (the file may have "
-                                    "changed upstream, or a mirror serves another file)")
+        raise ChecksumMismatchError(
+            url,
+            f"the downloaded file has SHA-256 {actual}, expected {sha256.lower()}{where}; nothing was installed",
+            "check that the URL and the pinned digest belong together (the file may have "
+            "changed upstream, or a mirror serves another file)",
+        )
     return actual
 
 
@@ -286,15 +327,17 @@ def _extract_tar(path: Path, out: Path, label: str) -> None:
                 base = posixpath.dirname(name) if m.issym() else ""
                 resolved = posixpath.normpath(posixpath.join(base, target))
                 if resolved == ".." or resolved.startswith("../"):
-                    raise UnsafeArchiveError(label, f"link '{m.name}' -> '{m.linkname}' escapes the archive",
-                                             _UNSAFE_FIX)
+                    raise UnsafeArchiveError(
+                        label, f"link '{m.name}' -> '{m.linkname}' escapes the archive", _UNSAFE_FIX
+                    )
             elif not (m.isfile() or m.isdir()):
                 raise UnsafeArchiveError(label, f"member '{m.name}' is a device or pipe", _UNSAFE_FIX)
         try:
             tar.extractall(out, members=members, filter="data")
         except tarfile.TarError as exc:
-            raise CorruptArchiveError(label, f"extraction failed ({exc})", "the archive is corrupt; download it "
-                                      "again") from None
+            raise CorruptArchiveError(
+                label, f"extraction failed ({exc})", "the archive is corrupt; download it again"
+            ) from None
         except OSError as exc:
             raise DownloadError(label, f"extraction into {out} failed ({exc})", _EXTRACT_OS_FIX) from None
 
@@ -308,8 +351,9 @@ def _extract_zip(path: Path, out: Path, label: str) -> None:
                     raise UnsafeArchiveError(label, f"member '{info.filename}' is a symbolic link", _UNSAFE_FIX)
             zf.extractall(out)
     except (zipfile.BadZipFile, zipfile.LargeZipFile, EOFError) as exc:
-        raise CorruptArchiveError(label, f"not a readable zip archive ({exc})",
-                                  "the archive is corrupt; download it again") from None
+        raise CorruptArchiveError(
+            label, f"not a readable zip archive ({exc})", "the archive is corrupt; download it again"
+        ) from None
     except OSError as exc:
         raise DownloadError(label, f"extraction into {out} failed ({exc})", _EXTRACT_OS_FIX) from None
 
@@ -343,11 +387,13 @@ def dataset_archive(name: str, config_dir=None):
 
     spec = DatasetSpec.load(name, config_dir)
     if spec.archive is None:
-        raise ConfigError(f"dataset '{name}' ({spec.title}) cannot be downloaded automatically: it needs an account, "
-                          f"a password or a request form ({spec.source.get('licence', 'see its licence')}). "
-                          f"Fix: get it by hand ({spec.download_help()}), place it so that "
-                          f"<data_dir>/{spec.folder} holds its {spec.file_type.upper()} files, and remove '{name}' "
-                          f"from `download`")
+        raise ConfigError(
+            f"dataset '{name}' ({spec.title}) cannot be downloaded automatically: it needs an account, "
+            f"a password or a request form ({spec.source.get('licence', 'see its licence')}). "
+            f"Fix: get it by hand ({spec.download_help()}), place it so that "
+            f"<data_dir>/{spec.folder} holds its {spec.file_type.upper()} files, and remove '{name}' "
+            f"from `download`"
+        )
     return spec, spec.archive
 
 
@@ -367,16 +413,19 @@ def download_config_problems(config: dict, config_dir=None) -> list[str]:
     problems = []
     for name in wanted:
         if name not in enabled:
-            problems.append(f"download lists '{name}', which is not in `datasets`: add it to `datasets` or remove it "
-                            f"from `download`")
+            problems.append(
+                f"download lists '{name}', which is not in `datasets`: add it to `datasets` or remove it "
+                f"from `download`"
+            )
         try:
             dataset_archive(name, config_dir)
         except BecosError as exc:
             problems.append(f"download: {exc}")
     for name in urls:
         if name not in wanted:
-            problems.append(f"download_urls names '{name}', which is not in `download`: add it to `download` or "
-                            f"remove the URL")
+            problems.append(
+                f"download_urls names '{name}', which is not in `download`: add it to `download` or remove the URL"
+            )
     return problems
 
 
@@ -399,8 +448,9 @@ def _record(folder: Path) -> dict | None:
     return _read_json(folder / RECORD_NAME)
 
 
-def download_dataset(name: str, data_dir: str | Path, url: str | None = None, *, config_dir=None,
-                     progress: bool = True) -> dict:
+def download_dataset(
+    name: str, data_dir: str | Path, url: str | None = None, *, config_dir=None, progress: bool = True
+) -> dict:
     """Download and install dataset ``name``'s public archive below ``data_dir`` (module docstring).
 
     Nothing is downloaded when ``<data_dir>/<extract_to>`` already yields the dataset's files (a
@@ -433,27 +483,41 @@ def download_dataset(name: str, data_dir: str | Path, url: str | None = None, *,
     yaml_key = f"source.archive.sha256 in {spec.path}"
     record = _record(dest) if dest.is_dir() else None
     if pinned is not None and record is not None and record.get("sha256") not in (None, pinned):
-        raise ChecksumMismatchError(dest / RECORD_NAME, f"{dest} was extracted from an archive with SHA-256 "
-                                    f"{record.get('sha256')} ({record.get('url')}), but {yaml_key} pins {pinned}",
-                                    f"remove {dest} to download the pinned archive, or pin {record.get('sha256')} "
-                                    f"if you trust that archive")
+        raise ChecksumMismatchError(
+            dest / RECORD_NAME,
+            f"{dest} was extracted from an archive with SHA-256 "
+            f"{record.get('sha256')} ({record.get('url')}), but {yaml_key} pins {pinned}",
+            f"remove {dest} to download the pinned archive, or pin {record.get('sha256')} if you trust that archive",
+        )
     present = _matches(dest, expected) if dest.is_dir() else []
     if present:
-        print(f"download-dataset: {name}: {dest} already holds {len(present)} files {expected}; nothing to download",
-              file=sys.stderr)
-        return {"dataset": name, "folder": str(dest), "url": (record or {}).get("url"),
-                "sha256": (record or {}).get("sha256"), "sha256_pinned": (record or {}).get("sha256_pinned", False),
-                "downloaded": False, "files": len(present)}
+        print(
+            f"download-dataset: {name}: {dest} already holds {len(present)} files {expected}; nothing to download",
+            file=sys.stderr,
+        )
+        return {
+            "dataset": name,
+            "folder": str(dest),
+            "url": (record or {}).get("url"),
+            "sha256": (record or {}).get("sha256"),
+            "sha256_pinned": (record or {}).get("sha256_pinned", False),
+            "downloaded": False,
+            "files": len(present),
+        }
     if dest.exists() and record is None and (not dest.is_dir() or any(dest.iterdir())):
-        raise ArchiveLayoutError(dest, f"exists but holds no {expected} and was not made by `becos download-dataset` "
-                                 f"(no {RECORD_NAME})", f"move {dest} away (becos never overwrites a folder it did not "
-                                 f"make), or extract the {spec.title} archive there yourself")
+        raise ArchiveLayoutError(
+            dest,
+            f"exists but holds no {expected} and was not made by `becos download-dataset` (no {RECORD_NAME})",
+            f"move {dest} away (becos never overwrites a folder it did not "
+            f"make), or extract the {spec.title} archive there yourself",
+        )
 
-    fix = (f"check the URL and the network connection; behind a mirror or proxy set `download_urls: {{{name}: URL}}` "
-           f"in the config (or --url); or get it by hand: {spec.source.get('instructions', spec.title)}")
+    fix = (
+        f"check the URL and the network connection; behind a mirror or proxy set `download_urls: {{{name}: URL}}` "
+        f"in the config (or --url); or get it by hand: {spec.source.get('instructions', spec.title)}"
+    )
     part = partial_path(data_dir / f"{archive.extract_to}.{Path(urllib.parse.urlparse(url).path).name or 'archive'}")
-    digest = fetch(url, part, pinned, label=f"{name} {Path(url).name}", fix=fix, pinned_in=yaml_key,
-                   progress=progress)
+    digest = fetch(url, part, pinned, label=f"{name} {Path(url).name}", fix=fix, pinned_in=yaml_key, progress=progress)
     remove_stale_temporaries(dest.parent, [dest.name])  # extraction folders of killed runs
     work = Path(tempfile.mkdtemp(dir=dest.parent, prefix=f".{dest.name}.", suffix=".tmp-extract"))
     try:
@@ -463,17 +527,28 @@ def download_dataset(name: str, data_dir: str | Path, url: str | None = None, *,
             extract_archive(part, out, url)
             found = _matches(out, expected)
             if not found:
-                raise ArchiveLayoutError(url, f"the archive does not yield the {spec.title} files: no {expected} "
-                                         f"inside ({_layout_problem(out, expected)}); nothing was installed at {dest}",
-                                         f"check that the URL points at the {spec.title} archive (download_urls / "
-                                         f"source.archive.url in {spec.path}); becos expects "
-                                         f"{archive.extract_to}/{expected} below the data root")
+                raise ArchiveLayoutError(
+                    url,
+                    f"the archive does not yield the {spec.title} files: no {expected} "
+                    f"inside ({_layout_problem(out, expected)}); nothing was installed at {dest}",
+                    f"check that the URL points at the {spec.title} archive (download_urls / "
+                    f"source.archive.url in {spec.path}); becos expects "
+                    f"{archive.extract_to}/{expected} below the data root",
+                )
         except (UnsafeArchiveError, CorruptArchiveError, ArchiveLayoutError):
             discard_partial(part)  # complete but unusable: a rerun must fetch it again
             raise
-        result = {"dataset": name, "folder": str(dest), "url": url, "sha256": digest,
-                  "sha256_pinned": pinned is not None, "downloaded": True, "files": len(found),
-                  "bytes": part.stat().st_size, "downloaded_at": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
+        result = {
+            "dataset": name,
+            "folder": str(dest),
+            "url": url,
+            "sha256": digest,
+            "sha256_pinned": pinned is not None,
+            "downloaded": True,
+            "files": len(found),
+            "bytes": part.stat().st_size,
+            "downloaded_at": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+        }
         write_text(out / RECORD_NAME, json.dumps(result, indent=2) + "\n")
         if dest.exists():  # an empty folder, or our own earlier download that lost its files: swap it out
             os.rename(dest, work / "previous")
@@ -481,12 +556,19 @@ def download_dataset(name: str, data_dir: str | Path, url: str | None = None, *,
     finally:
         shutil.rmtree(work, ignore_errors=True)
     discard_partial(part)
-    print(f"download-dataset: {name}: installed {dest} ({len(found)} files {expected}, SHA-256 {digest})",
-          file=sys.stderr)
+    print(
+        f"download-dataset: {name}: installed {dest} ({len(found)} files {expected}, SHA-256 {digest})", file=sys.stderr
+    )
     if pinned is None:
-        log.warning("download-dataset: %s: the archive's SHA-256 is not pinned; this download has SHA-256 %s "
-                    "(recorded in %s). Pin it so that later downloads are checked: set %s to %s",
-                    name, digest, dest / RECORD_NAME, yaml_key, digest)
+        log.warning(
+            "download-dataset: %s: the archive's SHA-256 is not pinned; this download has SHA-256 %s "
+            "(recorded in %s). Pin it so that later downloads are checked: set %s to %s",
+            name,
+            digest,
+            dest / RECORD_NAME,
+            yaml_key,
+            digest,
+        )
     return result
 
 
@@ -495,8 +577,9 @@ def configure_parser(parser: argparse.ArgumentParser) -> argparse.ArgumentParser
     """Arguments of ``becos download-dataset``."""
     parser.add_argument("dataset", help="dataset with a public archive (source.archive of its YAML): kids, shrec20")
     parser.add_argument("--data-dir", type=Path, required=True, help="data root (config key `data_dir`)")
-    parser.add_argument("--url", help="download from this URL instead of the YAML's (a mirror; config key "
-                                      "`download_urls`)")
+    parser.add_argument(
+        "--url", help="download from this URL instead of the YAML's (a mirror; config key `download_urls`)"
+    )
     parser.add_argument("--out", type=Path, help="write the result as JSON here (the workflow's stamp)")
     parser.add_argument("--no-progress", dest="progress", action="store_false", help="no progress bar")
     return parser

@@ -57,9 +57,11 @@ SOURCE_FOLDER = "DeformingThings4D"
 STAMP_NAME = ".becos-dt4d.json"
 STAMP_FORMAT = 1
 HEADER_BYTES = 12
-REQUEST = ("request DeformingThings4D through the form linked at https://github.com/rabbityl/DeformingThings4D "
-           "(non-commercial research licence) and unpack it so that DATA/DeformingThings4D/<animals|humanoids>/"
-           "<class>_<action>/<class>_<action>.anime exist")
+REQUEST = (
+    "request DeformingThings4D through the form linked at https://github.com/rabbityl/DeformingThings4D "
+    "(non-commercial research licence) and unpack it so that DATA/DeformingThings4D/<animals|humanoids>/"
+    "<class>_<action>/<class>_<action>.anime exist"
+)
 _REDOWNLOAD = "re-download or re-extract this animation of DeformingThings4D (the file is damaged)"
 
 
@@ -91,8 +93,9 @@ def read_info(path: str | Path) -> dict[str, dict[str, list[int]]]:
         raise InputFileError(path, "the DT4D class/action/frame list is missing", fix)
     try:
         raw = json.loads(path.read_text(encoding="utf-8"))
-        info = {str(c): {str(a): [int(k) for k in frames] for a, frames in actions.items()}
-                for c, actions in raw.items()}
+        info = {
+            str(c): {str(a): [int(k) for k in frames] for a, frames in actions.items()} for c, actions in raw.items()
+        }
     except (ValueError, AttributeError, TypeError) as exc:
         raise InputFileError(path, f"is not a {{class: {{action: [frame ids]}}}} JSON ({exc})", fix) from exc
     return info
@@ -125,10 +128,12 @@ class Animation:
     def frame(self, k: int) -> np.ndarray:
         """(nv, 3) float32 vertices of frame ``k`` (``frame0 + offsets[k - 1]`` in float32)."""
         if not 0 <= k < self.n_frames:
-            raise InputFileError(self.path, f"frame {k} is asked for but the animation has {self.n_frames} frames "
-                                 f"(ids 0..{self.n_frames - 1})",
-                                 "list only frames the animation has (use the annotation folder's unmodified info "
-                                 "file with the original DeformingThings4D download)")
+            raise InputFileError(
+                self.path,
+                f"frame {k} is asked for but the animation has {self.n_frames} frames (ids 0..{self.n_frames - 1})",
+                "list only frames the animation has (use the annotation folder's unmodified info "
+                "file with the original DeformingThings4D download)",
+            )
         if k == 0:
             return self.frame0
         return self.frame0 + self.offsets[k - 1]
@@ -147,32 +152,47 @@ def read_anime(path: str | Path) -> Animation:
     data = path.read_bytes()
     size = len(data)
     if size < HEADER_BYTES:
-        raise InputFileError(path, f"is truncated: {size} bytes, shorter than the {HEADER_BYTES}-byte header "
-                             "(int32 nf, nv, nt)", _REDOWNLOAD)
+        raise InputFileError(
+            path,
+            f"is truncated: {size} bytes, shorter than the {HEADER_BYTES}-byte header (int32 nf, nv, nt)",
+            _REDOWNLOAD,
+        )
     nf, nv, nt = (int(x) for x in np.frombuffer(data, dtype="<i4", count=3))
     if nf < 1 or nv < 1 or nt < 1:
-        raise InputFileError(path, f"the header's counts nf={nf}, nv={nv}, nt={nt} are not all positive "
-                             "(not a .anime file, or a damaged one)", _REDOWNLOAD)
+        raise InputFileError(
+            path,
+            f"the header's counts nf={nf}, nv={nv}, nt={nt} are not all positive (not a .anime file, or a damaged one)",
+            _REDOWNLOAD,
+        )
     frame0_end = HEADER_BYTES + 12 * nv
     faces_end = frame0_end + 12 * nt
     if size < faces_end:
-        raise InputFileError(path, f"is truncated: {size} bytes, but its header (nv={nv} vertices, nt={nt} faces) "
-                             f"needs {faces_end} bytes for frame 0 and the faces alone", _REDOWNLOAD)
+        raise InputFileError(
+            path,
+            f"is truncated: {size} bytes, but its header (nv={nv} vertices, nt={nt} faces) "
+            f"needs {faces_end} bytes for frame 0 and the faces alone",
+            _REDOWNLOAD,
+        )
     expected = faces_end + 12 * (nf - 1) * nv
     if size != expected:
         held = (size - faces_end) / (12 * nv)
-        raise InputFileError(path, f"its counts are inconsistent with the file size: the header announces nf={nf} "
-                             f"frames of nv={nv} vertices and nt={nt} faces ({expected} bytes), but the file has "
-                             f"{size} bytes (offsets for {held:.6g} frames instead of {nf - 1})"
-                             + (" -- it is truncated" if size < expected else ""), _REDOWNLOAD)
+        raise InputFileError(
+            path,
+            f"its counts are inconsistent with the file size: the header announces nf={nf} "
+            f"frames of nv={nv} vertices and nt={nt} faces ({expected} bytes), but the file has "
+            f"{size} bytes (offsets for {held:.6g} frames instead of {nf - 1})"
+            + (" -- it is truncated" if size < expected else ""),
+            _REDOWNLOAD,
+        )
     frame0 = np.frombuffer(data, dtype="<f4", count=3 * nv, offset=HEADER_BYTES).reshape(nv, 3)
     faces = np.frombuffer(data, dtype="<i4", count=3 * nt, offset=frame0_end).reshape(nt, 3)
     offsets = np.frombuffer(data, dtype="<f4", count=3 * nv * (nf - 1), offset=faces_end).reshape(nf - 1, nv, 3)
     low, high = int(faces.min()), int(faces.max())
     if low < 0 or high >= nv:
         bad = int(((faces < 0) | (faces >= nv)).any(axis=1).sum())
-        raise InputFileError(path, f"{bad} faces use vertex indices outside [0, {nv}) (they span [{low}, {high}])",
-                             _REDOWNLOAD)
+        raise InputFileError(
+            path, f"{bad} faces use vertex indices outside [0, {nv}) (they span [{low}, {high}])", _REDOWNLOAD
+        )
     return Animation(path, frame0, faces, offsets, hashlib.sha256(data).hexdigest())  # read-only views, no copy
 
 
@@ -188,8 +208,12 @@ def make_frame(animation: Animation, k: int):
     vertices = animation.frame(k)
     finite = np.isfinite(vertices).all(axis=1)
     if not finite.all():
-        raise InputFileError(animation.path, f"frame {k} has {int((~finite).sum())} vertices with NaN or infinite "
-                             f"coordinates (e.g. vertex {int(np.flatnonzero(~finite)[0])})", _REDOWNLOAD)
+        raise InputFileError(
+            animation.path,
+            f"frame {k} has {int((~finite).sum())} vertices with NaN or infinite "
+            f"coordinates (e.g. vertex {int(np.flatnonzero(~finite)[0])})",
+            _REDOWNLOAD,
+        )
     mesh = trimesh.Trimesh(vertices, animation.faces, process=False, maintain_order=True)
     parts = mesh.split(only_watertight=False)
     return max(parts, key=lambda part: len(part.vertices))
@@ -216,16 +240,21 @@ def _read_stamp(path: Path, kind: str, cls: str) -> dict:
     """The class's stamp, or an empty one (missing, unreadable or of another format: everything is redone)."""
     try:
         stamp = json.loads(path.read_text(encoding="utf-8"))
-        if stamp.get("format") == STAMP_FORMAT and stamp.get("kind") == kind and stamp.get("class") == cls \
-                and isinstance(stamp.get("animations"), dict):
+        if (
+            stamp.get("format") == STAMP_FORMAT
+            and stamp.get("kind") == kind
+            and stamp.get("class") == cls
+            and isinstance(stamp.get("animations"), dict)
+        ):
             return stamp
     except (OSError, ValueError, AttributeError):
         pass
     return {}
 
 
-def prepare_class(data_dir: str | Path, kind: str, cls: str, actions: dict[str, list[int]],
-                  info_path: Path | None = None) -> dict[str, int]:
+def prepare_class(
+    data_dir: str | Path, kind: str, cls: str, actions: dict[str, list[int]], info_path: Path | None = None
+) -> dict[str, int]:
     """Write the OBJ frames of one class (``actions``: ``{action: [frame ids]}``) and its stamp.
 
     Returns counts ``{"written", "kept", "animations_read"}``.
@@ -253,7 +282,7 @@ def prepare_class(data_dir: str | Path, kind: str, cls: str, actions: dict[str, 
         targets = {k: out / f"{action}{k:03d}.obj" for k in frames}
         same = bool(record) and record.get("size") == st.st_size and record.get("mtime_ns") == st.st_mtime_ns
         if record and not same and record.get("size") == st.st_size:
-            same = _sha256_file(source) == record.get("sha256")        # e.g. re-extracted, same bytes
+            same = _sha256_file(source) == record.get("sha256")  # e.g. re-extracted, same bytes
         todo = [k for k, t in targets.items() if not (same and t.is_file())]
         sha = record.get("sha256") if same else None
         if todo:
@@ -265,29 +294,42 @@ def prepare_class(data_dir: str | Path, kind: str, cls: str, actions: dict[str, 
             sha = animation.sha256
             for k in todo:
                 if not 0 <= k < animation.n_frames:
-                    raise InputFileError(source, f"frame {k} of {cls}/{action} is listed in "
-                                         f"{info_path or 'the info file'} but the animation has {animation.n_frames} "
-                                         f"frames (ids 0..{animation.n_frames - 1})",
-                                         "use the annotation folder's unmodified info file with the original "
-                                         "DeformingThings4D download")
+                    raise InputFileError(
+                        source,
+                        f"frame {k} of {cls}/{action} is listed in "
+                        f"{info_path or 'the info file'} but the animation has {animation.n_frames} "
+                        f"frames (ids 0..{animation.n_frames - 1})",
+                        "use the annotation folder's unmodified info file with the original DeformingThings4D download",
+                    )
             for k in todo:
                 mesh = make_frame(animation, k)
                 write_text(targets[k], obj_text(mesh))
             counts["written"] += len(todo)
         counts["kept"] += len(targets) - len(todo)
-        stamp["animations"][action] = {"anime": str(source.relative_to(data_dir)), "size": st.st_size,
-                                       "mtime_ns": st.st_mtime_ns, "sha256": sha, "frames": sorted(targets)}
+        stamp["animations"][action] = {
+            "anime": str(source.relative_to(data_dir)),
+            "size": st.st_size,
+            "mtime_ns": st.st_mtime_ns,
+            "sha256": sha,
+            "frames": sorted(targets),
+        }
         # the stamp so far plus the old records not yet visited: an interrupted run keeps what it did
-        partial = {**stamp, "animations": {**{a: r for a, r in old.items() if a in actions and a not in
-                                               stamp["animations"]}, **stamp["animations"]}}
+        partial = {
+            **stamp,
+            "animations": {
+                **{a: r for a, r in old.items() if a in actions and a not in stamp["animations"]},
+                **stamp["animations"],
+            },
+        }
         write_text(spath, json.dumps(partial, indent=1, sort_keys=True) + "\n")
     if not actions:
         write_text(spath, json.dumps(stamp, indent=1, sort_keys=True) + "\n")
     return counts
 
 
-def prepare_dt4d(data_dir: str | Path, info_path: str | Path, kind: str, classes: list[str] | None = None,
-                 log=None) -> dict[str, int]:
+def prepare_dt4d(
+    data_dir: str | Path, info_path: str | Path, kind: str, classes: list[str] | None = None, log=None
+) -> dict[str, int]:
     """Prepare every class of ``info_path`` (or only ``classes``); counts summed over the classes."""
     if kind not in KINDS:
         raise ConfigError(f"--kind must be one of {KINDS}, got {kind!r}")
@@ -296,8 +338,11 @@ def prepare_dt4d(data_dir: str | Path, info_path: str | Path, kind: str, classes
     chosen = list(info) if not classes else list(dict.fromkeys(classes))
     unknown = [c for c in chosen if c not in info]
     if unknown:
-        raise InputFileError(info_path, f"lists no class {unknown} (it has {len(info)} classes)",
-                             "name classes of the info file, or use the info file of the right kind")
+        raise InputFileError(
+            info_path,
+            f"lists no class {unknown} (it has {len(info)} classes)",
+            "name classes of the info file, or use the info file of the right kind",
+        )
     if not source_folder(data_dir, kind).is_dir():
         raise InputFileError(source_folder(data_dir, kind), "the DeformingThings4D folder is missing", REQUEST)
     total = {"classes": 0, "written": 0, "kept": 0, "animations_read": 0}
@@ -307,8 +352,10 @@ def prepare_dt4d(data_dir: str | Path, info_path: str | Path, kind: str, classes
         for key, value in counts.items():
             total[key] += value
         if log is not None:
-            log(f"prepare-dt4d: {kind}/{cls}: {counts['written']} frames written, {counts['kept']} kept "
-                f"({counts['animations_read']} of {len(info[cls])} animations read)")
+            log(
+                f"prepare-dt4d: {kind}/{cls}: {counts['written']} frames written, {counts['kept']} kept "
+                f"({counts['animations_read']} of {len(info[cls])} animations read)"
+            )
     return total
 
 
@@ -338,10 +385,13 @@ def dataset_kind(spec) -> str | None:
     """``animals`` / ``humanoids`` of a ``dt4d``-layout dataset spec (its folder ``dt4d_<kind>``), else None."""
     if spec.layout != "dt4d":
         return None
-    kind = spec.folder[len("dt4d_"):] if spec.folder.startswith("dt4d_") else None
+    kind = spec.folder[len("dt4d_") :] if spec.folder.startswith("dt4d_") else None
     if kind not in KINDS:
-        raise InputFileError(spec.path, f"a dt4d-layout dataset needs folder dt4d_animals or dt4d_humanoids, "
-                             f"got '{spec.folder}'", "set folder to the output folder of becos prepare-dt4d")
+        raise InputFileError(
+            spec.path,
+            f"a dt4d-layout dataset needs folder dt4d_animals or dt4d_humanoids, got '{spec.folder}'",
+            "set folder to the output folder of becos prepare-dt4d",
+        )
     return kind
 
 
@@ -361,28 +411,42 @@ def preparation_plan(config: dict) -> list[PreparationJob]:
             continue  # the dataset check reports it
         if kind is None or not source_folder(data_dir, kind).is_dir():
             continue
-        info_path = next((p for p in spec.info_file_candidates(config.get("annotations"), data_dir) if p.is_file()),
-                         None)
+        info_path = next(
+            (p for p in spec.info_file_candidates(config.get("annotations"), data_dir) if p.is_file()), None
+        )
         try:
             info = read_info(info_path) if info_path is not None else {}
         except BecosError:
             continue  # the dataset check names the file and the problem
         for cls, actions in info.items():
-            jobs.append(PreparationJob(
-                dataset=name, kind=kind, cls=cls, info=info_path,
-                anime=tuple(p for p in (anime_path(data_dir, kind, cls, a) for a in actions) if p.is_file()),
-                stamp=stamp_path(data_dir, kind, cls),
-                listing=json.dumps(actions, sort_keys=True, separators=(",", ":"))))
+            jobs.append(
+                PreparationJob(
+                    dataset=name,
+                    kind=kind,
+                    cls=cls,
+                    info=info_path,
+                    anime=tuple(p for p in (anime_path(data_dir, kind, cls, a) for a in actions) if p.is_file()),
+                    stamp=stamp_path(data_dir, kind, cls),
+                    listing=json.dumps(actions, sort_keys=True, separators=(",", ":")),
+                )
+            )
     return jobs
 
 
 # --- command line ---------------------------------------------------------------------------------
 def configure_parser(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
-    parser.add_argument("--data-dir", type=Path, required=True,
-                        help="data root (config key `data_dir`) holding DeformingThings4D/<kind>/")
-    parser.add_argument("--info", type=Path, required=True,
-                        help="info JSON {class: {action: [frame ids]}} "
-                             "(the annotation folder's data/info_dt4d_<kind>.json)")
+    parser.add_argument(
+        "--data-dir",
+        type=Path,
+        required=True,
+        help="data root (config key `data_dir`) holding DeformingThings4D/<kind>/",
+    )
+    parser.add_argument(
+        "--info",
+        type=Path,
+        required=True,
+        help="info JSON {class: {action: [frame ids]}} (the annotation folder's data/info_dt4d_<kind>.json)",
+    )
     parser.add_argument("--kind", required=True, choices=KINDS, help="animals or humanoids")
     parser.add_argument("--classes", nargs="+", metavar="CLASS", help="only these classes (default: all listed)")
     return parser
@@ -397,5 +461,14 @@ def run_cli(args: argparse.Namespace) -> int:
     return 0
 
 
-__all__ = ["Animation", "PreparationJob", "make_frame", "obj_text", "prepare_class", "prepare_dt4d",
-           "preparation_plan", "read_anime", "read_info"]
+__all__ = [
+    "Animation",
+    "PreparationJob",
+    "make_frame",
+    "obj_text",
+    "prepare_class",
+    "prepare_dt4d",
+    "preparation_plan",
+    "read_anime",
+    "read_info",
+]

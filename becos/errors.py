@@ -36,6 +36,9 @@ class DiskFullError(InputFileError):
             free = f"{shutil.disk_usage(Path(path).parent).free} bytes free"
         except OSError:
             free = "free space unknown"
-        super().__init__(path, f"cannot be written: {exc.strerror or 'no space left on device'} ({free} on its disk)",
-                         "free disk space, or set `results` to a folder on a larger disk, and run again: finished "
-                         "files are kept, so the run resumes where it stopped")
+        super().__init__(
+            path,
+            f"cannot be written: {exc.strerror or 'no space left on device'} ({free} on its disk)",
+            "free disk space, or set `results` to a folder on a larger disk, and run again: finished "
+            "files are kept, so the run resumes where it stopped",
+        )

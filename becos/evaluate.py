@@ -64,9 +64,9 @@ import argparse
 import json
 import sys
 import time
+from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Iterable, Iterator, Mapping
 
 import numpy as np
 import pandas as pd
@@ -76,8 +76,16 @@ from becos.errors import BecosError, InputFileError
 from becos.geodesics import METHODS as GEODESIC_METHODS
 from becos.geodesics import GeodesicsCache, shape_key
 from becos.mesh import TriMesh
-from becos.metrics import (DEFAULT_AUC_PRESET, PAPER_PRESET, get_preset, left_right_accuracy, overlap_f1,
-                           overlap_iou, pck_curve, summarise)
+from becos.metrics import (
+    DEFAULT_AUC_PRESET,
+    PAPER_PRESET,
+    get_preset,
+    left_right_accuracy,
+    overlap_f1,
+    overlap_iou,
+    pck_curve,
+    summarise,
+)
 from becos.record import PairRecord
 from becos.surface_map import SurfaceMap
 
@@ -123,19 +131,24 @@ class Prediction:
 
 def _as_map(array: np.ndarray, where: Path | str) -> np.ndarray:
     array = np.asarray(array)
-    if array.ndim != 1 or not (np.issubdtype(array.dtype, np.integer)
-                               or (np.issubdtype(array.dtype, np.floating) and np.all(array == np.round(array)))):
-        raise PredictionError(where, f"a map must be a 1-D integer array (vertex ids, -1 = none); got dtype "
-                              f"{array.dtype}, shape {array.shape}",
-                              "save one int array per pair with np.save(path, map.astype(np.int64))")
+    if array.ndim != 1 or not (
+        np.issubdtype(array.dtype, np.integer)
+        or (np.issubdtype(array.dtype, np.floating) and np.all(array == np.round(array)))
+    ):
+        raise PredictionError(
+            where,
+            f"a map must be a 1-D integer array (vertex ids, -1 = none); got dtype {array.dtype}, shape {array.shape}",
+            "save one int array per pair with np.save(path, map.astype(np.int64))",
+        )
     return array.astype(np.int64)
 
 
 def _as_mask(array: np.ndarray, where: Path | str) -> np.ndarray:
     array = np.asarray(array)
     if array.ndim != 1:
-        raise PredictionError(where, f"an overlap mask must be 1-D; got shape {array.shape}",
-                              "save one bool (or float score) per vertex")
+        raise PredictionError(
+            where, f"an overlap mask must be 1-D; got shape {array.shape}", "save one bool (or float score) per vertex"
+        )
     return array.astype(bool) if array.dtype == bool else array.astype(np.float64) > OVERLAP_SCORE_THRESHOLD
 
 
@@ -145,8 +158,9 @@ class PredictionFolder:
     def __init__(self, path: str | Path, name: str | None = None):
         self.path = Path(path)
         if not self.path.is_dir():
-            raise PredictionError(self.path, "prediction folder not found",
-                                  "pass a folder of <pair_id>.npy files or a Zarr store")
+            raise PredictionError(
+                self.path, "prediction folder not found", "pass a folder of <pair_id>.npy files or a Zarr store"
+            )
         self.name = name or self.path.name
 
     def pair_ids(self) -> list[str]:
@@ -175,8 +189,11 @@ class PredictionZarr:
         try:
             self.group = zarr.open_group(str(self.path), mode="r")
         except Exception as exc:  # zarr raises several types for "not a group"
-            raise PredictionError(self.path, f"cannot open as a Zarr group ({exc})",
-                                  "write the predictions with zarr.open_group(path, mode='w')") from exc
+            raise PredictionError(
+                self.path,
+                f"cannot open as a Zarr group ({exc})",
+                "write the predictions with zarr.open_group(path, mode='w')",
+            ) from exc
         self.name = name or (self.path.name[:-5] if self.path.name.endswith(".zarr") else self.path.name)
         self._keys = set(self.group.array_keys())
 
@@ -250,20 +267,27 @@ def full_shape(record: PairRecord, s: str) -> FullShape:
     full_faces = a.get(f"{s}_full_faces")
     if full_faces is None or len(full_faces) == 0:
         if len(a[f"{s}_full_to_partial"]) != len(vertices):
-            raise ValueError(f"pair {pair_id}: shape {s} is partial but the record has no {s}_full_vertices / "
-                             f"{s}_full_faces; errors must be measured on the full shape (rebuild the record)")
+            raise ValueError(
+                f"pair {pair_id}: shape {s} is partial but the record has no {s}_full_vertices / "
+                f"{s}_full_faces; errors must be measured on the full shape (rebuild the record)"
+            )
         return FullShape(TriMesh(vertices, faces), np.arange(len(vertices)), np.arange(len(faces)), sqrt_area)
     mesh = TriMesh(a[f"{s}_full_vertices"], full_faces)
     if (len(to_full) and to_full.max() >= mesh.n_vertices) or (len(face_ids) and face_ids.max() >= mesh.n_faces):
-        raise ValueError(f"pair {pair_id}: {s}_partial_to_full / {s}_full_face_ids point beyond "
-                         f"{s}_full_vertices / {s}_full_faces")
+        raise ValueError(
+            f"pair {pair_id}: {s}_partial_to_full / {s}_full_face_ids point beyond {s}_full_vertices / {s}_full_faces"
+        )
     if not np.array_equal(mesh.faces[face_ids], to_full[faces]):
-        raise ValueError(f"pair {pair_id}: {s}_full_faces[{s}_full_face_ids] differ from {s}_faces mapped "
-                         f"through {s}_partial_to_full: the full shape is not the one the partial was cut from")
+        raise ValueError(
+            f"pair {pair_id}: {s}_full_faces[{s}_full_face_ids] differ from {s}_faces mapped "
+            f"through {s}_partial_to_full: the full shape is not the one the partial was cut from"
+        )
     scale = max(float(np.abs(mesh.vertices).max()), 1e-300)
     if not np.allclose(mesh.vertices[to_full], vertices, rtol=0, atol=1e-6 * scale):
-        raise ValueError(f"pair {pair_id}: {s}_full_vertices[{s}_partial_to_full] differ from {s}_vertices: "
-                         "the full shape must be stored in the record's final frame")
+        raise ValueError(
+            f"pair {pair_id}: {s}_full_vertices[{s}_partial_to_full] differ from {s}_vertices: "
+            "the full shape must be stored in the record's final frame"
+        )
     return FullShape(mesh, to_full, face_ids, sqrt_area)
 
 
@@ -275,9 +299,15 @@ def pair_info(record: PairRecord, row: Mapping | None = None) -> dict:
     """
     meta = record.meta
     x, y = meta.get("x", {}), meta.get("y", {})
-    info = {"pair_id": meta.get("pair_id"), "setting": meta.get("setting"), "split": meta.get("split"),
-            "x_dataset": x.get("dataset"), "x_name": x.get("name"), "y_dataset": y.get("dataset"),
-            "y_name": y.get("name")}
+    info = {
+        "pair_id": meta.get("pair_id"),
+        "setting": meta.get("setting"),
+        "split": meta.get("split"),
+        "x_dataset": x.get("dataset"),
+        "x_name": x.get("name"),
+        "y_dataset": y.get("dataset"),
+        "y_name": y.get("name"),
+    }
     category = meta.get("category")
     if category is None:
         category = x.get("category") if x.get("category") == y.get("category") else y.get("category")
@@ -302,23 +332,37 @@ class PairResult:
 def _check_prediction(prediction: Prediction, n_src: int, n_dst: int, n: dict, method: str, pair_id: str):
     pred = prediction.map
     if len(pred) != n_src:
-        raise PredictionError(method, f"pair {pair_id}: the map has {len(pred)} entries but the shape it covers "
-                              f"has {n_src} vertices", "give one entry per vertex of the covered shape "
-                              "(Y for --direction yx), in the record's vertex order")
+        raise PredictionError(
+            method,
+            f"pair {pair_id}: the map has {len(pred)} entries but the shape it covers has {n_src} vertices",
+            "give one entry per vertex of the covered shape (Y for --direction yx), in the record's vertex order",
+        )
     if len(pred) and (pred.min() < -1 or pred.max() >= n_dst):
-        raise PredictionError(method, f"pair {pair_id}: map entries must lie in [-1, {n_dst}); got "
-                              f"[{pred.min()}, {pred.max()}]", "use the record's vertex numbering, -1 = none")
+        raise PredictionError(
+            method,
+            f"pair {pair_id}: map entries must lie in [-1, {n_dst}); got [{pred.min()}, {pred.max()}]",
+            "use the record's vertex numbering, -1 = none",
+        )
     for shape in ("x", "y"):
         mask = prediction.overlap(shape)
         if mask is not None and len(mask) != n[shape]:
-            raise PredictionError(method, f"pair {pair_id}: overlap_{shape} has {len(mask)} entries, shape "
-                                  f"{shape} has {n[shape]} vertices", "one mask entry per vertex")
+            raise PredictionError(
+                method,
+                f"pair {pair_id}: overlap_{shape} has {len(mask)} entries, shape {shape} has {n[shape]} vertices",
+                "one mask entry per vertex",
+            )
 
 
-def evaluate_record(record: PairRecord, predictions: Mapping[str, Prediction], *,
-                    presets: Iterable[str] = (DEFAULT_AUC_PRESET, PAPER_PRESET),
-                    geodesics: GeodesicsCache | None = None, direction: str = "yx",
-                    truth: str = "vertex", info: Mapping | None = None) -> PairResult:
+def evaluate_record(
+    record: PairRecord,
+    predictions: Mapping[str, Prediction],
+    *,
+    presets: Iterable[str] = (DEFAULT_AUC_PRESET, PAPER_PRESET),
+    geodesics: GeodesicsCache | None = None,
+    direction: str = "yx",
+    truth: str = "vertex",
+    info: Mapping | None = None,
+) -> PairResult:
     """Score several methods' predictions on one pair.
 
     Args:
@@ -359,8 +403,9 @@ def evaluate_record(record: PairRecord, predictions: Mapping[str, Prediction], *
         _check_prediction(predictions[m], n[src], n[dst], n, m, pair_id)
     full = full_shape(record, dst)
     meta_dst = record.meta.get(dst, {})
-    solver = geodesics.get(shape_key(full.mesh, meta_dst.get("dataset"), meta_dst.get("name"),
-                                     int(a[f"{dst}_remesh_variant"])), full.mesh)
+    solver = geodesics.get(
+        shape_key(full.mesh, meta_dst.get("dataset"), meta_dst.get("name"), int(a[f"{dst}_remesh_variant"])), full.mesh
+    )
 
     true_face = np.asarray(a[f"{key}_face"], dtype=np.int64)
     has_true = true_face >= 0
@@ -382,8 +427,9 @@ def evaluate_record(record: PairRecord, predictions: Mapping[str, Prediction], *
                 ok = rows_true[targets[rows_true, k] >= 0]
                 distances[ok, k] = solver.between(targets[ok, k], face_on_full[ok], weights[ok])
         else:  # heat: one set of rows, from the true points' corners, serves every method
-            distances[rows_true] = solver.point_to_vertices(face_on_full[rows_true], weights[rows_true],
-                                                            targets[rows_true])
+            distances[rows_true] = solver.point_to_vertices(
+                face_on_full[rows_true], weights[rows_true], targets[rows_true]
+            )
 
     labels_src = np.asarray(a[f"{src}_annotation"], dtype=np.int64)
     labels_dst = np.asarray(a[f"{dst}_annotation"], dtype=np.int64)
@@ -400,10 +446,18 @@ def evaluate_record(record: PairRecord, predictions: Mapping[str, Prediction], *
             errors[~has_true & has_pred] = np.inf
         included = errors[~np.isnan(errors)]
         finite = included[np.isfinite(included)]
-        row = {"method": m, **info, "direction": direction, "truth": truth,
-               "geodesics": solver.method, "n_vertices": int(n[src]), "n_scored": int(len(included)),
-               "n_infinite": int(len(included) - len(finite)), "n_excluded": int(n[src] - len(included)),
-               "mean_error": float(finite.mean()) if len(finite) else float("nan")}
+        row = {
+            "method": m,
+            **info,
+            "direction": direction,
+            "truth": truth,
+            "geodesics": solver.method,
+            "n_vertices": int(n[src]),
+            "n_scored": int(len(included)),
+            "n_infinite": int(len(included) - len(finite)),
+            "n_excluded": int(n[src] - len(included)),
+            "mean_error": float(finite.mean()) if len(finite) else float("nan"),
+        }
         for j, name in enumerate(presets):
             spec = get_preset(name)
             value = spec.area(pck_curve(errors, spec.thresholds))
@@ -411,8 +465,11 @@ def evaluate_record(record: PairRecord, predictions: Mapping[str, Prediction], *
                 row["auc"], row["auc_preset"] = value, name
             row[f"auc_{name}"] = value
         row.update(_overlap_scores(predictions[m], a, src, has_pred))
-        row["left_right"] = (left_right_accuracy(pred, true_labels, labels_dst, has_true if p2p else None)
-                             if has_labels else float("nan"))
+        row["left_right"] = (
+            left_right_accuracy(pred, true_labels, labels_dst, has_true if p2p else None)
+            if has_labels
+            else float("nan")
+        )
         result.rows.append(row)
         result.errors[m] = errors
     return result
@@ -465,10 +522,18 @@ class Evaluation:
         return summary_table(self.per_pair, self.preset)
 
 
-def evaluate_records(pairs: Iterable[tuple[PairRecord, Mapping | None]], sources: Mapping[str, object], *,
-                     preset: str = DEFAULT_AUC_PRESET, geodesic_method: str = "heat",
-                     geodesics: GeodesicsCache | None = None, direction: str = "yx", truth: str = "vertex",
-                     allow_missing: bool = False, progress: bool = False) -> Evaluation:
+def evaluate_records(
+    pairs: Iterable[tuple[PairRecord, Mapping | None]],
+    sources: Mapping[str, object],
+    *,
+    preset: str = DEFAULT_AUC_PRESET,
+    geodesic_method: str = "heat",
+    geodesics: GeodesicsCache | None = None,
+    direction: str = "yx",
+    truth: str = "vertex",
+    allow_missing: bool = False,
+    progress: bool = False,
+) -> Evaluation:
     """Score every method of ``sources`` (name -> object with ``get(pair_id) -> Prediction | None``,
     e.g. :func:`open_predictions`) on each ``(record, table row or None)`` of ``pairs``.
 
@@ -488,13 +553,17 @@ def evaluate_records(pairs: Iterable[tuple[PairRecord, Mapping | None]], sources
             pred = source.get(info["pair_id"])
             if pred is None:
                 if not allow_missing:
-                    raise PredictionError(getattr(source, "path", name), f"no prediction for pair {info['pair_id']}",
-                                          "predict every pair of the split, or pass --allow-missing")
+                    raise PredictionError(
+                        getattr(source, "path", name),
+                        f"no prediction for pair {info['pair_id']}",
+                        "predict every pair of the split, or pass --allow-missing",
+                    )
                 missing[name].append(info["pair_id"])
                 continue
             predictions[name] = pred
-        result = evaluate_record(record, predictions, presets=presets, geodesics=geodesics,
-                                 direction=direction, truth=truth, info=info)
+        result = evaluate_record(
+            record, predictions, presets=presets, geodesics=geodesics, direction=direction, truth=truth, info=info
+        )
         rows.extend(result.rows)
         for name, errors in result.errors.items():
             curves[name].append(pck_curve(errors, CURVE_THRESHOLDS))
@@ -507,13 +576,21 @@ def evaluate_records(pairs: Iterable[tuple[PairRecord, Mapping | None]], sources
         stack = np.array(per) if per else np.full((0, len(CURVE_THRESHOLDS)), np.nan)
         scored = ~np.isnan(stack).all(axis=1)
         mean = stack[scored].mean(axis=0) if scored.any() else np.full(len(CURVE_THRESHOLDS), np.nan)
-        curve_rows.append(pd.DataFrame({"method": name, "threshold": CURVE_THRESHOLDS, "pck": mean,
-                                        "n_pairs": int(scored.sum())}))
-    meta = {"methods": list(sources), "preset": preset, "presets": list(presets), "direction": direction,
-            "truth": truth,
-            "geodesics": geodesics.method, "n_pairs": count,
-            "missing": {m: ids for m, ids in missing.items() if ids},
-            "geodesic_rows_computed": geodesics.n_computed, "seconds": round(time.perf_counter() - started, 2)}
+        curve_rows.append(
+            pd.DataFrame({"method": name, "threshold": CURVE_THRESHOLDS, "pck": mean, "n_pairs": int(scored.sum())})
+        )
+    meta = {
+        "methods": list(sources),
+        "preset": preset,
+        "presets": list(presets),
+        "direction": direction,
+        "truth": truth,
+        "geodesics": geodesics.method,
+        "n_pairs": count,
+        "missing": {m: ids for m, ids in missing.items() if ids},
+        "geodesic_rows_computed": geodesics.n_computed,
+        "seconds": round(time.perf_counter() - started, 2),
+    }
     return Evaluation(per_pair, pd.concat(curve_rows, ignore_index=True), preset, meta)
 
 
@@ -531,8 +608,19 @@ def summary_table(per_pair: pd.DataFrame, preset: str) -> pd.DataFrame:
     data = per_pair.copy()
     data["infinite_share"] = data["n_infinite"] / data["n_scored"].where(data["n_scored"] > 0)
     aucs = [PAPER_PRESET] + ([preset] if preset != PAPER_PRESET else [])
-    keep = ["method", "setting", "split", "category", "dataset", "mean_error", "infinite_share",
-            *[f"auc_{p}" for p in aucs], "iou", "f1", "left_right"]
+    keep = [
+        "method",
+        "setting",
+        "split",
+        "category",
+        "dataset",
+        "mean_error",
+        "infinite_share",
+        *[f"auc_{p}" for p in aucs],
+        "iou",
+        "f1",
+        "left_right",
+    ]
     table = summarise(data[[c for c in keep if c in data.columns]])
     out = table[[c for c in ("method", "setting", "grouping", "group", "n_pairs") if c in table.columns]].copy()
     for p in aucs:
@@ -547,12 +635,16 @@ def summary_table(per_pair: pd.DataFrame, preset: str) -> pd.DataFrame:
 
 def summary_markdown(summary: pd.DataFrame, preset: str, title: str) -> str:
     """``summary`` as a Markdown table headed by the presets it uses."""
-    lines = [f"# {title}", "",
-             f"AUC x100 under `{PAPER_PRESET}` ({get_preset(PAPER_PRESET).description}) is the column to compare "
-             "with the BeCoS paper; "
-             + (f"`{preset}`: {get_preset(preset).description}." if preset != PAPER_PRESET else ""), "",
-             "Means over pairs of per-pair means over vertices; mIoU / F1 from predicted vs true overlap "
-             "masks; left/right over labelled vertices (NaN: no labels).", ""]
+    lines = [
+        f"# {title}",
+        "",
+        f"AUC x100 under `{PAPER_PRESET}` ({get_preset(PAPER_PRESET).description}) is the column to compare "
+        "with the BeCoS paper; " + (f"`{preset}`: {get_preset(preset).description}." if preset != PAPER_PRESET else ""),
+        "",
+        "Means over pairs of per-pair means over vertices; mIoU / F1 from predicted vs true overlap "
+        "masks; left/right over labelled vertices (NaN: no labels).",
+        "",
+    ]
     if summary.empty:
         return "\n".join(lines + ["(no pairs)", ""])
     cols = list(summary.columns)
@@ -564,8 +656,14 @@ def summary_markdown(summary: pd.DataFrame, preset: str, title: str) -> str:
     return "\n".join(lines) + "\n"
 
 
-def plot_pck(curves: pd.DataFrame, path: str | Path, *, title: str = "", max_threshold: float = 0.25,
-             legend_auc: Mapping[str, str] | None = None) -> Path:
+def plot_pck(
+    curves: pd.DataFrame,
+    path: str | Path,
+    *,
+    title: str = "",
+    max_threshold: float = 0.25,
+    legend_auc: Mapping[str, str] | None = None,
+) -> Path:
     """One PCK curve per method (x: error threshold in units of sqrt(area) up to ``max_threshold``;
     y: % of vertices), written as PNG atomically."""
     import matplotlib
@@ -594,15 +692,29 @@ def plot_pck(curves: pd.DataFrame, path: str | Path, *, title: str = "", max_thr
     return path
 
 
-def write_evaluation(evaluation: Evaluation, out: str | Path, *, title: str = "",
-                     plot_max: float = 0.25, extra_meta: Mapping | None = None) -> dict[str, Path]:
+def write_evaluation(
+    evaluation: Evaluation,
+    out: str | Path,
+    *,
+    title: str = "",
+    plot_max: float = 0.25,
+    extra_meta: Mapping | None = None,
+) -> dict[str, Path]:
     """Write per_pair.csv, summary.csv, summary.md, pck.csv, pck.png and evaluation.json into ``out``."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     summary = evaluation.summary()
-    paths = {k: out / v for k, v in (("per_pair", "per_pair.csv"), ("summary", "summary.csv"),
-                                     ("markdown", "summary.md"), ("curves", "pck.csv"), ("plot", "pck.png"),
-                                     ("meta", "evaluation.json"))}
+    paths = {
+        k: out / v
+        for k, v in (
+            ("per_pair", "per_pair.csv"),
+            ("summary", "summary.csv"),
+            ("markdown", "summary.md"),
+            ("curves", "pck.csv"),
+            ("plot", "pck.png"),
+            ("meta", "evaluation.json"),
+        )
+    }
     write_text(paths["per_pair"], evaluation.per_pair.to_csv(index=False))
     write_text(paths["summary"], summary.to_csv(index=False))
     write_text(paths["markdown"], summary_markdown(summary, evaluation.preset, title or "becos evaluation"))
@@ -611,9 +723,11 @@ def write_evaluation(evaluation: Evaluation, out: str | Path, *, title: str = ""
     if not summary.empty:
         overall = summary[summary["grouping"] == "all"]
         for _, r in overall.iterrows():
-            legend[r["method"]] = (f"AUC×100 {r[f'auc_x100[{PAPER_PRESET}]']:.1f} paper"
-                                   + (f", {r[f'auc_x100[{evaluation.preset}]']:.1f} {evaluation.preset}"
-                                      if evaluation.preset != PAPER_PRESET else ""))
+            legend[r["method"]] = f"AUC×100 {r[f'auc_x100[{PAPER_PRESET}]']:.1f} paper" + (
+                f", {r[f'auc_x100[{evaluation.preset}]']:.1f} {evaluation.preset}"
+                if evaluation.preset != PAPER_PRESET
+                else ""
+            )
     plot_pck(evaluation.curves, paths["plot"], title=title, max_threshold=plot_max, legend_auc=legend)
     meta = {**evaluation.meta, **(extra_meta or {}), "files": {k: p.name for k, p in paths.items()}}
     write_text(paths["meta"], json.dumps(meta, indent=2, sort_keys=True, default=str) + "\n")
@@ -640,14 +754,25 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("predictions", type=Path, nargs="+", help="one folder or Zarr store per method")
     parser.add_argument("--out", type=Path, required=True, help="output folder (CSV tables, PNG plot, JSON)")
     parser.add_argument("--split", default="test", help="split to score, or 'all' (default: test)")
-    parser.add_argument("--preset", default=DEFAULT_AUC_PRESET,
-                        help=f"AUC preset (default {DEFAULT_AUC_PRESET}; {PAPER_PRESET} is always added)")
+    parser.add_argument(
+        "--preset",
+        default=DEFAULT_AUC_PRESET,
+        help=f"AUC preset (default {DEFAULT_AUC_PRESET}; {PAPER_PRESET} is always added)",
+    )
     parser.add_argument("--names", nargs="+", help="method names (default: the prediction folder names)")
     parser.add_argument("--geodesics", choices=GEODESIC_METHODS, default="heat", help="geodesic distance method")
-    parser.add_argument("--direction", choices=sorted(DIRECTIONS), default="yx",
-                        help="yx: maps Y -> X like corr_10 (default); xy: X -> Y like corr_01")
-    parser.add_argument("--truth", choices=TRUTHS, default="vertex",
-                        help="measure errors to the true vertex (corr_10, default) or the exact barycentric point")
+    parser.add_argument(
+        "--direction",
+        choices=sorted(DIRECTIONS),
+        default="yx",
+        help="yx: maps Y -> X like corr_10 (default); xy: X -> Y like corr_01",
+    )
+    parser.add_argument(
+        "--truth",
+        choices=TRUTHS,
+        default="vertex",
+        help="measure errors to the true vertex (corr_10, default) or the exact barycentric point",
+    )
     parser.add_argument("--allow-missing", action="store_true", help="skip pairs a method did not predict")
     parser.add_argument("--plot-max", type=float, default=0.25, help="largest threshold shown in pck.png")
     parser.add_argument("--cache-mb", type=int, default=1024, help="memory for cached geodesic rows")
@@ -669,17 +794,34 @@ def run_cli(args: argparse.Namespace) -> int:
         sources[source.name] = source
     benchmark = _open_store(args.store)
     if args.split not in ("all", *benchmark.splits()):
-        raise InputFileError(args.store, f"has no split {args.split!r} (splits: {benchmark.splits()})",
-                             "pass --split with one of them, or 'all'")
-    evaluation = evaluate_records(benchmark_pairs(benchmark, args.split), sources, preset=args.preset,
-                                  geodesics=GeodesicsCache(args.geodesics, cache_bytes=args.cache_mb << 20),
-                                  direction=args.direction, truth=args.truth, allow_missing=args.allow_missing,
-                                  progress=True)
+        raise InputFileError(
+            args.store,
+            f"has no split {args.split!r} (splits: {benchmark.splits()})",
+            "pass --split with one of them, or 'all'",
+        )
+    evaluation = evaluate_records(
+        benchmark_pairs(benchmark, args.split),
+        sources,
+        preset=args.preset,
+        geodesics=GeodesicsCache(args.geodesics, cache_bytes=args.cache_mb << 20),
+        direction=args.direction,
+        truth=args.truth,
+        allow_missing=args.allow_missing,
+        progress=True,
+    )
     title = f"{benchmark.setting} · split {args.split} · {evaluation.meta['n_pairs']} pairs"
-    paths = write_evaluation(evaluation, args.out, title=title, plot_max=args.plot_max,
-                             extra_meta={"store": str(args.store), "split": args.split,
-                                         "setting": benchmark.setting,
-                                         "predictions": {n: str(s.path) for n, s in sources.items()}})
+    paths = write_evaluation(
+        evaluation,
+        args.out,
+        title=title,
+        plot_max=args.plot_max,
+        extra_meta={
+            "store": str(args.store),
+            "split": args.split,
+            "setting": benchmark.setting,
+            "predictions": {n: str(s.path) for n, s in sources.items()},
+        },
+    )
     summary = evaluation.summary()
     if not summary.empty:
         overall = summary[summary["grouping"] == "all"]

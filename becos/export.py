@@ -41,10 +41,10 @@ import re
 import shutil
 import sys
 import tempfile
+from collections.abc import Iterable, Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterable, Iterator, Mapping
 
 import numpy as np
 
@@ -99,7 +99,7 @@ def _rows_text(cells: np.ndarray, lead: str = "") -> str:
     if lead:
         tokens[:, 0] = lead
     tokens[:, offset::2] = cells
-    tokens[:, offset + 1::2] = [" "] * (c - 1) + ["\n"]
+    tokens[:, offset + 1 :: 2] = [" "] * (c - 1) + ["\n"]
     return "".join(tokens.ravel().tolist())
 
 
@@ -225,8 +225,12 @@ def released_infos(record: PairRecord) -> tuple[dict, dict]:
         }
     scanned = {"partial_partial": ("x", "y"), "partial_full": ("y",), "full_full": ()}[setting]
     for s, _ in SIDES:
-        infos[s]["mesh_id"] = mesh_id(infos[s]["org_dataset"], infos[s]["name"], infos[s]["remesh_variant"],
-                                      f"{record.pair_id}/{s}" if s in scanned else None)
+        infos[s]["mesh_id"] = mesh_id(
+            infos[s]["org_dataset"],
+            infos[s]["name"],
+            infos[s]["remesh_variant"],
+            f"{record.pair_id}/{s}" if s in scanned else None,
+        )
     for s in scanned:
         camera = _f64(record[f"{s}_camera"])
         infos[s]["partial2full"] = np.array(record[f"{s}_partial_to_full"], dtype=np.int64)
@@ -234,7 +238,9 @@ def released_infos(record: PairRecord) -> tuple[dict, dict]:
         infos[s]["camera"] = camera
     for s, _ in SIDES:
         infos[s]["overlap_mask"] = np.array(record[f"{s}_overlap_mask"], dtype=bool)
-        infos[s]["overlap_percentage"] = float(np.mean(infos[s]["overlap_mask"])) if len(infos[s]["overlap_mask"]) else 0.0
+        infos[s]["overlap_percentage"] = (
+            float(np.mean(infos[s]["overlap_mask"])) if len(infos[s]["overlap_mask"]) else 0.0
+        )
     if setting in ("partial_partial", "full_full"):
         infos["x"]["found_faces_mask_yx"] = np.array(record["y_overlap_mask"], dtype=bool)
         infos["y"]["found_faces_mask"] = np.array(record["x_overlap_mask"], dtype=bool)
@@ -246,19 +252,24 @@ def released_infos(record: PairRecord) -> tuple[dict, dict]:
 def _check_record(record: PairRecord, setting: str | None) -> None:
     pid = record.meta.get("pair_id", "?")
     if setting is not None and record.meta.get("setting") != setting:
-        raise ExportError(f"pair {pid}: its setting {record.meta.get('setting')!r} differs from the export's "
-                          f"setting {setting!r}. Fix: export each setting's store on its own")
+        raise ExportError(
+            f"pair {pid}: its setting {record.meta.get('setting')!r} differs from the export's "
+            f"setting {setting!r}. Fix: export each setting's store on its own"
+        )
     split = str(record.meta.get("split", ""))
     if not _SPLIT_NAME.fullmatch(split) or split == LOGS_DIR or split.isdigit():
-        raise ExportError(f"pair {pid}: split {split!r} cannot be a folder name. Fix: use splits such as "
-                          f"train, val, test")
+        raise ExportError(
+            f"pair {pid}: split {split!r} cannot be a folder name. Fix: use splits such as train, val, test"
+        )
     for s, o, corr in (("x", "y", "corr_01"), ("y", "x", "corr_10")):
         n, n_other = len(record[f"{s}_vertices"]), len(record[f"{o}_vertices"])
         c = record[corr]
         if len(c) != n or (len(c) and (c.min() < -1 or c.max() >= n_other)):
-            raise ExportError(f"pair {pid}: {corr} has {len(c)} entries in [{c.min() if len(c) else 0}, "
-                              f"{c.max() if len(c) else 0}] for {n} -> {n_other} vertices. Fix: rebuild the "
-                              f"pair record")
+            raise ExportError(
+                f"pair {pid}: {corr} has {len(c)} entries in [{c.min() if len(c) else 0}, "
+                f"{c.max() if len(c) else 0}] for {n} -> {n_other} vertices. Fix: rebuild the "
+                f"pair record"
+            )
 
 
 # --------------------------------------------------------------------------------------------------
@@ -273,8 +284,10 @@ def _check_target(out: Path, overwrite: bool) -> None:
     if out.exists() and not out.is_dir():
         raise ExportError(f"{out}: exists and is not a folder. Fix: choose another output path")
     if out.is_dir() and not overwrite and not _is_empty_dir(out):
-        raise ExportError(f"{out}: folder exists and is not empty. Fix: choose a new output path or pass "
-                          f"overwrite=True (--force) to replace it")
+        raise ExportError(
+            f"{out}: folder exists and is not empty. Fix: choose a new output path or pass "
+            f"overwrite=True (--force) to replace it"
+        )
 
 
 @contextmanager
@@ -329,8 +342,17 @@ class _Staging:
         folder = self.root / str(len(self.entries))
         folder.mkdir(parents=True)
         m = record.meta
-        self.entries.append(_Entry(str(m["split"]), str(m["pair_id"]), folder, str(m["x"]["name"]),
-                                   str(m["y"]["name"]), str(m["x"]["dataset"]), str(m["y"]["dataset"])))
+        self.entries.append(
+            _Entry(
+                str(m["split"]),
+                str(m["pair_id"]),
+                folder,
+                str(m["x"]["name"]),
+                str(m["y"]["name"]),
+                str(m["x"]["dataset"]),
+                str(m["y"]["dataset"]),
+            )
+        )
         if self.progress and len(self.entries) % _PROGRESS_EVERY == 0:
             print(f"{self.label}: {len(self.entries)} pairs", file=sys.stderr, flush=True)
         return folder
@@ -345,8 +367,7 @@ class _Staging:
             ids = [e.pair_id for e in entries]
             dup = sorted({a for a, b in zip(ids, ids[1:]) if a == b})
             if dup:
-                raise ExportError(f"split {split}: pair ids {dup[:5]} occur more than once. Fix: pass each pair "
-                                  f"once")
+                raise ExportError(f"split {split}: pair ids {dup[:5]} occur more than once. Fix: pass each pair once")
         return out
 
     def finish(self) -> None:
@@ -368,8 +389,9 @@ def _plain(value):
     return json.loads(json.dumps(value, default=lambda o: o.item() if isinstance(o, np.generic) else str(o)))
 
 
-def _write_log(root: Path, writer: str, layout: str, counts: dict[str, int], setting: str | None,
-               metadata: Mapping | None) -> None:
+def _write_log(
+    root: Path, writer: str, layout: str, counts: dict[str, int], setting: str | None, metadata: Mapping | None
+) -> None:
     import yaml
 
     from becos import __version__
@@ -377,14 +399,15 @@ def _write_log(root: Path, writer: str, layout: str, counts: dict[str, int], set
     log = {
         "written_by": f"becos {__version__} ({writer})",
         "layout": f"{layout} version {LAYOUT_VERSION}, described in docs/released-layout.md of becos",
-        "created": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+        "created": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
         "setting": setting,
         "pairs": counts,
         "source_metadata": _plain(dict(metadata)) if metadata else None,
     }
     (root / LOGS_DIR).mkdir(exist_ok=True)
-    (root / LOGS_DIR / "config.yaml").write_text(yaml.safe_dump(log, sort_keys=False, allow_unicode=True),
-                                                 encoding="utf-8")
+    (root / LOGS_DIR / "config.yaml").write_text(
+        yaml.safe_dump(log, sort_keys=False, allow_unicode=True), encoding="utf-8"
+    )
 
 
 def _write_annotation_files(folder: Path, record: PairRecord) -> bool:
@@ -414,8 +437,15 @@ def _place_by_split(staging: _Staging, tmp: Path) -> tuple[list[list], dict[str,
     return rows, counts
 
 
-def write_released(records: Iterable[PairRecord], out_dir: str | Path, *, setting: str,
-                   metadata: Mapping | None = None, overwrite: bool = False, progress: bool = False) -> Path:
+def write_released(
+    records: Iterable[PairRecord],
+    out_dir: str | Path,
+    *,
+    setting: str,
+    metadata: Mapping | None = None,
+    overwrite: bool = False,
+    progress: bool = False,
+) -> Path:
     """Write the records in the released BeCoS folder layout (``docs/released-layout.md``).
 
     ``<out>/<split>/<i>/`` per pair (``i`` = 0..N-1 in ascending pair_id order within the split) with
@@ -455,10 +485,10 @@ def write_released(records: Iterable[PairRecord], out_dir: str | Path, *, settin
 def _write_released_pair(folder: Path, record: PairRecord, setting: str) -> None:
     infos = released_infos(record)
     for (s, k), info in zip(SIDES, infos):
-        stem = released_file_stem(k, info["name"], info["remesh_variant"],
-                                  record.pair_id if "partial2full" in info else None)
-        (folder / f"{stem}.off").write_text(off_text(record[f"{s}_vertices"], record[f"{s}_faces"]),
-                                            encoding="utf-8")
+        stem = released_file_stem(
+            k, info["name"], info["remesh_variant"], record.pair_id if "partial2full" in info else None
+        )
+        (folder / f"{stem}.off").write_text(off_text(record[f"{s}_vertices"], record[f"{s}_faces"]), encoding="utf-8")
         (folder / f"{stem}_info.pkl").write_bytes(info_pickle_bytes(info))
     if setting != "partial_full":
         np.save(folder / "corres_01.npy", np.asarray(record["corr_01"], dtype=np.int64))
@@ -466,8 +496,14 @@ def _write_released_pair(folder: Path, record: PairRecord, setting: str) -> None
     _write_annotation_files(folder, record)
 
 
-def write_psmal(records: Iterable[PairRecord], out_dir: str | Path, *, metadata: Mapping | None = None,
-                overwrite: bool = False, progress: bool = False) -> Path:
+def write_psmal(
+    records: Iterable[PairRecord],
+    out_dir: str | Path,
+    *,
+    metadata: Mapping | None = None,
+    overwrite: bool = False,
+    progress: bool = False,
+) -> Path:
     """Write the records PSMAL style (``docs/released-layout.md``, section PSMAL).
 
     Per split: ``<out>/<split>/shapes/<id>.off`` for both shapes of every pair and
@@ -478,8 +514,9 @@ def write_psmal(records: Iterable[PairRecord], out_dir: str | Path, *, metadata:
 
     Args: as :func:`write_released` (records of any setting; numbering per split by pair_id).
     """
-    return _write_shapes_and_maps(records, out_dir, psmal_shape_id, "vts", "write_psmal", "PSMAL-style",
-                                  metadata, overwrite, progress)
+    return _write_shapes_and_maps(
+        records, out_dir, psmal_shape_id, "vts", "write_psmal", "PSMAL-style", metadata, overwrite, progress
+    )
 
 
 def dpfm_shape_id(index: int, side: int, dataset: str, name: str) -> str:
@@ -489,19 +526,34 @@ def dpfm_shape_id(index: int, side: int, dataset: str, name: str) -> str:
     return "-".join([str(int(index)), str(int(side)), _id_field(dataset), _id_field(name)])
 
 
-def write_dpfm(records: Iterable[PairRecord], out_dir: str | Path, *, metadata: Mapping | None = None,
-               overwrite: bool = False, progress: bool = False) -> Path:
+def write_dpfm(
+    records: Iterable[PairRecord],
+    out_dir: str | Path,
+    *,
+    metadata: Mapping | None = None,
+    overwrite: bool = False,
+    progress: bool = False,
+) -> Path:
     """Write the records DPFM style (``docs/released-layout.md``, section DPFM): per split
     ``<out>/<split>/shapes/<id>.off`` and ``<out>/<split>/maps/<A>_<B>.map`` in both directions (one
     line per vertex of A: the 0-based vertex of B, -1 = none, as DPFM's SHREC'16 maps), ids
     :func:`dpfm_shape_id`; ``ids.csv`` and ``logs/config.yaml`` as :func:`write_psmal`."""
-    return _write_shapes_and_maps(records, out_dir, dpfm_shape_id, "map", "write_dpfm", "DPFM-style",
-                                  metadata, overwrite, progress)
+    return _write_shapes_and_maps(
+        records, out_dir, dpfm_shape_id, "map", "write_dpfm", "DPFM-style", metadata, overwrite, progress
+    )
 
 
-def _write_shapes_and_maps(records: Iterable[PairRecord], out_dir: str | Path, shape_id, map_ext: str,
-                           writer: str, layout: str, metadata: Mapping | None, overwrite: bool,
-                           progress: bool) -> Path:
+def _write_shapes_and_maps(
+    records: Iterable[PairRecord],
+    out_dir: str | Path,
+    shape_id,
+    map_ext: str,
+    writer: str,
+    layout: str,
+    metadata: Mapping | None,
+    overwrite: bool,
+    progress: bool,
+) -> Path:
     """``<out>/<split>/shapes/<id>.off`` + ``<out>/<split>/maps/<A>_<B>.<map_ext>`` (both directions)."""
     out = Path(out_dir)
     with _staged_dir(out, overwrite) as tmp:
@@ -512,8 +564,9 @@ def _write_shapes_and_maps(records: Iterable[PairRecord], out_dir: str | Path, s
             settings.add(record.meta["setting"])
             folder = staging.add(record)
             for s, k in SIDES:
-                (folder / f"{k}.off").write_text(off_text(record[f"{s}_vertices"], record[f"{s}_faces"]),
-                                                 encoding="utf-8")
+                (folder / f"{k}.off").write_text(
+                    off_text(record[f"{s}_vertices"], record[f"{s}_faces"]), encoding="utf-8"
+                )
             (folder / "01.map").write_text(vts_text(record["corr_01"]), encoding="utf-8")
             (folder / "10.map").write_text(vts_text(record["corr_10"]), encoding="utf-8")
         rows, counts = [], {}
@@ -549,9 +602,18 @@ def ulrssm_template_vts(record: PairRecord) -> tuple[str, str]:
     return vts_text(corr[matched] + 1), vts_text(matched + 1)
 
 
-def write_ulrssm(records: Iterable[PairRecord], out_dir: str | Path, *, metadata: Mapping | None = None,
-                 overwrite: bool = False, progress: bool = False, geodesics: bool = False,
-                 method: str = "heat", splits=None, jobs: int = 1) -> Path:
+def write_ulrssm(
+    records: Iterable[PairRecord],
+    out_dir: str | Path,
+    *,
+    metadata: Mapping | None = None,
+    overwrite: bool = False,
+    progress: bool = False,
+    geodesics: bool = False,
+    method: str = "heat",
+    splits=None,
+    jobs: int = 1,
+) -> Path:
     """Write the records ULRSSM style (``docs/released-layout.md``, section ULRSSM): one data root per
     pair, ``<out>/<split>/<i>/`` with ``off/0.off``, ``off/1.off``, ``corres/0.vts``, ``corres/1.vts``
     (:func:`ulrssm_template_vts`) and, with ``geodesics``, ``dist/0.mat``, ``dist/1.mat`` (MATLAB files,
@@ -572,8 +634,9 @@ def write_ulrssm(records: Iterable[PairRecord], out_dir: str | Path, *, metadata
             (folder / "off").mkdir()
             (folder / "corres").mkdir()
             for s, k in SIDES:
-                (folder / "off" / f"{k}.off").write_text(off_text(record[f"{s}_vertices"], record[f"{s}_faces"]),
-                                                         encoding="utf-8")
+                (folder / "off" / f"{k}.off").write_text(
+                    off_text(record[f"{s}_vertices"], record[f"{s}_faces"]), encoding="utf-8"
+                )
             for k, text in enumerate(ulrssm_template_vts(record)):
                 (folder / "corres" / f"{k}.vts").write_text(text, encoding="utf-8")
 
@@ -608,17 +671,17 @@ class _GeodesicShape:
 
     split: str
     pair_id: str
-    side: int          # 0 = X, 1 = Y
+    side: int  # 0 = X, 1 = Y
     dataset: str
     name: str
-    stem: str          # released file stem (:func:`released_file_stem`)
+    stem: str  # released file stem (:func:`released_file_stem`)
     mesh_id: str
-    key: str           # the full mesh up to rigid motion (cache key of its rows)
-    p2f: np.ndarray    # (V,) its vertices on the full mesh
-    sqrt_area: float   # the full shape's sqrt-area in the units of the record's vertices
+    key: str  # the full mesh up to rigid motion (cache key of its rows)
+    p2f: np.ndarray  # (V,) its vertices on the full mesh
+    sqrt_area: float  # the full shape's sqrt-area in the units of the record's vertices
     setting: str = ""
     vertices: np.ndarray | None = None  # (V, 3) float64 as written (only when the plan keeps arrays)
-    faces: np.ndarray | None = None     # (F, 3) int64
+    faces: np.ndarray | None = None  # (F, 3) int64
 
 
 def _full_mesh_key(vertices: np.ndarray, faces: np.ndarray, dataset: str, name: str, variant: int) -> str:
@@ -632,8 +695,9 @@ def _full_mesh_key(vertices: np.ndarray, faces: np.ndarray, dataset: str, name: 
     return f"{_id_field(dataset)}_{_id_field(name)}_v{int(variant)}_{digest}"
 
 
-def _geodesic_plan(records: Iterable[PairRecord], splits, each=None,
-                   keep_arrays: bool = False) -> tuple[list[_GeodesicShape], dict, dict, dict]:
+def _geodesic_plan(
+    records: Iterable[PairRecord], splits, each=None, keep_arrays: bool = False
+) -> tuple[list[_GeodesicShape], dict, dict, dict]:
     """Shapes to write, unique full meshes ``{key: (vertices, faces)}``, the rows each needs
     ``{key: sorted unique full vertices}`` (the union of its shapes' ``partial_to_full``) and the pair
     numbers ``{(split, pair_id): index}`` of ALL records (ascending pair_id per split, as every export
@@ -658,13 +722,23 @@ def _geodesic_plan(records: Iterable[PairRecord], splits, each=None,
             p2f = np.asarray(record[f"{s}_partial_to_full"], dtype=np.int64)
             needed.setdefault(key, []).append(p2f)
             scanned = "partial2full" in info
-            shapes.append(_GeodesicShape(
-                str(record.meta["split"]), str(record.pair_id), k, info["org_dataset"], info["name"],
-                released_file_stem(k, info["name"], info["remesh_variant"], record.pair_id if scanned else None),
-                info["mesh_id"], key, p2f, 1.0 if normalised else float(record[f"{s}_full_sqrt_area"]),
-                str(record.meta["setting"]),
-                np.asarray(record[f"{s}_vertices"], dtype=np.float64) if keep_arrays else None,
-                np.asarray(record[f"{s}_faces"], dtype=np.int64) if keep_arrays else None))
+            shapes.append(
+                _GeodesicShape(
+                    str(record.meta["split"]),
+                    str(record.pair_id),
+                    k,
+                    info["org_dataset"],
+                    info["name"],
+                    released_file_stem(k, info["name"], info["remesh_variant"], record.pair_id if scanned else None),
+                    info["mesh_id"],
+                    key,
+                    p2f,
+                    1.0 if normalised else float(record[f"{s}_full_sqrt_area"]),
+                    str(record.meta["setting"]),
+                    np.asarray(record[f"{s}_vertices"], dtype=np.float64) if keep_arrays else None,
+                    np.asarray(record[f"{s}_faces"], dtype=np.int64) if keep_arrays else None,
+                )
+            )
     numbers = {}
     for split, pair_ids in ids.items():
         pair_ids.sort()
@@ -682,28 +756,38 @@ def _geodesic_task(args):
     return key, start, distance_rows(vertices, faces, sources, method)
 
 
-def _compute_geodesic_rows(meshes: dict, needed: dict, method: str, jobs: int, folder: Path,
-                           progress: bool) -> dict[str, np.ndarray]:
+def _compute_geodesic_rows(
+    meshes: dict, needed: dict, method: str, jobs: int, folder: Path, progress: bool
+) -> dict[str, np.ndarray]:
     """``{key: (len(needed[key]), V) float32 memmap}`` of distance rows, computed in tasks of
     :data:`_GEODESIC_TASK_ROWS` rows by ``jobs`` processes (1: in this process), in ``folder``."""
     import time
     from concurrent.futures import ProcessPoolExecutor
 
-    out = {key: np.lib.format.open_memmap(folder / f"{key}.npy", mode="w+", dtype=np.float32,
-                                          shape=(len(needed[key]), len(meshes[key][0])))
-           for key in meshes}
-    tasks = [(key, start, *meshes[key], needed[key][start:start + _GEODESIC_TASK_ROWS], method)
-             for key in sorted(meshes, key=lambda k: -len(needed[k]))
-             for start in range(0, len(needed[key]), _GEODESIC_TASK_ROWS)]
+    out = {
+        key: np.lib.format.open_memmap(
+            folder / f"{key}.npy", mode="w+", dtype=np.float32, shape=(len(needed[key]), len(meshes[key][0]))
+        )
+        for key in meshes
+    }
+    tasks = [
+        (key, start, *meshes[key], needed[key][start : start + _GEODESIC_TASK_ROWS], method)
+        for key in sorted(meshes, key=lambda k: -len(needed[k]))
+        for start in range(0, len(needed[key]), _GEODESIC_TASK_ROWS)
+    ]
     started, done, total = time.monotonic(), 0, sum(len(r) for r in needed.values())
     pool = ProcessPoolExecutor(max_workers=jobs) if jobs > 1 and len(tasks) > 1 else None
     try:
-        for key, start, rows in (pool.map(_geodesic_task, tasks) if pool else map(_geodesic_task, tasks)):
-            out[key][start:start + len(rows)] = rows
+        for key, start, rows in pool.map(_geodesic_task, tasks) if pool else map(_geodesic_task, tasks):
+            out[key][start : start + len(rows)] = rows
             done += len(rows)
             if progress:
-                print(f"geodesics ({method}, {jobs} jobs): {done}/{total} rows of {len(meshes)} meshes, "
-                      f"{time.monotonic() - started:.0f} s", file=sys.stderr, flush=True)
+                print(
+                    f"geodesics ({method}, {jobs} jobs): {done}/{total} rows of {len(meshes)} meshes, "
+                    f"{time.monotonic() - started:.0f} s",
+                    file=sys.stderr,
+                    flush=True,
+                )
     finally:
         if pool is not None:
             pool.shutdown(cancel_futures=True)
@@ -722,8 +806,16 @@ def _shape_matrix(shape: _GeodesicShape, rows: np.ndarray, matrix: np.ndarray) -
     return sym
 
 
-def write_geodesics(records: Iterable[PairRecord], out_dir: str | Path, method: str = "heat", *,
-                    overwrite: bool = False, progress: bool = False, splits=None, jobs: int = 1) -> Path:
+def write_geodesics(
+    records: Iterable[PairRecord],
+    out_dir: str | Path,
+    method: str = "heat",
+    *,
+    overwrite: bool = False,
+    progress: bool = False,
+    splits=None,
+    jobs: int = 1,
+) -> Path:
     """Write ``<out>/<split>/geodesics/<shape id>.npy``: (V, V) float32 geodesic distances of both
     shapes of every pair (units of the record's vertices), with the shape ids of :func:`write_psmal`
     (pass the same records).
@@ -739,8 +831,10 @@ def write_geodesics(records: Iterable[PairRecord], out_dir: str | Path, method: 
         raise ExportError(f"{out}: exists and is not a folder. Fix: choose another output path")
     existing = sorted(p for p in out.glob("*/geodesics") if p.exists()) if out.is_dir() else []
     if existing and not overwrite:
-        raise ExportError(f"{existing[0]}: geodesic matrices exist already. Fix: pass overwrite=True (--force) "
-                          f"or write into a new folder")
+        raise ExportError(
+            f"{existing[0]}: geodesic matrices exist already. Fix: pass overwrite=True (--force) "
+            f"or write into a new folder"
+        )
     out.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(dir=out, prefix=".geodesics.tmp-"))
     try:
@@ -801,8 +895,9 @@ def _dsmk_reads(setting: str, side: int) -> bool:
     return side == 0 or setting in ("partial_partial", "full_full")
 
 
-def _rows_for(meshes: dict, needed: dict, rows_folders, method: str, jobs: int, work: Path,
-              progress: bool) -> tuple[dict, dict]:
+def _rows_for(
+    meshes: dict, needed: dict, rows_folders, method: str, jobs: int, work: Path, progress: bool
+) -> tuple[dict, dict]:
     """``({key: sorted source vertices}, {key: (R, V) float32 rows})``: read from ``rows_folders``
     (outputs of ``becos geodesic-rows``; they may hold more rows and meshes) or computed here."""
     if rows_folders is None:
@@ -813,22 +908,35 @@ def _rows_for(meshes: dict, needed: dict, rows_folders, method: str, jobs: int, 
     sources, rows = {}, {}
     for key in meshes:
         if key not in loaded:
-            raise ExportError(f"{', '.join(map(str, rows_folders))}: no geodesic rows of mesh {key}. Fix: plan "
-                              f"the rows with this store and the same splits (`becos geodesic-plan`), then "
-                              f"rerun `becos geodesic-rows`")
+            raise ExportError(
+                f"{', '.join(map(str, rows_folders))}: no geodesic rows of mesh {key}. Fix: plan "
+                f"the rows with this store and the same splits (`becos geodesic-plan`), then "
+                f"rerun `becos geodesic-rows`"
+            )
         have, matrix = loaded[key]
         if matrix.shape[1] != len(meshes[key][0]) or not np.isin(needed[key], have).all():
-            raise ExportError(f"geodesic rows of mesh {key}: {matrix.shape} for a mesh of {len(meshes[key][0])} "
-                              f"vertices, missing some of the {len(needed[key])} rows this store needs. Fix: "
-                              f"rerun `becos geodesic-plan` and `becos geodesic-rows` with this store")
+            raise ExportError(
+                f"geodesic rows of mesh {key}: {matrix.shape} for a mesh of {len(meshes[key][0])} "
+                f"vertices, missing some of the {len(needed[key])} rows this store needs. Fix: "
+                f"rerun `becos geodesic-plan` and `becos geodesic-rows` with this store"
+            )
         sources[key], rows[key] = have, matrix
     return sources, rows
 
 
-def write_geodesic_matrices(records: Iterable[PairRecord], out_dir: str | Path, method: str = "heat", *,
-                            splits=None, jobs: int = 1, metadata: Mapping | None = None,
-                            overwrite: bool = False, progress: bool = False, rows=None,
-                            layouts=GEODESIC_LAYOUTS) -> Path:
+def write_geodesic_matrices(
+    records: Iterable[PairRecord],
+    out_dir: str | Path,
+    method: str = "heat",
+    *,
+    splits=None,
+    jobs: int = 1,
+    metadata: Mapping | None = None,
+    overwrite: bool = False,
+    progress: bool = False,
+    rows=None,
+    layouts=GEODESIC_LAYOUTS,
+) -> Path:
     """Geodesic matrices in the layouts loaders read (``docs/released-layout.md``, section 3):
 
     - ``<out>/geodesic_dist_matrices/<stem>.npy``: (V, V) float32 distances between the vertices of the
@@ -880,16 +988,35 @@ def write_geodesic_matrices(records: Iterable[PairRecord], out_dir: str | Path, 
                         matrix = _shape_matrix(sh, sources[sh.key], matrices[sh.key])
                     (tmp / dsmk_file).parent.mkdir(parents=True, exist_ok=True)
                     save_npz(tmp / dsmk_file, verts=sh.vertices.astype(np.float32), faces=sh.faces, result=matrix)
-            table.append([sh.split, numbers[(sh.split, sh.pair_id)], sh.pair_id, sh.side, sh.stem, sh.mesh_id,
-                          len(sh.p2f), repr(sh.sqrt_area), dsmk_file])
+            table.append(
+                [
+                    sh.split,
+                    numbers[(sh.split, sh.pair_id)],
+                    sh.pair_id,
+                    sh.side,
+                    sh.stem,
+                    sh.mesh_id,
+                    len(sh.p2f),
+                    repr(sh.sqrt_area),
+                    dsmk_file,
+                ]
+            )
         del matrices
         shutil.rmtree(work)
-        _write_ids(folder / "index.csv", ["split", "index", "pair_id", "side", "stem", "mesh_id", "n_vertices",
-                                          "sqrt_area", "dsmk_file"], table)
+        _write_ids(
+            folder / "index.csv",
+            ["split", "index", "pair_id", "side", "stem", "mesh_id", "n_vertices", "sqrt_area", "dsmk_file"],
+            table,
+        )
         counts = {split: len({r[2] for r in table if r[0] == split}) for split in dict.fromkeys(r[0] for r in table)}
-        _write_log(tmp, "becos.export.write_geodesic_matrices",
-                   f"becos geodesic matrices ({method}, divided by sqrt-area; DeepShapeMatchingKit cache)",
-                   counts, None, metadata)
+        _write_log(
+            tmp,
+            "becos.export.write_geodesic_matrices",
+            f"becos geodesic matrices ({method}, divided by sqrt-area; DeepShapeMatchingKit cache)",
+            counts,
+            None,
+            metadata,
+        )
     return out
 
 
@@ -904,32 +1031,59 @@ def configure_parser(parser: argparse.ArgumentParser, name: str) -> argparse.Arg
 
     parser.add_argument("store", type=Path, help="benchmark store written by `becos export-zarr`")
     if name == "export-released":
-        parser.add_argument("out", type=Path, help="output folder, best named after the setting "
-                                                   "(e.g. BeCoS/partial_partial): some loaders read the setting "
-                                                   "from the path")
+        parser.add_argument(
+            "out",
+            type=Path,
+            help="output folder, best named after the setting "
+            "(e.g. BeCoS/partial_partial): some loaders read the setting "
+            "from the path",
+        )
     elif name in ("export-psmal", "export-dpfm"):
         parser.add_argument("out", type=Path, help="output folder (<out>/<split>/shapes, maps)")
         if name == "export-psmal":
-            parser.add_argument("--geodesics", action="store_true",
-                                help="also write (V, V) float32 geodesic matrices per shape (<split>/geodesics)")
+            parser.add_argument(
+                "--geodesics",
+                action="store_true",
+                help="also write (V, V) float32 geodesic matrices per shape (<split>/geodesics)",
+            )
     elif name == "export-ulrssm":
         parser.add_argument("out", type=Path, help="output folder (<out>/<split>/<i>/off, corres, dist)")
-        parser.add_argument("--geodesics", action="store_true",
-                            help="also write dist/<k>.mat (key dist: geodesics divided by the sqrt-area)")
+        parser.add_argument(
+            "--geodesics",
+            action="store_true",
+            help="also write dist/<k>.mat (key dist: geodesics divided by the sqrt-area)",
+        )
     else:
-        parser.add_argument("out", type=Path, help="output folder (<out>/geodesic_dist_matrices/<stem>.npy, "
-                                                   "<out>/dsmk/<split>/dist/<hash>_0.npz)")
-        parser.add_argument("--rows", type=Path, nargs="+", metavar="DIR",
-                            help="read the distance rows from these `becos geodesic-rows` folders instead of "
-                                 "computing them")
-        parser.add_argument("--layouts", nargs="+", choices=GEODESIC_LAYOUTS, default=list(GEODESIC_LAYOUTS),
-                            help="layouts to write (default: all): geo-lora geodesic_dist_matrices/<stem>.npy, "
-                                 "dsmk dsmk/<split>/dist/<sha1>_0.npz")
+        parser.add_argument(
+            "out",
+            type=Path,
+            help="output folder (<out>/geodesic_dist_matrices/<stem>.npy, <out>/dsmk/<split>/dist/<hash>_0.npz)",
+        )
+        parser.add_argument(
+            "--rows",
+            type=Path,
+            nargs="+",
+            metavar="DIR",
+            help="read the distance rows from these `becos geodesic-rows` folders instead of computing them",
+        )
+        parser.add_argument(
+            "--layouts",
+            nargs="+",
+            choices=GEODESIC_LAYOUTS,
+            default=list(GEODESIC_LAYOUTS),
+            help="layouts to write (default: all): geo-lora geodesic_dist_matrices/<stem>.npy, "
+            "dsmk dsmk/<split>/dist/<sha1>_0.npz",
+        )
     if name in ("export-psmal", "export-geodesics", "export-ulrssm"):
-        parser.add_argument("--geodesic-method", choices=METHODS, default="heat",
-                            help="geodesic estimator (default: heat)")
-        parser.add_argument("--splits", nargs="+", metavar="SPLIT",
-                            help="geodesics of these splits only (e.g. test); default: every split")
+        parser.add_argument(
+            "--geodesic-method", choices=METHODS, default="heat", help="geodesic estimator (default: heat)"
+        )
+        parser.add_argument(
+            "--splits",
+            nargs="+",
+            metavar="SPLIT",
+            help="geodesics of these splits only (e.g. test); default: every split",
+        )
         parser.add_argument("--jobs", type=int, default=1, help="processes computing distance rows (default 1)")
     parser.add_argument("--force", action="store_true", help="replace OUT if it exists")
     parser.set_defaults(export_kind=name)
@@ -944,38 +1098,78 @@ def run_cli(args: argparse.Namespace) -> int:
     if getattr(args, "jobs", 1) < 1:
         raise ExportError(f"--jobs must be at least 1, got {args.jobs}")
     if args.export_kind == "export-geodesics":
-        write_geodesic_matrices(bench.records(), out, args.geodesic_method, splits=args.splits, jobs=args.jobs,
-                                metadata=bench.metadata, overwrite=args.force, progress=True, rows=args.rows,
-                                layouts=args.layouts)
+        write_geodesic_matrices(
+            bench.records(),
+            out,
+            args.geodesic_method,
+            splits=args.splits,
+            jobs=args.jobs,
+            metadata=bench.metadata,
+            overwrite=args.force,
+            progress=True,
+            rows=args.rows,
+            layouts=args.layouts,
+        )
         with open(out / GEODESIC_FOLDER / "index.csv", encoding="utf-8", newline="") as fh:
             rows = list(csv.DictReader(fh))
-        print(json.dumps({"out": str(out.resolve()), "setting": bench.setting, "method": args.geodesic_method,
-                          "splits": args.splits, "matrices": len(list((out / GEODESIC_FOLDER).glob("*.npy"))),
-                          "bytes": sum(p.stat().st_size for p in (out / GEODESIC_FOLDER).glob("*.npy")),
-                          "dsmk_files": len({r["dsmk_file"] for r in rows if r["dsmk_file"]}),
-                          "dsmk_bytes": sum(p.stat().st_size for p in out.glob(f"{DSMK_FOLDER}/*/dist/*.npz"))}))
+        print(
+            json.dumps(
+                {
+                    "out": str(out.resolve()),
+                    "setting": bench.setting,
+                    "method": args.geodesic_method,
+                    "splits": args.splits,
+                    "matrices": len(list((out / GEODESIC_FOLDER).glob("*.npy"))),
+                    "bytes": sum(p.stat().st_size for p in (out / GEODESIC_FOLDER).glob("*.npy")),
+                    "dsmk_files": len({r["dsmk_file"] for r in rows if r["dsmk_file"]}),
+                    "dsmk_bytes": sum(p.stat().st_size for p in out.glob(f"{DSMK_FOLDER}/*/dist/*.npz")),
+                }
+            )
+        )
         return 0
     if args.export_kind == "export-released":
         if bench.setting not in out.resolve().parts:
-            print(f"becos export-released: note: DeepShapeMatchingKit's BeCoSDataset reads the setting from "
-                  f"its data_root path; name the folder after it (e.g. {out / bench.setting})",
-                  file=sys.stderr)
-        write_released(bench.records(), out, setting=bench.setting, metadata=bench.metadata,
-                       overwrite=args.force, progress=True)
+            print(
+                f"becos export-released: note: DeepShapeMatchingKit's BeCoSDataset reads the setting from "
+                f"its data_root path; name the folder after it (e.g. {out / bench.setting})",
+                file=sys.stderr,
+            )
+        write_released(
+            bench.records(), out, setting=bench.setting, metadata=bench.metadata, overwrite=args.force, progress=True
+        )
     elif args.export_kind == "export-ulrssm":
-        write_ulrssm(bench.records(), out, metadata=bench.metadata, overwrite=args.force, progress=True,
-                     geodesics=args.geodesics, method=args.geodesic_method, splits=args.splits, jobs=args.jobs)
+        write_ulrssm(
+            bench.records(),
+            out,
+            metadata=bench.metadata,
+            overwrite=args.force,
+            progress=True,
+            geodesics=args.geodesics,
+            method=args.geodesic_method,
+            splits=args.splits,
+            jobs=args.jobs,
+        )
     elif args.export_kind == "export-dpfm":
         write_dpfm(bench.records(), out, metadata=bench.metadata, overwrite=args.force, progress=True)
     else:
         write_psmal(bench.records(), out, metadata=bench.metadata, overwrite=args.force, progress=True)
         if args.geodesics:
-            write_geodesics(bench.records(), out, args.geodesic_method, overwrite=args.force, progress=True,
-                            splits=args.splits, jobs=args.jobs)
+            write_geodesics(
+                bench.records(),
+                out,
+                args.geodesic_method,
+                overwrite=args.force,
+                progress=True,
+                splits=args.splits,
+                jobs=args.jobs,
+            )
     with open(out / IDS_FILE, encoding="utf-8", newline="") as fh:
         splits = [row["split"] for row in csv.DictReader(fh)]
-    result = {"out": str(out.resolve()), "setting": bench.setting,
-              "pairs": {s: splits.count(s) for s in dict.fromkeys(splits)}}
+    result = {
+        "out": str(out.resolve()),
+        "setting": bench.setting,
+        "pairs": {s: splits.count(s) for s in dict.fromkeys(splits)},
+    }
     if args.export_kind in ("export-psmal", "export-ulrssm"):
         result["geodesics"] = args.geodesic_method if args.geodesics else None
     print(json.dumps(result))

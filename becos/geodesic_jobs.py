@@ -73,8 +73,12 @@ def write_plan(stores: list[Path], out: Path, parts: int, splits=None) -> dict:
     needed = {key: np.unique(np.concatenate(v)) for key, v in needed.items()}
     assignment = plan_parts(meshes, needed, parts)
     out.mkdir(parents=True, exist_ok=True)
-    summary = {"parts": len(assignment), "splits": None if splits is None else sorted(splits),
-               "stores": [str(s) for s in stores], "meshes": {}}
+    summary = {
+        "parts": len(assignment),
+        "splits": None if splits is None else sorted(splits),
+        "stores": [str(s) for s in stores],
+        "meshes": {},
+    }
     for k, keys in enumerate(assignment):
         arrays = {}
         for key in keys:
@@ -101,8 +105,10 @@ def read_part(path: Path) -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]
             out.setdefault(key, {})[field] = data[name]
     for key, fields in out.items():
         if set(fields) != {"vertices", "faces", "sources"}:
-            raise GeodesicJobError(f"{path}: mesh {key} lacks {sorted({'vertices', 'faces', 'sources'} - set(fields))}."
-                                   f" Fix: rerun `becos geodesic-plan`")
+            raise GeodesicJobError(
+                f"{path}: mesh {key} lacks {sorted({'vertices', 'faces', 'sources'} - set(fields))}."
+                f" Fix: rerun `becos geodesic-plan`"
+            )
     return {key: (f["vertices"], f["faces"], f["sources"]) for key, f in out.items()}
 
 
@@ -122,8 +128,12 @@ def solve_part(part: Path, out: Path, method: str = "heat", progress: bool = Fal
             cpu = time.process_time() - started
             np.save(tmp / f"{key}.npy", rows)
             np.save(tmp / f"{key}.sources.npy", sources)
-            timings[key] = {"n_vertices": len(vertices), "n_rows": len(sources), "cpu_s": round(cpu, 3),
-                            "bytes": int(rows.nbytes)}
+            timings[key] = {
+                "n_vertices": len(vertices),
+                "n_rows": len(sources),
+                "cpu_s": round(cpu, 3),
+                "bytes": int(rows.nbytes),
+            }
             if progress:
                 print(json.dumps({key: timings[key]}), file=sys.stderr, flush=True)
         (tmp / "timings.json").write_text(json.dumps(timings, indent=1, sort_keys=True) + "\n", encoding="utf-8")
@@ -148,8 +158,10 @@ def load_rows(folders) -> dict[str, tuple[np.ndarray, np.ndarray]]:
             rows = np.load(folder / f"{key}.npy", mmap_mode="r")
             sources = np.load(path)
             if rows.shape[0] != len(sources):
-                raise GeodesicJobError(f"{folder / key}.npy: {rows.shape[0]} rows for {len(sources)} sources. "
-                                       f"Fix: rerun `becos geodesic-rows`")
+                raise GeodesicJobError(
+                    f"{folder / key}.npy: {rows.shape[0]} rows for {len(sources)} sources. "
+                    f"Fix: rerun `becos geodesic-rows`"
+                )
             out[key] = (sources, rows)
     return out
 
@@ -179,11 +191,26 @@ def run_cli(args: argparse.Namespace) -> int:
         if args.parts < 1:
             raise GeodesicJobError(f"--parts must be at least 1, got {args.parts}")
         summary = write_plan(args.stores, args.out, args.parts, args.splits)
-        print(json.dumps({"out": str(args.out), "parts": summary["parts"], "meshes": len(summary["meshes"]),
-                          "rows": sum(m["n_rows"] for m in summary["meshes"].values())}))
+        print(
+            json.dumps(
+                {
+                    "out": str(args.out),
+                    "parts": summary["parts"],
+                    "meshes": len(summary["meshes"]),
+                    "rows": sum(m["n_rows"] for m in summary["meshes"].values()),
+                }
+            )
+        )
         return 0
     timings = solve_part(args.part, args.out, args.geodesic_method, progress=True)
-    print(json.dumps({"out": str(args.out), "meshes": len(timings),
-                      "cpu_s": round(sum(t["cpu_s"] for t in timings.values()), 2),
-                      "bytes": sum(t["bytes"] for t in timings.values())}))
+    print(
+        json.dumps(
+            {
+                "out": str(args.out),
+                "meshes": len(timings),
+                "cpu_s": round(sum(t["cpu_s"] for t in timings.values()), 2),
+                "bytes": sum(t["bytes"] for t in timings.values()),
+            }
+        )
+    )
     return 0

@@ -69,8 +69,10 @@ def _point_queries(source_vertices, target_face, target_weights) -> tuple[np.nda
     target_face = np.asarray(target_face, dtype=np.int64).reshape(-1)
     target_weights = np.asarray(target_weights, dtype=np.float64).reshape(-1, 3)
     if not len(source_vertices) == len(target_face) == len(target_weights):
-        raise ValueError(f"vertex -> point queries need equally long inputs; got {len(source_vertices)}, "
-                         f"{len(target_face)}, {len(target_weights)}")
+        raise ValueError(
+            f"vertex -> point queries need equally long inputs; got {len(source_vertices)}, "
+            f"{len(target_face)}, {len(target_weights)}"
+        )
     return source_vertices, target_face, target_weights
 
 
@@ -88,8 +90,7 @@ class GeodesicDistances:
             length squared).
     """
 
-    def __init__(self, mesh: TriMesh, method: str = "heat", cache_bytes: int = 256 << 20,
-                 heat_t_coef: float = 1.0):
+    def __init__(self, mesh: TriMesh, method: str = "heat", cache_bytes: int = 256 << 20, heat_t_coef: float = 1.0):
         if method not in METHODS:
             raise ValueError(f"unknown geodesic method {method!r}; choose one of {METHODS}")
         self.mesh = mesh
@@ -130,8 +131,9 @@ class GeodesicDistances:
         """
         sources = np.asarray(sources, dtype=np.int64).reshape(-1)
         if len(sources) and (sources.min() < 0 or sources.max() >= self.n_vertices):
-            raise IndexError(f"source vertices must lie in [0, {self.n_vertices}); got "
-                             f"[{sources.min()}, {sources.max()}]")
+            raise IndexError(
+                f"source vertices must lie in [0, {self.n_vertices}); got [{sources.min()}, {sources.max()}]"
+            )
         unique, inverse = np.unique(sources, return_inverse=True)
         out_unique = np.empty((len(unique), self.n_vertices))
         missing = []
@@ -159,8 +161,7 @@ class GeodesicDistances:
         while len(self._rows) * row_bytes > self.cache_bytes:
             self._rows.popitem(last=False)
 
-    def between(self, source_vertices: np.ndarray, target_face: np.ndarray,
-                target_weights: np.ndarray) -> np.ndarray:
+    def between(self, source_vertices: np.ndarray, target_face: np.ndarray, target_weights: np.ndarray) -> np.ndarray:
         """(N,) distance from vertex ``source_vertices[i]`` to the surface point (``target_face[i]``,
         ``target_weights[i]``), in mesh units.
 
@@ -178,8 +179,9 @@ class GeodesicDistances:
         source_vertices, target_face, target_weights = _point_queries(source_vertices, target_face, target_weights)
         n = len(source_vertices)
         if n and (target_face.min() < 0 or target_face.max() >= self.mesh.n_faces):
-            raise IndexError(f"target faces must lie in [0, {self.mesh.n_faces}); got "
-                             f"[{target_face.min()}, {target_face.max()}]")
+            raise IndexError(
+                f"target faces must lie in [0, {self.mesh.n_faces}); got [{target_face.min()}, {target_face.max()}]"
+            )
         corners = self.mesh.faces[target_face]  # (N, 3)
         unique, inverse = np.unique(source_vertices, return_inverse=True)
         if self.method == "dijkstra" and not all(int(s) in self._rows for s in unique):
@@ -190,11 +192,10 @@ class GeodesicDistances:
         starts = np.searchsorted(inverse[order], np.arange(len(unique) + 1))
         for block in _chunks(np.arange(len(unique)), self.n_vertices):
             rows = self.from_vertices(unique[block])  # (B, V)
-            sel = order[starts[block.start]:starts[block.stop]]
+            sel = order[starts[block.start] : starts[block.stop]]
             local = inverse[sel] - block.start
             out[sel] = np.einsum("nk,nk->n", rows[local[:, None], corners[sel]], target_weights[sel])
         return out
-
 
     def point_to_vertices(self, face: np.ndarray, weights: np.ndarray, targets: np.ndarray) -> np.ndarray:
         """Distances from surface points to vertices, computed from the POINTS' side.
@@ -220,13 +221,15 @@ class GeodesicDistances:
         squeeze = targets.ndim == 1
         targets = targets.reshape(len(targets), -1)
         if not len(face) == len(weights) == len(targets):
-            raise ValueError(f"point -> vertex queries need equally long inputs; got {len(face)}, "
-                             f"{len(weights)}, {len(targets)}")
+            raise ValueError(
+                f"point -> vertex queries need equally long inputs; got {len(face)}, {len(weights)}, {len(targets)}"
+            )
         if len(face) and (face.min() < 0 or face.max() >= self.mesh.n_faces):
             raise IndexError(f"faces must lie in [0, {self.mesh.n_faces}); got [{face.min()}, {face.max()}]")
         if targets.size and (targets.min() < -1 or targets.max() >= self.n_vertices):
-            raise IndexError(f"target vertices must lie in [-1, {self.n_vertices}); got "
-                             f"[{targets.min()}, {targets.max()}]")
+            raise IndexError(
+                f"target vertices must lie in [-1, {self.n_vertices}); got [{targets.min()}, {targets.max()}]"
+            )
         out = np.zeros(targets.shape)
         point, corner = np.nonzero(weights != 0.0)  # the (point, corner) entries that contribute
         sources = self.mesh.faces[face[point], corner]
@@ -238,7 +241,7 @@ class GeodesicDistances:
         safe_targets = np.maximum(targets, 0)
         for block in _chunks(np.arange(len(unique)), self.n_vertices):
             rows = self.from_vertices(unique[block])  # (B, V)
-            sel = order[starts[block.start]:starts[block.stop]]  # entries whose source is in this block
+            sel = order[starts[block.start] : starts[block.stop]]  # entries whose source is in this block
             local = inverse[sel] - block.start
             values = rows[local[:, None], safe_targets[point[sel]]]  # (n_sel, M)
             np.add.at(out, point[sel], weights[point[sel], corner[sel]][:, None] * values)
@@ -295,8 +298,8 @@ class HeatDistanceSolver:
         lengths, f = igl.intrinsic_delaunay_triangulation(original, f)[:2]
         l_bc, l_ca, l_ab = lengths[:, 0], lengths[:, 1], lengths[:, 2]
         # each triangle in its plane: corner 0 at the origin, corner 1 on the x axis, corner 2 above it
-        x2 = (l_ab ** 2 + l_ca ** 2 - l_bc ** 2) / (2.0 * np.maximum(l_ab, 1e-300))
-        y2 = np.sqrt(np.maximum(l_ca ** 2 - x2 ** 2, 0.0))
+        x2 = (l_ab**2 + l_ca**2 - l_bc**2) / (2.0 * np.maximum(l_ab, 1e-300))
+        y2 = np.sqrt(np.maximum(l_ca**2 - x2**2, 0.0))
         points = np.zeros((len(f), 3, 2))
         points[:, 1, 0] = l_ab
         points[:, 2, 0], points[:, 2, 1] = x2, y2
@@ -310,8 +313,9 @@ class HeatDistanceSolver:
                 rows.append(d * n_faces + np.arange(n_faces))
                 cols.append(f[:, k])
                 vals.append(component / double_area)
-        self.gradient = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
-                                      shape=(2 * n_faces, n))  # rows: x of every face, then y
+        self.gradient = sp.csr_matrix(
+            (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(2 * n_faces, n)
+        )  # rows: x of every face, then y
         self.divergence = (self.gradient.T @ sp.diags(np.tile(area, 2))).tocsr()  # (V, 2F) = Gᵀ diag(A)
         self._gradient32 = self.gradient.astype(np.float32)
         self._divergence32 = self.divergence.astype(np.float32)
@@ -359,8 +363,9 @@ def _factor(matrix: sp.spmatrix):
     from cholespy import CholeskySolverD, MatrixType
 
     coo = sp.coo_matrix(matrix)
-    solver = CholeskySolverD(coo.shape[0], coo.row.astype(np.int32), coo.col.astype(np.int32),
-                             coo.data.astype(np.float64), MatrixType.COO)
+    solver = CholeskySolverD(
+        coo.shape[0], coo.row.astype(np.int32), coo.col.astype(np.int32), coo.data.astype(np.float64), MatrixType.COO
+    )
 
     def solve(b: np.ndarray) -> np.ndarray:
         b = np.ascontiguousarray(b, dtype=np.float64)
@@ -389,7 +394,7 @@ def distance_rows(vertices: np.ndarray, faces: np.ndarray, sources: np.ndarray, 
         solver = HeatDistanceSolver(vertices, faces)
         size = solver.block_size()
         for start in range(0, len(sources), size):
-            out[start:start + size] = solver.distances(sources[start:start + size])
+            out[start : start + size] = solver.distances(sources[start : start + size])
         return out
     mesh = TriMesh(np.asarray(vertices, dtype=np.float64), np.asarray(faces, dtype=np.int64))
     solver = GeodesicDistances(mesh, method, cache_bytes=0)
@@ -453,7 +458,7 @@ def shape_key(mesh: TriMesh, *names) -> tuple:
     return (*names, mesh.n_vertices, mesh.n_faces, digest, float(f"{length:.9g}"))
 
 
-_PER_MESH: "weakref.WeakKeyDictionary[TriMesh, dict[str, GeodesicDistances]]" = weakref.WeakKeyDictionary()
+_PER_MESH: weakref.WeakKeyDictionary[TriMesh, dict[str, GeodesicDistances]] = weakref.WeakKeyDictionary()
 
 
 def geodesics_for(mesh: TriMesh, method: str = "heat") -> GeodesicDistances:
@@ -468,9 +473,14 @@ def geodesics_for(mesh: TriMesh, method: str = "heat") -> GeodesicDistances:
     return per_method[method]
 
 
-def dijkstra_to_points(mesh: TriMesh, source_vertices: np.ndarray, target_face: np.ndarray,
-                       target_weights: np.ndarray, limit: float | None = None,
-                       graph: sp.csr_matrix | None = None) -> np.ndarray:
+def dijkstra_to_points(
+    mesh: TriMesh,
+    source_vertices: np.ndarray,
+    target_face: np.ndarray,
+    target_weights: np.ndarray,
+    limit: float | None = None,
+    graph: sp.csr_matrix | None = None,
+) -> np.ndarray:
     """(N,) edge-graph distance from vertex ``source_vertices[i]`` to the point (``target_face[i]``,
     ``target_weights[i]``), in mesh units.
 
@@ -519,8 +529,9 @@ def dijkstra_to_points(mesh: TriMesh, source_vertices: np.ndarray, target_face: 
     return out
 
 
-def _adaptive_corner_search(graph: sp.csr_matrix, n_vertices: int, sources: np.ndarray, corners: np.ndarray,
-                            radius: np.ndarray, combine) -> np.ndarray:
+def _adaptive_corner_search(
+    graph: sp.csr_matrix, n_vertices: int, sources: np.ndarray, corners: np.ndarray, radius: np.ndarray, combine
+) -> np.ndarray:
     """Bounded Dijkstra searches from ``sources`` (N,), read at ``corners`` (N, 3), repeated with larger
     radii for the pairs that need it.
 
@@ -548,7 +559,7 @@ def _adaptive_corner_search(graph: sp.csr_matrix, n_vertices: int, sources: np.n
         for block in _chunks(by_radius, n_vertices):
             block_limit = float(need[by_radius[block]].max())
             rows = dijkstra(graph, directed=False, indices=unique[by_radius[block]], limit=block_limit)
-            sel = pair_order[starts[block.start]:starts[block.stop]]
+            sel = pair_order[starts[block.start] : starts[block.stop]]
             local = pair_rank[sel] - block.start
             d[sel] = rows[local[:, None], corners[todo[sel]]]
             used[sel] = block_limit

@@ -161,7 +161,7 @@ class SurfaceLocator:
         usable = ~degenerate & (self._first < 0)
         if not usable.any():
             raise ValueError(f"SurfaceLocator: none of the {mesh.n_faces} faces has a non-zero area")
-        self._rows = None if usable.all() else np.flatnonzero(usable)   # searched rows (None: all)
+        self._rows = None if usable.all() else np.flatnonzero(usable)  # searched rows (None: all)
         self._faces = mesh.faces if self._rows is None else mesh.faces[self._rows]
         self._tree = igl.AABB()
         self._tree.init(mesh.vertices, self._faces)
@@ -221,7 +221,7 @@ class SurfaceLocator:
         k = min(k, len(self._faces))
         _, cand = self._centroids.query(points, k=k)
         cand = self._row(np.asarray(cand).reshape(len(points), k))
-        tri = self.mesh.vertices[self.mesh.faces[cand]]                      # (M, k, 3, 3)
+        tri = self.mesh.vertices[self.mesh.faces[cand]]  # (M, k, 3, 3)
         closest = closest_points_on_triangles(points[:, None, :], tri[..., 0, :], tri[..., 1, :], tri[..., 2, :])
         dist = np.linalg.norm(closest - points[:, None, :], axis=2)
         ok = np.einsum("mkd,md->mk", self._normals[cand], normals) > min_cos
@@ -231,8 +231,9 @@ class SurfaceLocator:
         face = np.where(np.isfinite(dist[rows, best]), cand[rows, best], -1)
         return face, closest[rows, best]
 
-    def closest(self, points: np.ndarray, normals: np.ndarray | None = None,
-                min_cos: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def closest(
+        self, points: np.ndarray, normals: np.ndarray | None = None, min_cos: float = 0.0
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Closest surface point of each of the (N, 3) ``points``.
 
         Args:
@@ -269,8 +270,9 @@ class SurfaceLocator:
         weights = barycentric_coordinates(closest, tri[:, 0], tri[:, 1], tri[:, 2])
         return face, weights, np.linalg.norm(closest - points, axis=1)
 
-    def closest_near(self, points: np.ndarray, accept, normals: np.ndarray | None = None,
-                     ks: tuple[int, ...] = (32, 256)) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    def closest_near(
+        self, points: np.ndarray, accept, normals: np.ndarray | None = None, ks: tuple[int, ...] = (32, 256)
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Closest surface point of each query among the faces ``accept`` allows: contact-safe by connectivity.
 
         Where two parts of a shape touch or pass through each other (a hand on a hip, the arch of a foot
@@ -299,7 +301,7 @@ class SurfaceLocator:
             k = min(k, len(self._faces))
             _, cand = self._centroids.query(points[todo], k=k)
             cand = self._row(np.asarray(cand).reshape(len(todo), k))
-            tri = self.mesh.vertices[self.mesh.faces[cand]]                      # (M, k, 3, 3)
+            tri = self.mesh.vertices[self.mesh.faces[cand]]  # (M, k, 3, 3)
             closest = closest_points_on_triangles(points[todo, None, :], tri[..., 0, :], tri[..., 1, :], tri[..., 2, :])
             dist = np.linalg.norm(closest - points[todo, None, :], axis=2)
             dist = np.where(np.asarray(accept(todo, cand), dtype=bool), dist, np.inf)
@@ -379,8 +381,7 @@ def nearest_along_surface(mesh: TriMesh, sources: np.ndarray) -> np.ndarray:
 
     sources = np.asarray(sources, dtype=np.int64)
     unique, first = np.unique(sources, return_index=True)
-    _, _, owner = dijkstra(edge_graph(mesh), directed=False, indices=unique, min_only=True,
-                           return_predecessors=True)
+    _, _, owner = dijkstra(edge_graph(mesh), directed=False, indices=unique, min_only=True, return_predecessors=True)
     owner = np.asarray(owner, dtype=np.int64)
     lookup = np.full(mesh.n_vertices, -1, dtype=np.int64)
     lookup[unique] = first

@@ -9,8 +9,8 @@ what went wrong.
 from __future__ import annotations
 
 import re
+from collections.abc import Iterable
 from pathlib import Path
-from typing import Iterable
 
 MAX_LINES = 12
 """Lines of one job's error shown on the console (the log keeps all)."""
@@ -37,9 +37,13 @@ def error_lines(text: str, limit: int = MAX_LINES) -> list[str]:
     tracebacks = [i for i, line in enumerate(lines) if line.startswith("Traceback (most recent call last)")]
     if tracebacks and tracebacks[-1] > last_becos:
         exception = next((line for line in reversed(lines) if line and not line[:1].isspace()), lines[-1])
-        return [exception, f"(a Python traceback: the full one is in the log{'' if last_becos < 0 else ' below the becos lines'})"]
-    if last_becos >= 0 and all(not line.strip() or line[:1].isspace() or _BECOS_LINE.match(line)
-                               for line in lines[last_becos:]):
+        return [
+            exception,
+            f"(a Python traceback: the full one is in the log{'' if last_becos < 0 else ' below the becos lines'})",
+        ]
+    if last_becos >= 0 and all(
+        not line.strip() or line[:1].isspace() or _BECOS_LINE.match(line) for line in lines[last_becos:]
+    ):
         prefix = lines[last_becos].split(": ", 1)[0] + ": "  # "becos check: "
         start = last_becos
         while start > 0 and (lines[start - 1].startswith(prefix) or lines[start - 1][:1].isspace()):
@@ -48,7 +52,7 @@ def error_lines(text: str, limit: int = MAX_LINES) -> list[str]:
     else:
         shown = lines[-3:]
     if len(shown) > limit:
-        shown = shown[:limit - 1] + [f"... ({len(shown) - limit + 1} more lines in the log)"]
+        shown = shown[: limit - 1] + [f"... ({len(shown) - limit + 1} more lines in the log)"]
     return shown
 
 

@@ -69,7 +69,7 @@ class TriMesh:
     def n_faces(self) -> int:
         return len(self.faces)
 
-    def with_vertices(self, vertices: np.ndarray) -> "TriMesh":
+    def with_vertices(self, vertices: np.ndarray) -> TriMesh:
         """The same connectivity with new (V, 3) positions."""
         return TriMesh(vertices, self.faces)
 
@@ -77,23 +77,38 @@ class TriMesh:
 def check_mesh_arrays(path: str | Path, vertices: np.ndarray, faces: np.ndarray) -> None:
     """Raise :class:`InputFileError` unless the arrays form a usable triangle mesh."""
     if vertices.ndim != 2 or vertices.shape[1] != 3 or len(vertices) == 0:
-        raise InputFileError(path, f"no vertices could be read (vertex array shape {vertices.shape})",
-                             "check that the file is a complete OFF/PLY/OBJ mesh (re-download or re-extract it)")
+        raise InputFileError(
+            path,
+            f"no vertices could be read (vertex array shape {vertices.shape})",
+            "check that the file is a complete OFF/PLY/OBJ mesh (re-download or re-extract it)",
+        )
     if faces.ndim != 2 or faces.shape[1] != 3 or len(faces) == 0:
-        raise InputFileError(path, f"no triangles could be read (face array shape {faces.shape})",
-                             "check that the file is a complete triangle mesh (re-download or re-extract it)")
+        raise InputFileError(
+            path,
+            f"no triangles could be read (face array shape {faces.shape})",
+            "check that the file is a complete triangle mesh (re-download or re-extract it)",
+        )
     if not np.isfinite(vertices).all():
         bad = int((~np.isfinite(vertices)).any(axis=1).sum())
-        raise InputFileError(path, f"{bad} vertices have NaN or infinite coordinates",
-                             "re-export or re-download the mesh; becos cannot guess the positions")
+        raise InputFileError(
+            path,
+            f"{bad} vertices have NaN or infinite coordinates",
+            "re-export or re-download the mesh; becos cannot guess the positions",
+        )
     if faces.min() < 0 or faces.max() >= len(vertices):
-        raise InputFileError(path, f"face indices span [{faces.min()}, {faces.max()}] but the file has "
-                             f"{len(vertices)} vertices", "the file is truncated or corrupt: re-download it")
+        raise InputFileError(
+            path,
+            f"face indices span [{faces.min()}, {faces.max()}] but the file has {len(vertices)} vertices",
+            "the file is truncated or corrupt: re-download it",
+        )
     flat = flatness(vertices)
     if flat <= FLAT_RTOL:
-        raise InputFileError(path, f"all its {len(vertices)} vertices lie in one plane (thickness {flat:.2g} of its "
-                             f"largest extent): a flattened or 2-D mesh, and becos matches 3-D surfaces",
-                             "use the dataset's original 3-D mesh (re-download or re-extract it)")
+        raise InputFileError(
+            path,
+            f"all its {len(vertices)} vertices lie in one plane (thickness {flat:.2g} of its "
+            f"largest extent): a flattened or 2-D mesh, and becos matches 3-D surfaces",
+            "use the dataset's original 3-D mesh (re-download or re-extract it)",
+        )
 
 
 def read_mesh(path: str | Path) -> TriMesh:
@@ -104,8 +119,11 @@ def read_mesh(path: str | Path) -> TriMesh:
     """
     path = Path(path)
     if not path.is_file():
-        raise InputFileError(path, "mesh file not found",
-                             "check the dataset folder in the config (data_dir) and that the download is complete")
+        raise InputFileError(
+            path,
+            "mesh file not found",
+            "check the dataset folder in the config (data_dir) and that the download is complete",
+        )
     if path.suffix.lower() not in MESH_SUFFIXES:
         raise InputFileError(path, f"unknown mesh type '{path.suffix}'", f"convert it to one of {MESH_SUFFIXES}")
     if path.suffix.lower() == ".off":
@@ -121,8 +139,11 @@ def read_mesh(path: str | Path) -> TriMesh:
         faces = np.asarray(loaded.faces, dtype=np.int64)
     except Exception as exc:  # trimesh raises many types on corrupt input
         _raise_precise(path, exc)
-        raise InputFileError(path, f"could not be parsed as a mesh ({type(exc).__name__}: {exc})",
-                             "the file is truncated or corrupt: re-download or re-extract it") from exc
+        raise InputFileError(
+            path,
+            f"could not be parsed as a mesh ({type(exc).__name__}: {exc})",
+            "the file is truncated or corrupt: re-download or re-extract it",
+        ) from exc
     check_mesh_arrays(path, vertices, faces)
     if path.suffix.lower() == ".off":
         _check_off_header(path, len(vertices), len(faces))
@@ -155,9 +176,9 @@ def _read_plain_triangle_off(path: Path) -> tuple[np.ndarray, np.ndarray] | None
     if len(lines) != 2 + n_vertices + n_faces or n_vertices == 0 or n_faces == 0:
         return None
     try:
-        vertices = np.array([line.split() for line in lines[2:2 + n_vertices]], dtype=np.float64)
-        faces = np.array([line.split() for line in lines[2 + n_vertices:]], dtype=np.int64)
-    except ValueError:                                   # ragged rows or a non-number
+        vertices = np.array([line.split() for line in lines[2 : 2 + n_vertices]], dtype=np.float64)
+        faces = np.array([line.split() for line in lines[2 + n_vertices :]], dtype=np.int64)
+    except ValueError:  # ragged rows or a non-number
         return None
     if vertices.shape != (n_vertices, 3) or faces.shape != (n_faces, 4) or (faces[:, 0] != 3).any():
         return None
@@ -188,23 +209,30 @@ def _check_off_header(path: Path, n_vertices: int, n_faces: int) -> None:
     try:
         header_vertices, header_faces = (int(c) for c in counts)
     except ValueError:
-        raise InputFileError(path, "the OFF header has no vertex and face counts",
-                             "the file is corrupt: re-download or re-extract it") from None
+        raise InputFileError(
+            path, "the OFF header has no vertex and face counts", "the file is corrupt: re-download or re-extract it"
+        ) from None
     if (header_vertices, header_faces) != (n_vertices, n_faces):
         _raise_precise(path, None)  # e.g. a quad that trimesh split into two triangles
-        raise InputFileError(path, f"the OFF header announces {header_vertices} vertices and {header_faces} faces "
-                             f"but {n_vertices} and {n_faces} were read (truncated or corrupt file)",
-                             "re-download or re-extract the file")
+        raise InputFileError(
+            path,
+            f"the OFF header announces {header_vertices} vertices and {header_faces} faces "
+            f"but {n_vertices} and {n_faces} were read (truncated or corrupt file)",
+            "re-download or re-extract the file",
+        )
     from becos.check import off_data_lines
 
     _, _, have = off_data_lines(path.read_bytes())
     if have > n_vertices + n_faces:  # trimesh stops at the announced counts: the rest would be dropped silently
-        raise InputFileError(path, f"the OFF header announces {n_vertices} vertices and {n_faces} faces but "
-                             f"{have} data lines follow, {have - n_vertices - n_faces} more than announced (a "
-                             f"reader ignores them; after the vertex block there are {have - n_vertices} lines)",
-                             f"if the file is otherwise intact, correct the header's counts (e.g. '{n_vertices} "
-                             f"{have - n_vertices} 0' when the extra lines are faces); else re-download or "
-                             f"re-extract it")
+        raise InputFileError(
+            path,
+            f"the OFF header announces {n_vertices} vertices and {n_faces} faces but "
+            f"{have} data lines follow, {have - n_vertices - n_faces} more than announced (a "
+            f"reader ignores them; after the vertex block there are {have - n_vertices} lines)",
+            f"if the file is otherwise intact, correct the header's counts (e.g. '{n_vertices} "
+            f"{have - n_vertices} 0' when the extra lines are faces); else re-download or "
+            f"re-extract it",
+        )
 
 
 class MeshCache:
@@ -253,12 +281,13 @@ class MeshCache:
 # ----------------------------------------------------------------------------------------------
 # faults of a mesh's connectivity, and the repaired copy used for remeshing
 
+
 def vertex_set_keys(faces: np.ndarray, n_vertices: int) -> np.ndarray:
     """(F,) keys, equal exactly for faces with the same vertex set (any order / winding) and sortable:
     int64 below 2**21 vertices, else a structured (a, b, c) array."""
     s = np.sort(np.asarray(faces, dtype=np.int64), axis=1)
     n = max(int(n_vertices), 1)
-    if n < 2 ** 21:                                    # three 21-bit fields fit in an int64
+    if n < 2**21:  # three 21-bit fields fit in an int64
         return (s[:, 0] * n + s[:, 1]) * n + s[:, 2]
     return np.ascontiguousarray(s).view([("a", np.int64), ("b", np.int64), ("c", np.int64)]).ravel()
 
@@ -357,8 +386,9 @@ def non_manifold_vertices(faces: np.ndarray, n_vertices: int) -> np.ndarray:
     # spokes to its two other corners
     centre = f.ravel()
     left, right = f[:, [1, 2, 0]].ravel(), f[:, [2, 0, 1]].ravel()
-    spokes, index = np.unique(np.concatenate([centre * n_vertices + left, centre * n_vertices + right]),
-                              return_inverse=True)
+    spokes, index = np.unique(
+        np.concatenate([centre * n_vertices + left, centre * n_vertices + right]), return_inverse=True
+    )
     k = len(centre)
     graph = sp.coo_matrix((np.ones(k), (index[:k], index[k:])), shape=(len(spokes), len(spokes)))
     _, label = connected_components(graph, directed=False)
@@ -443,31 +473,38 @@ class MeshRepair:
         if self.repeated_index_faces:
             parts.append(f"dropped {self.repeated_index_faces} faces with a repeated vertex index")
         if self.zero_area_faces:
-            parts.append(f"found {self.zero_area_faces} zero-area faces (kept, so the surface stays closed, but "
-                         f"no surface point is placed in them)")
+            parts.append(
+                f"found {self.zero_area_faces} zero-area faces (kept, so the surface stays closed, but "
+                f"no surface point is placed in them)"
+            )
         if self.duplicate_faces:
             parts.append(f"dropped {self.duplicate_faces} duplicate faces (same vertices as an earlier row)")
         if self.dropped_component_faces:
-            parts.append(f"kept the largest of {self.components} connected components, dropping "
-                         f"{self.dropped_component_faces} faces and {self.dropped_component_vertices} vertices "
-                         f"({100 * self.dropped_area_share:.2f}% of the area; those vertices get no counterpart)")
+            parts.append(
+                f"kept the largest of {self.components} connected components, dropping "
+                f"{self.dropped_component_faces} faces and {self.dropped_component_vertices} vertices "
+                f"({100 * self.dropped_area_share:.2f}% of the area; those vertices get no counterpart)"
+            )
         if self.unreferenced_vertices:
-            parts.append(f"ignored {self.unreferenced_vertices} unreferenced vertices (used by no face; "
-                         f"they get no counterpart)")
+            parts.append(
+                f"ignored {self.unreferenced_vertices} unreferenced vertices (used by no face; they get no counterpart)"
+            )
         if self.orphaned_vertices:
-            parts.append(f"ignored {self.orphaned_vertices} vertices used only by dropped faces (they get no "
-                         f"counterpart)")
+            parts.append(
+                f"ignored {self.orphaned_vertices} vertices used only by dropped faces (they get no counterpart)"
+            )
         if self.misoriented_edges:
-            parts.append(f"re-orients inconsistently wound faces ({self.misoriented_edges} directed edges "
-                         f"used twice)")
+            parts.append(f"re-orients inconsistently wound faces ({self.misoriented_edges} directed edges used twice)")
         if not parts:
             return "no repair needed"
-        return "; ".join(parts) + (" — on a copy: the file is unchanged and the maps refer to its vertex "
-                                   "order and face rows")
+        return "; ".join(parts) + (
+            " — on a copy: the file is unchanged and the maps refer to its vertex order and face rows"
+        )
 
 
-def surface_for_remeshing(mesh: TriMesh, *, source: str | Path | None = None,
-                          max_dropped_area_share: float = MAX_DROPPED_AREA_SHARE) -> tuple[TriMesh, MeshRepair]:
+def surface_for_remeshing(
+    mesh: TriMesh, *, source: str | Path | None = None, max_dropped_area_share: float = MAX_DROPPED_AREA_SHARE
+) -> tuple[TriMesh, MeshRepair]:
     """A copy of ``mesh`` that a remesher can take: faces with a repeated vertex index, duplicate
     faces, unreferenced vertices and small extra connected components dropped (zero-area faces with
     three distinct vertices stay: they close the surface; no map point is placed in them). The
@@ -503,8 +540,11 @@ def surface_for_remeshing(mesh: TriMesh, *, source: str | Path | None = None,
     dup = duplicate_faces(faces, n, among=keep) >= 0
     keep &= ~dup
     if not (keep & ~zero).any():
-        raise InputFileError(where, f"none of its {len(faces)} faces has a non-zero area",
-                             "re-export the mesh; becos needs a triangle surface")
+        raise InputFileError(
+            where,
+            f"none of its {len(faces)} faces has a non-zero area",
+            "re-export the mesh; becos needs a triangle surface",
+        )
     referenced = np.zeros(n, dtype=bool)
     referenced[faces.ravel()] = True
     kept_faces = faces[keep]
@@ -521,12 +561,15 @@ def surface_for_remeshing(mesh: TriMesh, *, source: str | Path | None = None,
         share = float(1.0 - per_comp[main] / per_comp.sum())
         if share > max_dropped_area_share:
             sizes = ", ".join(f"{100 * a / per_comp.sum():.1f}%" for a in sorted(per_comp, reverse=True)[:5])
-            raise InputFileError(where, f"has {n_surface_components} connected components; besides the largest "
-                                 f"they hold {100 * share:.1f}% of the area (shares: {sizes}), more than the "
-                                 f"{100 * max_dropped_area_share:.0f}% becos drops as specks",
-                                 "a shape must be one connected surface: remove the extra pieces (e.g. MeshLab: "
-                                 "Filters > Cleaning and Repairing > Remove Isolated pieces) or split the file "
-                                 "into separate shapes")
+            raise InputFileError(
+                where,
+                f"has {n_surface_components} connected components; besides the largest "
+                f"they hold {100 * share:.1f}% of the area (shares: {sizes}), more than the "
+                f"{100 * max_dropped_area_share:.0f}% becos drops as specks",
+                "a shape must be one connected surface: remove the extra pieces (e.g. MeshLab: "
+                "Filters > Cleaning and Repairing > Remove Isolated pieces) or split the file "
+                "into separate shapes",
+            )
         in_main = face_label == main
         rows = np.flatnonzero(keep)
         dropped_faces = int((~in_main).sum())
@@ -534,26 +577,40 @@ def surface_for_remeshing(mesh: TriMesh, *, source: str | Path | None = None,
     kept = faces[keep]
     non_manifold = int((undirected_edges(kept)[1] > 2).sum())
     if non_manifold:
-        raise InputFileError(where, f"{non_manifold} edges are shared by more than two faces (non-manifold) after "
-                             f"dropping duplicate and repeated-index faces; becos cannot remesh such a surface",
-                             "repair the mesh (e.g. MeshLab: Filters > Cleaning and Repairing > Repair non Manifold "
-                             "Edges) or leave the shape out")
+        raise InputFileError(
+            where,
+            f"{non_manifold} edges are shared by more than two faces (non-manifold) after "
+            f"dropping duplicate and repeated-index faces; becos cannot remesh such a surface",
+            "repair the mesh (e.g. MeshLab: Filters > Cleaning and Repairing > Repair non Manifold "
+            "Edges) or leave the shape out",
+        )
     bow_ties = non_manifold_vertices(kept, n)
     if len(bow_ties):
-        raise InputFileError(where, f"{len(bow_ties)} vertices are non-manifold (their faces form several fans that "
-                             f"touch only at the vertex, e.g. vertex {int(bow_ties[0])} of the file) after dropping "
-                             f"duplicate and repeated-index faces; becos cannot remesh such a surface",
-                             "use the dataset's original mesh (re-download it), or repair it (e.g. MeshLab: Filters > "
-                             "Cleaning and Repairing > Repair non Manifold Vertices) or leave the shape out")
+        raise InputFileError(
+            where,
+            f"{len(bow_ties)} vertices are non-manifold (their faces form several fans that "
+            f"touch only at the vertex, e.g. vertex {int(bow_ties[0])} of the file) after dropping "
+            f"duplicate and repeated-index faces; becos cannot remesh such a surface",
+            "use the dataset's original mesh (re-download it), or repair it (e.g. MeshLab: Filters > "
+            "Cleaning and Repairing > Repair non Manifold Vertices) or leave the shape out",
+        )
     used = np.zeros(n, dtype=bool)
     used[kept.ravel()] = True
     dropped_vertices = int((clean_used & ~used).sum())
-    report_kw = dict(orphaned_vertices=int((referenced & ~clean_used).sum()),
-        n_input_vertices=n, n_input_faces=len(faces), repeated_index_faces=int(repeated.sum()),
-        zero_area_faces=int(zero.sum()), duplicate_faces=int(dup.sum()),
-        unreferenced_vertices=int((~referenced).sum()), components=int(n_surface_components),
-        dropped_component_faces=dropped_faces, dropped_component_vertices=dropped_vertices,
-        dropped_area_share=share, misoriented_edges=misoriented_edge_count(kept))
+    report_kw = dict(
+        orphaned_vertices=int((referenced & ~clean_used).sum()),
+        n_input_vertices=n,
+        n_input_faces=len(faces),
+        repeated_index_faces=int(repeated.sum()),
+        zero_area_faces=int(zero.sum()),
+        duplicate_faces=int(dup.sum()),
+        unreferenced_vertices=int((~referenced).sum()),
+        components=int(n_surface_components),
+        dropped_component_faces=dropped_faces,
+        dropped_component_vertices=dropped_vertices,
+        dropped_area_share=share,
+        misoriented_edges=misoriented_edge_count(kept),
+    )
     if keep.all() and used.all():
         return mesh, MeshRepair(np.arange(n), np.arange(len(faces)), **report_kw)
     vertex_index = np.flatnonzero(used)

@@ -104,25 +104,40 @@ def get_preset(name: str) -> AucPreset:
     except ValueError:
         max_threshold, steps = float("nan"), 0
     if family not in PRESET_FAMILIES or not max_threshold > 0 or steps < 2:
-        raise ValueError(f"unknown AUC preset {name!r}; choose {PAPER_PRESET!r} or '<family>-<T>x<N>' with "
-                         f"family in {sorted(PRESET_FAMILIES)}, T > 0 and N >= 2 (e.g. {DEFAULT_AUC_PRESET!r})")
+        raise ValueError(
+            f"unknown AUC preset {name!r}; choose {PAPER_PRESET!r} or '<family>-<T>x<N>' with "
+            f"family in {sorted(PRESET_FAMILIES)}, T > 0 and N >= 2 (e.g. {DEFAULT_AUC_PRESET!r})"
+        )
     rule = PRESET_FAMILIES[family]
     what = "mean of the PCK values" if rule == "mean" else "trapezoid normalised by the range (ULRSSM)"
-    return AucPreset(name, np.linspace(0.0, max_threshold, steps), rule,
-                     f"PCK at linspace(0, {max_threshold:g}, {steps}); AUC = {what}; ground truth = 1")
+    return AucPreset(
+        name,
+        np.linspace(0.0, max_threshold, steps),
+        rule,
+        f"PCK at linspace(0, {max_threshold:g}, {steps}); AUC = {what}; ground truth = 1",
+    )
 
 
 AUC_PRESETS: dict[str, AucPreset] = {
     "mean-0.10x40": AucPreset(
-        "mean-0.10x40", np.linspace(0.0, 0.10, 40), "mean",
-        "PCK at linspace(0, 0.10, 40); AUC = mean of the PCK values; ground truth = 1"),
+        "mean-0.10x40",
+        np.linspace(0.0, 0.10, 40),
+        "mean",
+        "PCK at linspace(0, 0.10, 40); AUC = mean of the PCK values; ground truth = 1",
+    ),
     "ulrssm-0.10x40": AucPreset(
-        "ulrssm-0.10x40", np.linspace(0.0, 0.10, 40), "trapezoid-normalised",
-        "PCK at linspace(0, 0.10, 40); AUC = trapezoid normalised by the range (ULRSSM); ground truth = 1"),
+        "ulrssm-0.10x40",
+        np.linspace(0.0, 0.10, 40),
+        "trapezoid-normalised",
+        "PCK at linspace(0, 0.10, 40); AUC = trapezoid normalised by the range (ULRSSM); ground truth = 1",
+    ),
     PAPER_PRESET: AucPreset(
-        PAPER_PRESET, np.round(np.arange(100) * 0.01, 2), "trapezoid",
+        PAPER_PRESET,
+        np.round(np.arange(100) * 0.01, 2),
+        "trapezoid",
         "PCK at 0.00..0.99 step 0.01; AUC = trapezoid, not renormalised (DeepShapeMatchingKit, the "
-        "BeCoS paper's figures); ground truth = 0.99"),
+        "BeCoS paper's figures); ground truth = 0.99",
+    ),
 }
 """The standard presets (any other ``<family>-<T>x<N>`` name works too, see :func:`get_preset`)."""
 
@@ -210,9 +225,15 @@ def _check_prediction(pred_10: np.ndarray, n_x: int | None) -> np.ndarray:
     return pred
 
 
-def pair_errors(pred_10: np.ndarray, gt_10, geodesics_on_x, sqrt_area_x: float,
-                gt_weights: np.ndarray | None = None, x_to_full: np.ndarray | None = None,
-                p2p: bool = True) -> np.ndarray:
+def pair_errors(
+    pred_10: np.ndarray,
+    gt_10,
+    geodesics_on_x,
+    sqrt_area_x: float,
+    gt_weights: np.ndarray | None = None,
+    x_to_full: np.ndarray | None = None,
+    p2p: bool = True,
+) -> np.ndarray:
     """(V_y,) Princeton errors of one predicted map Y -> X, with the P2P infinity rule.
 
     Args:
@@ -254,8 +275,10 @@ def pair_errors(pred_10: np.ndarray, gt_10, geodesics_on_x, sqrt_area_x: float,
             gt_vertex = np.where(gt_vertex >= 0, x_to_full[np.maximum(gt_vertex, 0)], -1)
         true_map = SurfaceMap.from_vertex_indices(gt_vertex, mesh.faces)
     if len(true_map) != len(pred):
-        raise ValueError(f"prediction has {len(pred)} entries but the ground truth {len(true_map)}: both "
-                         "must have one entry per vertex of shape 1 (Y)")
+        raise ValueError(
+            f"prediction has {len(pred)} entries but the ground truth {len(true_map)}: both "
+            "must have one entry per vertex of shape 1 (Y)"
+        )
     if x_to_full is not None:
         pred = np.where(pred >= 0, x_to_full[np.maximum(pred, 0)], -1)
 
@@ -272,8 +295,9 @@ def pair_errors(pred_10: np.ndarray, gt_10, geodesics_on_x, sqrt_area_x: float,
     return errors
 
 
-def left_right_accuracy(pred_10: np.ndarray, true_labels_y: np.ndarray, labels_x: np.ndarray,
-                        gt_matched_y: np.ndarray | None = None) -> float:
+def left_right_accuracy(
+    pred_10: np.ndarray, true_labels_y: np.ndarray, labels_x: np.ndarray, gt_matched_y: np.ndarray | None = None
+) -> float:
     """Share of labelled Y vertices whose predicted X vertex carries the true left/right label.
 
     Args:
@@ -300,9 +324,13 @@ def left_right_accuracy(pred_10: np.ndarray, true_labels_y: np.ndarray, labels_x
     return float(np.count_nonzero(correct) / np.count_nonzero(scored))
 
 
-def pair_record(errors: np.ndarray, presets: tuple[str, ...] = (DEFAULT_AUC_PRESET,),
-                pred_overlap: np.ndarray | None = None, true_overlap: np.ndarray | None = None,
-                left_right: float | None = None) -> dict:
+def pair_record(
+    errors: np.ndarray,
+    presets: tuple[str, ...] = (DEFAULT_AUC_PRESET,),
+    pred_overlap: np.ndarray | None = None,
+    true_overlap: np.ndarray | None = None,
+    left_right: float | None = None,
+) -> dict:
     """One pair's metrics as a flat dict (a row of the per-pair table for :func:`summarise`).
 
     Keys: ``n_scored`` (included vertices), ``n_infinite``, ``mean_error`` (over finite errors),
@@ -312,8 +340,11 @@ def pair_record(errors: np.ndarray, presets: tuple[str, ...] = (DEFAULT_AUC_PRES
     errors = np.asarray(errors, dtype=np.float64).reshape(-1)
     included = errors[~np.isnan(errors)]
     finite = included[np.isfinite(included)]
-    record = {"n_scored": int(len(included)), "n_infinite": int(len(included) - len(finite)),
-              "mean_error": float(finite.mean()) if len(finite) else float("nan")}
+    record = {
+        "n_scored": int(len(included)),
+        "n_infinite": int(len(included) - len(finite)),
+        "mean_error": float(finite.mean()) if len(finite) else float("nan"),
+    }
     for k, name in enumerate(presets):
         result = auc_preset(errors, name)
         if k == 0:
@@ -348,9 +379,14 @@ def summarise(per_pair: pd.DataFrame, groupings: tuple[str, ...] = GROUPINGS) ->
     """
     keys = [c for c in KEEP_APART if c in per_pair.columns]
     present = [c for c in groupings if c in per_pair.columns]
-    metrics = [c for c in per_pair.columns
-               if c not in keys and c not in present and pd.api.types.is_numeric_dtype(per_pair[c])
-               and not pd.api.types.is_bool_dtype(per_pair[c])]
+    metrics = [
+        c
+        for c in per_pair.columns
+        if c not in keys
+        and c not in present
+        and pd.api.types.is_numeric_dtype(per_pair[c])
+        and not pd.api.types.is_bool_dtype(per_pair[c])
+    ]
     frames = []
     for grouping in ["all", *present]:
         data = per_pair.assign(_group="all") if grouping == "all" else per_pair.assign(_group=per_pair[grouping])

@@ -31,8 +31,9 @@ the dataset when present, else the annotation folder's default faces).
 from __future__ import annotations
 
 from collections import OrderedDict
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable, Protocol
+from typing import Protocol
 
 import numpy as np
 
@@ -53,7 +54,7 @@ def identity_map(mesh: TriMesh, usable_rows: np.ndarray | None = None) -> Surfac
     faces = mesh.faces[rows]
     incident = np.full(mesh.n_vertices, NONE, dtype=np.int64)
     corner = np.zeros(mesh.n_vertices, dtype=np.int64)
-    incident[faces.ravel()] = np.repeat(rows, 3)            # the last write wins, as SurfaceMap.identity
+    incident[faces.ravel()] = np.repeat(rows, 3)  # the last write wins, as SurfaceMap.identity
     corner[faces.ravel()] = np.tile(np.arange(3), len(faces))
     weights = np.zeros((mesh.n_vertices, 3))
     has = np.flatnonzero(incident >= 0)
@@ -69,7 +70,7 @@ class FacesByVertexSet:
 
     def __init__(self, mesh: TriMesh):
         self.mesh = mesh
-        self.rows = np.flatnonzero(surface_faces(mesh))            # (U,) usable rows of mesh.faces
+        self.rows = np.flatnonzero(surface_faces(mesh))  # (U,) usable rows of mesh.faces
         keys = vertex_set_keys(mesh.faces[self.rows], mesh.n_vertices)
         self._order = np.argsort(keys, kind="stable")
         self._sorted_keys = keys[self._order]
@@ -93,8 +94,9 @@ class FacesByVertexSet:
         return self._identity
 
 
-def transplant(m: SurfaceMap, source_faces: np.ndarray, target: TriMesh | FacesByVertexSet,
-               locator: SurfaceLocator | None = None) -> SurfaceMap:
+def transplant(
+    m: SurfaceMap, source_faces: np.ndarray, target: TriMesh | FacesByVertexSet, locator: SurfaceLocator | None = None
+) -> SurfaceMap:
     """Carry ``m`` (points on a surface with faces ``source_faces``) to ``target``, a mesh with the
     same vertex order (another pose of the class, or the class template), by vertex identity.
     Pass the target's :class:`FacesByVertexSet` to reuse it across calls.
@@ -112,15 +114,17 @@ def transplant(m: SurfaceMap, source_faces: np.ndarray, target: TriMesh | FacesB
     target = index.mesh
     source_faces = np.asarray(source_faces, dtype=np.int64)
     if len(source_faces) and int(source_faces.max()) >= target.n_vertices:
-        raise BecosError(f"a ground-truth path carries points by vertex identity onto a mesh with "
-                         f"{target.n_vertices} vertices from a surface whose faces use vertex "
-                         f"{int(source_faces.max())}. Fix: check that the shape and its template come from the "
-                         f"same dataset release (same vertex count and order)")
+        raise BecosError(
+            f"a ground-truth path carries points by vertex identity onto a mesh with "
+            f"{target.n_vertices} vertices from a surface whose faces use vertex "
+            f"{int(source_faces.max())}. Fix: check that the shape and its template come from the "
+            f"same dataset release (same vertex count and order)"
+        )
     face = np.full(len(m), NONE, dtype=np.int64)
     weights = np.zeros((len(m), 3))
     distance = np.full(len(m), np.nan)
     alive = np.flatnonzero(m.matched)
-    src = source_faces[m.face[alive]]                                     # (M, 3) vertex ids
+    src = source_faces[m.face[alive]]  # (M, 3) vertex ids
     rows = index.find(src)
     found = rows >= 0
     hit = alive[found]
@@ -136,6 +140,7 @@ def transplant(m: SurfaceMap, source_faces: np.ndarray, target: TriMesh | FacesB
         projected = compose(sub, source_faces, index.identity(), target, locator)
         face[rest], weights[rest], distance[rest] = projected.face, projected.weights, projected.distance
     return SurfaceMap(face, weights, distance)
+
 
 class ShapeLike(Protocol):
     """What the network needs to know of a shape (``becos.datasets.ShapeEntry`` satisfies it)."""
@@ -211,7 +216,8 @@ class ShapeNetwork:
                     raise BecosError(
                         f"the faces of template {surface} are needed on a ground-truth path, but dataset "
                         f"'{surface.dataset}' is not available and the annotation folder has no default faces "
-                        f"for '{surface.name}'. Fix: enable/download dataset '{surface.dataset}'")
+                        f"for '{surface.name}'. Fix: enable/download dataset '{surface.dataset}'"
+                    )
             self._faces_cache[key] = np.asarray(faces, dtype=np.int64)
         return self._faces_cache[key]
 
@@ -228,13 +234,17 @@ class ShapeNetwork:
         if a.node is not None and b.node is not None:
             return False  # template -> template: decided by the annotation folder
         if a.dataset != b.dataset:
-            raise BecosError(f"{a} and its template {b} belong to different datasets, so they need an edge file. "
-                             f"Fix: point the template table row of {a} at a template of its own dataset")
+            raise BecosError(
+                f"{a} and its template {b} belong to different datasets, so they need an edge file. "
+                f"Fix: point the template table row of {a} at a template of its own dataset"
+            )
         na, nb = self._n_vertices(a), self._n_vertices(b)
         if na is not None and nb is not None and na != nb:
-            raise BecosError(f"{a} and its template {b} should share one triangulation (vertex i = vertex i) but "
-                             f"have {na} and {nb} vertices. Fix: check that both files come from the same "
-                             f"dataset release and were not re-processed")
+            raise BecosError(
+                f"{a} and its template {b} should share one triangulation (vertex i = vertex i) but "
+                f"have {na} and {nb} vertices. Fix: check that both files come from the same "
+                f"dataset release and were not re-processed"
+            )
         return True
 
     def hop(self, a: Surface, b: Surface) -> SurfaceMap | None:
@@ -248,12 +258,18 @@ class ShapeNetwork:
         n_target_faces = len(self.faces_of(b))
         source = self.annotations.edge_source(a.node, b.node)
         if n_source is not None and len(edge) != n_source:
-            raise InputFileError(source.path, f"has {len(edge)} rows but template {a} has {n_source} vertices",
-                                 "the edge file and the mesh come from different versions; restore the annotation "
-                                 "folder's file or the dataset's original mesh")
+            raise InputFileError(
+                source.path,
+                f"has {len(edge)} rows but template {a} has {n_source} vertices",
+                "the edge file and the mesh come from different versions; restore the annotation "
+                "folder's file or the dataset's original mesh",
+            )
         if len(edge) and edge.face.max() >= n_target_faces:
-            raise InputFileError(source.path, f"face index {int(edge.face.max())} is out of range for template {b} "
-                                 f"({n_target_faces} faces)", "restore the annotation folder's original file")
+            raise InputFileError(
+                source.path,
+                f"face index {int(edge.face.max())} is out of range for template {b} ({n_target_faces} faces)",
+                "restore the annotation folder's original file",
+            )
         return edge
 
     # --- ground truth ---------------------------------------------------------------------------
@@ -309,8 +325,9 @@ class ShapeNetwork:
                 self._geometries.popitem(last=False)
         return self._geometries[key][2]
 
-    def _compose_onto(self, hops: list[SurfaceMap | None], landing: list[Surface | None],
-                      target: TriMesh) -> SurfaceMap:
+    def _compose_onto(
+        self, hops: list[SurfaceMap | None], landing: list[Surface | None], target: TriMesh
+    ) -> SurfaceMap:
         """Compose ``hops`` (hop j lands on ``landing[j]``; the last lands on ``target``) onto ``target``.
 
         Trailing identity hops are applied exactly by :func:`transplant`; everything before them is
@@ -324,11 +341,12 @@ class ShapeNetwork:
             return compose_path(hops, middle, target, self.locator(target))
         faces = self.faces_of(landing[k])
         geometry = self._geometry_with_faces(target, faces)
-        head = compose_path(hops[:k + 1], middle, geometry, self.locator(geometry))
+        head = compose_path(hops[: k + 1], middle, geometry, self.locator(geometry))
         return transplant(head, faces, self._kept(FacesByVertexSet, target), self.locator(target))
 
-    def ground_truth(self, x: ShapeLike, y: ShapeLike, *, x_remesh=None, y_remesh=None,
-                     y_mesh: TriMesh | None = None) -> SurfaceMap:
+    def ground_truth(
+        self, x: ShapeLike, y: ShapeLike, *, x_remesh=None, y_remesh=None, y_mesh: TriMesh | None = None
+    ) -> SurfaceMap:
         """Dense ground truth from X's vertices to points on Y's surface.
 
         Args:
@@ -348,15 +366,15 @@ class ShapeNetwork:
         steps: list[tuple[SurfaceMap | None, Surface | None]] = []  # (hop, the surface it lands on)
         if x_remesh is not None:
             steps.append((x_remesh.to_original, surfaces[0]))
-        for a, b in zip(surfaces[:first], surfaces[1:first + 1]):      # X -> its template (identity)
+        for a, b in zip(surfaces[:first], surfaces[1 : first + 1]):  # X -> its template (identity)
             steps.append((self.hop(a, b), b))
-        chain = self.template_chain(surfaces[first:last + 1]) if last > first else None
+        chain = self.template_chain(surfaces[first : last + 1]) if last > first else None
         if chain is not None:
             steps.append((chain, surfaces[last]))
         else:
-            for a, b in zip(surfaces[first:last], surfaces[first + 1:last + 1]):
+            for a, b in zip(surfaces[first:last], surfaces[first + 1 : last + 1]):
                 steps.append((self.hop(a, b), b))
-        for a, b in zip(surfaces[last:], surfaces[last + 1:]):        # Y's template -> Y (identity)
+        for a, b in zip(surfaces[last:], surfaces[last + 1 :]):  # Y's template -> Y (identity)
             steps.append((self.hop(a, b), b))
         if y_remesh is not None:
             steps.append((y_remesh.from_original, None))
@@ -364,8 +382,9 @@ class ShapeNetwork:
         else:
             target = self._meshes(y.dataset, y.name)
             if target is None:
-                raise BecosError(f"shape {y.dataset}/{y.name} is not available. Fix: enable/download "
-                                 f"dataset '{y.dataset}'")
+                raise BecosError(
+                    f"shape {y.dataset}/{y.name} is not available. Fix: enable/download dataset '{y.dataset}'"
+                )
         if y_mesh is not None:
             if y_mesh.n_vertices != target.n_vertices or y_mesh.n_faces != target.n_faces:
                 raise ValueError("y_mesh must have the connectivity of the target surface")

@@ -26,8 +26,8 @@ from scipy.spatial.transform import Rotation
 from becos.mesh import TriMesh
 from becos.partiality import Partial, Scanner, align_to, cast_p2f, cast_p2p, whole
 from becos.record import PairRecord
-from becos.settings import MAX_OVERLAP, MIN_OVERLAP, SETTINGS, overlap_range_problem
 from becos.seeding import rng_for
+from becos.settings import MAX_OVERLAP, MIN_OVERLAP, SETTINGS, overlap_range_problem
 from becos.surface_map import SurfaceMap
 
 _UP = {"x": np.array([1.0, 0, 0]), "y": np.array([0, 1.0, 0]), "z": np.array([0, 0, 1.0])}
@@ -103,9 +103,18 @@ def _camera_rows(camera) -> np.ndarray:
     return np.stack([camera.position, camera.target, camera.up]).astype(np.float64)
 
 
-def _shape_arrays(shape: ShapeInstance, partial: Partial, final_vertices: np.ndarray, overlap_mask: np.ndarray,
-                  align_rotation: np.ndarray, align_translation: np.ndarray, rotation: np.ndarray,
-                  camera, area: float, final_full_vertices: np.ndarray) -> dict[str, np.ndarray]:
+def _shape_arrays(
+    shape: ShapeInstance,
+    partial: Partial,
+    final_vertices: np.ndarray,
+    overlap_mask: np.ndarray,
+    align_rotation: np.ndarray,
+    align_translation: np.ndarray,
+    rotation: np.ndarray,
+    camera,
+    area: float,
+    final_full_vertices: np.ndarray,
+) -> dict[str, np.ndarray]:
     is_full = partial.mesh.n_faces == shape.mesh.n_faces
     return {
         "vertices": final_vertices,
@@ -131,11 +140,20 @@ def _shape_arrays(shape: ShapeInstance, partial: Partial, final_vertices: np.nda
     }
 
 
-def build_pair(x: ShapeInstance, y: ShapeInstance, gt_xy: SurfaceMap, gt_yx: SurfaceMap, *, pair_id: str,
-               seed: int, split: str, options: PairOptions,
-               scanners: tuple[Scanner | None, Scanner | None] = (None, None),
-               rotations: tuple[np.ndarray, np.ndarray] | None = None,
-               published_views=None) -> PairRecord:
+def build_pair(
+    x: ShapeInstance,
+    y: ShapeInstance,
+    gt_xy: SurfaceMap,
+    gt_yx: SurfaceMap,
+    *,
+    pair_id: str,
+    seed: int,
+    split: str,
+    options: PairOptions,
+    scanners: tuple[Scanner | None, Scanner | None] = (None, None),
+    rotations: tuple[np.ndarray, np.ndarray] | None = None,
+    published_views=None,
+) -> PairRecord:
     """One matching instance.
 
     Args:
@@ -152,11 +170,21 @@ def build_pair(x: ShapeInstance, y: ShapeInstance, gt_xy: SurfaceMap, gt_yx: Sur
             the reference keeps; masks and maps are then computed on them with the exact ground truth.
     """
     if len(gt_xy) != x.mesh.n_vertices or len(gt_yx) != y.mesh.n_vertices:
-        raise ValueError(f"pair {pair_id}: ground truth lengths {len(gt_xy)}, {len(gt_yx)} do not match the "
-                         f"meshes ({x.mesh.n_vertices}, {y.mesh.n_vertices} vertices)")
-    meta = {"pair_id": pair_id, "seed": int(seed), "setting": options.setting, "split": split,
-            "area_normalised": options.area_normalised, "n_tries": 0, "accepted": True, "try_index": -1,
-            "options": {k: getattr(options, k) for k in options.__dataclass_fields__}}
+        raise ValueError(
+            f"pair {pair_id}: ground truth lengths {len(gt_xy)}, {len(gt_yx)} do not match the "
+            f"meshes ({x.mesh.n_vertices}, {y.mesh.n_vertices} vertices)"
+        )
+    meta = {
+        "pair_id": pair_id,
+        "seed": int(seed),
+        "setting": options.setting,
+        "split": split,
+        "area_normalised": options.area_normalised,
+        "n_tries": 0,
+        "accepted": True,
+        "try_index": -1,
+        "options": {k: getattr(options, k) for k in options.__dataclass_fields__},
+    }
     for key, s in (("x", x), ("y", y)):
         meta[key] = {"name": s.name, "dataset": s.dataset, "category": s.category, "class": s.shape_class}
 
@@ -171,24 +199,49 @@ def build_pair(x: ShapeInstance, y: ShapeInstance, gt_xy: SurfaceMap, gt_yx: Sur
         map_xy, map_yx = partial_map(px, gt_xy, py), partial_map(py, gt_yx, px)
         camera_x, camera_y = pub.camera_x, pub.camera_y
         c = pub.choice
-        meta.update(n_tries=len(c.reference_overlaps), accepted=bool(c.accepted), try_index=int(c.try_index),
-                    published_views={"camera_try": int(c.camera_try), "exact_try": int(c.exact_try),
-                                     "exact_rule_keeps_another_try": bool(c.exact_differs),
-                                     "reference_overlaps": c.reference_overlaps.tolist(),
-                                     "exact_overlaps": c.exact_overlaps.tolist(), "sources": pub.sources})
+        meta.update(
+            n_tries=len(c.reference_overlaps),
+            accepted=bool(c.accepted),
+            try_index=int(c.try_index),
+            published_views={
+                "camera_try": int(c.camera_try),
+                "exact_try": int(c.exact_try),
+                "exact_rule_keeps_another_try": bool(c.exact_differs),
+                "reference_overlaps": c.reference_overlaps.tolist(),
+                "exact_overlaps": c.exact_overlaps.tolist(),
+                "sources": pub.sources,
+            },
+        )
     elif options.setting == "partial_partial":
-        scan = cast_p2p(x.mesh, y.mesh, gt_xy, gt_yx, (seed, pair_id), regime=options.cam_pos_regime,
-                        up_axis=options.up_axis, camera_distance=options.camera_distance,
-                        n_tries=options.n_cam_pos, min_overlap=options.min_overlap,
-                        max_overlap=options.max_overlap,
-                        scanners=None if None in scanners else scanners)
+        scan = cast_p2p(
+            x.mesh,
+            y.mesh,
+            gt_xy,
+            gt_yx,
+            (seed, pair_id),
+            regime=options.cam_pos_regime,
+            up_axis=options.up_axis,
+            camera_distance=options.camera_distance,
+            n_tries=options.n_cam_pos,
+            min_overlap=options.min_overlap,
+            max_overlap=options.max_overlap,
+            scanners=None if None in scanners else scanners,
+        )
         px, py, alignment = scan.partial_x, scan.partial_y, scan.alignment
         mask_x, mask_y, map_xy, map_yx = scan.mask_x, scan.mask_y, scan.map_xy, scan.map_yx
         camera_x, camera_y = scan.camera_x, scan.camera_y
         meta.update(n_tries=scan.n_tries_used, accepted=bool(scan.accepted), try_index=scan.try_index)
     elif options.setting == "partial_full":
-        scan = cast_p2f(x.mesh, y.mesh, gt_xy, gt_yx, (seed, pair_id), up_axis=options.up_axis,
-                        camera_distance=options.camera_distance, scanner=scanners[1])
+        scan = cast_p2f(
+            x.mesh,
+            y.mesh,
+            gt_xy,
+            gt_yx,
+            (seed, pair_id),
+            up_axis=options.up_axis,
+            camera_distance=options.camera_distance,
+            scanner=scanners[1],
+        )
         px, py = scan.full_x, scan.partial_y
         alignment = align_to(x.mesh, y.mesh, gt_xy)
         mask_x, mask_y, map_xy, map_yx = scan.mask_x, scan.mask_y, scan.map_xy, scan.map_yx
@@ -214,8 +267,18 @@ def build_pair(x: ShapeInstance, y: ShapeInstance, gt_xy: SurfaceMap, gt_yx: Sur
 
     arrays = {}
     shape_x = _shape_arrays(x, px, final_x, mask_x, np.eye(3), np.zeros(3), rot_x, camera_x, area_x, full_x)
-    shape_y = _shape_arrays(y, py, final_y, mask_y, alignment.rotation.T.copy(), alignment.translation.copy(),
-                            rot_y, camera_y, area_y, full_y)
+    shape_y = _shape_arrays(
+        y,
+        py,
+        final_y,
+        mask_y,
+        alignment.rotation.T.copy(),
+        alignment.translation.copy(),
+        rot_y,
+        camera_y,
+        area_y,
+        full_y,
+    )
     arrays.update({f"x_{k}": v for k, v in shape_x.items()})
     arrays.update({f"y_{k}": v for k, v in shape_y.items()})
     for name, m, target_faces in (("corr_01", map_xy, py.mesh.faces), ("corr_10", map_yx, px.mesh.faces)):

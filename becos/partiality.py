@@ -18,8 +18,8 @@ a regime are drawn in one shared orientation.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 
@@ -30,7 +30,6 @@ from becos.seeding import rng_for
 from becos.settings import MAX_OVERLAP, MIN_OVERLAP
 from becos.surface_map import NONE, SurfaceMap
 from becos.visibility import DEFAULT_SAMPLES_PER_FACE, VisibilityScene
-
 
 # --------------------------------------------------------------------------------------------
 # Exact bookkeeping
@@ -110,7 +109,9 @@ def _check_gt(partial_x: Partial, gt_xy: SurfaceMap, partial_y: Partial) -> None
     if len(gt_xy) != partial_x.n_full_vertices:
         raise ValueError(f"the ground truth has {len(gt_xy)} rows but full X has {partial_x.n_full_vertices} vertices")
     if len(gt_xy) and gt_xy.face.max(initial=-1) >= partial_y.n_full_faces:
-        raise ValueError(f"the ground truth points at face {gt_xy.face.max()} but full Y has {partial_y.n_full_faces} faces")
+        raise ValueError(
+            f"the ground truth points at face {gt_xy.face.max()} but full Y has {partial_y.n_full_faces} faces"
+        )
 
 
 def overlap_mask(partial_x: Partial, gt_xy: SurfaceMap, partial_y: Partial) -> np.ndarray:
@@ -193,11 +194,13 @@ def _rng_factory(source: RngSource) -> Callable[[int], np.random.Generator]:
 def _unit_box_to_input(centre: np.ndarray, scale: float, to_input: RigidTransform | None = None):
     """A function mapping a camera from a unit-box frame ``(p - centre) / scale`` back to the input
     frame, optionally followed by a rigid motion ``to_input``."""
+
     def convert(camera: Camera) -> Camera:
         cam = camera.transformed(scale=scale, translation=centre)
         if to_input is not None:
             cam = cam.transformed(to_input.rotation, to_input.translation)
         return cam
+
     return convert
 
 
@@ -258,11 +261,21 @@ def align_to(x: TriMesh, y: TriMesh, gt_xy: SurfaceMap) -> RigidTransform:
     return procrustes(gt_xy.positions(y), x.vertices, mask=gt_xy.matched)
 
 
-def cast_p2p(x: TriMesh, y: TriMesh, gt_xy: SurfaceMap, gt_yx: SurfaceMap, rng: RngSource,
-             regime: str = "high", up_axis: str = "y", camera_distance: float = 1.0, n_tries: int = 10,
-             min_overlap: float = MIN_OVERLAP, max_overlap: float = MAX_OVERLAP,
-             samples_per_face: int = DEFAULT_SAMPLES_PER_FACE,
-             scanners: tuple[Scanner, Scanner] | None = None) -> P2PResult:
+def cast_p2p(
+    x: TriMesh,
+    y: TriMesh,
+    gt_xy: SurfaceMap,
+    gt_yx: SurfaceMap,
+    rng: RngSource,
+    regime: str = "high",
+    up_axis: str = "y",
+    camera_distance: float = 1.0,
+    n_tries: int = 10,
+    min_overlap: float = MIN_OVERLAP,
+    max_overlap: float = MAX_OVERLAP,
+    samples_per_face: int = DEFAULT_SAMPLES_PER_FACE,
+    scanners: tuple[Scanner, Scanner] | None = None,
+) -> P2PResult:
     """Scan both shapes of a partial-to-partial pair, retrying cameras until both overlaps are in range.
 
     Y is aligned rigidly to X (:func:`align_to`); for try k the two cameras are
@@ -304,12 +317,27 @@ def cast_p2p(x: TriMesh, y: TriMesh, gt_xy: SurfaceMap, gt_yx: SurfaceMap, rng: 
             break
     dist, k, drawn, cam_x, cam_y, px, py, ox, oy = best
     return P2PResult(
-        partial_x=px, partial_y=py, camera_x=cam_x, camera_y=cam_y, drawn_cameras=drawn,
-        alignment=alignment, centre_x=sx.centre, scale_x=sx.scale, centre_y=centre_y, scale_y=scale_y,
-        overlap_x=ox, overlap_y=oy,
-        mask_x=overlap_mask(px, gt_xy, py), mask_y=overlap_mask(py, gt_yx, px),
-        map_xy=partial_map(px, gt_xy, py), map_yx=partial_map(py, gt_yx, px),
-        try_index=k, n_tries_used=n_used, accepted=dist == 0.0, range_distance=dist)
+        partial_x=px,
+        partial_y=py,
+        camera_x=cam_x,
+        camera_y=cam_y,
+        drawn_cameras=drawn,
+        alignment=alignment,
+        centre_x=sx.centre,
+        scale_x=sx.scale,
+        centre_y=centre_y,
+        scale_y=scale_y,
+        overlap_x=ox,
+        overlap_y=oy,
+        mask_x=overlap_mask(px, gt_xy, py),
+        mask_y=overlap_mask(py, gt_yx, px),
+        map_xy=partial_map(px, gt_xy, py),
+        map_yx=partial_map(py, gt_yx, px),
+        try_index=k,
+        n_tries_used=n_used,
+        accepted=dist == 0.0,
+        range_distance=dist,
+    )
 
 
 @dataclass(frozen=True, eq=False)
@@ -344,9 +372,17 @@ class P2FResult:
     map_yx: SurfaceMap
 
 
-def cast_p2f(x: TriMesh, y: TriMesh, gt_xy: SurfaceMap, gt_yx: SurfaceMap, rng: RngSource,
-             up_axis: str = "y", camera_distance: float = 1.0,
-             samples_per_face: int = DEFAULT_SAMPLES_PER_FACE, scanner: Scanner | None = None) -> P2FResult:
+def cast_p2f(
+    x: TriMesh,
+    y: TriMesh,
+    gt_xy: SurfaceMap,
+    gt_yx: SurfaceMap,
+    rng: RngSource,
+    up_axis: str = "y",
+    camera_distance: float = 1.0,
+    samples_per_face: int = DEFAULT_SAMPLES_PER_FACE,
+    scanner: Scanner | None = None,
+) -> P2FResult:
     """One scan of Y from ``draw_camera(rng(0), up_axis, camera_distance)`` (Y's unit-box frame); X stays full.
 
     ``rng`` is as in :func:`cast_p2p` (``(seed, pair_id)`` -> ``rng_for(seed, pair_id, "cameras", 0)``);
@@ -360,8 +396,16 @@ def cast_p2f(x: TriMesh, y: TriMesh, gt_xy: SurfaceMap, gt_yx: SurfaceMap, rng: 
     fx = whole(x)
     mask_y, mask_x = overlap_mask(py, gt_yx, fx), overlap_mask(fx, gt_xy, py)
     return P2FResult(
-        full_x=fx, partial_y=py, camera_y=cam_y, drawn_camera=drawn, centre_y=sy.centre, scale_y=sy.scale,
+        full_x=fx,
+        partial_y=py,
+        camera_y=cam_y,
+        drawn_camera=drawn,
+        centre_y=sy.centre,
+        scale_y=sy.scale,
         overlap_x=float(mask_x.mean()) if len(mask_x) else 0.0,
         overlap_y=float(mask_y.mean()) if len(mask_y) else 0.0,
-        mask_x=mask_x, mask_y=mask_y,
-        map_xy=partial_map(fx, gt_xy, py), map_yx=partial_map(py, gt_yx, fx))
+        mask_x=mask_x,
+        mask_y=mask_y,
+        map_xy=partial_map(fx, gt_xy, py),
+        map_yx=partial_map(py, gt_yx, fx),
+    )

@@ -143,8 +143,10 @@ def labels_for_partial(full_labels: np.ndarray, partial_to_full: np.ndarray) -> 
     full_labels = _validate_labels(full_labels, "full_labels")
     partial_to_full = np.asarray(partial_to_full, dtype=np.int64)
     if len(partial_to_full) and (partial_to_full.min() < 0 or partial_to_full.max() >= len(full_labels)):
-        raise ValueError(f"partial_to_full indexes vertices {int(partial_to_full.min())}..{int(partial_to_full.max())}"
-                         f" but the full shape has {len(full_labels)} labels")
+        raise ValueError(
+            f"partial_to_full indexes vertices {int(partial_to_full.min())}..{int(partial_to_full.max())}"
+            f" but the full shape has {len(full_labels)} labels"
+        )
     return full_labels[partial_to_full].astype(np.int8)
 
 
@@ -219,9 +221,12 @@ class LabelPropagator:
                 dataset = dataset_of_key(key)
                 node = key if dataset.startswith("dt4d") else f"{dataset}_{annotated.replace('/', '_')}"
                 if node not in self.annotations.graph:
-                    raise InputFileError(path, f"row '{key},{annotated}' names node '{node}', which the network "
-                                         "does not contain", "restore the annotation folder's table, or list "
-                                         "only shapes that are network templates (or poses of a DT4D class node)")
+                    raise InputFileError(
+                        path,
+                        f"row '{key},{annotated}' names node '{node}', which the network does not contain",
+                        "restore the annotation folder's table, or list "
+                        "only shapes that are network templates (or poses of a DT4D class node)",
+                    )
                 try:
                     dataset, name = self.annotations.node_template(node)
                 except BecosError:  # a DT4D node the template table does not list: land on the pose itself
@@ -239,8 +244,10 @@ class LabelPropagator:
         hops = nx.single_source_shortest_path_length(self.annotations.graph, node)
         candidates = [(hops[a.node], a.order, a) for a in self.annotated_templates() if a.node in hops]
         if not candidates:
-            raise BecosError(f"no annotated template is connected to node '{node}' of {entry.dataset}/{entry.name}. "
-                             f"Fix: restore the annotation folder's templates_chirality_all.csv")
+            raise BecosError(
+                f"no annotated template is connected to node '{node}' of {entry.dataset}/{entry.name}. "
+                f"Fix: restore the annotation folder's templates_chirality_all.csv"
+            )
         n_hops, _, best = min(candidates, key=lambda c: (c[0], c[1]))
         return best, n_hops
 
@@ -248,8 +255,10 @@ class LabelPropagator:
         for a in self.annotated_templates():
             if a.key == key:
                 return a
-        raise BecosError(f"'{key}' is not a row of templates_chirality_all.csv (rows: "
-                         f"{[a.key for a in self.annotated_templates()]}). Fix: pass one of those keys")
+        raise BecosError(
+            f"'{key}' is not a row of templates_chirality_all.csv (rows: "
+            f"{[a.key for a in self.annotated_templates()]}). Fix: pass one of those keys"
+        )
 
     def file_labels(self, source: AnnotatedTemplate) -> np.ndarray:
         """(V,) int8 labels of an annotated template, as its file holds them."""
@@ -274,11 +283,12 @@ class LabelPropagator:
             n_target = int(faces.max()) + 1  # vertices the faces use (the files hold one label per vertex)
             if len(file_labels) < n_target:
                 stem = f"{source.dataset}_{source.annotated.replace('/', '_')}"
-                raise InputFileError(self.annotations.root / CHIRALITY_DIR / f"{stem}.txt",
-                                     f"holds {len(file_labels)} labels but the faces of template "
-                                     f"{source.dataset}/{source.name} use {n_target} vertices",
-                                     "restore the file from the annotation folder, or use the dataset's original "
-                                     "mesh of the template")
+                raise InputFileError(
+                    self.annotations.root / CHIRALITY_DIR / f"{stem}.txt",
+                    f"holds {len(file_labels)} labels but the faces of template "
+                    f"{source.dataset}/{source.name} use {n_target} vertices",
+                    "restore the file from the annotation folder, or use the dataset's original mesh of the template",
+                )
             vertex = surface_map.to_vertex_indices(faces)
             labels = np.where(vertex >= 0, file_labels[np.maximum(vertex, 0)], NO_LABEL).astype(np.int8)
             labels.setflags(write=False)
@@ -296,14 +306,18 @@ class LabelPropagator:
         if (shape.dataset, shape.name) != (template.dataset, template.name):
             # shape -> its class template is an identity hop (one triangulation; vertex counts checked)
             if self.network.hop(shape, template) is not None:
-                raise BecosError(f"{shape} and its class template {template} do not share a triangulation; "
-                                 "label propagation assumes they do (as the network's ground truth does)")
+                raise BecosError(
+                    f"{shape} and its class template {template} do not share a triangulation; "
+                    "label propagation assumes they do (as the network's ground truth does)"
+                )
         if remesh is None:
             return class_labels.copy()
         faces = self.network.faces_of(shape)
         if remesh.to_original.face.max(initial=-1) >= len(faces):
-            raise ValueError(f"the remesh maps onto face {int(remesh.to_original.face.max())} but {shape} has "
-                             f"{len(faces)} faces: it is the remesh of another shape")
+            raise ValueError(
+                f"the remesh maps onto face {int(remesh.to_original.face.max())} but {shape} has "
+                f"{len(faces)} faces: it is the remesh of another shape"
+            )
         # remeshed shape -> shape -> class template -> ... -> annotated template; the network composes
         # the template chain once per class pair and caches it, so only the last compose runs here
         composed = self.network.ground_truth(entry, source, x_remesh=remesh)
@@ -324,8 +338,7 @@ class LabelPropagator:
             warn_key = (entry.dataset, entry.template_key)
             if warn_key not in self._warned:
                 self._warned.add(warn_key)
-                log.warning("no left/right labels for %s shapes (class %s): %s", entry.dataset, entry.template_key,
-                            exc)
+                log.warning("no left/right labels for %s shapes (class %s): %s", entry.dataset, entry.template_key, exc)
             labels = None
         if labels is not None:
             labels.setflags(write=False)
@@ -335,7 +348,7 @@ class LabelPropagator:
         return labels
 
 
-_PROPAGATORS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+_PROPAGATORS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
 def propagator(network) -> LabelPropagator:

@@ -37,26 +37,43 @@ import io
 import pickle
 import re
 from collections import Counter
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 import pandas as pd
 
 from becos.atomic import save_npz, write_bytes
-
 from becos.catalog import frame_rotation
 from becos.errors import ConfigError, InputFileError
-from becos.sampling import (MANIFEST_COLUMNS, SETTINGS, JOINER, UNDEFINED, _field, _template_row, pair_id_of,
-                            shape_key, sort_manifest)
+from becos.sampling import (
+    JOINER,
+    MANIFEST_COLUMNS,
+    SETTINGS,
+    UNDEFINED,
+    _field,
+    _template_row,
+    pair_id_of,
+    shape_key,
+    sort_manifest,
+)
 from becos.seeding import rng_for, stable_hash
 
 PUBLISHED_SPLITS = ("train", "test", "val")
 """Order of the split lists inside a published pickle."""
-SHAPE_FIELDS = ("name", "org_dataset", "category", "file_path", "scale", "rot", "partial_full_template",
-                "partial_full_dataset", "desired_n_face_remeshed", "random_rot")
+SHAPE_FIELDS = (
+    "name",
+    "org_dataset",
+    "category",
+    "file_path",
+    "scale",
+    "rot",
+    "partial_full_template",
+    "partial_full_dataset",
+    "desired_n_face_remeshed",
+    "random_rot",
+)
 N_CAMERAS = 10
 FACE_TARGET_RANGE = (18000, 20000)
 P2P_OVERLAP_HISTOGRAM = (20, 1850, 2391, 2321, 2828, 3163, 3391, 3247, 1715, 2)
@@ -67,9 +84,13 @@ reference-facts §12): both directions of every pair (``x_overlap`` and ``y_over
 
 _NUMPY_CORE = "numpy._core" if int(np.__version__.split(".")[0]) >= 2 else "numpy.core"
 _ALLOWED = {
-    ("numpy", "ndarray"), ("numpy", "dtype"), ("numpy", "array"),
-    ("numpy.core.multiarray", "_reconstruct"), ("numpy._core.multiarray", "_reconstruct"),
-    ("numpy.core.multiarray", "scalar"), ("numpy._core.multiarray", "scalar"),
+    ("numpy", "ndarray"),
+    ("numpy", "dtype"),
+    ("numpy", "array"),
+    ("numpy.core.multiarray", "_reconstruct"),
+    ("numpy._core.multiarray", "_reconstruct"),
+    ("numpy.core.multiarray", "scalar"),
+    ("numpy._core.multiarray", "scalar"),
 }
 
 
@@ -90,14 +111,21 @@ def load_published(path: str | Path) -> list[list[tuple[dict, dict]]]:
     try:
         data = _RestrictedUnpickler(io.BytesIO(path.read_bytes())).load()
     except FileNotFoundError:
-        raise InputFileError(path, "file not found",
-                             "give the path of config/pairings_original_<setting>.pkl") from None
+        raise InputFileError(
+            path, "file not found", "give the path of config/pairings_original_<setting>.pkl"
+        ) from None
     except (pickle.UnpicklingError, EOFError, AttributeError, ImportError) as exc:
-        raise InputFileError(path, f"not a readable pair list ({exc})",
-                             "use a pair-list pickle from the BeCoS repository or write_published_pickle") from None
+        raise InputFileError(
+            path,
+            f"not a readable pair list ({exc})",
+            "use a pair-list pickle from the BeCoS repository or write_published_pickle",
+        ) from None
     if not (isinstance(data, list) and len(data) == 3 and all(isinstance(s, list) for s in data)):
-        raise InputFileError(path, "expected a list of 3 lists [train, test, val]",
-                             "use a pair-list pickle from the BeCoS repository or write_published_pickle")
+        raise InputFileError(
+            path,
+            "expected a list of 3 lists [train, test, val]",
+            "use a pair-list pickle from the BeCoS repository or write_published_pickle",
+        )
     return data
 
 
@@ -123,8 +151,15 @@ def _pair_category(x: dict, y: dict) -> str:
     return JOINER
 
 
-def import_published(path: str | Path, *, setting: str | None = None, seed: int = 42, n_variants: int = 4,
-                     n_chunks: int = 64, datasets=None) -> PublishedImport:
+def import_published(
+    path: str | Path,
+    *,
+    setting: str | None = None,
+    seed: int = 42,
+    n_variants: int = 4,
+    n_chunks: int = 64,
+    datasets=None,
+) -> PublishedImport:
     """A published pair list as a manifest (schema of :mod:`becos.sampling` + extras, module doc).
 
     Args:
@@ -162,12 +197,26 @@ def import_published(path: str | Path, *, setting: str | None = None, seed: int 
                 chunk = stable_hash(pid) % n_chunks
                 category = _pair_category(x, y)
                 xv, yv = stable_hash(pseed, "x_variant") % n_variants, stable_hash(pseed, "y_variant") % n_variants
-            rec = {"pair_id": pid, "setting": setting, "split": split, "category": category, "copy": copy,
-                   "x_dataset": x["org_dataset"], "x_name": x["name"], "y_dataset": y["org_dataset"],
-                   "y_name": y["name"], "seed": pseed, "x_variant": xv, "y_variant": yv, "chunk": chunk,
-                   "published_index": index, "x_category": x["category"], "y_category": y["category"],
-                   "x_face_target": int(x["desired_n_face_remeshed"]),
-                   "y_face_target": int(y["desired_n_face_remeshed"])}
+            rec = {
+                "pair_id": pid,
+                "setting": setting,
+                "split": split,
+                "category": category,
+                "copy": copy,
+                "x_dataset": x["org_dataset"],
+                "x_name": x["name"],
+                "y_dataset": y["org_dataset"],
+                "y_name": y["name"],
+                "seed": pseed,
+                "x_variant": xv,
+                "y_variant": yv,
+                "chunk": chunk,
+                "published_index": index,
+                "x_category": x["category"],
+                "y_category": y["category"],
+                "x_face_target": int(x["desired_n_face_remeshed"]),
+                "y_face_target": int(y["desired_n_face_remeshed"]),
+            }
             for side, s in (("x", x), ("y", y)):
                 rot = np.asarray(s["random_rot"], dtype=np.float64).reshape(9)
                 rec.update({f"{side}_random_rot_{i}": float(v) for i, v in enumerate(rot)})
@@ -182,8 +231,10 @@ def import_published(path: str | Path, *, setting: str | None = None, seed: int 
     if df["pair_id"].duplicated().any():
         raise InputFileError(path, "two pairs share a pair_id", "check the file for duplicated becos metadata")
     df = sort_manifest(df)
-    report = {"n_pairs": {s: int((df["split"] == s).sum()) for s in PUBLISHED_SPLITS},
-              "dropped_missing_dataset": dict(dropped)}
+    report = {
+        "n_pairs": {s: int((df["split"] == s).sum()) for s in PUBLISHED_SPLITS},
+        "dropped_missing_dataset": dict(dropped),
+    }
     df.attrs["report"] = report
     return PublishedImport(df, cameras or None, report)
 
@@ -266,13 +317,19 @@ class _PortablePickler(pickle.Pickler):
         return NotImplemented
 
 
-def write_published_pickle(manifest: pd.DataFrame, path: str | Path, catalog: pd.DataFrame, *,
-                           template_rows=None,
-                           face_targets: Callable[[str, str, int], int] | None = None,
-                           random_rotations: Mapping[str, np.ndarray] | None = None,
-                           cameras: Mapping[str, np.ndarray] | None = None, regime: str = "high",
-                           pair_face_targets: Mapping[str, tuple[int, int]] | None = None,
-                           data_root: str | Path | None = None) -> None:
+def write_published_pickle(
+    manifest: pd.DataFrame,
+    path: str | Path,
+    catalog: pd.DataFrame,
+    *,
+    template_rows=None,
+    face_targets: Callable[[str, str, int], int] | None = None,
+    random_rotations: Mapping[str, np.ndarray] | None = None,
+    cameras: Mapping[str, np.ndarray] | None = None,
+    regime: str = "high",
+    pair_face_targets: Mapping[str, tuple[int, int]] | None = None,
+    data_root: str | Path | None = None,
+) -> None:
     """Write ``manifest`` as a pair list in the published pickle schema (atomic, protocol 4).
 
     Args:
@@ -313,14 +370,18 @@ def write_published_pickle(manifest: pd.DataFrame, path: str | Path, catalog: pd
         try:
             below = Path(entry["file"]).resolve().relative_to(root)
         except ValueError:
-            raise ConfigError(f"{entry['file']}: shape {entry['dataset']}/{entry['name']} lies outside the data "
-                              f"root {root}. Fix: pass the data_dir the catalog was built from") from None
+            raise ConfigError(
+                f"{entry['file']}: shape {entry['dataset']}/{entry['name']} lies outside the data "
+                f"root {root}. Fix: pass the data_dir the catalog was built from"
+            ) from None
         return f"data/{below.as_posix()}"
 
     def lookup(table: Mapping | None, pid: str, what: str):
         if pid not in table:
-            raise ConfigError(f"pair {pid}: no {what} given for it (the store lacks the pair?). Fix: write the "
-                              f"pair list from the store built from this manifest")
+            raise ConfigError(
+                f"pair {pid}: no {what} given for it (the store lacks the pair?). Fix: write the "
+                f"pair list from the store built from this manifest"
+            )
         return table[pid]
 
     def shape_dict(side: str, row: dict, rot: np.ndarray, cam: np.ndarray | None, faces: int | None) -> dict:
@@ -332,17 +393,27 @@ def write_published_pickle(manifest: pd.DataFrame, path: str | Path, catalog: pd
             rot_cache[key] = rotation_to_xyz_degrees(frame_rotation(entry))
         trow = _template_row(template_rows, str(entry["template_key"]))
         d = {
-            "name": str(row[f"{side}_name"]), "org_dataset": str(row[f"{side}_dataset"]),
-            "category": str(entry["category"]), "file_path": file_path(entry), "scale": float(entry["scale"]),
+            "name": str(row[f"{side}_name"]),
+            "org_dataset": str(row[f"{side}_dataset"]),
+            "category": str(entry["category"]),
+            "file_path": file_path(entry),
+            "scale": float(entry["scale"]),
             "rot": list(rot_cache[key]),
             "partial_full_template": _field(trow, "partial_full_template") if trow is not None else UNDEFINED,
             "partial_full_dataset": _field(trow, "partial_full_dataset") if trow is not None else UNDEFINED,
-            "desired_n_face_remeshed": int(faces) if faces is not None else int(face_targets(
-                row[f"{side}_dataset"], row[f"{side}_name"], int(row[f"{side}_variant"]))),
+            "desired_n_face_remeshed": int(faces)
+            if faces is not None
+            else int(face_targets(row[f"{side}_dataset"], row[f"{side}_name"], int(row[f"{side}_variant"]))),
             "random_rot": np.array(rot, dtype=np.float64),
-            "becos": {"pair_id": str(row["pair_id"]), "setting": str(row["setting"]),
-                      "category": str(row["category"]), "copy": int(row["copy"]), "seed": int(row["seed"]),
-                      "variant": int(row[f"{side}_variant"]), "chunk": int(row["chunk"])},
+            "becos": {
+                "pair_id": str(row["pair_id"]),
+                "setting": str(row["setting"]),
+                "category": str(row["category"]),
+                "copy": int(row["copy"]),
+                "seed": int(row["seed"]),
+                "variant": int(row[f"{side}_variant"]),
+                "chunk": int(row["chunk"]),
+            },
         }
         if cam is not None:
             d["cam_pos"] = np.array(cam, dtype=np.float64)
@@ -353,15 +424,25 @@ def write_published_pickle(manifest: pd.DataFrame, path: str | Path, catalog: pd
         if row["split"] not in lists:
             raise ConfigError(f"pair {row['pair_id']}: split {row['split']!r} has no place in a pair list")
         pid = row["pair_id"]
-        rot = (np.asarray(lookup(random_rotations, pid, "random rotations")) if random_rotations is not None
-               else _default_random_rotations(int(row["seed"])))
+        rot = (
+            np.asarray(lookup(random_rotations, pid, "random rotations"))
+            if random_rotations is not None
+            else _default_random_rotations(int(row["seed"]))
+        )
         cam = None
         if partial:
-            cam = (np.asarray(lookup(cameras, pid, "cameras")) if cameras is not None
-                   else _default_cameras(int(row["seed"]), regime))
+            cam = (
+                np.asarray(lookup(cameras, pid, "cameras"))
+                if cameras is not None
+                else _default_cameras(int(row["seed"]), regime)
+            )
         faces = (None, None) if pair_face_targets is None else lookup(pair_face_targets, pid, "face targets")
-        lists[row["split"]].append((shape_dict("x", row, rot[0], None if cam is None else cam[0], faces[0]),
-                                    shape_dict("y", row, rot[1], None if cam is None else cam[1], faces[1])))
+        lists[row["split"]].append(
+            (
+                shape_dict("x", row, rot[0], None if cam is None else cam[0], faces[0]),
+                shape_dict("y", row, rot[1], None if cam is None else cam[1], faces[1]),
+            )
+        )
     buf = io.BytesIO()
     _PortablePickler(buf, protocol=4).dump([lists[s] for s in PUBLISHED_SPLITS])
     write_bytes(path, buf.getvalue())

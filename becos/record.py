@@ -60,21 +60,42 @@ class Field:
 
 
 SIDE_FIELDS: dict[str, Field] = {
-    "vertices": Field("float64", (3,), "vertex", "(V_s, 3) in the final frame (after the random rotation), at "
-                                                 "dataset scale unless ``area_normalised``"),
+    "vertices": Field(
+        "float64",
+        (3,),
+        "vertex",
+        "(V_s, 3) in the final frame (after the random rotation), at dataset scale unless ``area_normalised``",
+    ),
     "faces": Field("int64", (3,), "face", "(F_s, 3)", stored="int32"),
-    "full_vertices": Field("float64", (3,), "full_vertex",
-                           "(V_full, 3) the full (remeshed) shape in the same final frame, for errors measured on "
-                           "the full shape; (0, 3) when the shape is full (then it is ``s_vertices``)"),
-    "full_faces": Field("int64", (3,), "full_face", "(F_full, 3) its faces; (0, 3) when the shape is full",
-                        stored="int32"),
-    "partial_to_full": Field("int64", (), "vertex", "(V_s,) vertex of the full (remeshed) shape; arange when full",
-                             stored="int32", identity=True),
-    "full_to_partial": Field("int64", (), "full_to_partial",
-                             "(V_full,) -1 where the full vertex was not kept (V_full rows also for a full shape)",
-                             stored="int32", identity=True),
-    "full_face_ids": Field("int64", (), "face", "(F_s,) face of the full (remeshed) shape of each face",
-                           stored="int32", identity=True),
+    "full_vertices": Field(
+        "float64",
+        (3,),
+        "full_vertex",
+        "(V_full, 3) the full (remeshed) shape in the same final frame, for errors measured on "
+        "the full shape; (0, 3) when the shape is full (then it is ``s_vertices``)",
+    ),
+    "full_faces": Field(
+        "int64", (3,), "full_face", "(F_full, 3) its faces; (0, 3) when the shape is full", stored="int32"
+    ),
+    "partial_to_full": Field(
+        "int64",
+        (),
+        "vertex",
+        "(V_s,) vertex of the full (remeshed) shape; arange when full",
+        stored="int32",
+        identity=True,
+    ),
+    "full_to_partial": Field(
+        "int64",
+        (),
+        "full_to_partial",
+        "(V_full,) -1 where the full vertex was not kept (V_full rows also for a full shape)",
+        stored="int32",
+        identity=True,
+    ),
+    "full_face_ids": Field(
+        "int64", (), "face", "(F_s,) face of the full (remeshed) shape of each face", stored="int32", identity=True
+    ),
     "overlap_mask": Field("bool", (), "vertex", "(V_s,) the vertex's ground-truth point lies on the other shape"),
     "annotation": Field("int8", (), "vertex", "(V_s,) reserved per-vertex label (left/right), -1 = none/unset"),
     "full_area": Field("float64", (), None, "area of the full remeshed shape at dataset scale"),
@@ -85,8 +106,12 @@ SIDE_FIELDS: dict[str, Field] = {
     "align_rotation": Field("float64", (3, 3), None, "rigid alignment onto X (identity for X), row vectors"),
     "align_translation": Field("float64", (3,), None, "added after the alignment rotation"),
     "random_rotation": Field("float64", (3, 3), None, "applied last (row vectors)"),
-    "camera": Field("float64", (3, 3), None, "rows: position, look-at target, up, in the shape's common frame "
-                                             "(before alignment); NaN for a full shape"),
+    "camera": Field(
+        "float64",
+        (3, 3),
+        None,
+        "rows: position, look-at target, up, in the shape's common frame (before alignment); NaN for a full shape",
+    ),
     "remesh_variant": Field("int64", (), None, "remesh variant index (-1 = not remeshed)"),
     "overlap": Field("float64", (), None, "share of V_s with ``s_overlap_mask`` (1.0 for F2F)"),
 }
@@ -123,10 +148,14 @@ IDENTITY_MEMBER = "__identity__"
 
 
 def _schema_doc() -> str:
-    rows = [(f"s_{k}", f.dtype + ("" if f.stored is None else f" ({f.stored} on disk)"), f.meaning)
-            for k, f in SIDE_FIELDS.items()]
-    rows += [(f"corr_01{k}", f.dtype + ("" if f.stored is None else f" ({f.stored} on disk)"), f.meaning)
-             for k, f in PAIR_FIELDS.items()]
+    rows = [
+        (f"s_{k}", f.dtype + ("" if f.stored is None else f" ({f.stored} on disk)"), f.meaning)
+        for k, f in SIDE_FIELDS.items()
+    ]
+    rows += [
+        (f"corr_01{k}", f.dtype + ("" if f.stored is None else f" ({f.stored} on disk)"), f.meaning)
+        for k, f in PAIR_FIELDS.items()
+    ]
     w = [max(len(r[i]) for r in rows) for i in range(2)]
     rule = f"{'=' * w[0]}  {'=' * w[1]}  {'=' * 60}"
     lines = [rule, f"{'key':<{w[0]}}  {'dtype':<{w[1]}}  meaning", rule]
@@ -144,8 +173,15 @@ def encode_arrays(arrays: dict[str, np.ndarray]) -> tuple[dict[str, np.ndarray],
     out, identity = {}, {}
     for key, value in arrays.items():
         f = RECORD_SCHEMA.get(key)
-        if f is not None and f.identity and value.ndim == 1 and value.dtype == np.dtype(f.dtype) and len(value) \
-                and value[0] == 0 and np.array_equal(value, np.arange(len(value))):
+        if (
+            f is not None
+            and f.identity
+            and value.ndim == 1
+            and value.dtype == np.dtype(f.dtype)
+            and len(value)
+            and value[0] == 0
+            and np.array_equal(value, np.arange(len(value)))
+        ):
             identity[key] = len(value)
             continue
         if f is not None and f.stored is not None and value.dtype == np.dtype(f.dtype) and value.size:
@@ -199,11 +235,16 @@ class PairRecord:
         ``__identity__`` lists the maps left out), read back exactly by :meth:`load`."""
         self.meta["content_digest"] = content_digest(self.arrays, self.meta)
         stored, identity = encode_arrays(self.arrays)
-        save_npz(path, compressed=True, __meta__=np.array(json.dumps(self.meta, sort_keys=True)),
-                 **{IDENTITY_MEMBER: np.array(json.dumps(identity, sort_keys=True))}, **stored)
+        save_npz(
+            path,
+            compressed=True,
+            __meta__=np.array(json.dumps(self.meta, sort_keys=True)),
+            **{IDENTITY_MEMBER: np.array(json.dumps(identity, sort_keys=True))},
+            **stored,
+        )
 
     @classmethod
-    def load(cls, path: str | Path) -> "PairRecord":
+    def load(cls, path: str | Path) -> PairRecord:
         with np.load(path, allow_pickle=False) as data:
             meta = json.loads(str(data["__meta__"]))
             identity = json.loads(str(data[IDENTITY_MEMBER])) if IDENTITY_MEMBER in data.files else {}

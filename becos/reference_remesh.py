@@ -111,27 +111,39 @@ def reference_remesh(mesh: TriMesh, target_faces: int, *, source: str | Path | N
     repeated = int(repeated_index_faces(mesh.faces).sum())
     duplicated = int((duplicate_faces(mesh.faces, mesh.n_vertices) >= 0).sum()) if not repeated else 0
     if repeated or duplicated:
-        what = f"{repeated} faces name a vertex twice" if repeated else f"{duplicated} faces repeat another face's vertices"
-        raise InputFileError(where, f"{what}; the reference remesher (fast-simplification) cannot decimate such a mesh",
-                             "remove those faces from the file, or use remesher: becos (it repairs a copy)")
+        what = (
+            f"{repeated} faces name a vertex twice"
+            if repeated
+            else f"{duplicated} faces repeat another face's vertices"
+        )
+        raise InputFileError(
+            where,
+            f"{what}; the reference remesher (fast-simplification) cannot decimate such a mesh",
+            "remove those faces from the file, or use remesher: becos (it repairs a copy)",
+        )
     if 4 * mesh.n_faces <= int(target_faces):
-        raise InputFileError(where, f"the face target {int(target_faces)} is not below the {4 * mesh.n_faces} faces of "
-                             "the subdivided mesh, so the reference remesh is undefined",
-                             "use a smaller face target (remesh_variants / the pair list), or remesher: becos")
+        raise InputFileError(
+            where,
+            f"the face target {int(target_faces)} is not below the {4 * mesh.n_faces} faces of "
+            "the subdivided mesh, so the reference remesh is undefined",
+            "use a smaller face target (remesh_variants / the pair list), or remesher: becos",
+        )
     try:
         v1 = mesh.vertices * COORDINATE_FACTOR
         f1, _ = igl.bfs_orient(np.ascontiguousarray(mesh.faces, dtype=np.int64))
         s, f2 = igl.loop_matrix(f1, len(v1))
         v2 = s @ v1
-        v3, f3, collapses = fast_simplification.simplify(v2, f2, target_count=int(target_faces),
-                                                         return_collapses=True)
+        v3, f3, collapses = fast_simplification.simplify(v2, f2, target_count=int(target_faces), return_collapses=True)
         _, _, v2_v3 = fast_simplification.replay_simplification(v2.astype(np.float32), f2, collapses)
     except Exception as exc:  # the C++ extensions raise RuntimeError/ValueError on broken input
-        raise InputFileError(where, f"the reference remesher (libigl + fast-simplification) failed: "
-                             f"{type(exc).__name__}: {exc}",
-                             "repair the mesh (single manifold surface) or use remesher: becos") from exc
-    return ReferenceRemesh(TriMesh(v3 / COORDINATE_FACTOR, f3), s, v2,
-                           np.asarray(v2_v3, dtype=np.int64), int(target_faces))
+        raise InputFileError(
+            where,
+            f"the reference remesher (libigl + fast-simplification) failed: {type(exc).__name__}: {exc}",
+            "repair the mesh (single manifold surface) or use remesher: becos",
+        ) from exc
+    return ReferenceRemesh(
+        TriMesh(v3 / COORDINATE_FACTOR, f3), s, v2, np.asarray(v2_v3, dtype=np.int64), int(target_faces)
+    )
 
 
 def exact_maps(original: TriMesh, remeshed: TriMesh):
@@ -160,12 +172,12 @@ def exact_maps(original: TriMesh, remeshed: TriMesh):
 def to_common_frame(vertices: np.ndarray, scale: float, centre: np.ndarray, frame_rotation: np.ndarray) -> np.ndarray:
     """(N, 3) file-unit vertices -> becos's common frame: ``(V × scale − centre) @ frame_rotation``
     (:func:`becos.datasets.prepare_shape`; ``centre`` is the ORIGINAL mesh's scaled vertex mean)."""
-    return (np.asarray(vertices, dtype=np.float64) * float(scale) - np.asarray(centre, dtype=np.float64)) \
-        @ np.asarray(frame_rotation, dtype=np.float64)
+    return (np.asarray(vertices, dtype=np.float64) * float(scale) - np.asarray(centre, dtype=np.float64)) @ np.asarray(
+        frame_rotation, dtype=np.float64
+    )
 
 
-def remesh_like_reference(file_mesh: TriMesh, prepared, target_faces: int, *,
-                          source: str | Path | None = None):
+def remesh_like_reference(file_mesh: TriMesh, prepared, target_faces: int, *, source: str | Path | None = None):
     """The reference's remesh of a shape as a :class:`becos.remesh.Remeshed` in the common frame.
 
     Args:
@@ -184,18 +196,24 @@ def remesh_like_reference(file_mesh: TriMesh, prepared, target_faces: int, *,
     t0 = time.perf_counter()
     ref = reference_remesh(file_mesh, target_faces, source=source)
     t1 = time.perf_counter()
-    mesh = TriMesh(to_common_frame(ref.mesh.vertices, entry.scale, prepared.centre, entry.frame_rotation),
-                   ref.mesh.faces)
+    mesh = TriMesh(
+        to_common_frame(ref.mesh.vertices, entry.scale, prepared.centre, entry.frame_rotation), ref.mesh.faces
+    )
     to_original, from_original = exact_maps(prepared.mesh, mesh)
     seconds = time.perf_counter() - t0
-    stats = {"seconds_remesh": t1 - t0, "seconds_maps": seconds - (t1 - t0), "seconds": seconds,
-             "to_original_distance_mean": float(to_original.distance.mean()),
-             "to_original_distance_max": float(to_original.distance.max())}
+    stats = {
+        "seconds_remesh": t1 - t0,
+        "seconds_maps": seconds - (t1 - t0),
+        "seconds": seconds,
+        "to_original_distance_mean": float(to_original.distance.mean()),
+        "to_original_distance_max": float(to_original.distance.max()),
+    }
     return Remeshed(mesh, to_original, from_original, None, int(target_faces), seconds), stats
 
 
 # ----------------------------------------------------------------------------------------------
 # the reference's frames (facts §7.2, §7.4, §7.5): to compare with its output, or to cast its views
+
 
 def open3d_rotation(rot_deg_xyz) -> np.ndarray:
     """(3, 3) Open3D ``get_rotation_matrix_from_xyz(radians(rot))`` = Rx @ Ry @ Rz as the reference
@@ -225,9 +243,13 @@ def sqrt_area(vertices: np.ndarray, faces: np.ndarray) -> float:
     return float(np.sqrt(surface_area(TriMesh(vertices, faces))))
 
 
-def reference_output(posed: np.ndarray, area: float, random_rotation: np.ndarray,
-                     align_rotation: np.ndarray | None = None,
-                     align_translation: np.ndarray | None = None) -> np.ndarray:
+def reference_output(
+    posed: np.ndarray,
+    area: float,
+    random_rotation: np.ndarray,
+    align_rotation: np.ndarray | None = None,
+    align_translation: np.ndarray | None = None,
+) -> np.ndarray:
     """(N, 3) the vertices the reference saves for a full shape (``0_<x>.off`` / ``1_<y>.off``).
 
     ``posed``: :func:`reference_pose`; ``area``: its sqrt-area (info ``surface_area``); Y alone is
@@ -241,9 +263,12 @@ def reference_output(posed: np.ndarray, area: float, random_rotation: np.ndarray
     return np.dot(v, np.asarray(random_rotation, dtype=np.float64))
 
 
-def undo_reference_output(saved: np.ndarray, random_rotation: np.ndarray,
-                          align_rotation: np.ndarray | None = None,
-                          align_translation: np.ndarray | None = None) -> np.ndarray:
+def undo_reference_output(
+    saved: np.ndarray,
+    random_rotation: np.ndarray,
+    align_rotation: np.ndarray | None = None,
+    align_translation: np.ndarray | None = None,
+) -> np.ndarray:
     """(N, 3) the inverse of :func:`reference_output`: the saved vertices back in :func:`reference_pose`'s
     frame (rotations are orthogonal: inverted by their transpose)."""
     v = np.asarray(saved, dtype=np.float64) @ np.asarray(random_rotation, dtype=np.float64).T

@@ -49,10 +49,17 @@ SHRINK = 0.8
 def triangle_ids_path(root: str | Path, setting: str, name: str, cam_pos) -> Path:
     """The shipped file of ``name``'s view from ``cam_pos`` (``root``: the annotation folder)."""
     c = np.asarray(cam_pos, dtype=np.float64).reshape(3)
-    return Path(root) / "precomputed_triangle_ids" / setting / f"{name.replace('/', '_')}_cam_{c[0]:.3f}_{c[1]:.3f}_{c[2]:.3f}.npy"
+    return (
+        Path(root)
+        / "precomputed_triangle_ids"
+        / setting
+        / f"{name.replace('/', '_')}_cam_{c[0]:.3f}_{c[1]:.3f}_{c[2]:.3f}.npy"
+    )
 
 
-def pair_view_files(root: str | Path, setting: str, x_name: str, y_name: str, x_cam_pos, try_index: int) -> tuple[Path, Path]:
+def pair_view_files(
+    root: str | Path, setting: str, x_name: str, y_name: str, x_cam_pos, try_index: int
+) -> tuple[Path, Path]:
     """The files the reference reads for try ``try_index`` of a P2P pair: both named with X's camera."""
     cam = np.asarray(x_cam_pos, dtype=np.float64).reshape(-1, 3)[try_index]
     return triangle_ids_path(root, setting, x_name, cam), triangle_ids_path(root, setting, y_name, cam)
@@ -69,15 +76,24 @@ def read_triangle_ids(path: str | Path, n_faces: int) -> np.ndarray:
     try:
         ids = np.load(path, allow_pickle=False)
     except Exception as exc:
-        raise InputFileError(path, f"could not be read as .npy ({type(exc).__name__}: {exc})",
-                             "restore the file from the BeCoS annotation folder") from exc
+        raise InputFileError(
+            path,
+            f"could not be read as .npy ({type(exc).__name__}: {exc})",
+            "restore the file from the BeCoS annotation folder",
+        ) from exc
     if ids.ndim != 1 or ids.dtype.kind not in "iu":
-        raise InputFileError(path, f"is not a 1-D array of triangle ids (shape {ids.shape}, dtype {ids.dtype})",
-                             "restore the file from the BeCoS annotation folder")
+        raise InputFileError(
+            path,
+            f"is not a 1-D array of triangle ids (shape {ids.shape}, dtype {ids.dtype})",
+            "restore the file from the BeCoS annotation folder",
+        )
     ids = ids.astype(np.int64)
     if len(ids) and (ids.min() < 0 or ids.max() >= n_faces):
-        raise InputFileError(path, f"names triangles up to {ids.max()} but the remeshed shape has {n_faces} faces",
-                             "views from the published lists need remesher: reference and the published face targets")
+        raise InputFileError(
+            path,
+            f"names triangles up to {ids.max()} but the remeshed shape has {n_faces} faces",
+            "views from the published lists need remesher: reference and the published face targets",
+        )
     return np.unique(ids)
 
 
@@ -169,7 +185,7 @@ def full_faces_covering(faces: np.ndarray, n_vertices: int, triangles: np.ndarra
     if len(loose) == 0:
         return kept, 0
     pairs = face_adjacency(loose)
-    graph = np.zeros((len(loose), len(loose)), dtype=bool)   # few triangles: a dense graph is fine
+    graph = np.zeros((len(loose), len(loose)), dtype=bool)  # few triangles: a dense graph is fine
     graph[pairs[:, 0], pairs[:, 1]] = True
     n_groups, group = connected_components(graph, directed=False)
     vertex_group = np.full(n_vertices, -1, dtype=np.int64)
@@ -192,6 +208,7 @@ def full_triangles(partial_faces: np.ndarray, partial_to_full: np.ndarray) -> se
 
 # ----------------------------------------------------------------------------------------------
 # a P2P pair from the published cameras: the reference's casting frame and its choice of try
+
 
 def reference_alignment(x_posed: np.ndarray, y_posed: np.ndarray, p2p_xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``(R (3, 3), t (3,))`` as the reference's ``rigid_transform_3d(x, y[p2p])`` computes them (Kabsch,
@@ -271,8 +288,9 @@ class PublishedViews:
     Attribute ``sources``: ``{(try, side): "file" | "cast"}`` for the tries asked for.
     """
 
-    def __init__(self, root, x_name: str, y_name: str, cameras: np.ndarray, frames, faces,
-                 setting: str = "partial_partial"):
+    def __init__(
+        self, root, x_name: str, y_name: str, cameras: np.ndarray, frames, faces, setting: str = "partial_partial"
+    ):
         self.root, self.names, self.setting = Path(root), (x_name, y_name), setting
         self.cameras = np.asarray(cameras, dtype=np.float64).reshape(2, -1, 3)
         self.frames, self.faces = frames, faces
@@ -330,8 +348,16 @@ class PublishedP2P:
         return self.exact_try != self.try_index
 
 
-def published_p2p(x: TriMesh, y: TriMesh, gt_xy, gt_yx, views, n_tries: int = 10,
-                  min_overlap: float = MIN_OVERLAP, max_overlap: float = MAX_OVERLAP) -> PublishedP2P:
+def published_p2p(
+    x: TriMesh,
+    y: TriMesh,
+    gt_xy,
+    gt_yx,
+    views,
+    n_tries: int = 10,
+    min_overlap: float = MIN_OVERLAP,
+    max_overlap: float = MAX_OVERLAP,
+) -> PublishedP2P:
     """Cast the tries of a published P2P pair in order and keep the one the reference keeps.
 
     ``views``: ``k -> (kept_x, kept_y)`` (e.g. :class:`PublishedViews`); ``gt_xy`` / ``gt_yx``: becos's
@@ -374,8 +400,16 @@ def published_p2p(x: TriMesh, y: TriMesh, gt_xy, gt_yx, views, n_tries: int = 10
     ok = np.flatnonzero(exact_distance == 0)
     exact_try = int(ok[0]) if len(ok) else int(exact_distance.argmin())
     kept_x, kept_y = tries[geometry_try]
-    return PublishedP2P(geometry_try, best_camera, accepted, kept_x, kept_y, np.asarray(ref_overlaps),
-                        np.asarray(exact_overlaps), exact_try)
+    return PublishedP2P(
+        geometry_try,
+        best_camera,
+        accepted,
+        kept_x,
+        kept_y,
+        np.asarray(ref_overlaps),
+        np.asarray(exact_overlaps),
+        exact_try,
+    )
 
 
 @dataclass(frozen=True, eq=False)
@@ -388,8 +422,19 @@ class PublishedScan:
     sources: dict
 
 
-def published_scan(x: TriMesh, y: TriMesh, gt_xy, gt_yx, root, x_name: str, y_name: str, cameras,
-                   n_tries: int = 10, min_overlap: float = MIN_OVERLAP, max_overlap: float = MAX_OVERLAP) -> PublishedScan:
+def published_scan(
+    x: TriMesh,
+    y: TriMesh,
+    gt_xy,
+    gt_yx,
+    root,
+    x_name: str,
+    y_name: str,
+    cameras,
+    n_tries: int = 10,
+    min_overlap: float = MIN_OVERLAP,
+    max_overlap: float = MAX_OVERLAP,
+) -> PublishedScan:
     """A published P2P pair's views, end to end: :func:`casting_frames`, :class:`PublishedViews`,
     :func:`published_p2p`; the recorded cameras are the reference's (the camera try's, facts §7.5) in
     the meshes' input frames. ``x``, ``y``: the reference remeshes in becos's common frame."""
@@ -397,5 +442,9 @@ def published_scan(x: TriMesh, y: TriMesh, gt_xy, gt_yx, root, x_name: str, y_na
     views = PublishedViews(root, x_name, y_name, cameras, (frames.x_vertices, frames.y_vertices), (x.faces, y.faces))
     choice = published_p2p(x, y, gt_xy, gt_yx, views, n_tries, min_overlap, max_overlap)
     cams = views.cameras
-    return PublishedScan(choice, frames.camera(0, cams[0][choice.camera_try]), frames.camera(1, cams[1][choice.camera_try]),
-                         {f"{k}_{'xy'[side]}": v for (k, side), v in sorted(views.sources.items())})
+    return PublishedScan(
+        choice,
+        frames.camera(0, cams[0][choice.camera_try]),
+        frames.camera(1, cams[1][choice.camera_try]),
+        {f"{k}_{'xy'[side]}": v for (k, side), v in sorted(views.sources.items())},
+    )

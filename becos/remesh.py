@@ -79,9 +79,10 @@ from pathlib import Path
 
 import numpy as np
 
+from becos.atomic import save_npz as atomic_save_npz
+from becos.atomic import write_bytes
 from becos.errors import InputFileError
 from becos.geometry import SurfaceLocator, face_areas, points_on_surface
-from becos.atomic import save_npz as atomic_save_npz, write_bytes
 from becos.mesh import TriMesh, face_components, misoriented_edge_count, surface_for_remeshing, undirected_edges
 from becos.seeding import rng_for, stable_hash
 from becos.surface_map import SurfaceMap
@@ -102,8 +103,14 @@ VERTEX_TARGET_RANGE = (9000, 10000)
 
 FILE_FORMAT_VERSION = 1
 
-_DECIMATION = dict(preservetopology=True, optimalplacement=True, preserveboundary=False,
-                   planarquadric=False, qualitythr=0.3, autoclean=True)
+_DECIMATION = dict(
+    preservetopology=True,
+    optimalplacement=True,
+    preserveboundary=False,
+    planarquadric=False,
+    qualitythr=0.3,
+    autoclean=True,
+)
 
 
 @dataclass(frozen=True)
@@ -137,6 +144,7 @@ of the remeshed vertex nearest to it along the original surface (``from_original
 
 # ----------------------------------------------------------------------------------------------
 # small mesh utilities (numpy)
+
 
 def boundary_vertices(faces: np.ndarray, n_vertices: int) -> np.ndarray:
     """(V,) bool: the vertex lies on an edge used by exactly one face."""
@@ -189,8 +197,7 @@ def _largest_component(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndar
     return vertices, faces, dropped
 
 
-def _jitter_on_surface(vertices: np.ndarray, faces: np.ndarray, amount: float,
-                       rng: np.random.Generator) -> np.ndarray:
+def _jitter_on_surface(vertices: np.ndarray, faces: np.ndarray, amount: float, rng: np.random.Generator) -> np.ndarray:
     """Move each vertex to a random point of the surface near it.
 
     Interior vertex p of a randomly chosen incident face (p, q, r) goes to p + a (q - p) + b (r - p)
@@ -202,7 +209,7 @@ def _jitter_on_surface(vertices: np.ndarray, faces: np.ndarray, amount: float,
     flat = faces.ravel()
     slot_order = np.argsort(rng.random(len(flat)), kind="stable")
     incident_slot = np.full(n, -1, dtype=np.int64)
-    incident_slot[flat[slot_order]] = slot_order           # last write wins: a random incident slot
+    incident_slot[flat[slot_order]] = slot_order  # last write wins: a random incident slot
     edges, counts = undirected_edges(faces)
     boundary_edges = edges[counts == 1]
     on_boundary = np.zeros(n, dtype=bool)
@@ -218,10 +225,10 @@ def _jitter_on_surface(vertices: np.ndarray, faces: np.ndarray, amount: float,
     p = vertices[idx]
     out[idx] = p + ab[:, :1] * (vertices[q] - p) + ab[:, 1:] * (vertices[r] - p)
     if len(boundary_edges):
-        ends = np.concatenate([boundary_edges, boundary_edges[:, ::-1]])     # (p, q) both ways
+        ends = np.concatenate([boundary_edges, boundary_edges[:, ::-1]])  # (p, q) both ways
         ends = ends[np.argsort(rng.random(len(ends)), kind="stable")]
         other = np.full(n, -1, dtype=np.int64)
-        other[ends[:, 0]] = ends[:, 1]                      # last write wins: a random boundary edge
+        other[ends[:, 0]] = ends[:, 1]  # last write wins: a random boundary edge
         b_idx = np.flatnonzero(on_boundary)
         a = rng.random(n)[b_idx, None] * (amount / 2.0)
         out[b_idx] = vertices[b_idx] + a * (vertices[other[b_idx]] - vertices[b_idx])
@@ -245,14 +252,17 @@ def _original_vertex_normals(mesh: TriMesh, face_normals: np.ndarray | None = No
         face_normals = oriented_face_normals(mesh)
     # bincount adds in index order, as np.add.at does (the same sums), ~10x faster
     index = mesh.faces.ravel()
-    normals = np.stack([np.bincount(index, weights=np.repeat(face_normals[:, k], 3), minlength=mesh.n_vertices)
-                        for k in range(3)], axis=1)
+    normals = np.stack(
+        [np.bincount(index, weights=np.repeat(face_normals[:, k], 3), minlength=mesh.n_vertices) for k in range(3)],
+        axis=1,
+    )
     length = np.linalg.norm(normals, axis=1, keepdims=True)
     return np.divide(normals, length, out=np.zeros_like(normals), where=length > 0)
 
 
-def _from_original(surface: TriMesh, remeshed: TriMesh, face: np.ndarray, weights: np.ndarray,
-                   face_normals: np.ndarray | None = None):
+def _from_original(
+    surface: TriMesh, remeshed: TriMesh, face: np.ndarray, weights: np.ndarray, face_normals: np.ndarray | None = None
+):
     """Each vertex of ``surface`` (the original's repaired copy) -> its point on ``remeshed``.
 
     ``face``, ``weights``: the remeshed vertices' points on ``surface`` (rows of ``surface.faces``).
@@ -274,22 +284,25 @@ def _from_original(surface: TriMesh, remeshed: TriMesh, face: np.ndarray, weight
         vertex_adjacency,
     )
 
-    anchor = surface.faces[face, np.asarray(weights).argmax(axis=1)]            # (V_r,) surface vertex
-    owner = nearest_along_surface(surface, anchor)                              # (V_s,) remeshed vertex
+    anchor = surface.faces[face, np.asarray(weights).argmax(axis=1)]  # (V_r,) surface vertex
+    owner = nearest_along_surface(surface, anchor)  # (V_s,) remeshed vertex
     reached = owner >= 0
     rows, cols = vertex_adjacency(surface.faces, surface.n_vertices).nonzero()
     keep = reached[cols]
-    owners = sp.csr_matrix((np.ones(int(keep.sum()), dtype=np.float32), (rows[keep], owner[cols[keep]])),
-                           shape=(surface.n_vertices, remeshed.n_vertices))  # original vertex -> owners near it
+    owners = sp.csr_matrix(
+        (np.ones(int(keep.sum()), dtype=np.float32), (rows[keep], owner[cols[keep]])),
+        shape=(surface.n_vertices, remeshed.n_vertices),
+    )  # original vertex -> owners near it
     rings = VertexRings(remeshed.faces, remeshed.n_vertices, FROM_ORIGINAL_RINGS)
-    near = SparsePairs(owners @ rings.matrix)                                   # original vertex -> remeshed vertices
+    near = SparsePairs(owners @ rings.matrix)  # original vertex -> remeshed vertices
 
     def accept(rows, cand):
         ok = near.near(rows[:, None, None], remeshed.faces[cand]).any(axis=2)
         return ok | (~reached[rows])[:, None]
 
-    return SurfaceLocator(remeshed).closest_near(surface.vertices, accept,
-                                                 _original_vertex_normals(surface, face_normals))
+    return SurfaceLocator(remeshed).closest_near(
+        surface.vertices, accept, _original_vertex_normals(surface, face_normals)
+    )
 
 
 SNAP_ROUNDS = 4
@@ -304,8 +317,9 @@ def _cells(surface: TriMesh, anchor: np.ndarray) -> np.ndarray:
     return nearest_along_surface(surface, anchor)
 
 
-def _off_part(surface: TriMesh, surface_edges: np.ndarray, remesh_edges: np.ndarray, n: int,
-              anchor: np.ndarray) -> np.ndarray:
+def _off_part(
+    surface: TriMesh, surface_edges: np.ndarray, remesh_edges: np.ndarray, n: int, anchor: np.ndarray
+) -> np.ndarray:
     """(n,) bool: the remeshed vertex sits on another part of ``surface`` than most of its neighbours.
 
     ``anchor`` (n,): each remeshed vertex's snapped point as a surface vertex (its largest weight).
@@ -316,13 +330,17 @@ def _off_part(surface: TriMesh, surface_edges: np.ndarray, remesh_edges: np.ndar
     import scipy.sparse as sp
 
     owner = _cells(surface, anchor)
-    cell = owner[anchor]                                   # (n,) the cell a remeshed vertex is in
+    cell = owner[anchor]  # (n,) the cell a remeshed vertex is in
     a, b = owner[surface_edges[:, 0]], owner[surface_edges[:, 1]]
-    reached = (a >= 0) & (b >= 0)                          # all, on a connected surface
+    reached = (a >= 0) & (b >= 0)  # all, on a connected surface
     a, b = a[reached], b[reached]
-    hop = sp.coo_matrix((np.ones(2 * len(a) + n, dtype=np.float32),
-                         (np.concatenate([a, b, np.arange(n)]), np.concatenate([b, a, np.arange(n)]))),
-                        shape=(n, n)).tocsr()
+    hop = sp.coo_matrix(
+        (
+            np.ones(2 * len(a) + n, dtype=np.float32),
+            (np.concatenate([a, b, np.arange(n)]), np.concatenate([b, a, np.arange(n)])),
+        ),
+        shape=(n, n),
+    ).tocsr()
     hop.data[:] = 1.0
     two = (hop @ hop).tocsr()
     ok = np.asarray(two[cell[remesh_edges[:, 0]], cell[remesh_edges[:, 1]]]).ravel() > 0
@@ -331,8 +349,15 @@ def _off_part(surface: TriMesh, surface_edges: np.ndarray, remesh_edges: np.ndar
     return 2 * consistent < degree
 
 
-def _snap_onto_own_part(surface: TriMesh, locator: SurfaceLocator, v: np.ndarray, f: np.ndarray,
-                        face: np.ndarray, weights: np.ndarray, dist: np.ndarray):
+def _snap_onto_own_part(
+    surface: TriMesh,
+    locator: SurfaceLocator,
+    v: np.ndarray,
+    f: np.ndarray,
+    face: np.ndarray,
+    weights: np.ndarray,
+    dist: np.ndarray,
+):
     """Re-snap the remeshed vertices whose snapped point lies on another part than their neighbours'.
 
     Where two parts of the original touch or pass through each other at an angle (TOSCA victoria: a
@@ -409,19 +434,26 @@ def _content_key(mesh: TriMesh) -> str:
 # ----------------------------------------------------------------------------------------------
 # pymeshlab stages
 
+
 def _meshset(vertices: np.ndarray, faces: np.ndarray):
     import pymeshlab
 
     ms = pymeshlab.MeshSet()
-    ms.add_mesh(pymeshlab.Mesh(vertex_matrix=np.ascontiguousarray(vertices, dtype=np.float64),
-                               face_matrix=np.ascontiguousarray(faces, dtype=np.int32)))
+    ms.add_mesh(
+        pymeshlab.Mesh(
+            vertex_matrix=np.ascontiguousarray(vertices, dtype=np.float64),
+            face_matrix=np.ascontiguousarray(faces, dtype=np.int32),
+        )
+    )
     return ms
 
 
 def _arrays(ms) -> tuple[np.ndarray, np.ndarray]:
     m = ms.current_mesh()
-    return (np.array(m.vertex_matrix(), dtype=np.float64, copy=True),
-            np.array(m.face_matrix(), dtype=np.int64, copy=True))
+    return (
+        np.array(m.vertex_matrix(), dtype=np.float64, copy=True),
+        np.array(m.face_matrix(), dtype=np.int64, copy=True),
+    )
 
 
 def _decimate(ms, target_faces: int) -> None:
@@ -451,29 +483,33 @@ def _to_vertex_target(start, target_vertices: int, stats: dict) -> tuple[np.ndar
             # fewer faces removes between excess/2 and excess vertices, so the target is never passed
             _decimate(ms, m.face_number() - excess)
             if (ms.current_mesh().vertex_number(), ms.current_mesh().face_number()) == before:
-                break                                      # stalled
+                break  # stalled
         v, f = _arrays(ms)
         v, f, dropped = _largest_component(v, f)
         stats["dropped_faces"] += dropped
-        best = (v, f) if best is None or abs(len(v) - target_vertices) < abs(len(best[0]) - target_vertices) \
-            else best
+        best = (v, f) if best is None or abs(len(v) - target_vertices) < abs(len(best[0]) - target_vertices) else best
         if len(v) == target_vertices:
             break
-        if len(v) < target_vertices:                       # overshoot (specks dropped, autoclean): redo
+        if len(v) < target_vertices:  # overshoot (specks dropped, autoclean): redo
             first_faces += 2 * (target_vertices - len(v)) + 8
-        else:                                              # stalled above the target
+        else:  # stalled above the target
             break
     stats["attempts"] = attempt + 1
     stats["vertices_off_target"] = len(best[0]) - target_vertices
     if stats["vertices_off_target"]:
-        log.warning("remesh: decimation stopped at %d vertices for a target of %d",
-                    len(best[0]), target_vertices)
+        log.warning("remesh: decimation stopped at %d vertices for a target of %d", len(best[0]), target_vertices)
     return best
 
 
-def remesh_with_stats(mesh: TriMesh, target_vertices: int | None = None, target_faces: int | None = None,
-                      *, jitter: float = DEFAULT_JITTER, seed: int | None = None,
-                      source: str | Path | None = None) -> tuple[Remeshed, dict]:
+def remesh_with_stats(
+    mesh: TriMesh,
+    target_vertices: int | None = None,
+    target_faces: int | None = None,
+    *,
+    jitter: float = DEFAULT_JITTER,
+    seed: int | None = None,
+    source: str | Path | None = None,
+) -> tuple[Remeshed, dict]:
     """:func:`remesh`, also returning a dict of diagnostics (stage times in s, snap distances in input
     units, dropped faces, decimation attempts, ``vertices_off_target`` (0 when the vertex target is
     met exactly), ``unsnapped_vertices`` and ``snap_flipped_faces`` (always 0 after the fix-up),
@@ -487,8 +523,10 @@ def remesh_with_stats(mesh: TriMesh, target_vertices: int | None = None, target_
     from the mesh content and the target) control step 2 of the pipeline. ``source`` (the mesh's
     file) is named in the repair warning and in errors."""
     if (target_vertices is None) == (target_faces is None):
-        raise ValueError("remesh needs exactly one of target_vertices (the paper's rule, e.g. 9000-10000) "
-                         "or target_faces (the published pair lists' desired_n_face_remeshed)")
+        raise ValueError(
+            "remesh needs exactly one of target_vertices (the paper's rule, e.g. 9000-10000) "
+            "or target_faces (the published pair lists' desired_n_face_remeshed)"
+        )
     target = target_vertices if target_vertices is not None else target_faces
     if int(target) < 4:
         raise ValueError(f"remesh target must be at least 4, got {target}")
@@ -509,13 +547,14 @@ def remesh_with_stats(mesh: TriMesh, target_vertices: int | None = None, target_
     import pymeshlab
 
     try:
-        v, f = _remesh_surface(mesh, surface, target_vertices, target_faces, face_goal, jitter, seed, stats, t0,
-                               cpu)
+        v, f = _remesh_surface(mesh, surface, target_vertices, target_faces, face_goal, jitter, seed, stats, t0, cpu)
     except pymeshlab.PyMeshLabException as exc:
         message = " ".join(str(exc).split())
-        raise InputFileError(Path(where), f"the remesher (pymeshlab) failed on this surface: {message}",
-                             "repair the mesh (e.g. MeshLab: Filters > Cleaning and Repairing) or leave the "
-                             "shape out") from None
+        raise InputFileError(
+            Path(where),
+            f"the remesher (pymeshlab) failed on this surface: {message}",
+            "repair the mesh (e.g. MeshLab: Filters > Cleaning and Repairing) or leave the shape out",
+        ) from None
     stats["seconds_decimate"] = time.perf_counter() - t0 - stats["seconds_prepare"]
 
     # 6. orientation vote and snap onto the original surface (its repaired copy: same geometry,
@@ -523,11 +562,11 @@ def remesh_with_stats(mesh: TriMesh, target_vertices: int | None = None, target_
     locator = SurfaceLocator(surface)
     face, weights, dist = locator.closest(v)
     tri = v[f]
-    normals = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])       # length = 2 × area
+    normals = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])  # length = 2 × area
     orig_tri = surface.vertices[surface.faces]
     orig_n = np.cross(orig_tri[:, 1] - orig_tri[:, 0], orig_tri[:, 2] - orig_tri[:, 0])
     orig_n /= np.maximum(np.linalg.norm(orig_n, axis=1, keepdims=True), 1e-300)
-    ref = orig_n[face[f]].sum(axis=1)                                       # input normal at the corners
+    ref = orig_n[face[f]].sum(axis=1)  # input normal at the corners
     if np.einsum("ij,ij->i", normals, ref).sum() < 0:
         f = f[:, ::-1].copy()
         normals = -normals
@@ -540,7 +579,7 @@ def remesh_with_stats(mesh: TriMesh, target_vertices: int | None = None, target_
     stats["snap_distance_mean"] = float(dist.mean())
     stats["snap_distance_max"] = float(dist.max())
     snapped = points_on_surface(surface, face, weights)
-    kept = np.zeros(len(v), dtype=bool)           # vertices left where decimation put them
+    kept = np.zeros(len(v), dtype=bool)  # vertices left where decimation put them
     flipped = np.zeros(len(f), dtype=bool)
     for _ in range(10):
         # a snap may fold a sliver face in a crease: leave the corners of folded faces unsnapped
@@ -576,15 +615,29 @@ def remesh_with_stats(mesh: TriMesh, target_vertices: int | None = None, target_
     cpu.lap("from_original")
     seconds = time.perf_counter() - t0
     stats["seconds"] = seconds
-    result = Remeshed(remeshed, to_original, from_original,
-                      None if target_vertices is None else int(target_vertices),
-                      None if target_faces is None else int(target_faces), seconds)
+    result = Remeshed(
+        remeshed,
+        to_original,
+        from_original,
+        None if target_vertices is None else int(target_vertices),
+        None if target_faces is None else int(target_faces),
+        seconds,
+    )
     return result, stats
 
 
-def _remesh_surface(mesh: TriMesh, surface: TriMesh, target_vertices: int | None, target_faces: int | None,
-                    face_goal: int, jitter: float, seed: int | None, stats: dict,
-                    t0: float, cpu: _CpuSteps) -> tuple[np.ndarray, np.ndarray]:
+def _remesh_surface(
+    mesh: TriMesh,
+    surface: TriMesh,
+    target_vertices: int | None,
+    target_faces: int | None,
+    face_goal: int,
+    jitter: float,
+    seed: int | None,
+    stats: dict,
+    t0: float,
+    cpu: _CpuSteps,
+) -> tuple[np.ndarray, np.ndarray]:
     """Steps 1-5 on the repaired copy ``surface``: (V_r, 3) vertices and (F_r, 3) faces of the remesh
     before the snap (diagnostics go into ``stats``). The jitter seed is derived from the INPUT
     ``mesh`` (as before the repair step); ``t0`` is the start time of the whole remesh."""
@@ -616,14 +669,20 @@ def _remesh_surface(mesh: TriMesh, surface: TriMesh, target_vertices: int | None
         v, f, dropped = _largest_component(v, f)
         stats["dropped_faces"] += dropped
     if stats["dropped_faces"]:
-        log.warning("remesh: decimation left %d faces in small components; kept the largest component",
-                    stats["dropped_faces"])
+        log.warning(
+            "remesh: decimation left %d faces in small components; kept the largest component", stats["dropped_faces"]
+        )
     cpu.lap("decimate")
     return v, f
 
 
-def remesh(mesh: TriMesh, target_vertices: int | None = None, target_faces: int | None = None, *,
-           source: str | Path | None = None) -> Remeshed:
+def remesh(
+    mesh: TriMesh,
+    target_vertices: int | None = None,
+    target_faces: int | None = None,
+    *,
+    source: str | Path | None = None,
+) -> Remeshed:
     """Remesh ``mesh`` to a vertex target (paper: 9,000–10,000) or a face target (pair lists: 18,000–20,000).
 
     See the module docstring for the pipeline and guarantees. Exactly one target must be given.
@@ -639,8 +698,14 @@ def remesh(mesh: TriMesh, target_vertices: int | None = None, target_faces: int 
     return remesh_with_stats(mesh, target_vertices, target_faces, source=source)[0]
 
 
-def variant_target_vertices(seed: int, dataset: str, name: str, variant: int,
-                            low: int = VERTEX_TARGET_RANGE[0], high: int = VERTEX_TARGET_RANGE[1]) -> int:
+def variant_target_vertices(
+    seed: int,
+    dataset: str,
+    name: str,
+    variant: int,
+    low: int = VERTEX_TARGET_RANGE[0],
+    high: int = VERTEX_TARGET_RANGE[1],
+) -> int:
     """Vertex target of remesh variant ``variant`` of shape ``dataset/name``: uniform in [low, high]
     (inclusive), drawn from ``rng_for(seed, "remesh", dataset, name, variant)``."""
     if low > high:
@@ -651,8 +716,10 @@ def variant_target_vertices(seed: int, dataset: str, name: str, variant: int,
 # ----------------------------------------------------------------------------------------------
 # sample-sharing measures
 
-def coincident_original_vertices(r: Remeshed, original_faces: np.ndarray, weight_tol: float = 1e-6,
-                                 distance_tol: float = 1e-9) -> np.ndarray:
+
+def coincident_original_vertices(
+    r: Remeshed, original_faces: np.ndarray, weight_tol: float = 1e-6, distance_tol: float = 1e-9
+) -> np.ndarray:
     """(V_r,) int64: the original vertex a remeshed vertex sits on (a corner weight ≥ 1 − weight_tol
     and ``to_original.distance`` ≤ distance_tol, input units), else -1."""
     m = r.to_original
@@ -674,8 +741,9 @@ def shared_vertex_share(a: Remeshed, a_faces: np.ndarray, b: Remeshed, b_faces: 
     return float(max(np.isin(ca, common).mean(), np.isin(cb, common).mean()))
 
 
-def intrinsic_coincidence(a: Remeshed, a_faces: np.ndarray, b: Remeshed, b_original: TriMesh,
-                          rel_tol: float = 0.01) -> float:
+def intrinsic_coincidence(
+    a: Remeshed, a_faces: np.ndarray, b: Remeshed, b_original: TriMesh, rel_tol: float = 0.01
+) -> float:
     """Share of a's remeshed vertices whose sample point, carried to shape b's original surface by
     vertex order (a and b originals share vertices, faces may differ in winding), lies within
     ``rel_tol`` × b's mean remesh edge length of a vertex of b's remesh. Independent samplings give
@@ -692,24 +760,38 @@ def intrinsic_coincidence(a: Remeshed, a_faces: np.ndarray, b: Remeshed, b_origi
 # ----------------------------------------------------------------------------------------------
 # files
 
+
 def save_remeshed(path: Path, r: Remeshed) -> None:
     """Write ``r`` to one .npz (atomic: temporary file + rename), maps with their distances."""
     atomic_save_npz(
         path,
         format_version=np.int64(FILE_FORMAT_VERSION),
-        vertices=r.mesh.vertices, faces=r.mesh.faces,
-        to_original_face=r.to_original.face, to_original_weights=r.to_original.weights,
+        vertices=r.mesh.vertices,
+        faces=r.mesh.faces,
+        to_original_face=r.to_original.face,
+        to_original_weights=r.to_original.weights,
         to_original_distance=r.to_original.distance,
-        from_original_face=r.from_original.face, from_original_weights=r.from_original.weights,
+        from_original_face=r.from_original.face,
+        from_original_weights=r.from_original.weights,
         from_original_distance=r.from_original.distance,
         target_vertices=np.int64(-1 if r.target_vertices is None else r.target_vertices),
         target_faces=np.int64(-1 if r.target_faces is None else r.target_faces),
     )  # no wall time: the same input gives the same bytes (``seconds`` is logged instead)
 
 
-_KEYS = ("format_version", "vertices", "faces", "to_original_face", "to_original_weights",
-         "to_original_distance", "from_original_face", "from_original_weights", "from_original_distance",
-         "target_vertices", "target_faces")
+_KEYS = (
+    "format_version",
+    "vertices",
+    "faces",
+    "to_original_face",
+    "to_original_weights",
+    "to_original_distance",
+    "from_original_face",
+    "from_original_weights",
+    "from_original_distance",
+    "target_vertices",
+    "target_faces",
+)
 
 
 def load_remeshed(path: Path) -> Remeshed:
@@ -734,23 +816,29 @@ def load_remeshed(path: Path) -> Remeshed:
     except Exception as exc:
         raise InputFileError(path, f"could not be read as .npz ({type(exc).__name__}: {exc})", fix) from exc
     if int(d["format_version"]) != FILE_FORMAT_VERSION:
-        raise InputFileError(path, f"remesh file format {int(d['format_version'])}, this becos reads "
-                             f"{FILE_FORMAT_VERSION}", fix)
+        raise InputFileError(
+            path, f"remesh file format {int(d['format_version'])}, this becos reads {FILE_FORMAT_VERSION}", fix
+        )
     tv, tf = int(d["target_vertices"]), int(d["target_faces"])
     return Remeshed(
         TriMesh(d["vertices"], d["faces"]),
         SurfaceMap(d["to_original_face"], d["to_original_weights"], d["to_original_distance"]),
         SurfaceMap(d["from_original_face"], d["from_original_weights"], d["from_original_distance"]),
-        None if tv < 0 else tv, None if tf < 0 else tf, seconds)
+        None if tv < 0 else tv,
+        None if tf < 0 else tf,
+        seconds,
+    )
 
 
 def write_ply(path: Path, mesh: TriMesh) -> None:
     """Write ``mesh`` as binary little-endian PLY (double x/y/z, int vertex indices), atomically."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    header = ("ply\nformat binary_little_endian 1.0\ncomment written by becos\n"
-              f"element vertex {mesh.n_vertices}\nproperty double x\nproperty double y\nproperty double z\n"
-              f"element face {mesh.n_faces}\nproperty list uchar int vertex_indices\nend_header\n").encode("ascii")
+    header = (
+        "ply\nformat binary_little_endian 1.0\ncomment written by becos\n"
+        f"element vertex {mesh.n_vertices}\nproperty double x\nproperty double y\nproperty double z\n"
+        f"element face {mesh.n_faces}\nproperty list uchar int vertex_indices\nend_header\n"
+    ).encode("ascii")
     face_rec = np.empty(mesh.n_faces, dtype=[("n", "u1"), ("i", "<i4", (3,))])
     face_rec["n"] = 3
     face_rec["i"] = mesh.faces

@@ -42,8 +42,8 @@ import io
 import json
 import sys
 import time
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
-from typing import Iterable, Mapping, Sequence
 
 import numpy as np
 
@@ -68,13 +68,18 @@ CAPTIONS = {"report": "index.rst"}
 
 _AMBIENT = 0.3  # Lambert: shade = ambient + (1 - ambient) * |n . l|
 _UP = {"x": np.array([1.0, 0.0, 0.0]), "y": np.array([0.0, 1.0, 0.0]), "z": np.array([0.0, 0.0, 1.0])}
-_FIXED_VIEWS = {"front": np.array([0.0, 0.0, 1.0]), "back": np.array([0.0, 0.0, -1.0]),
-                "side": np.array([1.0, 0.0, 0.0]), "top": np.array([0.0, 1.0, 0.0])}
+_FIXED_VIEWS = {
+    "front": np.array([0.0, 0.0, 1.0]),
+    "back": np.array([0.0, 0.0, -1.0]),
+    "side": np.array([1.0, 0.0, 0.0]),
+    "top": np.array([0.0, 1.0, 0.0]),
+}
 
 
 # ----------------------------------------------------------------------------------------------------
 # Colours, frames, projection
 # ----------------------------------------------------------------------------------------------------
+
 
 def common_vertices(record: PairRecord, shape: str) -> np.ndarray:
     """(V_s, 3) vertices of shape ``'x'`` or ``'y'`` in the common frame (random rotation undone).
@@ -177,8 +182,9 @@ def camera_basis(direction: np.ndarray, up: np.ndarray) -> np.ndarray:
     return np.stack([right, np.cross(w, right), w], axis=1)
 
 
-def shaded_face_colours(vertices: np.ndarray, faces: np.ndarray, vertex_colours: np.ndarray,
-                        light: np.ndarray) -> np.ndarray:
+def shaded_face_colours(
+    vertices: np.ndarray, faces: np.ndarray, vertex_colours: np.ndarray, light: np.ndarray
+) -> np.ndarray:
     """(F, 3) RGB: mean vertex colour of each face times its two-sided Lambert shade.
 
     ``vertices`` (V, 3) and ``light`` (3,) unit, towards the light, in the same frame; degenerate faces
@@ -196,8 +202,10 @@ def shaded_face_colours(vertices: np.ndarray, faces: np.ndarray, vertex_colours:
 # Rendering
 # ----------------------------------------------------------------------------------------------------
 
-def render_pair(record: PairRecord, path: str | Path, *, size: tuple[int, int] = (900, 450),
-                view: str | Sequence[float] = "auto") -> Path:
+
+def render_pair(
+    record: PairRecord, path: str | Path, *, size: tuple[int, int] = (900, 450), view: str | Sequence[float] = "auto"
+) -> Path:
     """Write a PNG of ``size`` = (width, height) pixels showing X (left) and Y (right) with colour transfer.
 
     See the module docstring for frames, colours and the view. Both panels share one scale (units of
@@ -235,25 +243,51 @@ def render_pair(record: PairRecord, path: str | Path, *, size: tuple[int, int] =
     half = 1e-9
     for _, _, _, screen in panels:
         if len(screen):
-            half = max(half, 0.5 * np.ptp(screen[:, 0]) / panel_w / width,
-                       0.5 * np.ptp(screen[:, 1]) / panel_h / height)
+            half = max(
+                half, 0.5 * np.ptp(screen[:, 0]) / panel_w / width, 0.5 * np.ptp(screen[:, 1]) / panel_h / height
+            )
     half *= 1.06
     for i, (shape, tri2d, face_rgb, screen) in enumerate(panels):
         ax = fig.add_axes((i * panel_w, label_h, panel_w, panel_h))
         ax.set_axis_off()
         ax.set_facecolor(BACKGROUND)
-        cx, cy = ((screen[:, :2].min(axis=0) + screen[:, :2].max(axis=0)) / 2 if len(screen) else (0.0, 0.0))
+        cx, cy = (screen[:, :2].min(axis=0) + screen[:, :2].max(axis=0)) / 2 if len(screen) else (0.0, 0.0)
         ax.set_xlim(cx - half * panel_w * width, cx + half * panel_w * width)
         ax.set_ylim(cy - half * panel_h * height, cy + half * panel_h * height)
         if len(tri2d):
-            ax.add_collection(PolyCollection(tri2d, facecolors=np.clip(face_rgb, 0, 1), edgecolors="none",
-                                             linewidths=0, antialiased=False))
-        fig.text(i * panel_w + panel_w / 2, label_h / 2, _panel_label(record, shape), ha="center",
-                 va="center", fontsize=9, color=TEXT_COLOUR)
-    fig.text(0.5, 1.0 - title_h * 0.33, _title(record), ha="center", va="center", fontsize=11,
-             color=TEXT_COLOUR, weight="bold")
-    fig.text(0.5, 1.0 - title_h * 0.75, "Y coloured by its ground-truth X vertex (corr_10); grey = no counterpart",
-             ha="center", va="center", fontsize=8, color=TEXT_COLOUR)
+            ax.add_collection(
+                PolyCollection(
+                    tri2d, facecolors=np.clip(face_rgb, 0, 1), edgecolors="none", linewidths=0, antialiased=False
+                )
+            )
+        fig.text(
+            i * panel_w + panel_w / 2,
+            label_h / 2,
+            _panel_label(record, shape),
+            ha="center",
+            va="center",
+            fontsize=9,
+            color=TEXT_COLOUR,
+        )
+    fig.text(
+        0.5,
+        1.0 - title_h * 0.33,
+        _title(record),
+        ha="center",
+        va="center",
+        fontsize=11,
+        color=TEXT_COLOUR,
+        weight="bold",
+    )
+    fig.text(
+        0.5,
+        1.0 - title_h * 0.75,
+        "Y coloured by its ground-truth X vertex (corr_10); grey = no counterpart",
+        ha="center",
+        va="center",
+        fontsize=8,
+        color=TEXT_COLOUR,
+    )
     buffer = io.BytesIO()
     fig.savefig(buffer, format="png", dpi=dpi, facecolor=BACKGROUND)
     path = Path(path)
@@ -289,6 +323,7 @@ def _panel_label(record: PairRecord, shape: str) -> str:
 # Tables, histogram, report folder
 # ----------------------------------------------------------------------------------------------------
 
+
 def split_order(splits: Iterable[str]) -> list[str]:
     """Distinct split names, train / val / test first, then the others sorted."""
     present = set(splits)
@@ -300,8 +335,10 @@ def select_render_ids(table, n: int) -> list[str]:
     taking each split's pair ids in sorted order (the smallest first)."""
     if n <= 0 or len(table) == 0:
         return []
-    per_split = {s: sorted(table.loc[table["split"] == s, "pair_id"].astype(str))
-                 for s in split_order(table["split"].astype(str))}
+    per_split = {
+        s: sorted(table.loc[table["split"] == s, "pair_id"].astype(str))
+        for s in split_order(table["split"].astype(str))
+    }
     chosen: list[str] = []
     depth = 0
     while len(chosen) < n and any(depth < len(ids) for ids in per_split.values()):
@@ -325,21 +362,42 @@ def table_from_records(records: Iterable[PairRecord]):
     rows = []
     for record in records:
         meta = record.meta
-        row = {"pair_id": str(record.pair_id), "setting": meta.get("setting"), "split": meta.get("split"),
-               "seed": meta.get("seed")}
+        row = {
+            "pair_id": str(record.pair_id),
+            "setting": meta.get("setting"),
+            "split": meta.get("split"),
+            "seed": meta.get("seed"),
+        }
         for s in ("x", "y"):
             info = meta.get(s) or {}
-            row.update({f"{s}_dataset": info.get("dataset"), f"{s}_name": info.get("name"),
-                        f"{s}_class": info.get("class"), f"{s}_category": info.get("category")})
+            row.update(
+                {
+                    f"{s}_dataset": info.get("dataset"),
+                    f"{s}_name": info.get("name"),
+                    f"{s}_class": info.get("class"),
+                    f"{s}_category": info.get("category"),
+                }
+            )
         row["category"] = row["y_category"] if meta.get("setting") == "partial_full" else row["x_category"]
         for s in ("x", "y"):
             row[f"{s}_n_vertices"] = int(len(record[f"{s}_vertices"]))
             row[f"{s}_overlap"] = float(np.asarray(record[f"{s}_overlap"]))
         row.update(n_tries=meta.get("n_tries"), accepted=bool(meta.get("accepted", True)))
         rows.append(row)
-    columns = ["pair_id", "setting", "split", "category", "seed", *[f"{s}_{k}" for s in ("x", "y") for k in
-               ("dataset", "name", "class", "category")], "x_n_vertices", "y_n_vertices", "x_overlap",
-               "y_overlap", "n_tries", "accepted"]
+    columns = [
+        "pair_id",
+        "setting",
+        "split",
+        "category",
+        "seed",
+        *[f"{s}_{k}" for s in ("x", "y") for k in ("dataset", "name", "class", "category")],
+        "x_n_vertices",
+        "y_n_vertices",
+        "x_overlap",
+        "y_overlap",
+        "n_tries",
+        "accepted",
+    ]
     table = pd.DataFrame(rows, columns=columns)
     if len(table):
         rank = {s: i for i, s in enumerate(split_order(table["split"].astype(str)))}
@@ -356,8 +414,10 @@ def count_table(table):
     import pandas as pd
 
     splits = split_order(table["split"].astype(str))
-    frame = table.assign(split=table["split"].astype(str),
-                         dataset_pair=table["x_dataset"].astype(str) + "/" + table["y_dataset"].astype(str))
+    frame = table.assign(
+        split=table["split"].astype(str),
+        dataset_pair=table["x_dataset"].astype(str) + "/" + table["y_dataset"].astype(str),
+    )
     blocks = []
     for group in ("split", "category", "x_dataset", "y_dataset", "dataset_pair"):
         counts = pd.crosstab(frame[group].astype(str), frame["split"]).reindex(columns=splits, fill_value=0)
@@ -387,9 +447,11 @@ def overlap_histogram(table) -> dict:
         values = np.asarray(table[f"{shape}_overlap"], dtype=np.float64)
         bad = ~np.isfinite(values) | (values < 0) | (values > 1)
         if bad.any():
-            raise ValueError(f"{shape}_overlap has {int(bad.sum())} values outside [0, 1] or NaN, e.g. pair "
-                             f"{table['pair_id'].iloc[int(np.argmax(bad))]}; the store's table is inconsistent, "
-                             "rebuild the store")
+            raise ValueError(
+                f"{shape}_overlap has {int(bad.sum())} values outside [0, 1] or NaN, e.g. pair "
+                f"{table['pair_id'].iloc[int(np.argmax(bad))]}; the store's table is inconsistent, "
+                "rebuild the store"
+            )
         # bin k holds [k/10, (k+1)/10); the tolerance puts exact decimal edges (0.3 = 3/10) in the upper bin
         index = np.clip(np.floor(values * (len(HIST_EDGES) - 1) + 1e-9), 0, len(HIST_EDGES) - 2).astype(np.int64)
         counts = np.bincount(index, minlength=len(HIST_EDGES) - 1)
@@ -421,16 +483,20 @@ def published_overlap_comparison(hist: Mapping) -> dict:
     published_share = published / published.sum()
     return {
         "bin_centre_percent": np.round(100 * (edges[:-1] + edges[1:]) / 2).astype(int).tolist(),
-        "count": counts.tolist(), "share": share.tolist(),
-        "published_count": published.tolist(), "published_share": published_share.tolist(),
-        "n_directions": n, "n_published_directions": int(published.sum()),
+        "count": counts.tolist(),
+        "share": share.tolist(),
+        "published_count": published.tolist(),
+        "published_share": published_share.tolist(),
+        "n_directions": n,
+        "n_published_directions": int(published.sum()),
         "total_variation": float(0.5 * np.abs(share - published_share).sum()) if n else None,
         "source": "BeCoS paper (SGP 2025), P2P overlap histogram: becos.published.P2P_OVERLAP_HISTOGRAM",
     }
 
 
-def plot_overlap_histogram(hist: Mapping, path: str | Path, *, title: str = "", size=(700, 420),
-                           published: Mapping | None = None) -> Path:
+def plot_overlap_histogram(
+    hist: Mapping, path: str | Path, *, title: str = "", size=(700, 420), published: Mapping | None = None
+) -> Path:
     """Bar chart of :func:`overlap_histogram` (X->Y and Y->X stacked) as a PNG.
 
     Without ``published``: counts, totals on top. With ``published``
@@ -446,8 +512,9 @@ def plot_overlap_histogram(hist: Mapping, path: str | Path, *, title: str = "", 
     x_counts, y_counts = np.asarray(hist["x"]), np.asarray(hist["y"])
     if published is None:
         ax.bar(centres, x_counts, width=9.0, color="#3b6fb6", label="x_overlap (share of X matched on Y)")
-        ax.bar(centres, y_counts, width=9.0, bottom=x_counts, color="#e08a2e",
-               label="y_overlap (share of Y matched on X)")
+        ax.bar(
+            centres, y_counts, width=9.0, bottom=x_counts, color="#e08a2e", label="y_overlap (share of Y matched on X)"
+        )
         for c, t in zip(centres, x_counts + y_counts):
             ax.text(c, t, str(int(t)), ha="center", va="bottom", fontsize=8)
         ax.set_ylabel("directions (pairs × 2)")
@@ -455,10 +522,14 @@ def plot_overlap_histogram(hist: Mapping, path: str | Path, *, title: str = "", 
         n = max(int(hist["n_directions"]), 1)
         ours, theirs = centres - 2.25, centres + 2.25
         ax.bar(ours, 100 * x_counts / n, width=4.4, color="#3b6fb6", label="ours: x_overlap")
-        ax.bar(ours, 100 * y_counts / n, width=4.4, bottom=100 * x_counts / n, color="#e08a2e",
-               label="ours: y_overlap")
-        ax.bar(theirs, 100 * np.asarray(published["published_share"]), width=4.4, color="#8c8c8c",
-               label=f"published BeCoS ({published['n_published_directions']:,} directions)")
+        ax.bar(ours, 100 * y_counts / n, width=4.4, bottom=100 * x_counts / n, color="#e08a2e", label="ours: y_overlap")
+        ax.bar(
+            theirs,
+            100 * np.asarray(published["published_share"]),
+            width=4.4,
+            color="#8c8c8c",
+            label=f"published BeCoS ({published['n_published_directions']:,} directions)",
+        )
         for c, t in zip(ours, published["share"]):
             ax.text(c, 100 * t, f"{100 * t:.0f}", ha="center", va="bottom", fontsize=7)
         for c, t in zip(theirs, published["published_share"]):
@@ -477,8 +548,15 @@ def plot_overlap_histogram(hist: Mapping, path: str | Path, *, title: str = "", 
     return Path(path)
 
 
-def write_report(records: Iterable[PairRecord], table, out_dir: str | Path, *, n_renders: int = 8,
-                 metadata: Mapping | None = None, size: tuple[int, int] = (900, 450)) -> dict:
+def write_report(
+    records: Iterable[PairRecord],
+    table,
+    out_dir: str | Path,
+    *,
+    n_renders: int = 8,
+    metadata: Mapping | None = None,
+    size: tuple[int, int] = (900, 450),
+) -> dict:
     """Write the report folder ``out_dir`` and return its summary (also written as ``summary.json``).
 
     Args:
@@ -499,8 +577,10 @@ def write_report(records: Iterable[PairRecord], table, out_dir: str | Path, *, n
     """
     missing = [c for c in REQUIRED_COLUMNS if c not in getattr(table, "columns", ())]
     if missing:
-        raise ValueError(f"pairs table lacks columns {missing}; pass the store's table (Benchmark.table), "
-                         f"which has {list(REQUIRED_COLUMNS)}")
+        raise ValueError(
+            f"pairs table lacks columns {missing}; pass the store's table (Benchmark.table), "
+            f"which has {list(REQUIRED_COLUMNS)}"
+        )
     out = Path(out_dir)
     (out / "renders").mkdir(parents=True, exist_ok=True)
     metadata = dict(metadata or {})
@@ -532,9 +612,13 @@ def write_report(records: Iterable[PairRecord], table, out_dir: str | Path, *, n
     published = published_overlap_comparison(hist) if setting == "partial_partial" else None
     hist_frame = _histogram_frame(hist, published)
     write_text(out / "overlap_histogram.csv", hist_frame.to_csv(index=False))
-    plot_overlap_histogram(hist, out / "overlap_histogram.png", published=published,
-                           title=f"{label} overlap histogram: {len(table)} pairs, {hist['n_directions']} directions"
-                           + (" vs published" if published else ""))
+    plot_overlap_histogram(
+        hist,
+        out / "overlap_histogram.png",
+        published=published,
+        title=f"{label} overlap histogram: {len(table)} pairs, {hist['n_directions']} directions"
+        + (" vs published" if published else ""),
+    )
 
     summary = {
         "setting": setting,
@@ -546,9 +630,14 @@ def write_report(records: Iterable[PairRecord], table, out_dir: str | Path, *, n
         "overlap": {s: _stats(table[f"{s}_overlap"]) for s in ("x", "y")},
         "renders": renders,
         "missing_renders": sorted(wanted),
-        "files": {"counts": "counts.csv", "overlap_histogram": "overlap_histogram.png",
-                  "overlap_histogram_table": "overlap_histogram.csv", "summary": "summary.json",
-                  "index": "index.html", "renders": [r["file"] for r in renders]},
+        "files": {
+            "counts": "counts.csv",
+            "overlap_histogram": "overlap_histogram.png",
+            "overlap_histogram_table": "overlap_histogram.csv",
+            "summary": "summary.json",
+            "index": "index.html",
+            "renders": [r["file"] for r in renders],
+        },
         "metadata": _jsonable(metadata),
     }
     if "accepted" in table.columns:
@@ -567,12 +656,22 @@ def _histogram_frame(hist: Mapping, published: Mapping | None = None):
     import pandas as pd
 
     edges = np.asarray(hist["edges"])
-    frame = pd.DataFrame({"bin_low": edges[:-1], "bin_high": edges[1:],
-                          "bin_centre_percent": np.round(100 * (edges[:-1] + edges[1:]) / 2).astype(int),
-                          "x_overlap": hist["x"], "y_overlap": hist["y"], "total": hist["total"]})
+    frame = pd.DataFrame(
+        {
+            "bin_low": edges[:-1],
+            "bin_high": edges[1:],
+            "bin_centre_percent": np.round(100 * (edges[:-1] + edges[1:]) / 2).astype(int),
+            "x_overlap": hist["x"],
+            "y_overlap": hist["y"],
+            "total": hist["total"],
+        }
+    )
     if published is not None:
-        frame = frame.assign(share=np.round(published["share"], 6), published_count=published["published_count"],
-                             published_share=np.round(published["published_share"], 6))
+        frame = frame.assign(
+            share=np.round(published["share"], 6),
+            published_count=published["published_count"],
+            published_share=np.round(published["published_share"], 6),
+        )
     return frame
 
 
@@ -601,9 +700,16 @@ def _index_html(summary: Mapping, counts, hist_frame) -> str:
     setting = summary.get("setting") or "?"
     label = SETTING_LABELS.get(setting, setting)
     meta = summary.get("metadata") or {}
-    facts = [("setting", f"{label} ({setting})"), ("pairs", summary["n_pairs"]),
-             ("splits", ", ".join(f"{s}: {summary['counts'].get('split', {}).get(s, {}).get('total', 0)}"
-                                  for s in summary["splits"]))]
+    facts = [
+        ("setting", f"{label} ({setting})"),
+        ("pairs", summary["n_pairs"]),
+        (
+            "splits",
+            ", ".join(
+                f"{s}: {summary['counts'].get('split', {}).get(s, {}).get('total', 0)}" for s in summary["splits"]
+            ),
+        ),
+    ]
     for key in ("n_distinct_shapes", "n_not_accepted"):
         if key in summary:
             facts.append((key.replace("n_", "").replace("_", " "), summary[key]))
@@ -611,10 +717,14 @@ def _index_html(summary: Mapping, counts, hist_frame) -> str:
         if key in meta:
             facts.append((key.replace("_", " "), meta[key]))
     rows = "\n".join(f"<tr><th>{esc(str(k))}</th><td>{esc(str(v))}</td></tr>" for k, v in facts)
-    gallery = "\n".join(
-        f'<figure><a href="{esc(r["file"])}"><img src="{esc(r["file"])}" alt="{esc(r["pair_id"])}" '
-        f'loading="lazy"></a><figcaption>{esc(r["pair_id"])} ({esc(r["split"])})</figcaption></figure>'
-        for r in summary["renders"]) or "<p>No renders.</p>"
+    gallery = (
+        "\n".join(
+            f'<figure><a href="{esc(r["file"])}"><img src="{esc(r["file"])}" alt="{esc(r["pair_id"])}" '
+            f'loading="lazy"></a><figcaption>{esc(r["pair_id"])} ({esc(r["split"])})</figcaption></figure>'
+            for r in summary["renders"]
+        )
+        or "<p>No renders.</p>"
+    )
     missing = ""
     if summary.get("missing_renders"):
         missing = f"<p class=warn>Not found among the records: {esc(', '.join(summary['missing_renders']))}</p>"
@@ -624,19 +734,26 @@ def _index_html(summary: Mapping, counts, hist_frame) -> str:
         tv = published["total_variation"]
         rows_html = "\n".join(
             f"<tr><td>{c} %</td><td>{n:,}</td><td>{100 * a:.1f} %</td><td>{m:,}</td><td>{100 * b:.1f} %</td></tr>"
-            for c, n, a, m, b in zip(published["bin_centre_percent"], published["count"], published["share"],
-                                     published["published_count"], published["published_share"]))
+            for c, n, a, m, b in zip(
+                published["bin_centre_percent"],
+                published["count"],
+                published["share"],
+                published["published_count"],
+                published["published_share"],
+            )
+        )
         comparison = f"""<h3>Beside the published BeCoS P2P histogram</h3>
-<p>Shares of all directions (ours: {published['n_directions']:,}; published:
-{published['n_published_directions']:,} = 2 &times; 10,464 pairs, from the BeCoS paper).
-Total variation distance: {'n/a' if tv is None else f'{tv:.3f}'} (0 = same shape, 1 = disjoint).</p>
+<p>Shares of all directions (ours: {published["n_directions"]:,}; published:
+{published["n_published_directions"]:,} = 2 &times; 10,464 pairs, from the BeCoS paper).
+Total variation distance: {"n/a" if tv is None else f"{tv:.3f}"} (0 = same shape, 1 = disjoint).</p>
 <table class=published>
 <tr><th>bin centre</th><th>ours</th><th>ours share</th><th>published</th><th>published share</th></tr>
 {rows_html}
 </table>"""
     count_blocks = "\n".join(
         f"<h3>{esc(group)}</h3>\n" + block.drop(columns="group").to_html(index=False, border=0, escape=True)
-        for group, block in counts.groupby("group", sort=False))
+        for group, block in counts.groupby("group", sort=False)
+    )
     return f"""<!doctype html>
 <html lang="en">
 <head>
@@ -662,7 +779,7 @@ pre {{ background: #f5f5f8; padding: 1em; overflow-x: auto; }}
 <a href="overlap_histogram.csv">overlap_histogram.csv</a>.</p>
 <h2>Overlap histogram</h2>
 <p>Share of each shape's vertices whose ground-truth point lies on the other shape, both directions of
-every pair ({summary['overlap_histogram']['n_directions']} directions), in 10 % bins.</p>
+every pair ({summary["overlap_histogram"]["n_directions"]} directions), in 10 % bins.</p>
 <img src="overlap_histogram.png" alt="overlap histogram">
 {hist_frame.to_html(index=False, border=0)}
 {comparison}
@@ -686,6 +803,7 @@ X vertex; grey Y vertices have no counterpart on X. Random rotations undone, com
 # Command line
 # ----------------------------------------------------------------------------------------------------
 
+
 def configure_parser(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("store", type=Path, help="benchmark store (Zarr folder written by `becos export-zarr`)")
     parser.add_argument("out", type=Path, help="output folder (index.html, counts, histogram, renders)")
@@ -696,8 +814,11 @@ def run_cli(args: argparse.Namespace) -> int:
     from becos.errors import InputFileError
 
     if not Path(args.store).exists():
-        raise InputFileError(args.store, "benchmark store not found",
-                             "pass the folder written by `becos export-zarr` (or the workflow's store output)")
+        raise InputFileError(
+            args.store,
+            "benchmark store not found",
+            "pass the folder written by `becos export-zarr` (or the workflow's store output)",
+        )
     if args.renders < 0:
         raise InputFileError(args.store, f"--renders must be >= 0, got {args.renders}", "pass a count such as 8")
     from becos.store import open_benchmark
@@ -711,11 +832,20 @@ def run_cli(args: argparse.Namespace) -> int:
     metadata = dict(bench.metadata)
     metadata.setdefault("setting", bench.setting)
     summary = write_report(records, table, args.out, n_renders=args.renders, metadata=metadata)
-    print(f"becos report: wrote {Path(args.out) / 'index.html'} in {time.perf_counter() - start:.1f} s",
-          file=sys.stderr)
-    print(json.dumps({"index": str(Path(args.out) / "index.html"), "n_pairs": summary["n_pairs"],
-                      "renders": len(summary["renders"]),
-                      "overlap_directions": summary["overlap_histogram"]["n_directions"],
-                      "published_overlap_total_variation":
-                          (summary["published_overlap_histogram"] or {}).get("total_variation")}))
+    print(
+        f"becos report: wrote {Path(args.out) / 'index.html'} in {time.perf_counter() - start:.1f} s", file=sys.stderr
+    )
+    print(
+        json.dumps(
+            {
+                "index": str(Path(args.out) / "index.html"),
+                "n_pairs": summary["n_pairs"],
+                "renders": len(summary["renders"]),
+                "overlap_directions": summary["overlap_histogram"]["n_directions"],
+                "published_overlap_total_variation": (summary["published_overlap_histogram"] or {}).get(
+                    "total_variation"
+                ),
+            }
+        )
+    )
     return 0

@@ -14,8 +14,8 @@ a job killed by the scheduler for exceeding its request comes back with a larger
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 import yaml
 
@@ -32,7 +32,7 @@ class RuleResources:
         self.table = table
 
     @classmethod
-    def load(cls, path: str | Path) -> "RuleResources":
+    def load(cls, path: str | Path) -> RuleResources:
         path = Path(path)
         try:
             raw = yaml.safe_load(path.read_text()) or {}
@@ -42,13 +42,19 @@ class RuleResources:
                     if not (isinstance(entry.get(key), (int, float)) and entry[key] > 0):
                         raise ValueError(f"rule {rule}: {key} must be a positive number, got {entry.get(key)!r}")
         except FileNotFoundError:
-            raise InputFileError(path, "the resource table is missing",
-                                 "restore workflow/resources.yaml from the repository or regenerate it with "
-                                 "`python benchmarks/resources.py --write`") from None
+            raise InputFileError(
+                path,
+                "the resource table is missing",
+                "restore workflow/resources.yaml from the repository or regenerate it with "
+                "`python benchmarks/resources.py --write`",
+            ) from None
         except (yaml.YAMLError, KeyError, TypeError, AttributeError, ValueError) as exc:
-            raise InputFileError(path, f"not a valid resource table ({type(exc).__name__}: {exc})",
-                                 "each entry under `rules:` needs positive mem_mb (MiB) and runtime (minutes); "
-                                 "regenerate it with `python benchmarks/resources.py --write`") from None
+            raise InputFileError(
+                path,
+                f"not a valid resource table ({type(exc).__name__}: {exc})",
+                "each entry under `rules:` needs positive mem_mb (MiB) and runtime (minutes); "
+                "regenerate it with `python benchmarks/resources.py --write`",
+            ) from None
         return cls(table)
 
     def entry(self, rule: str) -> dict:

@@ -109,8 +109,21 @@ COMBINATIONS: dict[str, tuple[tuple[str, ...], bool]] = {
 }
 """combination -> (category pools, centaurs join)."""
 
-MANIFEST_COLUMNS = ("pair_id", "setting", "split", "category", "copy", "x_dataset", "x_name", "y_dataset",
-                    "y_name", "seed", "x_variant", "y_variant", "chunk")
+MANIFEST_COLUMNS = (
+    "pair_id",
+    "setting",
+    "split",
+    "category",
+    "copy",
+    "x_dataset",
+    "x_name",
+    "y_dataset",
+    "y_name",
+    "seed",
+    "x_variant",
+    "y_variant",
+    "chunk",
+)
 MANIFEST_STRINGS = ("pair_id", "setting", "split", "category", "x_dataset", "x_name", "y_dataset", "y_name")
 MANIFEST_INTS = ("copy", "seed", "x_variant", "y_variant", "chunk")
 N_BUCKETS = 4096
@@ -234,8 +247,17 @@ class _Rows:
         self.anchor.append(anchor)
 
 
-def _pool_pairs(cat: pd.DataFrame, *, seed: int, setting: str, pools: tuple[str, ...], centaurs: bool,
-                usage_scale: float, rows: _Rows, skipped: Counter) -> None:
+def _pool_pairs(
+    cat: pd.DataFrame,
+    *,
+    seed: int,
+    setting: str,
+    pools: tuple[str, ...],
+    centaurs: bool,
+    usage_scale: float,
+    rows: _Rows,
+    skipped: Counter,
+) -> None:
     """F2F / P2P pairs: rendezvous partners inside each (split, pool)."""
     keys = cat["key"].tolist()
     names = cat["name"].to_numpy(dtype=object)
@@ -282,12 +304,15 @@ def _pool_pairs(cat: pd.DataFrame, *, seed: int, setting: str, pools: tuple[str,
                 rows.add(x, y, a_copy[r], split, pool, x)
 
 
-def _p2f_pairs(cat: pd.DataFrame, *, categories: set[str], template_rows, usage_scale: float,
-               rows: _Rows, skipped: Counter) -> None:
+def _p2f_pairs(
+    cat: pd.DataFrame, *, categories: set[str], template_rows, usage_scale: float, rows: _Rows, skipped: Counter
+) -> None:
     """P2F pairs: each Y anchors its copies with X = its full template."""
     if template_rows is None:
-        raise ConfigError("setting partial_full needs template_rows (the template table: templates_all.csv "
-                          "or templates_tosca_demo.csv for TOSCA alone)")
+        raise ConfigError(
+            "setting partial_full needs template_rows (the template table: templates_all.csv "
+            "or templates_tosca_demo.csv for TOSCA alone)"
+        )
     datasets = set(cat["dataset"])
     present = set(cat["key"])
     for i in range(len(cat)):
@@ -327,9 +352,19 @@ def _p2f_pairs(cat: pd.DataFrame, *, categories: set[str], template_rows, usage_
 # public API
 
 
-def sample_pairs(catalog: pd.DataFrame, setting: str, *, seed: int, combinations: str = "all",
-                 template_rows=None, n_variants: int = 4, n_chunks: int = 64, pairs_per_chunk: int = 100,
-                 caps: dict | None = None, usage_scale: float = 1.0) -> pd.DataFrame:
+def sample_pairs(
+    catalog: pd.DataFrame,
+    setting: str,
+    *,
+    seed: int,
+    combinations: str = "all",
+    template_rows=None,
+    n_variants: int = 4,
+    n_chunks: int = 64,
+    pairs_per_chunk: int = 100,
+    caps: dict | None = None,
+    usage_scale: float = 1.0,
+) -> pd.DataFrame:
     """The pair manifest of ``setting`` for the shapes of ``catalog`` (rules in the module doc).
 
     Args:
@@ -356,14 +391,18 @@ def sample_pairs(catalog: pd.DataFrame, setting: str, *, seed: int, combinations
     if combinations not in COMBINATIONS:
         raise ConfigError(f"combinations must be one of {sorted(COMBINATIONS)}, got {combinations!r}")
     if n_variants < 1 or not 1 <= n_chunks <= N_BUCKETS or pairs_per_chunk < 1:
-        raise ConfigError(f"n_variants, n_chunks and pairs_per_chunk must be >= 1 (n_chunks <= {N_BUCKETS}), "
-                          f"got {n_variants}, {n_chunks}, {pairs_per_chunk}")
+        raise ConfigError(
+            f"n_variants, n_chunks and pairs_per_chunk must be >= 1 (n_chunks <= {N_BUCKETS}), "
+            f"got {n_variants}, {n_chunks}, {pairs_per_chunk}"
+        )
     if usage_scale < 0:
         raise ConfigError(f"usage_scale must be >= 0, got {usage_scale}")
     pools, centaurs = COMBINATIONS[combinations]
-    cat = sort_catalog(catalog[["dataset", "name", "category", "split", "template_key", "usage"]]
-                       .astype({"dataset": str, "name": str, "category": str, "split": str,
-                                "template_key": str}))
+    cat = sort_catalog(
+        catalog[["dataset", "name", "category", "split", "template_key", "usage"]].astype(
+            {"dataset": str, "name": str, "category": str, "split": str, "template_key": str}
+        )
+    )
     cat["key"] = [shape_key(d, n) for d, n in zip(cat["dataset"], cat["name"])]
     if cat["key"].duplicated().any():
         raise ConfigError(f"catalog has duplicate shapes: {cat.loc[cat['key'].duplicated(), 'key'].tolist()[:5]}")
@@ -371,11 +410,20 @@ def sample_pairs(catalog: pd.DataFrame, setting: str, *, seed: int, combinations
     rows, skipped = _Rows(), Counter()
     if setting == "partial_full":
         categories = set(pools) | ({JOINER} if centaurs else set())
-        _p2f_pairs(cat, categories=categories, template_rows=template_rows, usage_scale=usage_scale,
-                   rows=rows, skipped=skipped)
+        _p2f_pairs(
+            cat, categories=categories, template_rows=template_rows, usage_scale=usage_scale, rows=rows, skipped=skipped
+        )
     else:
-        _pool_pairs(cat, seed=seed, setting=setting, pools=pools, centaurs=centaurs,
-                    usage_scale=usage_scale, rows=rows, skipped=skipped)
+        _pool_pairs(
+            cat,
+            seed=seed,
+            setting=setting,
+            pools=pools,
+            centaurs=centaurs,
+            usage_scale=usage_scale,
+            rows=rows,
+            skipped=skipped,
+        )
 
     df = _finish(rows, setting=setting, seed=seed, n_variants=n_variants, caps=caps, skipped=skipped)
     df["chunk"] = assign_chunks(df["pair_id"], n_chunks=n_chunks, pairs_per_chunk=pairs_per_chunk)
@@ -392,22 +440,26 @@ def _finish(rows: _Rows, *, setting, seed, n_variants, caps, skipped: Counter) -
     seeds = [stable_hash(seed, pid, bits=63) for pid in pair_ids]
     split_x = lambda s: s.split("/", 1)  # noqa: E731  (dataset names contain no '/')
     xs, ys = [split_x(k) for k in rows.x], [split_x(k) for k in rows.y]
-    df = pd.DataFrame({
-        "pair_id": pair_ids,
-        "setting": [setting] * n,
-        "split": rows.split,
-        "category": rows.category,
-        "copy": np.asarray(rows.copy, dtype=np.int64),
-        "x_dataset": [d for d, _ in xs], "x_name": [m for _, m in xs],
-        "y_dataset": [d for d, _ in ys], "y_name": [m for _, m in ys],
-        "seed": np.asarray(seeds, dtype=np.int64),
-        "x_variant": np.asarray([stable_hash(s, "x_variant") % n_variants for s in seeds], dtype=np.int64),
-        "y_variant": np.asarray([stable_hash(s, "y_variant") % n_variants for s in seeds], dtype=np.int64),
-        "chunk": np.zeros(n, dtype=np.int64),
-    }, columns=list(MANIFEST_COLUMNS))
+    df = pd.DataFrame(
+        {
+            "pair_id": pair_ids,
+            "setting": [setting] * n,
+            "split": rows.split,
+            "category": rows.category,
+            "copy": np.asarray(rows.copy, dtype=np.int64),
+            "x_dataset": [d for d, _ in xs],
+            "x_name": [m for _, m in xs],
+            "y_dataset": [d for d, _ in ys],
+            "y_name": [m for _, m in ys],
+            "seed": np.asarray(seeds, dtype=np.int64),
+            "x_variant": np.asarray([stable_hash(s, "x_variant") % n_variants for s in seeds], dtype=np.int64),
+            "y_variant": np.asarray([stable_hash(s, "y_variant") % n_variants for s in seeds], dtype=np.int64),
+            "chunk": np.zeros(n, dtype=np.int64),
+        },
+        columns=list(MANIFEST_COLUMNS),
+    )
     if caps:
-        rank = np.array([stable_hash(seed, setting, "cap", a, c) for a, c in zip(rows.anchor, rows.copy)],
-                        dtype=object)
+        rank = np.array([stable_hash(seed, setting, "cap", a, c) for a, c in zip(rows.anchor, rows.copy)], dtype=object)
         keep = np.ones(n, dtype=bool)
         for split, cap in caps.items():
             if split not in SPLITS:
@@ -415,7 +467,7 @@ def _finish(rows: _Rows, *, setting, seed, n_variants, caps, skipped: Counter) -
             idx = np.flatnonzero(df["split"].to_numpy() == split)
             if cap is not None and len(idx) > int(cap):
                 order = sorted(idx, key=lambda i: rank[i])
-                keep[order[int(cap):]] = False
+                keep[order[int(cap) :]] = False
                 skipped[f"cap:{split}"] += len(idx) - int(cap)
         df = df[keep]
     df = sort_manifest(df)
@@ -496,10 +548,15 @@ def appearance_summary(manifest: pd.DataFrame, catalog: pd.DataFrame) -> pd.Data
     train = catalog[catalog["split"] == "train"][["dataset", "name", "usage"]]
     merged = train.merge(counts.drop(columns="split"), on=["dataset", "name"], how="left").fillna(0)
     g = merged.groupby("dataset")
-    return pd.DataFrame({
-        "usage": g["usage"].first(),
-        "shapes": g.size(),
-        "as_x_min": g["as_x"].min().astype(int), "as_x_max": g["as_x"].max().astype(int),
-        "total_min": g["total"].min().astype(int), "total_median": g["total"].median(),
-        "total_mean": g["total"].mean(), "total_max": g["total"].max().astype(int),
-    }).reset_index()
+    return pd.DataFrame(
+        {
+            "usage": g["usage"].first(),
+            "shapes": g.size(),
+            "as_x_min": g["as_x"].min().astype(int),
+            "as_x_max": g["as_x"].max().astype(int),
+            "total_min": g["total"].min().astype(int),
+            "total_median": g["total"].median(),
+            "total_mean": g["total"].mean(),
+            "total_max": g["total"].max().astype(int),
+        }
+    ).reset_index()

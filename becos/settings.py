@@ -28,6 +28,8 @@ def overlap_range_problem(min_overlap: float, max_overlap: float) -> str | None:
         if not 0.0 <= value <= 1.0:
             return f"{key}: {value} is outside [0, 1] (a share of a shape's vertices). Fix: use a value in [0, 1]"
     if min_overlap > max_overlap:
-        return (f"min_overlap: {min_overlap} is above max_overlap {max_overlap} (the overlap range is reversed). "
-                "Fix: set min_overlap <= max_overlap")
+        return (
+            f"min_overlap: {min_overlap} is above max_overlap {max_overlap} (the overlap range is reversed). "
+            "Fix: set min_overlap <= max_overlap"
+        )
     return None

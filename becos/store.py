@@ -76,10 +76,10 @@ import sys
 import tempfile
 import time
 import zipfile
+from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
-from typing import Iterable, Iterator, Mapping
 
 import numpy as np
 
@@ -113,11 +113,37 @@ CHUNK_KEYS = {"name": "default", "separator": "."}
 READ_BLOCK_BYTES = 64 << 20
 """Uncompressed bytes read at once by :meth:`Benchmark.blocks` / :meth:`Benchmark.records`."""
 VERSION_PACKAGES = ("becos", "numpy", "zarr", "trimesh", "pymeshlab", "embreex", "snakemake")
-TABLE_COLUMNS = ("index", "pair_id", "split", "category", "seed", "x_dataset", "x_name", "x_class", "x_category",
-                 "y_dataset", "y_name", "y_class", "y_category", "x_n_vertices", "y_n_vertices", "x_overlap",
-                 "y_overlap", "n_tries", "accepted")
-TABLE_DTYPES = {"index": "int64", "seed": "int64", "x_n_vertices": "int64", "y_n_vertices": "int64",
-                "x_overlap": "float64", "y_overlap": "float64", "n_tries": "int64", "accepted": "bool"}
+TABLE_COLUMNS = (
+    "index",
+    "pair_id",
+    "split",
+    "category",
+    "seed",
+    "x_dataset",
+    "x_name",
+    "x_class",
+    "x_category",
+    "y_dataset",
+    "y_name",
+    "y_class",
+    "y_category",
+    "x_n_vertices",
+    "y_n_vertices",
+    "x_overlap",
+    "y_overlap",
+    "n_tries",
+    "accepted",
+)
+TABLE_DTYPES = {
+    "index": "int64",
+    "seed": "int64",
+    "x_n_vertices": "int64",
+    "y_n_vertices": "int64",
+    "x_overlap": "float64",
+    "y_overlap": "float64",
+    "n_tries": "int64",
+    "accepted": "bool",
+}
 
 
 SCHEMA_GROUPS = {key: f.group for key, f in RECORD_SCHEMA.items() if f.group is not None}
@@ -145,7 +171,7 @@ def _npy_header(fh) -> tuple[tuple[int, ...], np.dtype, bool]:
     size = struct.unpack("<H" if version == (1, 0) else "<I", fh.read(2 if version == (1, 0) else 4))[0]
     text = fh.read(size).decode("latin1" if version < (3, 0) else "utf-8")
     m = _NPY_HEADER.match(text)
-    if m is not None:                      # numpy's own layout: parse without ast (10x faster)
+    if m is not None:  # numpy's own layout: parse without ast (10x faster)
         shape = tuple(int(v) for v in m.group(3).replace(" ", "").split(",") if v)
         dtype, fortran = np.dtype(m.group(1)), m.group(2) == "True"
     else:
@@ -204,7 +230,7 @@ def _read_npz(path: Path, load: bool) -> tuple[dict, dict[str, tuple[tuple[int, 
                 identity = json.loads(str(data))
             else:
                 arrays[key] = data
-    for key, n in identity.items():          # the record's own dtypes and shapes (decode_arrays)
+    for key, n in identity.items():  # the record's own dtypes and shapes (decode_arrays)
         shapes[key] = ((int(n),), np.dtype(RECORD_SCHEMA[key].dtype))
     for key, (shape, dtype) in shapes.items():
         f = RECORD_SCHEMA.get(key)
@@ -217,8 +243,11 @@ def _scan_record(path: Path) -> _RecordInfo:
     """Meta and the (shape, dtype) of every array of a record .npz, reading only the .npy headers."""
     fix = "give pair records written by becos (PairRecord.save, the workflow's pairs stage)"
     if not path.is_file():
-        raise InputFileError(path, "pair record not found", "check the path (index paths are relative to the "
-                                                              "current directory) or re-run the pairs stage")
+        raise InputFileError(
+            path,
+            "pair record not found",
+            "check the path (index paths are relative to the current directory) or re-run the pairs stage",
+        )
     try:
         meta, shapes, _ = _read_npz(path, load=False)
     except (zipfile.BadZipFile, ValueError, OSError, KeyError, SyntaxError, struct.error, TypeError) as exc:
@@ -231,8 +260,12 @@ def _scan_record(path: Path) -> _RecordInfo:
     if not isinstance(meta.get("pair_id"), str) or not meta["pair_id"]:
         raise InputFileError(path, "its meta has no pair_id", fix)
     if meta.get("schema_version", SCHEMA_VERSION) != SCHEMA_VERSION:
-        raise InputFileError(path, f"has record schema version {meta.get('schema_version')}, this becos writes "
-                                   f"stores of version {SCHEMA_VERSION}", "rebuild the pair records with this becos")
+        raise InputFileError(
+            path,
+            f"has record schema version {meta.get('schema_version')}, this becos writes "
+            f"stores of version {SCHEMA_VERSION}",
+            "rebuild the pair records with this becos",
+        )
     return _RecordInfo(path, meta, shapes)
 
 
@@ -248,8 +281,11 @@ def read_record_index(path: str | Path) -> list[Path]:
     try:
         text = path.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as exc:
-        raise InputFileError(path, f"cannot be read as a record index ({exc})",
-                             "give record .npz files or a chunk index written by `becos pairs`") from exc
+        raise InputFileError(
+            path,
+            f"cannot be read as a record index ({exc})",
+            "give record .npz files or a chunk index written by `becos pairs`",
+        ) from exc
     stripped = text.lstrip()
     if stripped.startswith(("{", "[")):
         try:
@@ -263,24 +299,27 @@ def read_record_index(path: str | Path) -> list[Path]:
         for entry in entries:
             value = entry.get("path") if isinstance(entry, dict) else entry
             if not isinstance(value, str):
-                raise InputFileError(path, f"entry {entry!r} names no record path",
-                                     "each entry needs a 'path' (or be a path string)")
+                raise InputFileError(
+                    path, f"entry {entry!r} names no record path", "each entry needs a 'path' (or be a path string)"
+                )
             raw.append((value, entry.get("digest") if isinstance(entry, dict) else None))
     else:
-        raw = [(line.strip(), None) for line in text.splitlines()
-               if line.strip() and not line.strip().startswith("#")]
+        raw = [(line.strip(), None) for line in text.splitlines() if line.strip() and not line.strip().startswith("#")]
     out = []
     for value, recorded in raw:
         p = Path(value)
         if not p.is_absolute() and not p.exists() and (path.parent / p).exists():
             p = path.parent / p
         if recorded is not None and p.is_file():
-            found = hashlib.sha256(p.read_bytes()).hexdigest()[:len(recorded)]
+            found = hashlib.sha256(p.read_bytes()).hexdigest()[: len(recorded)]
             if found != recorded:
-                raise InputFileError(p, f"is not the file the pairs job wrote: its digest is {found}, {path} "
-                                        f"records {recorded} (edited or replaced after the job)",
-                                     "rebuild it: snakemake --forcerun pairs (becos rebuilds every record whose "
-                                     "content changed), then write the store again")
+                raise InputFileError(
+                    p,
+                    f"is not the file the pairs job wrote: its digest is {found}, {path} "
+                    f"records {recorded} (edited or replaced after the job)",
+                    "rebuild it: snakemake --forcerun pairs (becos rebuilds every record whose "
+                    "content changed), then write the store again",
+                )
         out.append(p)
     return out
 
@@ -311,8 +350,11 @@ def _plan_layout(infos: list[_RecordInfo]) -> tuple[dict[str, str | None], dict[
     for info in infos[1:]:
         if set(info.shapes) != set(keys):
             diff = sorted(set(info.shapes) ^ set(keys))
-            raise InputFileError(info.path, f"has a different set of arrays than {first.path} (differing: {diff})",
-                                 "export records built by one becos version and setting together")
+            raise InputFileError(
+                info.path,
+                f"has a different set of arrays than {first.path} (differing: {diff})",
+                "export records built by one becos version and setting together",
+            )
     layout: dict[str, str | None] = {}
     lengths: dict[str, np.ndarray] = {}
     order = [k for k in SCHEMA_GROUPS if k in first.shapes] + sorted(k for k in keys if k not in SCHEMA_GROUPS)
@@ -321,20 +363,26 @@ def _plan_layout(infos: list[_RecordInfo]) -> tuple[dict[str, str | None], dict[
         dtypes = {info.shapes[key][1] for info in infos}
         if len(dtypes) > 1:
             bad = next(info for info in infos if info.shapes[key][1] != first.shapes[key][1])
-            raise InputFileError(bad.path, f"'{key}' has dtype {bad.shapes[key][1]} but {first.path} has "
-                                           f"{first.shapes[key][1]}", "rebuild the records with one becos version")
+            raise InputFileError(
+                bad.path,
+                f"'{key}' has dtype {bad.shapes[key][1]} but {first.path} has {first.shapes[key][1]}",
+                "rebuild the records with one becos version",
+            )
         same_shape = all(s == shapes[0] for s in shapes)
         if key not in SCHEMA_GROUPS and same_shape:
             layout[key] = None
             continue
         if len(shapes[0]) == 0 or any(s[1:] != shapes[0][1:] for s in shapes):
             bad = next((info for info in infos if info.shapes[key][0][1:] != shapes[0][1:]), first)
-            raise InputFileError(bad.path, f"'{key}' has shape {bad.shapes[key][0]}, which cannot be concatenated "
-                                           f"with {first.path}'s {shapes[0]}", "rebuild the records with one becos version")
+            raise InputFileError(
+                bad.path,
+                f"'{key}' has shape {bad.shapes[key][0]}, which cannot be concatenated with {first.path}'s {shapes[0]}",
+                "rebuild the records with one becos version",
+            )
         n = np.array([s[0] for s in shapes], dtype=np.int64)
         group = SCHEMA_GROUPS.get(key, key)
         if group in lengths and not np.array_equal(lengths[group], n):
-            group = key                      # disagrees with its group: offsets of its own
+            group = key  # disagrees with its group: offsets of its own
         lengths.setdefault(group, n)
         layout[key] = group
     return layout, lengths
@@ -349,8 +397,9 @@ def disk_dtype(key: str, dtype: np.dtype) -> np.dtype:
     return np.dtype(dtype)
 
 
-def _chunking(n_rows: int, row_shape: tuple[int, ...], itemsize: int,
-              chunk_bytes: int = CHUNK_BYTES) -> tuple[tuple, tuple | None]:
+def _chunking(
+    n_rows: int, row_shape: tuple[int, ...], itemsize: int, chunk_bytes: int = CHUNK_BYTES
+) -> tuple[tuple, tuple | None]:
     """(chunks, shards or None) along axis 0 for an array of ``n_rows`` rows of ``row_shape``."""
     row_bytes = max(1, math.prod(row_shape)) * itemsize
     chunk_rows = int(min(max(1, chunk_bytes // row_bytes), max(1, n_rows)))
@@ -394,7 +443,7 @@ class _Writer:
 
     def submit(self, array, start: int, data: np.ndarray) -> None:
         def job():
-            array[start:start + len(data)] = data
+            array[start : start + len(data)] = data
 
         self.pending.append((self.pool.submit(job), data.nbytes))
         while sum(n for _, n in self.pending) > self.max_pending:
@@ -402,7 +451,7 @@ class _Writer:
         still = []
         for future, nbytes in self.pending:
             if future.done():
-                future.result()              # re-raises a failed write now
+                future.result()  # re-raises a failed write now
             else:
                 still.append((future, nbytes))
         self.pending = still
@@ -477,15 +526,30 @@ def _pair_category(meta: dict) -> str:
     return cy if cx == "centaur" else f"{cx}_{cy}"
 
 
-def table_row(index: int, meta: dict, x_n_vertices: int, y_n_vertices: int, x_overlap: float,
-              y_overlap: float) -> list:
+def table_row(index: int, meta: dict, x_n_vertices: int, y_n_vertices: int, x_overlap: float, y_overlap: float) -> list:
     """One row of the pairs table (:data:`TABLE_COLUMNS`) from a pair's meta and sizes."""
     x, y = meta.get("x", {}), meta.get("y", {})
-    return [int(index), meta["pair_id"], meta.get("split", ""), _pair_category(meta), int(meta.get("seed", -1)),
-            x.get("dataset", ""), x.get("name", ""), x.get("class", ""), x.get("category", ""),
-            y.get("dataset", ""), y.get("name", ""), y.get("class", ""), y.get("category", ""),
-            int(x_n_vertices), int(y_n_vertices), float(x_overlap), float(y_overlap),
-            int(meta.get("n_tries", 0)), bool(meta.get("accepted", True))]
+    return [
+        int(index),
+        meta["pair_id"],
+        meta.get("split", ""),
+        _pair_category(meta),
+        int(meta.get("seed", -1)),
+        x.get("dataset", ""),
+        x.get("name", ""),
+        x.get("class", ""),
+        x.get("category", ""),
+        y.get("dataset", ""),
+        y.get("name", ""),
+        y.get("class", ""),
+        y.get("category", ""),
+        int(x_n_vertices),
+        int(y_n_vertices),
+        float(x_overlap),
+        float(y_overlap),
+        int(meta.get("n_tries", 0)),
+        bool(meta.get("accepted", True)),
+    ]
 
 
 def _json_bytes(value) -> np.ndarray:
@@ -494,8 +558,16 @@ def _json_bytes(value) -> np.ndarray:
 
 def _bytes_array(group, name: str, data: np.ndarray) -> None:
     chunks, shards = _chunking(len(data), (), 1)
-    array = group.create_array(name, shape=data.shape, dtype=np.uint8, chunks=chunks, shards=shards,
-                               compressors=_compressors(), fill_value=0, chunk_key_encoding=CHUNK_KEYS)
+    array = group.create_array(
+        name,
+        shape=data.shape,
+        dtype=np.uint8,
+        chunks=chunks,
+        shards=shards,
+        compressors=_compressors(),
+        fill_value=0,
+        chunk_key_encoding=CHUNK_KEYS,
+    )
     if len(data):
         array[:] = data
 
@@ -520,8 +592,13 @@ def write_pairs(root, metas: list[dict], table_rows: list[list]) -> None:
         if name in pairs:
             del pairs[name]
     _bytes_array(pairs, "meta_json", np.frombuffer(b"".join(blobs), dtype=np.uint8))
-    pairs.create_array("meta_offsets", data=offsets, chunks=(max(1, len(offsets)),), compressors=_compressors(),
-                       chunk_key_encoding=CHUNK_KEYS)
+    pairs.create_array(
+        "meta_offsets",
+        data=offsets,
+        chunks=(max(1, len(offsets)),),
+        compressors=_compressors(),
+        chunk_key_encoding=CHUNK_KEYS,
+    )
     _bytes_array(pairs, "table_json", _json_bytes({"columns": list(TABLE_COLUMNS), "rows": table_rows}))
 
 
@@ -533,28 +610,47 @@ def _add_record(info: _RecordInfo, sinks: dict, layout: dict, metas: list, rows:
     try:
         meta, _, arrays = _read_npz(info.path, load=True)
     except (zipfile.BadZipFile, ValueError, OSError, KeyError, SyntaxError, struct.error, TypeError) as exc:
-        raise InputFileError(info.path, f"is not a readable pair record .npz ({exc})",
-                             "re-run the pairs stage for this pair") from exc
+        raise InputFileError(
+            info.path, f"is not a readable pair record .npz ({exc})", "re-run the pairs stage for this pair"
+        ) from exc
     record = PairRecord(arrays, meta)
     for key, sink in sinks.items():
         value = record.arrays[key]
         if value.shape != info.shapes[key][0] or value.dtype != info.shapes[key][1]:
-            raise InputFileError(info.path, "changed while the store was written",
-                                 "re-run export-zarr once the pairs stage is done")
+            raise InputFileError(
+                info.path, "changed while the store was written", "re-run export-zarr once the pairs stage is done"
+            )
         disk = sink.array.dtype
-        if value.dtype != disk:                   # an index key stored narrower: every value must fit
+        if value.dtype != disk:  # an index key stored narrower: every value must fit
             if value.size and (value.min() < np.iinfo(disk).min or value.max() > np.iinfo(disk).max):
-                raise InputFileError(info.path, f"'{key}' holds values outside {disk}, the store's dtype of "
-                                                "this index key", "rebuild the pair record with becos")
+                raise InputFileError(
+                    info.path,
+                    f"'{key}' holds values outside {disk}, the store's dtype of this index key",
+                    "rebuild the pair record with becos",
+                )
             value = value.astype(disk)
         sink.add(value[None] if layout[key] is None else value)
     metas.append(record.meta)
-    rows.append(table_row(index, record.meta, len(record["x_vertices"]), len(record["y_vertices"]),
-                          record["x_overlap"], record["y_overlap"]))
+    rows.append(
+        table_row(
+            index,
+            record.meta,
+            len(record["x_vertices"]),
+            len(record["y_vertices"]),
+            record["x_overlap"],
+            record["y_overlap"],
+        )
+    )
 
 
-def write_store(record_paths: Iterable[str | Path], out: str | Path, *, setting: str,
-                metadata: Mapping | None = None, progress: bool = True) -> Path:
+def write_store(
+    record_paths: Iterable[str | Path],
+    out: str | Path,
+    *,
+    setting: str,
+    metadata: Mapping | None = None,
+    progress: bool = True,
+) -> Path:
     """One Zarr v3 store per setting: every PairRecord concatenated per key (+ offsets), a pairs table,
     metadata. Written to a temp dir then renamed (atomic).
 
@@ -577,8 +673,10 @@ def write_store(record_paths: Iterable[str | Path], out: str | Path, *, setting:
         raise BecosError(f"setting must be one of {SETTINGS}, got {setting!r}")
     metadata = json.loads(json.dumps(dict(metadata or {}), default=str))
     if metadata.get("setting", setting) != setting:
-        raise BecosError(f"the store metadata says setting {metadata['setting']!r} but --setting is {setting!r}. "
-                         "Fix: pass the metadata file of the same setting")
+        raise BecosError(
+            f"the store metadata says setting {metadata['setting']!r} but --setting is {setting!r}. "
+            "Fix: pass the metadata file of the same setting"
+        )
     started = time.perf_counter()
     paths = [Path(p) for p in record_paths]
     if not paths:
@@ -592,8 +690,11 @@ def write_store(record_paths: Iterable[str | Path], out: str | Path, *, setting:
             raise InputFileError(path, f"pair {pid} is also in {seen[pid]}", "give each record once")
         seen[pid] = path
         if info.meta.get("setting", setting) != setting:
-            raise InputFileError(path, f"is a {info.meta.get('setting')} record, not {setting}",
-                                 f"export only the records of {setting} into this store")
+            raise InputFileError(
+                path,
+                f"is a {info.meta.get('setting')} record, not {setting}",
+                f"export only the records of {setting} into this store",
+            )
         infos.append(info)
     infos.sort(key=lambda i: store_order_key(i.meta.get("split", ""), i.meta["pair_id"]))
     layout, lengths = _plan_layout(infos)
@@ -602,20 +703,22 @@ def write_store(record_paths: Iterable[str | Path], out: str | Path, *, setting:
         _progress(f"{n} records scanned in {time.perf_counter() - started:.1f} s")
 
     out.parent.mkdir(parents=True, exist_ok=True)
-    remove_stale_temporaries(out.parent, [out.name])   # one job writes a store: these are a killed write's
+    remove_stale_temporaries(out.parent, [out.name])  # one job writes a store: these are a killed write's
     tmp = Path(tempfile.mkdtemp(dir=out.parent, prefix=f".{out.name}.", suffix=".tmp"))
     try:
         root = zarr.open_group(str(tmp), mode="w", zarr_format=3)
         arrays, offsets_group = root.create_group("arrays"), root.create_group("offsets")
         first = infos[0].shapes
         disk = {key: disk_dtype(key, first[key][1]) for key in layout}
-        digests = ContentDigests({**{f"arrays/{key}": disk[key] for key in layout},
-                                  **{f"offsets/{group}": np.int64 for group in lengths}})
+        digests = ContentDigests(
+            {**{f"arrays/{key}": disk[key] for key in layout}, **{f"offsets/{group}": np.int64 for group in lengths}}
+        )
         for group, n_rows in lengths.items():
             offsets = np.zeros(n + 1, dtype=np.int64)
             offsets[1:] = np.cumsum(n_rows)
-            offsets_group.create_array(group, data=offsets, chunks=(n + 1,), compressors=_compressors(),
-                                       chunk_key_encoding=CHUNK_KEYS)
+            offsets_group.create_array(
+                group, data=offsets, chunks=(n + 1,), compressors=_compressors(), chunk_key_encoding=CHUNK_KEYS
+            )
             digests.update(f"offsets/{group}", offsets)
         sinks = {}
         writer = _Writer()
@@ -623,13 +726,21 @@ def write_store(record_paths: Iterable[str | Path], out: str | Path, *, setting:
             shape, dtype = first[key][0], disk[key]
             total = n if group is None else int(lengths[group].sum())
             row_shape = shape if group is None else shape[1:]
-            chunks, shards = _chunking(total, row_shape, dtype.itemsize,
-                                       CHUNK_BYTES if group is not None else STACKED_CHUNK_BYTES)
-            array = arrays.create_array(key, shape=(total, *row_shape), dtype=dtype, chunks=chunks, shards=shards,
-                                        compressors=_compressors(), fill_value=np.zeros((), dtype).item(),
-                                        chunk_key_encoding=CHUNK_KEYS,
-                                        # every chunk file exists, even all-zero ones: an absent file is damage
-                                        config={"write_empty_chunks": True})
+            chunks, shards = _chunking(
+                total, row_shape, dtype.itemsize, CHUNK_BYTES if group is not None else STACKED_CHUNK_BYTES
+            )
+            array = arrays.create_array(
+                key,
+                shape=(total, *row_shape),
+                dtype=dtype,
+                chunks=chunks,
+                shards=shards,
+                compressors=_compressors(),
+                fill_value=np.zeros((), dtype).item(),
+                chunk_key_encoding=CHUNK_KEYS,
+                # every chunk file exists, even all-zero ones: an absent file is damage
+                config={"write_empty_chunks": True},
+            )
             sinks[key] = _Sink(array, (shards or chunks)[0], writer, digests, f"arrays/{key}")
         metas, rows = [], []
         step = max(1, math.ceil(n / 10))
@@ -649,9 +760,15 @@ def write_store(record_paths: Iterable[str | Path], out: str | Path, *, setting:
         for m in metas:
             splits[m.get("split", "")] = splits.get(m.get("split", ""), 0) + 1
         attrs = dict(metadata)
-        attrs.update(schema_version=SCHEMA_VERSION, setting=setting, n_pairs=n, splits=splits,
-                     created=datetime.now(timezone.utc).isoformat(timespec="seconds"), versions=_versions(),
-                     becos_store={"format": STORE_FORMAT, "layout": layout, "sha256": digests.hexdigests()})
+        attrs.update(
+            schema_version=SCHEMA_VERSION,
+            setting=setting,
+            n_pairs=n,
+            splits=splits,
+            created=datetime.now(UTC).isoformat(timespec="seconds"),
+            versions=_versions(),
+            becos_store={"format": STORE_FORMAT, "layout": layout, "sha256": digests.hexdigests()},
+        )
         root.attrs.update(attrs)
         os.chmod(tmp, 0o755)
         _replace_dir(tmp, out)
@@ -718,7 +835,7 @@ class Block:
                 value = data[i, ...]
             else:
                 o = self.offsets[group]
-                value = data[o[i]:o[i + 1]]
+                value = data[o[i] : o[i + 1]]
             f = RECORD_SCHEMA.get(key)
             wide = f is not None and f.stored is not None and value.dtype == np.dtype(f.stored)
             arrays[key] = value.astype(f.dtype) if wide else value.copy()
@@ -754,9 +871,15 @@ class _ChunkFiles:
             self.inner = int(shard.chunk_shape[0])
             self.per_shard = self.outer // self.inner
             codecs = list(shard.codecs) if end and tuple(shard.chunk_shape[1:]) == self.row_shape else []
-        self.usable = (len(codecs) == 2 and isinstance(codecs[0], BytesCodec) and isinstance(codecs[1], BloscCodec)
-                       and tuple(meta.chunk_grid.chunk_shape[1:]) == self.row_shape and self.dtype.isnative
-                       and meta.dimension_names is None and self.sep in (".", "/"))
+        self.usable = (
+            len(codecs) == 2
+            and isinstance(codecs[0], BytesCodec)
+            and isinstance(codecs[1], BloscCodec)
+            and tuple(meta.chunk_grid.chunk_shape[1:]) == self.row_shape
+            and self.dtype.isnative
+            and meta.dimension_names is None
+            and self.sep in (".", "/")
+        )
         self.chunk_key = getattr(meta.chunk_key_encoding, "name", "")
         self.usable = self.usable and self.chunk_key == "default"
         self._index: dict[int, np.ndarray] = {}
@@ -768,7 +891,7 @@ class _ChunkFiles:
         index = self._index.get(shard)
         if index is None:
             size = os.fstat(fd).st_size
-            n = 16 * self.per_shard + 4                  # (offset, nbytes) uint64 per chunk + crc32c
+            n = 16 * self.per_shard + 4  # (offset, nbytes) uint64 per chunk + crc32c
             raw = os.pread(fd, n, size - n)
             if size < n or len(raw) != n:
                 raise ValueError("shard index truncated")
@@ -802,14 +925,14 @@ class _ChunkFiles:
                     raw = os.pread(fd, os.fstat(fd).st_size, 0)
                 lo, hi = max(a, k * c), min(b, (k + 1) * c, self.shape[0])
                 rows = min(c, self.shape[0] - k * c) if not self.per_shard else c
-                if lo == k * c and hi == (k + 1) * c:     # the whole chunk: decode in place
-                    decompress(raw, out[lo - a:hi - a])
+                if lo == k * c and hi == (k + 1) * c:  # the whole chunk: decode in place
+                    decompress(raw, out[lo - a : hi - a])
                     continue
                 data = np.frombuffer(decompress(raw), dtype=self.dtype)
                 if data.size < rows * row_items:
                     raise ValueError("chunk decodes to too few bytes")
-                data = data[:c * row_items].reshape(-1, *self.row_shape)
-                out[lo - a:hi - a] = data[lo - k * c:hi - k * c]
+                data = data[: c * row_items].reshape(-1, *self.row_shape)
+                out[lo - a : hi - a] = data[lo - k * c : hi - k * c]
         finally:
             for fd in fds.values():
                 os.close(fd)
@@ -855,17 +978,26 @@ class Benchmark:
         newer = "upgrade becos (pip install -U the becos checkout) to read it, or re-export the store with this becos"
         found = info.get("format") if isinstance(info, dict) else None
         if isinstance(found, int) and not isinstance(found, bool) and found > STORE_FORMAT:
-            raise InputFileError(self.path, f"was written by a newer becos: store format {found}, this becos reads "
-                                            f"format {STORE_FORMAT}", newer)
+            raise InputFileError(
+                self.path,
+                f"was written by a newer becos: store format {found}, this becos reads format {STORE_FORMAT}",
+                newer,
+            )
         if not isinstance(info, dict) or found != STORE_FORMAT:
             raise InputFileError(self.path, f"is not a becos benchmark store of format {STORE_FORMAT}", fix)
         schema = attrs.get("schema_version")
         if isinstance(schema, int) and not isinstance(schema, bool) and schema > SCHEMA_VERSION:
-            raise InputFileError(self.path, f"was written by a newer becos: record schema {schema}, this becos reads "
-                                            f"{SCHEMA_VERSION}", newer)
+            raise InputFileError(
+                self.path,
+                f"was written by a newer becos: record schema {schema}, this becos reads {SCHEMA_VERSION}",
+                newer,
+            )
         if attrs.get("schema_version") != SCHEMA_VERSION:
-            raise InputFileError(self.path, f"holds record schema {attrs.get('schema_version')}, this becos reads "
-                                            f"{SCHEMA_VERSION}", "re-export the store with this becos version")
+            raise InputFileError(
+                self.path,
+                f"holds record schema {attrs.get('schema_version')}, this becos reads {SCHEMA_VERSION}",
+                "re-export the store with this becos version",
+            )
         self._root = root
         self._files: dict[str, _ChunkFiles] | None = None
         self._stamp = self._identity()
@@ -893,15 +1025,19 @@ class Benchmark:
             table = json.loads(bytes(np.asarray(root[node][:])).decode("utf-8"))
             frame = pd.DataFrame(table["rows"], columns=table["columns"])
         except Exception as exc:
-            raise DamagedStoreError(self.path, f"{node} is missing or unreadable ({type(exc).__name__}: {exc})",
-                                 DAMAGED_STORE_FIX) from exc
+            raise DamagedStoreError(
+                self.path, f"{node} is missing or unreadable ({type(exc).__name__}: {exc})", DAMAGED_STORE_FIX
+            ) from exc
         self.table = frame.astype({k: v for k, v in TABLE_DTYPES.items() if k in frame.columns})
         self._row_of = {pid: i for i, pid in enumerate(self.table["pair_id"])}
         n = len(self.table)
         for name, o in [*self.offsets.items(), ("meta_offsets", self._meta_offsets)]:
             if len(o) != n + 1:
-                raise InputFileError(self.path, f"offsets '{name}' have {len(o)} entries for {n} pairs",
-                                     "re-export the store (it is damaged)")
+                raise InputFileError(
+                    self.path,
+                    f"offsets '{name}' have {len(o)} entries for {n} pairs",
+                    "re-export the store (it is damaged)",
+                )
 
     def __repr__(self) -> str:
         return f"Benchmark({str(self.path)!r}, setting={self.setting!r}, pairs={len(self)})"
@@ -919,9 +1055,11 @@ class Benchmark:
         """Raise :class:`DamagedStoreError` when the store was rewritten (or removed) since it was opened:
         its offsets no longer fit the files, so a read would return another pair's bytes."""
         if self._identity() != self._stamp:
-            raise DamagedStoreError(self.path, f"was rewritten or removed while this reader had it open (reading "
-                                               f"{what})", "open it again (open_benchmark) once the writer has "
-                                                           "finished")
+            raise DamagedStoreError(
+                self.path,
+                f"was rewritten or removed while this reader had it open (reading {what})",
+                "open it again (open_benchmark) once the writer has finished",
+            )
 
     def __len__(self) -> int:
         return len(self.table)
@@ -941,9 +1079,11 @@ class Benchmark:
                 raise KeyError(f"{self.path}: no pair {key!r}")
             return self._row_of[key]
         if isinstance(key, (bool, np.bool_)) or not isinstance(key, (int, np.integer)):
-            raise PairKeyError(f"{self.path}: a pair is chosen by its row (an int) or its pair_id (a str), not "
-                               f"{key!r} ({type(key).__name__}). Fix: pass an integer row, e.g. "
-                               f"bench.record(0), or a pair_id from bench.table['pair_id']")
+            raise PairKeyError(
+                f"{self.path}: a pair is chosen by its row (an int) or its pair_id (a str), not "
+                f"{key!r} ({type(key).__name__}). Fix: pass an integer row, e.g. "
+                f"bench.record(0), or a pair_id from bench.table['pair_id']"
+            )
         i = int(key)
         if not -len(self) <= i < len(self):
             raise IndexError(f"{self.path}: row {i} out of range for {len(self)} pairs")
@@ -973,13 +1113,15 @@ class Benchmark:
                 arrays[key] = self._files[key].read(int(a), int(b))
             mo = self._meta_offsets
             blob = self._files["pairs/meta_json"].read(int(mo[start]), int(mo[stop])).tobytes()
-            metas = [json.loads(blob[o0:o1].decode("utf-8"))
-                     for o0, o1 in zip(mo[start:stop] - mo[start], mo[start + 1:stop + 1] - mo[start])]
+            metas = [
+                json.loads(blob[o0:o1].decode("utf-8"))
+                for o0, o1 in zip(mo[start:stop] - mo[start], mo[start + 1 : stop + 1] - mo[start])
+            ]
         except Exception:  # noqa: BLE001 - zarr re-reads it and reports the problem as before
             self._files = None
             return self.read_block(start, stop)
         self._check_unchanged(f"pairs {start}:{stop}")
-        offsets = {g: o[start:stop + 1] - o[start] for g, o in self.offsets.items()}
+        offsets = {g: o[start : stop + 1] - o[start] for g, o in self.offsets.items()}
         return Block(start, stop, arrays, offsets, self.layout, metas)
 
     def records(self, split: str | None = None) -> Iterator[PairRecord]:
@@ -1046,7 +1188,7 @@ class Benchmark:
         mo = self._meta_offsets
         ranges.append((self._meta_json, int(mo[start]), int(mo[stop])))
 
-        async def read_all():   # every array's slice concurrently: one round trip, not one per key
+        async def read_all():  # every array's slice concurrently: one round trip, not one per key
             return await asyncio.gather(*(array.async_array.getitem(slice(a, b)) for array, a, b in ranges))
 
         self._check_unchanged(f"pairs {start}:{stop}")
@@ -1054,23 +1196,25 @@ class Benchmark:
             values = sync(read_all())
         except Exception as exc:  # a chunk that does not decode: zarr and the codecs raise several types
             self._check_unchanged(f"pairs {start}:{stop}")
-            raise DamagedStoreError(self.path, f"pairs {start}:{stop} cannot be read ({type(exc).__name__}: {exc})",
-                                    DAMAGED_STORE_FIX) from exc
+            raise DamagedStoreError(
+                self.path, f"pairs {start}:{stop} cannot be read ({type(exc).__name__}: {exc})", DAMAGED_STORE_FIX
+            ) from exc
         self._check_unchanged(f"pairs {start}:{stop}")
         arrays = {key: np.asarray(v) for key, v in zip(keys, values)}
-        offsets = {g: o[start:stop + 1] - o[start] for g, o in self.offsets.items()}
+        offsets = {g: o[start : stop + 1] - o[start] for g, o in self.offsets.items()}
         blob = bytes(np.asarray(values[-1]))
-        local = mo[start:stop + 1] - mo[start]
+        local = mo[start : stop + 1] - mo[start]
         metas = self._decode_metas(blob, local, f"pairs {start}:{stop}")
         return Block(start, stop, arrays, offsets, self.layout, metas)
 
     def _decode_metas(self, blob: bytes, offsets: np.ndarray, what: str) -> list[dict]:
         try:
-            return [json.loads(blob[offsets[i]:offsets[i + 1]].decode("utf-8")) for i in range(len(offsets) - 1)]
+            return [json.loads(blob[offsets[i] : offsets[i + 1]].decode("utf-8")) for i in range(len(offsets) - 1)]
         except (UnicodeDecodeError, json.JSONDecodeError) as exc:
             self._check_unchanged(what)
-            raise DamagedStoreError(self.path, f"the metadata of {what} does not decode ({exc})",
-                                    DAMAGED_STORE_FIX) from exc
+            raise DamagedStoreError(
+                self.path, f"the metadata of {what} does not decode ({exc})", DAMAGED_STORE_FIX
+            ) from exc
 
     def read_metas(self) -> list[dict]:
         """Every pair's meta, in store order."""
@@ -1101,8 +1245,7 @@ class TrainingView:
         bench = Benchmark(self.path)
         unknown = sorted(set(keys or ()) - set(bench.layout))
         if unknown:
-            raise BecosError(f"{self.path}: no record keys {unknown}. Fix: choose keys from "
-                             f"{sorted(bench.layout)}")
+            raise BecosError(f"{self.path}: no record keys {unknown}. Fix: choose keys from {sorted(bench.layout)}")
         self.keys = tuple(keys) if keys is not None else tuple(bench.layout)
         table_split = bench.table["split"].to_numpy()
         self.rows = np.arange(len(bench)) if split is None else np.flatnonzero(table_split == split)
@@ -1147,11 +1290,19 @@ def count_files(path: str | Path) -> int:
 def configure_parser(parser: argparse.ArgumentParser, name: str = "export-zarr") -> None:
     parser.add_argument("--setting", required=True, choices=SETTINGS)
     parser.add_argument("--out", required=True, type=Path, help="store folder to write (replaced if present)")
-    parser.add_argument("--metadata", type=Path, help="JSON file of extra root attributes (config, config_hash, "
-                                                      "datasets ...), e.g. becos.workflow.store_metadata")
-    parser.add_argument("inputs", nargs="+", type=Path,
-                        help="pair record .npz files and/or index files (a chunk index JSON of `becos pairs`, "
-                             "or text with one record path per line)")
+    parser.add_argument(
+        "--metadata",
+        type=Path,
+        help="JSON file of extra root attributes (config, config_hash, "
+        "datasets ...), e.g. becos.workflow.store_metadata",
+    )
+    parser.add_argument(
+        "inputs",
+        nargs="+",
+        type=Path,
+        help="pair record .npz files and/or index files (a chunk index JSON of `becos pairs`, "
+        "or text with one record path per line)",
+    )
 
 
 def expand_inputs(inputs: Iterable[str | Path], setting: str | None = None) -> list[Path]:
@@ -1165,8 +1316,11 @@ def expand_inputs(inputs: Iterable[str | Path], setting: str | None = None) -> l
             raise InputFileError(path, "not found", "pass existing record .npz files or index files")
         declared = index_setting(path)
         if setting is not None and declared is not None and declared != setting:
-            raise InputFileError(path, f"is an index of {declared} records, not {setting}",
-                                 "pass the indexes of the setting being exported")
+            raise InputFileError(
+                path,
+                f"is an index of {declared} records, not {setting}",
+                "pass the indexes of the setting being exported",
+            )
         out.extend(read_record_index(path))
     return out
 
@@ -1177,15 +1331,25 @@ def run_cli(args: argparse.Namespace) -> int:
         try:
             metadata = json.loads(Path(args.metadata).read_text(encoding="utf-8"))
         except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-            raise InputFileError(args.metadata, f"cannot be read as JSON ({exc})",
-                                 "give the metadata JSON written by `becos metadata`") from exc
+            raise InputFileError(
+                args.metadata, f"cannot be read as JSON ({exc})", "give the metadata JSON written by `becos metadata`"
+            ) from exc
         if not isinstance(metadata, dict):
             raise InputFileError(args.metadata, "is not a JSON object", "give a {key: value} JSON file")
     paths = expand_inputs(args.inputs, args.setting)
     started = time.perf_counter()
     write_store(paths, args.out, setting=args.setting, metadata=metadata)
     bench = open_benchmark(args.out)
-    print(json.dumps({"store": str(args.out), "setting": bench.setting, "n_pairs": len(bench),
-                      "splits": bench.metadata.get("splits"), "n_files": count_files(args.out),
-                      "seconds": round(time.perf_counter() - started, 2)}))
+    print(
+        json.dumps(
+            {
+                "store": str(args.out),
+                "setting": bench.setting,
+                "n_pairs": len(bench),
+                "splits": bench.metadata.get("splits"),
+                "n_files": count_files(args.out),
+                "seconds": round(time.perf_counter() - started, 2),
+            }
+        )
+    )
     return 0

@@ -74,7 +74,7 @@ class SurfaceMap:
         return float((~self.matched).mean()) if len(self) else 0.0
 
     @classmethod
-    def from_vertex_indices(cls, target_vertex: np.ndarray, target_faces: np.ndarray) -> "SurfaceMap":
+    def from_vertex_indices(cls, target_vertex: np.ndarray, target_faces: np.ndarray) -> SurfaceMap:
         """Map each source vertex onto a target *vertex* (``-1`` = none).
 
         The point is stored in some face incident to that vertex with weight 1 at its corner.
@@ -100,7 +100,7 @@ class SurfaceMap:
         return cls(face, weights)
 
     @classmethod
-    def identity(cls, mesh_faces: np.ndarray, n_vertices: int) -> "SurfaceMap":
+    def identity(cls, mesh_faces: np.ndarray, n_vertices: int) -> SurfaceMap:
         """Vertex i -> vertex i of a mesh with the same vertex order (e.g. two poses of one TOSCA class)."""
         return cls.from_vertex_indices(np.arange(n_vertices), mesh_faces)
 
@@ -122,8 +122,13 @@ class SurfaceMap:
         return out
 
 
-def compose(first: SurfaceMap, middle_faces: np.ndarray, second: SurfaceMap, target: TriMesh,
-            locator: SurfaceLocator | None = None) -> SurfaceMap:
+def compose(
+    first: SurfaceMap,
+    middle_faces: np.ndarray,
+    second: SurfaceMap,
+    target: TriMesh,
+    locator: SurfaceLocator | None = None,
+) -> SurfaceMap:
     """The map ``second ∘ first``: source -> middle surface -> target surface.
 
     Args:
@@ -143,17 +148,17 @@ def compose(first: SurfaceMap, middle_faces: np.ndarray, second: SurfaceMap, tar
     distance = np.full(n, np.nan)
 
     alive = np.flatnonzero(first.matched)
-    corner_vertices = middle_faces[first.face[alive]]                 # (M, 3) middle vertices
-    w = first.weights[alive]                                          # (M, 3)
-    has_image = second.face[corner_vertices] >= 0                     # (M, 3)
+    corner_vertices = middle_faces[first.face[alive]]  # (M, 3) middle vertices
+    w = first.weights[alive]  # (M, 3)
+    has_image = second.face[corner_vertices] >= 0  # (M, 3)
     dominant_has_image = has_image[np.arange(len(alive)), w.argmax(axis=1)]
     keep = dominant_has_image
     alive, corner_vertices, w, has_image = alive[keep], corner_vertices[keep], w[keep], has_image[keep]
     w = np.where(has_image, w, 0.0)
     w /= w.sum(axis=1, keepdims=True)
 
-    image_face = second.face[corner_vertices]                         # (M, 3), -1 only where w == 0
-    image_weights = second.weights[corner_vertices]                   # (M, 3, 3)
+    image_face = second.face[corner_vertices]  # (M, 3), -1 only where w == 0
+    image_weights = second.weights[corner_vertices]  # (M, 3, 3)
 
     # Exact case: all three images lie in one target face (always true for an identity map on the
     # same connectivity); then the combination is that face with summed weights, no projection.
@@ -168,7 +173,7 @@ def compose(first: SurfaceMap, middle_faces: np.ndarray, second: SurfaceMap, tar
     loose = ~exact
     if loose.any():
         target_vertices = target.vertices[target.faces[np.where(image_face[loose] >= 0, image_face[loose], 0)]]
-        image_points = np.einsum("mkj,mkjd->mkd", image_weights[loose], target_vertices)   # (L, 3, 3)
+        image_points = np.einsum("mkj,mkjd->mkd", image_weights[loose], target_vertices)  # (L, 3, 3)
         points = np.einsum("mk,mkd->md", w[loose], image_points)
         # the point lies between its images: it may only land near their faces along the target's
         # connectivity, never on another part that touches them in space (normals alone are misled
@@ -176,13 +181,13 @@ def compose(first: SurfaceMap, middle_faces: np.ndarray, second: SurfaceMap, tar
         locator = locator if locator is not None else SurfaceLocator(target)
         safe_face = np.where(image_face[loose] >= 0, image_face[loose], 0)
         normals = np.einsum("mk,mkd->md", w[loose], locator.face_normals[safe_face])
-        near_vertices = np.asarray(target.faces)[safe_face].reshape(-1, 9)           # (L, 9) image corners
-        used = np.repeat(w[loose] > 0, 3, axis=1)                                     # (L, 9)
+        near_vertices = np.asarray(target.faces)[safe_face].reshape(-1, 9)  # (L, 9) image corners
+        used = np.repeat(w[loose] > 0, 3, axis=1)  # (L, 9)
         near_vertices = np.where(used, near_vertices, near_vertices[np.arange(len(used)), used.argmax(axis=1)][:, None])
         rings = locator.rings(COMPOSE_RINGS)
 
         def accept(rows, cand):
-            corners = np.asarray(target.faces)[cand]                                  # (M, K, 3)
+            corners = np.asarray(target.faces)[cand]  # (M, K, 3)
             return rings.near(near_vertices[rows][:, None, :, None], corners[:, :, None, :]).any(axis=(2, 3))
 
         f, bw, d, _ = locator.closest_near(points, accept, normals)
@@ -195,8 +200,12 @@ def compose(first: SurfaceMap, middle_faces: np.ndarray, second: SurfaceMap, tar
     return SurfaceMap(face, weights, distance)
 
 
-def compose_path(hops: list[SurfaceMap | None], middle_faces: list[np.ndarray], target: TriMesh,
-                 locator: SurfaceLocator | None = None) -> SurfaceMap:
+def compose_path(
+    hops: list[SurfaceMap | None],
+    middle_faces: list[np.ndarray],
+    target: TriMesh,
+    locator: SurfaceLocator | None = None,
+) -> SurfaceMap:
     """Compose a chain surface_0 -> surface_1 -> ... -> surface_k+1 (= target), backwards from the target.
 
     Args:

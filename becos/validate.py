@@ -107,7 +107,7 @@ class _Problems:
         entry = self.items.setdefault((check, what), {"n": 0, "examples": [], "detail": detail, "values": 0})
         entry["n"] += len(pair_ids)
         entry["values"] += int(values)
-        entry["examples"].extend(pair_ids[:MAX_EXAMPLES - len(entry["examples"])])
+        entry["examples"].extend(pair_ids[: MAX_EXAMPLES - len(entry["examples"])])
 
     def messages(self) -> list[str]:
         out = []
@@ -134,8 +134,15 @@ class ValidationReport:
         return not self.problems
 
     def summary(self) -> dict:
-        return {"store": str(self.path), "valid": self.valid, "setting": self.setting, "n_pairs": self.n_pairs,
-                "splits": self.splits, "n_problems": len(self.problems), "seconds": round(self.seconds, 2)}
+        return {
+            "store": str(self.path),
+            "valid": self.valid,
+            "setting": self.setting,
+            "n_pairs": self.n_pairs,
+            "splits": self.splits,
+            "n_problems": len(self.problems),
+            "seconds": round(self.seconds, 2),
+        }
 
 
 # --------------------------------------------------------------------------------------------------
@@ -212,70 +219,98 @@ class _BlockChecker:
         c, face, w = a[corr], a[f"{corr}_face"], a[f"{corr}_weights"]
         matched, fmatched = c >= 0, face >= 0
         self.report("unmatched", f"{corr} >= 0 differs from {s}_overlap_mask", self.pairs_with(matched != mask, gv))
-        self.report("unmatched", f"{corr}_face >= 0 differs from {s}_overlap_mask",
-                    self.pairs_with(fmatched != mask, gv))
+        self.report(
+            "unmatched", f"{corr}_face >= 0 differs from {s}_overlap_mask", self.pairs_with(fmatched != mask, gv)
+        )
         unmatched_w = w[~fmatched]
         bad = ~((unmatched_w == 0).all(axis=1) | np.isnan(unmatched_w).all(axis=1))
-        self.report("unmatched", f"{corr}_weights not all 0 (or NaN) where {corr}_face is -1",
-                    np.unique(self.pair_of[gv][~fmatched][bad]))
+        self.report(
+            "unmatched",
+            f"{corr}_weights not all 0 (or NaN) where {corr}_face is -1",
+            np.unique(self.pair_of[gv][~fmatched][bad]),
+        )
         wm = w[fmatched]
-        bad = (~np.isfinite(wm).all(axis=1)) | (wm < -WEIGHT_TOL).any(axis=1) | (np.abs(wm.sum(axis=1) - 1) > WEIGHT_TOL)
-        self.report("weights", f"{corr}_weights negative, non-finite or not summing to 1",
-                    np.unique(self.pair_of[gv][fmatched][bad]))
-        face_ok = fmatched & (face < self.rep(Fo, gv)) & matched & (c < self.rep(Vo, gv))   # in range (else index_range)
+        bad = (
+            (~np.isfinite(wm).all(axis=1)) | (wm < -WEIGHT_TOL).any(axis=1) | (np.abs(wm.sum(axis=1) - 1) > WEIGHT_TOL)
+        )
+        self.report(
+            "weights",
+            f"{corr}_weights negative, non-finite or not summing to 1",
+            np.unique(self.pair_of[gv][fmatched][bad]),
+        )
+        face_ok = fmatched & (face < self.rep(Fo, gv)) & matched & (c < self.rep(Vo, gv))  # in range (else index_range)
         if face_ok.any():
             rows = np.flatnonzero(face_ok)
             gface = face[rows] + self.rep(self.start[go_f], gv)[rows]
             corner = np.nan_to_num(w[rows], nan=-1.0).argmax(axis=1)
             expected = a[f"{o}_faces"][gface, corner]
-            self.report("corr_face", f"{corr} is not the largest-weight corner of {corr}_face",
-                        np.unique(self.pair_of[gv][rows[expected != c[rows]]]))
+            self.report(
+                "corr_face",
+                f"{corr} is not the largest-weight corner of {corr}_face",
+                np.unique(self.pair_of[gv][rows[expected != c[rows]]]),
+            )
 
         # overlap values
         share = np.bincount(self.pair_of[gv], weights=mask, minlength=self.n) / np.maximum(V, 1)
         stored = a[f"{s}_overlap"]
-        self.report("overlap", f"{s}_overlap differs from the mean of {s}_overlap_mask",
-                    np.abs(stored - share) > 1e-9)
+        self.report("overlap", f"{s}_overlap differs from the mean of {s}_overlap_mask", np.abs(stored - share) > 1e-9)
         if self.setting == "partial_partial":
             lo = np.array([m.get("options", {}).get("min_overlap", -np.inf) for m in self.b.metas], dtype=float)
             hi = np.array([m.get("options", {}).get("max_overlap", np.inf) for m in self.b.metas], dtype=float)
             accepted = np.array([bool(m.get("accepted", False)) for m in self.b.metas])
-            self.report("overlap", f"{s}_overlap outside [min_overlap, max_overlap] of an accepted pair",
-                        accepted & ((stored < lo - 1e-12) | (stored > hi + 1e-12)))
+            self.report(
+                "overlap",
+                f"{s}_overlap outside [min_overlap, max_overlap] of an accepted pair",
+                accepted & ((stored < lo - 1e-12) | (stored > hi + 1e-12)),
+            )
 
         # index maps
         ptf, ftp = a[f"{s}_partial_to_full"], a[f"{s}_full_to_partial"]
         pair = self.pair_of[gv]
         if len(ptf) > 1:
             same = pair[1:] == pair[:-1]
-            self.report("index_maps", f"{s}_partial_to_full not strictly increasing",
-                        np.unique(pair[1:][same & (np.diff(ptf) <= 0)]))
+            self.report(
+                "index_maps",
+                f"{s}_partial_to_full not strictly increasing",
+                np.unique(pair[1:][same & (np.diff(ptf) <= 0)]),
+            )
         ok = (ptf >= 0) & (ptf < self.rep(cnt[gftp], gv))
         local = np.arange(len(ptf)) - self.rep(self.start[gv], gv)
         inverse = np.full(len(ptf), -2, dtype=np.int64)
         inverse[ok] = ftp[ptf[ok] + self.rep(self.start[gftp], gv)[ok]]
-        self.report("index_maps", f"{s}_full_to_partial[{s}_partial_to_full] is not the identity",
-                    np.unique(pair[inverse != local]))
+        self.report(
+            "index_maps",
+            f"{s}_full_to_partial[{s}_partial_to_full] is not the identity",
+            np.unique(pair[inverse != local]),
+        )
         kept = np.bincount(self.pair_of[gftp], weights=ftp >= 0, minlength=self.n)
         self.report("index_maps", f"{s}_full_to_partial keeps a different number of vertices than V_{s}", kept != V)
-        self.report("index_maps", f"len({s}_full_to_partial) != len({s}_full_vertices) for a partial shape",
-                    partial & (cnt[gftp] != cnt[gfv]))
+        self.report(
+            "index_maps",
+            f"len({s}_full_to_partial) != len({s}_full_vertices) for a partial shape",
+            partial & (cnt[gftp] != cnt[gfv]),
+        )
 
         # full shapes and the setting
         full = ~partial
         full_rows_v, full_rows_f = self.rep(full, gv), self.rep(full, gf)
         local_f = np.arange(len(a[f"{s}_full_face_ids"])) - self.rep(self.start[gf], gf)
-        bad_pairs = np.union1d(self.pairs_with(full_rows_v & (ptf != local), gv),
-                               self.pairs_with(full_rows_f & (a[f"{s}_full_face_ids"] != local_f), gf))
+        bad_pairs = np.union1d(
+            self.pairs_with(full_rows_v & (ptf != local), gv),
+            self.pairs_with(full_rows_f & (a[f"{s}_full_face_ids"] != local_f), gf),
+        )
         bad_pairs = np.union1d(bad_pairs, np.flatnonzero(full & ((cnt[gftp] != V) | (cnt[gfv] != 0))))
         self.report("full_shape", f"full {s} shape does not keep every face and vertex (identity maps)", bad_pairs)
         must_be_full = self.setting == "full_full" or (self.setting == "partial_full" and s == "x")
         if must_be_full:
             self.report("setting", f"{s} is partial in a {self.setting} store", partial)
         camera = a[f"{s}_camera"].reshape(self.n, -1)
-        if must_be_full:                 # (a partial shape here is the ``setting`` problem)
-            self.report("camera", f"{s}_camera not NaN though a {self.setting} store keeps {s} full",
-                        full & ~np.isnan(camera).all(axis=1))
+        if must_be_full:  # (a partial shape here is the ``setting`` problem)
+            self.report(
+                "camera",
+                f"{s}_camera not NaN though a {self.setting} store keeps {s} full",
+                full & ~np.isnan(camera).all(axis=1),
+            )
         else:
             self.report("camera", f"{s}_camera not finite for a scanned {s} shape", ~np.isfinite(camera).all(axis=1))
 
@@ -289,21 +324,32 @@ class _BlockChecker:
         rows_f = self.rep(partial, gf)
         V = cnt[gv]
         # faces through the vertex map == the full faces they came from
-        ok = rows_f & (faces >= 0).all(axis=1) & (faces < self.rep(V, gf)[:, None]).all(axis=1) \
-            & (ids >= 0) & (ids < self.rep(cnt[gff], gf))
+        ok = (
+            rows_f
+            & (faces >= 0).all(axis=1)
+            & (faces < self.rep(V, gf)[:, None]).all(axis=1)
+            & (ids >= 0)
+            & (ids < self.rep(cnt[gff], gf))
+        )
         rows = np.flatnonzero(ok)
         gvert = faces[rows] + self.rep(self.start[gv], gf)[rows, None]
         mapped = ptf[gvert]
         full_faces = a[f"{s}_full_faces"][ids[rows] + self.rep(self.start[gff], gf)[rows]]
-        self.report("face_map", f"{s}_partial_to_full[{s}_faces] != {s}_full_faces[{s}_full_face_ids]",
-                    np.unique(self.pair_of[gf][rows[(mapped != full_faces).any(axis=1)]]))
+        self.report(
+            "face_map",
+            f"{s}_partial_to_full[{s}_faces] != {s}_full_faces[{s}_full_face_ids]",
+            np.unique(self.pair_of[gf][rows[(mapped != full_faces).any(axis=1)]]),
+        )
         rows_v = np.flatnonzero(self.rep(partial, gv) & (ptf >= 0) & (ptf < self.rep(cnt[gfv], gv)))
         verts = a[f"{s}_vertices"][rows_v]
         full_v = a[f"{s}_full_vertices"][ptf[rows_v] + self.rep(self.start[gfv], gv)[rows_v]]
         scale = 1.0 + np.abs(full_v).max(axis=1)
         bad = ~(np.abs(verts - full_v).max(axis=1) <= 1e-9 * scale)
-        self.report("vertex_map", f"{s}_vertices != {s}_full_vertices[{s}_partial_to_full]",
-                    np.unique(self.pair_of[gv][rows_v[bad]]))
+        self.report(
+            "vertex_map",
+            f"{s}_vertices != {s}_full_vertices[{s}_partial_to_full]",
+            np.unique(self.pair_of[gv][rows_v[bad]]),
+        )
 
         # one edge-connected component, no vertex off the faces
         from scipy.sparse import coo_matrix
@@ -312,7 +358,7 @@ class _BlockChecker:
         frows = np.flatnonzero(rows_f & (faces >= 0).all(axis=1) & (faces < self.rep(V, gf)[:, None]).all(axis=1))
         if not len(frows):
             return
-        gfaces = faces[frows] + self.rep(self.start[gv], gf)[frows, None]      # block-wide vertex ids
+        gfaces = faces[frows] + self.rep(self.start[gv], gf)[frows, None]  # block-wide vertex ids
         n_v = int(len(ptf))
         edges = np.sort(np.concatenate([gfaces[:, [0, 1]], gfaces[:, [1, 2]], gfaces[:, [2, 0]]]), axis=1)
         edge_key = edges[:, 0] * n_v + edges[:, 1]
@@ -323,10 +369,11 @@ class _BlockChecker:
         graph = coo_matrix((np.ones(int(same.sum())), (f[:-1][same], f[1:][same])), shape=(len(frows), len(frows)))
         _, labels = connected_components(graph, directed=False)
         face_pair = self.pair_of[gf][frows]
-        _, first = np.unique(labels, return_index=True)          # faces of two pairs never connect
+        _, first = np.unique(labels, return_index=True)  # faces of two pairs never connect
         components = np.bincount(face_pair[first], minlength=self.n)
-        self.report("connectivity", f"partial {s} shape is not one edge-connected component",
-                    partial & (components > 1))
+        self.report(
+            "connectivity", f"partial {s} shape is not one edge-connected component", partial & (components > 1)
+        )
         used = np.zeros(n_v, dtype=bool)
         used[gfaces.ravel()] = True
         unused = self.rep(partial, gv) & ~used
@@ -342,15 +389,22 @@ class _BlockChecker:
                 bad = ~((np.abs(gram).max(axis=(1, 2)) <= ROTATION_TOL) & (np.abs(det - 1) <= ROTATION_TOL))
                 self.report("rotation", f"{s}_{key} not orthonormal with det +1", bad)
             area, sqrt_area, scale = a[f"{s}_full_area"], a[f"{s}_full_sqrt_area"], a[f"{s}_dataset_scale"]
-            bad = ~((area > 0) & np.isfinite(area) & (np.abs(sqrt_area ** 2 - area) <= 1e-9 * np.abs(area))
-                    & (scale > 0) & np.isfinite(scale))
+            bad = ~(
+                (area > 0)
+                & np.isfinite(area)
+                & (np.abs(sqrt_area**2 - area) <= 1e-9 * np.abs(area))
+                & (scale > 0)
+                & np.isfinite(scale)
+            )
             self.report("scalars", f"{s}_full_area / {s}_full_sqrt_area / {s}_dataset_scale inconsistent", bad)
             self.report("scalars", f"{s}_remesh_variant below -1", a[f"{s}_remesh_variant"] < -1)
             for key, group in ((f"{s}_vertices", f"{s}_vertex"), (f"{s}_full_vertices", f"{s}_full_vertex")):
                 self.report("finite", f"{key} not finite", self.pairs_with(~np.isfinite(a[key]), group))
             bad = ~(np.isfinite(a[f"{s}_centre"]).all(axis=1) & np.isfinite(a[f"{s}_align_translation"]).all(axis=1))
             self.report("finite", f"{s}_centre or {s}_align_translation not finite", bad)
-        bad = (np.abs(a["x_align_rotation"] - np.eye(3)).max(axis=(1, 2)) > 0) | (np.abs(a["x_align_translation"]).max(axis=1) > 0)
+        bad = (np.abs(a["x_align_rotation"] - np.eye(3)).max(axis=(1, 2)) > 0) | (
+            np.abs(a["x_align_translation"]).max(axis=1) > 0
+        )
         self.report("alignment", "x_align_rotation / x_align_translation not the identity", bad)
 
 
@@ -373,8 +427,10 @@ def _check_schema(bench, problems: list[str]) -> bool:
         group = bench.layout[key]
         want_group = RECORD_SCHEMA[key].group
         if group != want_group:
-            problems.append(f"schema: {key} is stored in offset group {group}, expected {want_group} "
-                            "(its lengths disagree with the other arrays of that group)")
+            problems.append(
+                f"schema: {key} is stored in offset group {group}, expected {want_group} "
+                "(its lengths disagree with the other arrays of that group)"
+            )
             ok = False
         if str(array.dtype) != dtype:
             problems.append(f"schema: {key} has dtype {array.dtype}, expected {dtype}")
@@ -383,8 +439,9 @@ def _check_schema(bench, problems: list[str]) -> bool:
             problems.append(f"schema: {key} has rows of shape {tuple(array.shape[1:])}, expected {trailing}")
             ok = False
         if group is not None and array.shape[0] != bench.offsets[group][-1]:
-            problems.append(f"schema: {key} has {array.shape[0]} rows but offsets '{group}' end at "
-                            f"{bench.offsets[group][-1]}")
+            problems.append(
+                f"schema: {key} has {array.shape[0]} rows but offsets '{group}' end at {bench.offsets[group][-1]}"
+            )
             ok = False
         if group is None and array.shape[0] != len(bench):
             problems.append(f"schema: {key} has {array.shape[0]} rows for {len(bench)} pairs")
@@ -396,8 +453,10 @@ def _check_schema(bench, problems: list[str]) -> bool:
             ok = False
         bad = np.flatnonzero(np.diff(o) < 0)
         if len(bad):
-            problems.append(f"schema: offsets '{group}' decrease (negative row count) in {len(bad)} pair(s), "
-                            f"e.g. {', '.join(ids[bad[:MAX_EXAMPLES]])}")
+            problems.append(
+                f"schema: offsets '{group}' decrease (negative row count) in {len(bad)} pair(s), "
+                f"e.g. {', '.join(ids[bad[:MAX_EXAMPLES]])}"
+            )
             ok = False
     return ok
 
@@ -418,9 +477,18 @@ def _check_splits(table, setting: str, problems: _Problems) -> None:
     import pandas as pd
 
     sides = ["y"] if setting == "partial_full" else ["x", "y"]
-    parts = [pd.DataFrame({"dataset": table[f"{s}_dataset"], "class": table[f"{s}_class"],
-                           "category": table[f"{s}_category"], "split": table["split"],
-                           "pair_id": table["pair_id"]}) for s in sides]
+    parts = [
+        pd.DataFrame(
+            {
+                "dataset": table[f"{s}_dataset"],
+                "class": table[f"{s}_class"],
+                "category": table[f"{s}_category"],
+                "split": table["split"],
+                "pair_id": table["pair_id"],
+            }
+        )
+        for s in sides
+    ]
     rows = pd.concat(parts, ignore_index=True)
     rules: dict = {}
     for (dataset, shape_class), group in rows.groupby(["dataset", "class"], sort=True):
@@ -428,12 +496,14 @@ def _check_splits(table, setting: str, problems: _Problems) -> None:
         if len(splits) < 2 or _split_rule(dataset, rules) in ("slices", "by_name"):
             continue
         examples = [group.loc[group["split"] == sp, "pair_id"].iloc[0] for sp in splits]
-        problems.add("split_classes", f"class {dataset}/{shape_class} in splits {'+'.join(splits)}",
-                     sorted(set(group["pair_id"])), ", ".join(f"{sp}: {e}" for sp, e in zip(splits, examples)))
+        problems.add(
+            "split_classes",
+            f"class {dataset}/{shape_class} in splits {'+'.join(splits)}",
+            sorted(set(group["pair_id"])),
+            ", ".join(f"{sp}: {e}" for sp, e in zip(splits, examples)),
+        )
     centaurs = rows[(rows["category"] == "centaur") & (rows["split"] != "train")]
     problems.add("centaur", "centaur shape outside train", sorted(set(centaurs["pair_id"])))
-
-
 
 
 def _node_problem(path: Path, node: str) -> str | None:
@@ -455,7 +525,7 @@ def _diagnose(path: Path, exc: Exception) -> list[str]:
     try:
         attrs = json.loads((path / "zarr.json").read_text(encoding="utf-8")).get("attributes", {})
         layout = dict(attrs["becos_store"]["layout"])
-    except Exception:                    # root metadata unreadable: nothing more specific to say
+    except Exception:  # root metadata unreadable: nothing more specific to say
         layout = {}
     nodes = [f"arrays/{k}" for k in layout]
     nodes += [f"offsets/{g}" for g in sorted({g for g in layout.values() if g is not None})]
@@ -465,12 +535,15 @@ def _diagnose(path: Path, exc: Exception) -> list[str]:
         problem = _node_problem(path, node)
         if problem is not None:
             found.setdefault(problem if problem == "missing" else "unreadable", []).append(
-                node if problem == "missing" else f"{node} {problem}")
+                node if problem == "missing" else f"{node} {problem}"
+            )
     out = []
     if "missing" in found:
         names = found["missing"]
-        out.append(f"store: {path}: {len(names)} of its arrays missing: {', '.join(names[:8])}"
-                   f"{' ...' if len(names) > 8 else ''}. Fix: {STORE_FIX}")
+        out.append(
+            f"store: {path}: {len(names)} of its arrays missing: {', '.join(names[:8])}"
+            f"{' ...' if len(names) > 8 else ''}. Fix: {STORE_FIX}"
+        )
     if "unreadable" in found:
         out.append(f"store: {path}: {'; '.join(found['unreadable'][:4])}. Fix: {STORE_FIX}")
     if not out:
@@ -491,17 +564,18 @@ def open_for_validation(path: str | Path):
         return None, [f"store: {path}: is a file, not a store folder. Fix: {fix}"]
     try:
         return open_benchmark(path), []
-    except DamagedStoreError as exc:    # name every missing or unreadable node, not just the first
+    except DamagedStoreError as exc:  # name every missing or unreadable node, not just the first
         return None, _diagnose(path, exc.__cause__)
     except InputFileError as exc:
         return None, [f"store: {exc}"]
-    except Exception as exc:            # zarr raises KeyError, JSONDecodeError ... for damaged stores
+    except Exception as exc:  # zarr raises KeyError, JSONDecodeError ... for damaged stores
         return None, _diagnose(path, exc)
 
 
 def _unreadable(bench, start: int, stop: int, exc: Exception, ids: np.ndarray) -> str:
     """The ``store`` problem of rows ``start:stop`` that failed to read: which arrays fail, why, and for
     which pairs (each failing array re-read pair by pair)."""
+
     def rows_of(key: str, i: int, j: int) -> tuple[int, int]:
         group = bench.layout[key]
         return (i, j) if group is None else (int(bench.offsets[group][i]), int(bench.offsets[group][j]))
@@ -522,8 +596,10 @@ def _unreadable(bench, start: int, stop: int, exc: Exception, ids: np.ndarray) -
     if not bad.any():
         bad[:] = True
     pairs = ids[start:stop][bad]
-    return (f"store: {bench.path}: chunks of {'; '.join(failing[:4])}{' ...' if len(failing) > 4 else ''} cannot "
-            f"be read, in {len(pairs)} pair(s), e.g. {', '.join(pairs[:MAX_EXAMPLES])}. Fix: {STORE_FIX}")
+    return (
+        f"store: {bench.path}: chunks of {'; '.join(failing[:4])}{' ...' if len(failing) > 4 else ''} cannot "
+        f"be read, in {len(pairs)} pair(s), e.g. {', '.join(pairs[:MAX_EXAMPLES])}. Fix: {STORE_FIX}"
+    )
 
 
 def validate(path: str | Path, progress: bool = False) -> ValidationReport:
@@ -544,7 +620,7 @@ def validate(path: str | Path, progress: bool = False) -> ValidationReport:
     _check_order(table, problems)
 
     rows_ok = _check_schema(bench, problems)
-    if not rows_ok:                    # the arrays cannot be trusted: check the metas and the table only
+    if not rows_ok:  # the arrays cannot be trusted: check the metas and the table only
         from becos.store import Block
 
         try:
@@ -558,7 +634,7 @@ def validate(path: str | Path, progress: bool = False) -> ValidationReport:
     for start, stop in bench.block_ranges(max_bytes=VALIDATE_BLOCK_BYTES) if rows_ok else []:
         try:
             block = bench.read_block(start, stop)
-        except Exception as exc:        # a damaged chunk: name it, check the other blocks
+        except Exception as exc:  # a damaged chunk: name it, check the other blocks
             problems.append(_unreadable(bench, start, stop, exc, ids))
             digests = None
             continue
@@ -567,10 +643,13 @@ def validate(path: str | Path, progress: bool = False) -> ValidationReport:
                 digests.update(f"arrays/{key}", block.arrays[key])
         _BlockChecker(block, bench.setting, ids[start:stop], found).run()
         _check_metas(block, bench.setting, table, found)
-        if progress and (10 * stop // n > reported or stop == n):   # about every 10 %
+        if progress and (10 * stop // n > reported or stop == n):  # about every 10 %
             reported = 10 * stop // n
-            print(f"validate: {stop}/{n} pairs checked ({time.perf_counter() - started:.1f} s)",
-                  file=sys.stderr, flush=True)
+            print(
+                f"validate: {stop}/{n} pairs checked ({time.perf_counter() - started:.1f} s)",
+                file=sys.stderr,
+                flush=True,
+            )
 
     if digests is not None:
         _check_digests(bench, digests, problems)
@@ -592,9 +671,11 @@ def _check_order(table, problems: list[str]) -> None:
     late = [i for i in range(1, len(keys)) if keys[i] < keys[i - 1]]
     if late:
         i = late[0]
-        problems.append(f"table: {len(late)} row(s) out of store order (split train, val, test, then pair_id), "
-                        f"first at row {i}: {table['pair_id'][i]} ({table['split'][i]}) after "
-                        f"{table['pair_id'][i - 1]} ({table['split'][i - 1]})")
+        problems.append(
+            f"table: {len(late)} row(s) out of store order (split train, val, test, then pair_id), "
+            f"first at row {i}: {table['pair_id'][i]} ({table['split'][i]}) after "
+            f"{table['pair_id'][i - 1]} ({table['split'][i - 1]})"
+        )
 
 
 def _digests_to_check(bench):
@@ -611,7 +692,7 @@ def _digests_to_check(bench):
 def _absent_chunk_files(bench, node: str) -> list[str]:
     """Chunk (shard) file names of ``node`` that its shape calls for but are not on disk."""
     if not node.startswith("arrays/"):
-        return []                      # offsets are read whole when the store opens
+        return []  # offsets are read whole when the store opens
     array = bench.array(node.removeprefix("arrays/"))
     files_per_axis = [-(-size // step) for size, step in zip(array.shape, array.shards or array.chunks)]
     names = [array.metadata.encode_chunk_key(idx) for idx in np.ndindex(*files_per_axis)]
@@ -626,12 +707,17 @@ def _check_digests(bench, digests, problems: list[str]) -> None:
     for node, recorded in sorted(bench.content_digests.items()):
         if node in actual and actual[node] != recorded:
             absent = _absent_chunk_files(bench, node)
-            why = (f"; chunk files absent (Zarr reads them as zeros): {', '.join(absent[:MAX_EXAMPLES])}"
-                   f"{' ...' if len(absent) > MAX_EXAMPLES else ''}" if absent else
-                   "; a chunk file changed after the store was written")
-            problems.append(f"checksum: {node} content differs from the sha256 recorded when the store was "
-                            f"written{why}. Fix: rebuild the store (delete it and rerun the workflow, or "
-                            "`becos export-zarr`) or restore it from a copy")
+            why = (
+                f"; chunk files absent (Zarr reads them as zeros): {', '.join(absent[:MAX_EXAMPLES])}"
+                f"{' ...' if len(absent) > MAX_EXAMPLES else ''}"
+                if absent
+                else "; a chunk file changed after the store was written"
+            )
+            problems.append(
+                f"checksum: {node} content differs from the sha256 recorded when the store was "
+                f"written{why}. Fix: rebuild the store (delete it and rerun the workflow, or "
+                "`becos export-zarr`) or restore it from a copy"
+            )
 
 
 def _check_metadata(bench, problems: list[str]) -> None:
@@ -648,19 +734,35 @@ def _check_metadata(bench, problems: list[str]) -> None:
         problems.append(f"metadata: splits says {meta['splits']} but the table has {splits}")
     versions = meta.get("versions")
     if not isinstance(versions, dict) or not {"python", "numpy", "zarr"} <= set(versions):
-        problems.append(f"metadata: versions is {versions!r}, not a {{package: version}} mapping with at least "
-                        "python, numpy and zarr (the store does not say which libraries built it)")
+        problems.append(
+            f"metadata: versions is {versions!r}, not a {{package: version}} mapping with at least "
+            "python, numpy and zarr (the store does not say which libraries built it)"
+        )
 
 
-_META_COLUMNS = ("pair_id", "split", "category", "seed", "x_dataset", "x_name", "x_class", "x_category",
-                 "y_dataset", "y_name", "y_class", "y_category", "n_tries", "accepted")
+_META_COLUMNS = (
+    "pair_id",
+    "split",
+    "category",
+    "seed",
+    "x_dataset",
+    "x_name",
+    "x_class",
+    "x_category",
+    "y_dataset",
+    "y_name",
+    "y_class",
+    "y_category",
+    "n_tries",
+    "accepted",
+)
 """Table columns :func:`becos.store.table_row` derives from a pair's meta alone."""
 
 
 def _check_metas(block, setting: str, table, found: _Problems) -> None:
     from becos.store import TABLE_COLUMNS, table_row
 
-    rows = table.iloc[block.start:block.stop]
+    rows = table.iloc[block.start : block.stop]
     ids = rows["pair_id"].to_numpy().astype(str)
     metas = block.metas
     bad = np.array([m.get("setting", setting) != setting for m in metas])
@@ -686,12 +788,18 @@ def _check_metas(block, setting: str, table, found: _Problems) -> None:
     for s in ("x", "y"):
         group = f"{s}_vertex"
         if group in block.offsets:
-            found.add("table", f"table {s}_n_vertices differs from the arrays",
-                      ids[block.counts(group) != rows[f"{s}_n_vertices"].to_numpy()])
+            found.add(
+                "table",
+                f"table {s}_n_vertices differs from the arrays",
+                ids[block.counts(group) != rows[f"{s}_n_vertices"].to_numpy()],
+            )
         if f"{s}_overlap" in block.arrays and block.arrays[f"{s}_overlap"].shape == (len(block),):
             stored = block.arrays[f"{s}_overlap"]
-            found.add("table", f"table {s}_overlap differs from the arrays",
-                      ids[~(np.abs(stored - rows[f"{s}_overlap"].to_numpy()) <= 1e-12)])
+            found.add(
+                "table",
+                f"table {s}_overlap differs from the arrays",
+                ids[~(np.abs(stored - rows[f"{s}_overlap"].to_numpy()) <= 1e-12)],
+            )
 
 
 def validate_store(path: str | Path) -> list[str]:
@@ -705,14 +813,25 @@ def validate_store(path: str | Path) -> list[str]:
 
 def configure_parser(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("store", type=Path, help="benchmark store written by `becos export-zarr`")
-    parser.add_argument("--json", type=Path, help="also write the summary and the problems (and with --against "
-                                                  "the full comparison) to this JSON file")
-    parser.add_argument("--against", type=Path, metavar="OTHER",
-                        help="then compare STORE with OTHER, a store of the same setting (e.g. rebuilt after a "
-                             "library upgrade): pairs only in one store, per pair which arrays differ and why, "
-                             "differing versions and config; exit status 1 when they differ")
-    parser.add_argument("--atol", type=float, default=0.0,
-                        help="with --against: float values within ATOL count as equal (default 0: exact)")
+    parser.add_argument(
+        "--json",
+        type=Path,
+        help="also write the summary and the problems (and with --against the full comparison) to this JSON file",
+    )
+    parser.add_argument(
+        "--against",
+        type=Path,
+        metavar="OTHER",
+        help="then compare STORE with OTHER, a store of the same setting (e.g. rebuilt after a "
+        "library upgrade): pairs only in one store, per pair which arrays differ and why, "
+        "differing versions and config; exit status 1 when they differ",
+    )
+    parser.add_argument(
+        "--atol",
+        type=float,
+        default=0.0,
+        help="with --against: float values within ATOL count as equal (default 0: exact)",
+    )
 
 
 def run_cli(args: argparse.Namespace) -> int:
@@ -731,8 +850,7 @@ def run_cli(args: argparse.Namespace) -> int:
 
         if any(problem.startswith("store:") for problem in report.problems):
             out["comparison"] = None
-            print(f"becos validate: not compared with {against}: {args.store} is damaged (see above)",
-                  file=sys.stderr)
+            print(f"becos validate: not compared with {against}: {args.store} is damaged (see above)", file=sys.stderr)
         else:
             try:
                 comparison = compare_stores(args.store, against, atol=args.atol)

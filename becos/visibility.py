@@ -35,17 +35,25 @@ from becos.mesh import TriMesh
 _CORNER = 0.1
 SAMPLE_BARYCENTRICS: dict[int, np.ndarray] = {
     1: np.array([[1 / 3, 1 / 3, 1 / 3]]),
-    4: np.array([[1 / 3, 1 / 3, 1 / 3],
-                 [1 - 2 * _CORNER, _CORNER, _CORNER],
-                 [_CORNER, 1 - 2 * _CORNER, _CORNER],
-                 [_CORNER, _CORNER, 1 - 2 * _CORNER]]),
-    7: np.array([[1 / 3, 1 / 3, 1 / 3],
-                 [1 - 2 * _CORNER, _CORNER, _CORNER],
-                 [_CORNER, 1 - 2 * _CORNER, _CORNER],
-                 [_CORNER, _CORNER, 1 - 2 * _CORNER],
-                 [0.45, 0.45, 0.10],
-                 [0.10, 0.45, 0.45],
-                 [0.45, 0.10, 0.45]]),
+    4: np.array(
+        [
+            [1 / 3, 1 / 3, 1 / 3],
+            [1 - 2 * _CORNER, _CORNER, _CORNER],
+            [_CORNER, 1 - 2 * _CORNER, _CORNER],
+            [_CORNER, _CORNER, 1 - 2 * _CORNER],
+        ]
+    ),
+    7: np.array(
+        [
+            [1 / 3, 1 / 3, 1 / 3],
+            [1 - 2 * _CORNER, _CORNER, _CORNER],
+            [_CORNER, 1 - 2 * _CORNER, _CORNER],
+            [_CORNER, _CORNER, 1 - 2 * _CORNER],
+            [0.45, 0.45, 0.10],
+            [0.10, 0.45, 0.45],
+            [0.45, 0.10, 0.45],
+        ]
+    ),
 }
 """samples_per_face -> (S, 3) barycentric weights of the sample points aimed at in each triangle."""
 
@@ -68,12 +76,13 @@ def face_adjacency(faces: np.ndarray) -> np.ndarray:
     key, owner = key[order], owner[order]
     same = key[1:] == key[:-1]
     pairs = np.stack([owner[:-1][same], owner[1:][same]], axis=1)
-    pairs = pairs[pairs[:, 0] != pairs[:, 1]]      # a degenerate face repeating an edge
+    pairs = pairs[pairs[:, 0] != pairs[:, 1]]  # a degenerate face repeating an edge
     return np.sort(pairs, axis=1)
 
 
-def largest_component(mesh: TriMesh, face_mask: np.ndarray, adjacency: np.ndarray | None = None,
-                      areas: np.ndarray | None = None) -> np.ndarray:
+def largest_component(
+    mesh: TriMesh, face_mask: np.ndarray, adjacency: np.ndarray | None = None, areas: np.ndarray | None = None
+) -> np.ndarray:
     """(F,) bool: the edge-connected component of the masked faces with the largest total area.
 
     Args:
@@ -101,7 +110,7 @@ def largest_component(mesh: TriMesh, face_mask: np.ndarray, adjacency: np.ndarra
     graph = coo_matrix((np.ones(len(a), dtype=np.int8), (a, b)), shape=(len(kept), len(kept)))
     n_comp, labels = connected_components(graph, directed=False)
     comp_area = np.bincount(labels, weights=areas[kept], minlength=n_comp)
-    best = int(np.argmax(comp_area))   # labels are numbered in order of first face id: ties -> lowest id
+    best = int(np.argmax(comp_area))  # labels are numbered in order of first face id: ties -> lowest id
     out = np.zeros(n_faces, dtype=bool)
     out[kept[labels == best]] = True
     return out
@@ -124,7 +133,7 @@ class VisibilityScene:
         self._geometry = TriangleMesh(scene=self._scene, vertices=self._vertices32, indices=self._faces32)
         self.adjacency = face_adjacency(mesh.faces)
         self.areas = face_areas(mesh)
-        self._triangles = mesh.vertices[mesh.faces]                      # (F, 3, 3)
+        self._triangles = mesh.vertices[mesh.faces]  # (F, 3, 3)
 
     def first_hits(self, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
         """(N,) int64 id of the first face each ray hits, -1 for a miss.
@@ -159,9 +168,9 @@ class VisibilityScene:
         seen[hits[hits >= 0]] = True
         if len(bary) > 1:
             rest = np.ones(n_faces, dtype=bool)
-            rest[faces[hits == faces]] = False                               # seen at the centroid
+            rest[faces[hits == faces]] = False  # seen at the centroid
             rest_ids = np.flatnonzero(rest)
-            points = np.matmul(bary[None, 1:], tri[rest_ids]).reshape(-1, 3)   # (R*(S-1), 3)
+            points = np.matmul(bary[None, 1:], tri[rest_ids]).reshape(-1, 3)  # (R*(S-1), 3)
             points = points[camera.in_frustum(points)]
             hits = self.first_hits(camera.position, points - camera.position)
             seen[hits[hits >= 0]] = True
@@ -175,14 +184,17 @@ class VisibilityScene:
         """
         right, up, forward = camera.basis()
         half = np.tan(np.radians(camera.fov_deg) / 2.0)
-        coords = ((np.arange(resolution) + 0.5) / resolution * 2.0 - 1.0) * half    # (res,)
+        coords = ((np.arange(resolution) + 0.5) / resolution * 2.0 - 1.0) * half  # (res,)
         chunk_rows = chunk_rows or max(1, 2_000_000 // resolution)
         seen = np.zeros(self.mesh.n_faces, dtype=bool)
         for start in range(0, resolution, chunk_rows):
-            rows = coords[start:start + chunk_rows]
+            rows = coords[start : start + chunk_rows]
             # image row i goes downwards: vertical coordinate -rows
-            d = (forward[None, None, :] + coords[None, :, None] * right[None, None, :]
-                 - rows[:, None, None] * up[None, None, :]).reshape(-1, 3)
+            d = (
+                forward[None, None, :]
+                + coords[None, :, None] * right[None, None, :]
+                - rows[:, None, None] * up[None, None, :]
+            ).reshape(-1, 3)
             hits = self.first_hits(camera.position, d)
             seen[hits[hits >= 0]] = True
         return seen

@@ -67,13 +67,35 @@ MESHES_KEPT = 12
 
 STAGE_KEYS: dict[str, tuple[str, ...]] = {
     "catalog": ("data_dir", "annotations", "datasets", "shapes", "template_file"),
-    "manifest": ("data_dir", "annotations", "datasets", "shapes", "template_file", "combinations", "seed", "usage_scale",
-                 "caps", "remesh", "remesh_variants", "n_chunks", "pairs_per_chunk", "original_settings"),
+    "manifest": (
+        "data_dir",
+        "annotations",
+        "datasets",
+        "shapes",
+        "template_file",
+        "combinations",
+        "seed",
+        "usage_scale",
+        "caps",
+        "remesh",
+        "remesh_variants",
+        "n_chunks",
+        "pairs_per_chunk",
+        "original_settings",
+    ),
     "remesh": ("seed", "remesh", "remesher"),
     "export": ("data_dir",),
     "ground_truth": ("annotations", "template_file", "remesh"),
-    "pairs": ("one_axis_rotation", "up_axis", "area_normalised", "propagate_annotations", "annotations",
-              "template_file", "original_settings", "remesher"),
+    "pairs": (
+        "one_axis_rotation",
+        "up_axis",
+        "area_normalised",
+        "propagate_annotations",
+        "annotations",
+        "template_file",
+        "original_settings",
+        "remesher",
+    ),
 }
 """The config keys each stage depends on: a change to one of them reruns that stage (and only it)."""
 SETTING_KEYS: dict[str, tuple[str, ...]] = {
@@ -86,6 +108,7 @@ SETTING_KEYS: dict[str, tuple[str, ...]] = {
 
 # --------------------------------------------------------------------------------------------------
 # configuration
+
 
 def _schema() -> dict:
     import yaml
@@ -151,8 +174,15 @@ def resolve_config(raw: dict) -> dict:
 
 
 CONFIG_DOCS = "config/README.md"
-_TYPE_NAMES = {"integer": "an integer", "number": "a number", "string": "a string", "boolean": "true or false",
-               "array": "a list", "object": "a mapping (key: value)", "null": "null"}
+_TYPE_NAMES = {
+    "integer": "an integer",
+    "number": "a number",
+    "string": "a string",
+    "boolean": "true or false",
+    "array": "a list",
+    "object": "a mapping (key: value)",
+    "null": "null",
+}
 
 
 def _key(path) -> str:
@@ -211,15 +241,21 @@ def schema_problems(error) -> list[str]:
     if rule == "type":
         wanted = [limit] if isinstance(limit, str) else list(limit)
         expected = " or ".join(_TYPE_NAMES.get(t, t) for t in wanted)
-        return [f"{key}: {value!r} is {_TYPE_NAMES.get(_type_of(value), _type_of(value))}, not {expected}. "
-                f"Fix: give {expected} ({docs})"]
+        return [
+            f"{key}: {value!r} is {_TYPE_NAMES.get(_type_of(value), _type_of(value))}, not {expected}. "
+            f"Fix: give {expected} ({docs})"
+        ]
     if rule == "enum":
         choices = ", ".join(map(str, limit))
         close = difflib.get_close_matches(str(value), [str(c) for c in limit], n=1)
         hint = f" (did you mean '{close[0]}'?)" if close else ""
         return [f"{key}: {value!r} is not an allowed value. Fix: use one of {choices}{hint}"]
-    bounds = {"minimum": ("below the minimum", ">="), "exclusiveMinimum": ("not above", ">"),
-              "maximum": ("above the maximum", "<="), "exclusiveMaximum": ("not below", "<")}
+    bounds = {
+        "minimum": ("below the minimum", ">="),
+        "exclusiveMinimum": ("not above", ">"),
+        "maximum": ("above the maximum", "<="),
+        "exclusiveMaximum": ("not below", "<"),
+    }
     if rule in bounds:
         what, op = bounds[rule]
         return [f"{key}: {value!r} is {what} {limit}. Fix: use a value {op} {limit}"]
@@ -264,8 +300,10 @@ def check_config(config: dict) -> None:
 
     problems = []
     if config["exports"].get("zarr") is False:
-        problems.append("exports.zarr: false is not supported: the Zarr store is always built (validation, the report "
-                        "and every other export read it). Fix: remove exports.zarr from the configuration")
+        problems.append(
+            "exports.zarr: false is not supported: the Zarr store is always built (validation, the report "
+            "and every other export read it). Fix: remove exports.zarr from the configuration"
+        )
     overlap = overlap_range_problem(config["min_overlap"], config["max_overlap"])
     if overlap:
         problems.append(overlap)
@@ -274,26 +312,34 @@ def check_config(config: dict) -> None:
         if name not in known:
             close = difflib.get_close_matches(name, known, n=1)
             hint = f"did you mean '{close[0]}'? " if close else ""
-            problems.append(f"datasets: '{name}' is not in the registry (config/datasets/*.yaml). "
-                            f"Fix: {hint}use one of {', '.join(known)}")
+            problems.append(
+                f"datasets: '{name}' is not in the registry (config/datasets/*.yaml). "
+                f"Fix: {hint}use one of {', '.join(known)}"
+            )
     if config.get("download") or config.get("download_urls"):
         from becos.download import download_config_problems
 
         problems += download_config_problems(config)
     if config.get("original_settings") and "partial_full" in settings_of(config):
-        problems.append("original_settings: the reference publishes no partial_full pair list. "
-                        "Fix: use setting full_full / partial_partial or original_settings: false")
+        problems.append(
+            "original_settings: the reference publishes no partial_full pair list. "
+            "Fix: use setting full_full / partial_partial or original_settings: false"
+        )
     synthetic = config.get("synthetic") or {}
     if synthetic.get("enabled"):
         out = Path(synthetic.get("out", "resources/synthetic"))
         for key, expected in (("data_dir", out / "data"), ("annotations", out / "annotations")):
             if Path(config[key]) != expected:
-                problems.append(f"{key}: {config[key]!r}, but the synthetic collection is generated into "
-                                f"{str(expected)!r}. Fix: set {key}: {expected} (or synthetic.enabled: false)")
+                problems.append(
+                    f"{key}: {config[key]!r}, but the synthetic collection is generated into "
+                    f"{str(expected)!r}. Fix: set {key}: {expected} (or synthetic.enabled: false)"
+                )
     results = Path(config.get("results", "results"))
     if results.exists() and not results.is_dir():
-        problems.append(f"results: {str(results)!r} ({results.absolute()}) is a file, not a folder. "
-                        "Fix: set results to a folder path, or move the file away")
+        problems.append(
+            f"results: {str(results)!r} ({results.absolute()}) is a file, not a folder. "
+            "Fix: set results to a folder path, or move the file away"
+        )
     if problems:
         raise ConfigError("\n".join(" ".join(p.split()) for p in problems))  # one line per problem
 
@@ -347,8 +393,10 @@ def read_config_file(path: str | Path) -> dict:
     path = Path(path)
     if not path.is_file():
         what = "is a folder" if path.is_dir() else "not found"
-        raise ConfigError(f"{path}: config file {what} ({path.absolute()}). Fix: check the path given to "
-                          "--configfile (keys: config/README.md; an example: config/tosca.yaml)")
+        raise ConfigError(
+            f"{path}: config file {what} ({path.absolute()}). Fix: check the path given to "
+            "--configfile (keys: config/README.md; an example: config/tosca.yaml)"
+        )
     try:
         value = yaml.safe_load(path.read_text())
     except yaml.YAMLError as exc:
@@ -357,15 +405,19 @@ def read_config_file(path: str | Path) -> dict:
         problem = " ".join(str(getattr(exc, "problem", None) or exc).split())
         if start is not None and getattr(exc, "context", None):
             problem += f"; {exc.context} at line {start.line + 1}, column {start.column + 1}"
-        raise ConfigError(f"{path}: {where}not valid YAML ({problem}). Fix: correct the YAML syntax there "
-                          "(e.g. a missing ']' or ':', tabs used for indentation)") from None
+        raise ConfigError(
+            f"{path}: {where}not valid YAML ({problem}). Fix: correct the YAML syntax there "
+            "(e.g. a missing ']' or ':', tabs used for indentation)"
+        ) from None
     except (OSError, UnicodeDecodeError) as exc:
         raise ConfigError(f"{path}: cannot be read ({exc}). Fix: check the file's permissions and encoding") from None
     if value is None:
         return {}
     if not isinstance(value, dict):
-        raise ConfigError(f"{path}: holds {type(value).__name__}, not a mapping of config keys. "
-                          "Fix: write one `key: value` per line (config/README.md)")
+        raise ConfigError(
+            f"{path}: holds {type(value).__name__}, not a mapping of config keys. "
+            "Fix: write one `key: value` per line (config/README.md)"
+        )
     return value
 
 
@@ -396,6 +448,7 @@ def check_config_files(argv: list[str]) -> list[str]:
 # --------------------------------------------------------------------------------------------------
 # layout
 
+
 @dataclass(frozen=True)
 class Layout:
     """Where every artefact of a run lives (relative to the working directory unless absolute)."""
@@ -403,7 +456,7 @@ class Layout:
     results: Path
 
     @classmethod
-    def of(cls, config: dict) -> "Layout":
+    def of(cls, config: dict) -> Layout:
         return cls(Path(config.get("results", "results")))
 
     @property
@@ -459,11 +512,15 @@ def remesh_token(row, side: str, remesh: bool) -> str:
 # --------------------------------------------------------------------------------------------------
 # the plan: everything Snakemake needs to know to build the job graph
 
+
 def annotation_source(config: dict):
     from becos.annotations import AnnotationSource
 
-    return AnnotationSource(config["annotations"], cache_dir=Layout.of(config).cache / "annotations",
-                            template_table=config.get("template_file", "templates_all.csv"))
+    return AnnotationSource(
+        config["annotations"],
+        cache_dir=Layout.of(config).cache / "annotations",
+        template_table=config.get("template_file", "templates_all.csv"),
+    )
 
 
 def build_catalog(config: dict, annotations=None) -> pd.DataFrame:
@@ -495,25 +552,41 @@ def build_manifest(config: dict, setting: str, catalog: pd.DataFrame, annotation
         from becos.published import import_published
 
         path = Path(config["annotations"]) / "config" / f"pairings_original_{setting}.pkl"
-        imported = import_published(path, setting=setting, seed=config["seed"],
-                                    n_variants=config["remesh_variants"], n_chunks=config["n_chunks"],
-                                    datasets=config["datasets"])
+        imported = import_published(
+            path,
+            setting=setting,
+            seed=config["seed"],
+            n_variants=config["remesh_variants"],
+            n_chunks=config["n_chunks"],
+            datasets=config["datasets"],
+        )
         manifest = imported.manifest
         if imported.cameras:  # P2P: the published cameras travel with their pair (x_cam_pos_0..29, y_...)
             cams = np.stack([imported.cameras[p] for p in manifest["pair_id"]]).reshape(len(manifest), 2, -1)
-            columns = {f"{side}_cam_pos_{i}": cams[:, s, i] for s, side in enumerate("xy") for i in range(cams.shape[2])}
+            columns = {
+                f"{side}_cam_pos_{i}": cams[:, s, i] for s, side in enumerate("xy") for i in range(cams.shape[2])
+            }
             manifest = pd.concat([manifest, pd.DataFrame(columns, index=manifest.index)], axis=1)
             manifest.attrs = imported.manifest.attrs
         manifest = _restrict_published(manifest, catalog, config, setting)
-        manifest["chunk"] = assign_chunks(manifest["pair_id"], n_chunks=config["n_chunks"],
-                                          pairs_per_chunk=config["pairs_per_chunk"])
+        manifest["chunk"] = assign_chunks(
+            manifest["pair_id"], n_chunks=config["n_chunks"], pairs_per_chunk=config["pairs_per_chunk"]
+        )
         return manifest
     annotations = annotations or annotation_source(config)
     caps = {k: v for k, v in (config.get("caps") or {}).items() if v is not None}
-    return sample_pairs(catalog, setting, seed=config["seed"], combinations=config["combinations"],
-                        template_rows=annotations, n_variants=config["remesh_variants"],
-                        n_chunks=config["n_chunks"], pairs_per_chunk=config["pairs_per_chunk"], caps=caps or None,
-                        usage_scale=config["usage_scale"])
+    return sample_pairs(
+        catalog,
+        setting,
+        seed=config["seed"],
+        combinations=config["combinations"],
+        template_rows=annotations,
+        n_variants=config["remesh_variants"],
+        n_chunks=config["n_chunks"],
+        pairs_per_chunk=config["pairs_per_chunk"],
+        caps=caps or None,
+        usage_scale=config["usage_scale"],
+    )
 
 
 def _restrict_published(manifest: pd.DataFrame, catalog: pd.DataFrame, config: dict, setting: str) -> pd.DataFrame:
@@ -523,8 +596,10 @@ def _restrict_published(manifest: pd.DataFrame, catalog: pd.DataFrame, config: d
     from becos.seeding import stable_hash
 
     known = set(zip(catalog["dataset"], catalog["name"]))
-    keep = [(xd, xn) in known and (yd, yn) in known for xd, xn, yd, yn in
-            zip(manifest["x_dataset"], manifest["x_name"], manifest["y_dataset"], manifest["y_name"])]
+    keep = [
+        (xd, xn) in known and (yd, yn) in known
+        for xd, xn, yd, yn in zip(manifest["x_dataset"], manifest["x_name"], manifest["y_dataset"], manifest["y_name"])
+    ]
     out = manifest[np.asarray(keep, dtype=bool)]
     for split, cap in (config.get("caps") or {}).items():
         rows = out[out["split"] == split]
@@ -556,7 +631,7 @@ class Plan:
         self.layout = Layout.of(self.config)
 
     @classmethod
-    def build(cls, config: dict) -> "Plan":
+    def build(cls, config: dict) -> Plan:
         annotations = annotation_source(config)
         catalog = build_catalog(config, annotations)
         manifests = {s: build_manifest(config, s, catalog, annotations) for s in settings_of(config)}
@@ -626,8 +701,10 @@ class Plan:
         editing or restoring one reruns the chunk (:func:`edge_files_between`)."""
         keys = self._catalog_rows
         rows = self.chunk_rows(setting, chunk)
-        pairs = {(keys[(xd, xn)]["template_key"], keys[(yd, yn)]["template_key"])
-                 for xd, xn, yd, yn in zip(rows["x_dataset"], rows["x_name"], rows["y_dataset"], rows["y_name"])}
+        pairs = {
+            (keys[(xd, xn)]["template_key"], keys[(yd, yn)]["template_key"])
+            for xd, xn, yd, yn in zip(rows["x_dataset"], rows["x_name"], rows["y_dataset"], rows["y_name"])
+        }
         return sorted({str(p) for kx, ky in pairs for p in edge_files_between(self._annotations, kx, ky)})
 
 
@@ -656,13 +733,23 @@ def edge_files_between(annotations, x_key: str, y_key: str) -> list[Path]:
 # --------------------------------------------------------------------------------------------------
 # shapes as the jobs see them
 
-def _entry(row) -> "object":
+
+def _entry(row) -> object:
     from becos.catalog import frame_rotation
     from becos.datasets import ShapeEntry
 
-    return ShapeEntry(dataset=row["dataset"], name=row["name"], path=Path(row["file"]), category=row["category"],
-                      shape_class=row["class"], template_key=row["template_key"], split=row["split"],
-                      scale=float(row["scale"]), frame_rotation=frame_rotation(row), usage=int(row["usage"]))
+    return ShapeEntry(
+        dataset=row["dataset"],
+        name=row["name"],
+        path=Path(row["file"]),
+        category=row["category"],
+        shape_class=row["class"],
+        template_key=row["template_key"],
+        split=row["split"],
+        scale=float(row["scale"]),
+        frame_rotation=frame_rotation(row),
+        usage=int(row["usage"]),
+    )
 
 
 class _Recent(OrderedDict):
@@ -691,8 +778,10 @@ ShapeKey = tuple[str, str, str]
 
 def pair_shape_keys(row: dict, remesh: bool) -> tuple[ShapeKey, ShapeKey]:
     """The shapes of a manifest row's two sides."""
-    return ((row["x_dataset"], row["x_name"], remesh_token(row, "x", remesh)),
-            (row["y_dataset"], row["y_name"], remesh_token(row, "y", remesh)))
+    return (
+        (row["x_dataset"], row["x_name"], remesh_token(row, "x", remesh)),
+        (row["y_dataset"], row["y_name"], remesh_token(row, "y", remesh)),
+    )
 
 
 def visit_order(records: list[dict], remesh: bool) -> tuple[list[dict], list[list[ShapeKey]]]:
@@ -703,6 +792,7 @@ def visit_order(records: list[dict], remesh: bool) -> tuple[list[dict], list[lis
     chunk's working set small without reloading shapes. The order changes no output: every pair's
     files depend on that pair alone, and the chunk's index is sorted by pair id.
     """
+
     def sort_key(row):
         a, b = pair_shape_keys(row, remesh)
         return (min(a, b), max(a, b), row["pair_id"])
@@ -728,7 +818,7 @@ class ShapeStore:
     grow with the number of pairs in a chunk.
     """
 
-    def __init__(self, config: dict, catalog: "pd.DataFrame | list[dict]"):
+    def __init__(self, config: dict, catalog: pd.DataFrame | list[dict]):
         """``catalog``: the catalog table, or some of its rows as dicts."""
         from becos.mesh import MeshCache
 
@@ -784,8 +874,10 @@ class ShapeStore:
         try:
             return self.entries[(dataset, name)]
         except KeyError:
-            raise ConfigError(f"shape {dataset}/{name} is not in the catalog; was the dataset disabled? "
-                              f"Re-run the workflow so the catalog and manifests are rebuilt") from None
+            raise ConfigError(
+                f"shape {dataset}/{name} is not in the catalog; was the dataset disabled? "
+                f"Re-run the workflow so the catalog and manifests are rebuilt"
+            ) from None
 
     def mesh(self, dataset: str, name: str):
         """The original mesh of a catalogued shape, or None (the network then uses default faces)."""
@@ -795,8 +887,9 @@ class ShapeStore:
     def prepared(self, dataset: str, name: str):
         from becos.datasets import prepare_shape
 
-        return self._prepared.get_or_make((dataset, name),
-                                          lambda: prepare_shape(self.entry(dataset, name), self.mesh_cache))
+        return self._prepared.get_or_make(
+            (dataset, name), lambda: prepare_shape(self.entry(dataset, name), self.mesh_cache)
+        )
 
     def remeshed(self, dataset: str, name: str, token: str):
         """The remesh variant (:class:`becos.remesh.Remeshed`), or None for ``original``."""
@@ -804,8 +897,9 @@ class ShapeStore:
 
         if token == "original":
             return None
-        return self._remeshed.get_or_make((dataset, name, token),
-                                          lambda: load_remeshed(self.layout.remeshed(dataset, name, token)))
+        return self._remeshed.get_or_make(
+            (dataset, name, token), lambda: load_remeshed(self.layout.remeshed(dataset, name, token))
+        )
 
     def file_digest(self, path: Path) -> str:
         path = Path(path)
@@ -842,10 +936,18 @@ class ShapeStore:
                         source_mesh = self.mesh(*annotations.node_template(u))
                         edge = annotations.edge_map(u, v)
                         if not len(edge) or edge.face.max() < target.n_faces:  # else ground_truth names it
-                            faces = (source_mesh.faces if source_mesh is not None
-                                     else annotations.default_faces(*annotations.node_template(u)[::-1]))
-                            stats = edge_plausibility(edge, target.vertices, target.faces, faces,
-                                                      None if source_mesh is None else source_mesh.vertices)
+                            faces = (
+                                source_mesh.faces
+                                if source_mesh is not None
+                                else annotations.default_faces(*annotations.node_template(u)[::-1])
+                            )
+                            stats = edge_plausibility(
+                                edge,
+                                target.vertices,
+                                target.faces,
+                                faces,
+                                None if source_mesh is None else source_mesh.vertices,
+                            )
                             require_plausible_edge(key, u, v, stats)
                 out.append(self.file_digest(key))
         return out
@@ -873,12 +975,22 @@ class ShapeStore:
         else:  # the prepared mesh itself is not needed, only its centre
             mesh, centre = remeshed.mesh, self.centre(dataset, name)
         variant = int(token[1:]) if token.startswith("v") else -1
-        return ShapeInstance(entry.dataset, entry.name, entry.category, entry.shape_class, mesh, entry.scale,
-                             entry.frame_rotation, centre, variant)
+        return ShapeInstance(
+            entry.dataset,
+            entry.name,
+            entry.category,
+            entry.shape_class,
+            mesh,
+            entry.scale,
+            entry.frame_rotation,
+            centre,
+            variant,
+        )
 
 
 # --------------------------------------------------------------------------------------------------
 # stage functions (one per job kind)
+
 
 def _log(message: str) -> None:
     print(message, file=sys.stderr, flush=True)
@@ -915,7 +1027,7 @@ def remesh_stage(config: dict, shape_row: dict, token: str, out: Path, ply: Path
     from becos.remesh import remesh_with_stats, save_remeshed, write_ply
 
     dataset, name = shape_row["dataset"], shape_row["name"]
-    cpu = {"job_start": time.process_time()}      # CPU seconds by step, logged for benchmarks/remesh.py
+    cpu = {"job_start": time.process_time()}  # CPU seconds by step, logged for benchmarks/remesh.py
     shapes = ShapeStore(config, [shape_row])
     target = remesh_target(config, dataset, name, token)
     lap = time.process_time()
@@ -938,8 +1050,10 @@ def remesh_stage(config: dict, shape_row: dict, token: str, out: Path, ply: Path
     if ply is not None:
         write_ply(Path(ply), result.mesh)
     cpu["save"] = time.process_time() - lap
-    _log(f"remesh {dataset}/{name} {token} ({config.get('remesher', 'becos')}): {prepared.mesh.n_vertices} -> "
-         f"{result.mesh.n_vertices} vertices ({target}) in {time.perf_counter() - start:.1f} s")
+    _log(
+        f"remesh {dataset}/{name} {token} ({config.get('remesher', 'becos')}): {prepared.mesh.n_vertices} -> "
+        f"{result.mesh.n_vertices} vertices ({target}) in {time.perf_counter() - start:.1f} s"
+    )
     _log("remesh cpu seconds: " + json.dumps({k: round(v, 4) for k, v in cpu.items()}))
 
 
@@ -966,8 +1080,10 @@ def _progress(stage: str, setting: str, chunk: int, entries: list[dict], n_rows:
     """A progress line every 10 pairs and at the end of a chunk."""
     done = len(entries)
     if done % 10 == 0 or done == n_rows:
-        _log(f"{stage} {setting} chunk {chunk}: {done}/{n_rows} pairs ({sum(e['computed'] for e in entries)} "
-             f"computed, the rest up to date) {time.perf_counter() - started:.1f} s")
+        _log(
+            f"{stage} {setting} chunk {chunk}: {done}/{n_rows} pairs ({sum(e['computed'] for e in entries)} "
+            f"computed, the rest up to date) {time.perf_counter() - started:.1f} s"
+        )
 
 
 def _remove_killed_writes(paths: list[Path]) -> None:
@@ -984,12 +1100,17 @@ def _write_index(path: Path, setting: str, chunk: int, entries: list[dict], star
     The index holds content only, so a resumed or re-ordered run writes the same bytes; what was
     computed or reused and how long it took go to the job's log."""
     computed = sum(e["computed"] for e in entries)
-    index = {"setting": setting, "chunk": int(chunk), "n_pairs": len(entries),
-             "pairs": sorted(({k: v for k, v in e.items() if k != "computed"} for e in entries),
-                             key=lambda e: e["pair_id"])}
+    index = {
+        "setting": setting,
+        "chunk": int(chunk),
+        "n_pairs": len(entries),
+        "pairs": sorted(({k: v for k, v in e.items() if k != "computed"} for e in entries), key=lambda e: e["pair_id"]),
+    }
     write_text(path, json.dumps(index, indent=1) + "\n")
-    _log(f"chunk {chunk} of {setting}: {len(entries)} pairs, {computed} computed, {len(entries) - computed} "
-         f"reused, {time.perf_counter() - started:.1f} s")
+    _log(
+        f"chunk {chunk} of {setting}: {len(entries)} pairs, {computed} computed, {len(entries) - computed} "
+        f"reused, {time.perf_counter() - started:.1f} s"
+    )
     return {"n": len(entries), "computed": computed}
 
 
@@ -1008,13 +1129,21 @@ def ground_truth_stage(config: dict, setting: str, chunk: int, out_index: Path) 
     ordered, last_used = visit_order(rows.to_dict("records"), remesh)
     for row, done in zip(ordered, last_used):
         tx, ty = remesh_token(row, "x", remesh), remesh_token(row, "y", remesh)
-        key = digest({"version": GROUND_TRUTH_VERSION, "x": [row["x_dataset"], row["x_name"], tx],
-                      "y": [row["y_dataset"], row["y_name"], ty],
-                      "sources": [shapes.source_digest(row["x_dataset"], row["x_name"], tx),
-                                  shapes.source_digest(row["y_dataset"], row["y_name"], ty)],
-                      "edges": shapes.edge_digests(shapes.entry(row["x_dataset"], row["x_name"]),
-                                                   shapes.entry(row["y_dataset"], row["y_name"])),
-                      "options": stage_options(config, "ground_truth")})
+        key = digest(
+            {
+                "version": GROUND_TRUTH_VERSION,
+                "x": [row["x_dataset"], row["x_name"], tx],
+                "y": [row["y_dataset"], row["y_name"], ty],
+                "sources": [
+                    shapes.source_digest(row["x_dataset"], row["x_name"], tx),
+                    shapes.source_digest(row["y_dataset"], row["y_name"], ty),
+                ],
+                "edges": shapes.edge_digests(
+                    shapes.entry(row["x_dataset"], row["x_name"]), shapes.entry(row["y_dataset"], row["y_name"])
+                ),
+                "options": stage_options(config, "ground_truth"),
+            }
+        )
         path = layout.ground_truth(setting, row["pair_id"])
         computed = _stored_key(path, "input_key") != key
         if computed:
@@ -1022,11 +1151,26 @@ def ground_truth_stage(config: dict, setting: str, chunk: int, out_index: Path) 
             rx, ry = shapes.remeshed(x.dataset, x.name, tx), shapes.remeshed(y.dataset, y.name, ty)
             gt_xy = shapes.network.ground_truth(x, y, x_remesh=rx, y_remesh=ry)
             gt_yx = shapes.network.ground_truth(y, x, x_remesh=ry, y_remesh=rx)
-            save_npz(path, compressed=True, input_key=np.array(key), xy_face=_narrow(gt_xy.face),
-                     xy_weights=gt_xy.weights, xy_distance=gt_xy.distance, yx_face=_narrow(gt_yx.face),
-                     yx_weights=gt_yx.weights, yx_distance=gt_yx.distance)
-        entries.append({"pair_id": row["pair_id"], "path": str(path), "input_key": key, "computed": computed,
-                        "digest": shapes.file_digest(path)})
+            save_npz(
+                path,
+                compressed=True,
+                input_key=np.array(key),
+                xy_face=_narrow(gt_xy.face),
+                xy_weights=gt_xy.weights,
+                xy_distance=gt_xy.distance,
+                yx_face=_narrow(gt_yx.face),
+                yx_weights=gt_yx.weights,
+                yx_distance=gt_yx.distance,
+            )
+        entries.append(
+            {
+                "pair_id": row["pair_id"],
+                "path": str(path),
+                "input_key": key,
+                "computed": computed,
+                "digest": shapes.file_digest(path),
+            }
+        )
         shapes.release(done)
         _progress("ground truth", setting, chunk, entries, len(rows), started)
     return _write_index(Path(out_index), setting, chunk, entries, started)
@@ -1045,8 +1189,10 @@ def load_ground_truth(path: Path):
     from becos.surface_map import SurfaceMap
 
     with np.load(path, allow_pickle=False) as d:
-        return (SurfaceMap(d["xy_face"], d["xy_weights"], d["xy_distance"]),
-                SurfaceMap(d["yx_face"], d["yx_weights"], d["yx_distance"]))
+        return (
+            SurfaceMap(d["xy_face"], d["xy_weights"], d["xy_distance"]),
+            SurfaceMap(d["yx_face"], d["yx_weights"], d["yx_distance"]),
+        )
 
 
 def pair_options(config: dict, setting: str):
@@ -1077,17 +1223,29 @@ def pairs_stage(config: dict, setting: str, chunk: int, gt_index: Path, out_inde
         tx, ty = remesh_token(row, "x", remesh), remesh_token(row, "y", remesh)
         gt = gt_files.get(row["pair_id"])
         if gt is None:
-            raise ConfigError(f"{gt_index}: no ground truth for pair {row['pair_id']}; re-run the workflow "
-                              "(the ground-truth index is older than the manifest)")
-        key = digest({"version": RECORD_VERSION, "row": {k: row[k] for k in sorted(row) if k != "chunk"},
-                      "options": stage_options(config, "pairs", setting), "ground_truth": gt["digest"],
-                      "sources": [shapes.source_digest(row["x_dataset"], row["x_name"], tx),
-                                  shapes.source_digest(row["y_dataset"], row["y_name"], ty)]})
+            raise ConfigError(
+                f"{gt_index}: no ground truth for pair {row['pair_id']}; re-run the workflow "
+                "(the ground-truth index is older than the manifest)"
+            )
+        key = digest(
+            {
+                "version": RECORD_VERSION,
+                "row": {k: row[k] for k in sorted(row) if k != "chunk"},
+                "options": stage_options(config, "pairs", setting),
+                "ground_truth": gt["digest"],
+                "sources": [
+                    shapes.source_digest(row["x_dataset"], row["x_name"], tx),
+                    shapes.source_digest(row["y_dataset"], row["y_name"], ty),
+                ],
+            }
+        )
         path = layout.record(setting, row["pair_id"])
         computed = _stored_key(path, "__meta__") != key
         if not computed and not is_intact(path):
-            _log(f"{path}: its content no longer matches the digest becos recorded when writing it (edited or "
-                 f"replaced by hand?); rebuilding it")
+            _log(
+                f"{path}: its content no longer matches the digest becos recorded when writing it (edited or "
+                f"replaced by hand?); rebuilding it"
+            )
             computed = True
         if computed:
             x = shapes.instance(row["x_dataset"], row["x_name"], tx)
@@ -1096,20 +1254,38 @@ def pairs_stage(config: dict, setting: str, chunk: int, gt_index: Path, out_inde
             pair_scanners = (None, None)
             if setting != "full_full":
                 pair_scanners = tuple(shapes.scanner(s.dataset, s.name, t, s.mesh) for s, t in ((x, tx), (y, ty)))
-            record = build_pair(x, y, gt_xy, gt_yx, pair_id=row["pair_id"], seed=int(row["seed"]),
-                                split=row["split"], options=options, scanners=pair_scanners,
-                                rotations=_published_rotations(row),
-                                published_views=_published_views(config, row, options))
+            record = build_pair(
+                x,
+                y,
+                gt_xy,
+                gt_yx,
+                pair_id=row["pair_id"],
+                seed=int(row["seed"]),
+                split=row["split"],
+                options=options,
+                scanners=pair_scanners,
+                rotations=_published_rotations(row),
+                published_views=_published_views(config, row, options),
+            )
             if labels is not None:
                 for side, s, t in (("x", x, tx), ("y", y, ty)):
                     full = labels(s.dataset, s.name, t)
                     if full is not None:
                         record.arrays[f"{side}_annotation"] = full[record[f"{side}_partial_to_full"]]
-            record.meta.update(input_key=key, category=row["category"], copy=int(row["copy"]),
-                               x_token=tx, y_token=ty)  # no chunk: regrouping keeps the record
+            record.meta.update(
+                input_key=key, category=row["category"], copy=int(row["copy"]), x_token=tx, y_token=ty
+            )  # no chunk: regrouping keeps the record
             record.save(path)
-        entries.append({"pair_id": row["pair_id"], "path": str(path), "input_key": key, "computed": computed,
-                        "split": row["split"], "digest": shapes.file_digest(path)})
+        entries.append(
+            {
+                "pair_id": row["pair_id"],
+                "path": str(path),
+                "input_key": key,
+                "computed": computed,
+                "split": row["split"],
+                "digest": shapes.file_digest(path),
+            }
+        )
         shapes.release(done)
         _progress("pairs", setting, chunk, entries, len(rows), started)
     return _write_index(Path(out_index), setting, chunk, entries, started)
@@ -1118,25 +1294,42 @@ def pairs_stage(config: dict, setting: str, chunk: int, gt_index: Path, out_inde
 def _published_views(config: dict, row: dict, options):
     """``original_settings`` P2P with the reference remesh: the views of the pair's published cameras
     (:func:`becos.reference_views.published_scan`), else None (the pairs stage draws cameras)."""
-    if (options.setting != "partial_partial" or not config.get("original_settings")
-            or config.get("remesher") != "reference" or "x_cam_pos_0" not in row):
+    if (
+        options.setting != "partial_partial"
+        or not config.get("original_settings")
+        or config.get("remesher") != "reference"
+        or "x_cam_pos_0" not in row
+    ):
         return None
     from becos.reference_views import published_scan
 
     n = sum(1 for k in row if k.startswith("x_cam_pos_"))
-    cameras = np.array([[row[f"{side}_cam_pos_{i}"] for i in range(n)] for side in "xy"],
-                       dtype=np.float64).reshape(2, -1, 3)
+    cameras = np.array([[row[f"{side}_cam_pos_{i}"] for i in range(n)] for side in "xy"], dtype=np.float64).reshape(
+        2, -1, 3
+    )
     return lambda x, y, gt_xy, gt_yx: published_scan(
-        x, y, gt_xy, gt_yx, config["annotations"], row["x_name"], row["y_name"], cameras,
-        options.n_cam_pos, options.min_overlap, options.max_overlap)
+        x,
+        y,
+        gt_xy,
+        gt_yx,
+        config["annotations"],
+        row["x_name"],
+        row["y_name"],
+        cameras,
+        options.n_cam_pos,
+        options.min_overlap,
+        options.max_overlap,
+    )
 
 
 def _published_rotations(row: dict):
     """The published lists' random rotations of a pair (``original_settings``), else None."""
     if "x_random_rot_0" not in row or math.isnan(float(row["x_random_rot_0"])):
         return None
-    return tuple(np.array([row[f"{side}_random_rot_{i}"] for i in range(9)], dtype=np.float64).reshape(3, 3)
-                 for side in ("x", "y"))
+    return tuple(
+        np.array([row[f"{side}_random_rot_{i}"] for i in range(9)], dtype=np.float64).reshape(3, 3)
+        for side in ("x", "y")
+    )
 
 
 def _labeller(config: dict, shapes: ShapeStore):
@@ -1148,8 +1341,9 @@ def _labeller(config: dict, shapes: ShapeStore):
     def labels(dataset: str, name: str, token: str):
         key = (dataset, name, token)
         if key not in cache:
-            cache[key] = labels_for_instance(shapes.network, shapes.entry(dataset, name),
-                                             remesh=shapes.remeshed(dataset, name, token))
+            cache[key] = labels_for_instance(
+                shapes.network, shapes.entry(dataset, name), remesh=shapes.remeshed(dataset, name, token)
+            )
         return cache[key]
 
     return labels
@@ -1163,9 +1357,14 @@ def store_metadata(config: dict, setting: str) -> dict:
     for name in config["datasets"]:
         spec = DatasetSpec.load(name)
         datasets[name] = {"title": spec.title, **{k: spec.source.get(k) for k in ("url", "licence", "citation")}}
-    return {"setting": setting, "config": config, "config_hash": digest(config),
-            "datasets": datasets, "generator": "becos workflow",
-            "follows_published_lists": published_parts(config, setting)}
+    return {
+        "setting": setting,
+        "config": config,
+        "config_hash": digest(config),
+        "datasets": datasets,
+        "generator": "becos workflow",
+        "follows_published_lists": published_parts(config, setting),
+    }
 
 
 def published_parts(config: dict, setting: str) -> dict[str, bool | None]:
@@ -1175,9 +1374,13 @@ def published_parts(config: dict, setting: str) -> dict[str, bool | None]:
     original = bool(config.get("original_settings"))
     remesh = bool(config.get("remesh", True))
     reference = original and remesh and config.get("remesher") == "reference"
-    return {"pairs": original, "rotations": original, "face_targets": original and remesh,
-            "remesh": reference,
-            "views": None if setting == "full_full" else (reference and setting == "partial_partial")}
+    return {
+        "pairs": original,
+        "rotations": original,
+        "face_targets": original and remesh,
+        "remesh": reference,
+        "views": None if setting == "full_full" else (reference and setting == "partial_partial"),
+    }
 
 
 def export_pairings_stage(config: dict, setting: str, out: Path, store: Path) -> None:
@@ -1191,18 +1394,27 @@ def export_pairings_stage(config: dict, setting: str, out: Path, store: Path) ->
 
     layout = Layout.of(config)
     facts = store_pair_facts(open_benchmark(store))
-    write_published_pickle(read_manifest(layout.manifest(setting)), out, read_catalog(layout.catalog),
-                           random_rotations=facts["random_rotations"], cameras=facts["cameras"],
-                           pair_face_targets=facts["face_targets"], data_root=config.get("data_dir"))
+    write_published_pickle(
+        read_manifest(layout.manifest(setting)),
+        out,
+        read_catalog(layout.catalog),
+        random_rotations=facts["random_rotations"],
+        cameras=facts["cameras"],
+        pair_face_targets=facts["face_targets"],
+        data_root=config.get("data_dir"),
+    )
 
 
 # --------------------------------------------------------------------------------------------------
 # command line
 
+
 def configure_parser(parser: argparse.ArgumentParser, name: str) -> None:
-    parser.add_argument("--options", required=True,
-                        help="JSON: the job's options (becos.workflow.job_options), or the whole config for write-config "
-                             "and metadata")
+    parser.add_argument(
+        "--options",
+        required=True,
+        help="JSON: the job's options (becos.workflow.job_options), or the whole config for write-config and metadata",
+    )
     if name in ("manifest", "ground-truth", "pairs", "metadata", "export-pairings"):
         parser.add_argument("--setting", required=True, choices=SETTINGS)
     if name in ("ground-truth", "pairs"):
@@ -1226,16 +1438,21 @@ def parse_json_option(text: str, option: str, command: str) -> dict:
     Raises:
         ConfigError: not JSON, or not a JSON object (names the option, the position and the fix).
     """
-    fix = ("Fix: pass the JSON the workflow's rule writes (--options: becos.workflow.job_options, or the whole "
-           "resolved config for write-config and metadata; --shape: the shape's catalog row as a JSON object)")
+    fix = (
+        "Fix: pass the JSON the workflow's rule writes (--options: becos.workflow.job_options, or the whole "
+        "resolved config for write-config and metadata; --shape: the shape's catalog row as a JSON object)"
+    )
     try:
         value = json.loads(text)
     except json.JSONDecodeError as exc:
-        raise ConfigError(f"{option}: not valid JSON ({exc.msg} at line {exc.lineno} column "
-                          f"{exc.colno}: {text[max(0, exc.pos - 20):exc.pos + 20]!r}). {fix}") from None
+        raise ConfigError(
+            f"{option}: not valid JSON ({exc.msg} at line {exc.lineno} column "
+            f"{exc.colno}: {text[max(0, exc.pos - 20) : exc.pos + 20]!r}). {fix}"
+        ) from None
     if not isinstance(value, dict):
-        raise ConfigError(f"{option}: a JSON object {{...}} is needed, not a JSON "
-                          f"{type(value).__name__} ({text[:60]!r}). {fix}")
+        raise ConfigError(
+            f"{option}: a JSON object {{...}} is needed, not a JSON {type(value).__name__} ({text[:60]!r}). {fix}"
+        )
     return value
 
 
@@ -1244,15 +1461,22 @@ def run_cli(args: argparse.Namespace) -> int:
     try:
         return _run_stage(args, config)
     except KeyError as exc:
-        raise ConfigError(f"--options: lacks the key {exc} (given keys: {sorted(config)}). Fix: "
-                          f"pass the JSON the workflow's rule writes (becos.workflow.job_options)") from None
+        raise ConfigError(
+            f"--options: lacks the key {exc} (given keys: {sorted(config)}). Fix: "
+            f"pass the JSON the workflow's rule writes (becos.workflow.job_options)"
+        ) from None
     except TypeError as exc:
-        raise ConfigError(f"--options: a value has the wrong type ({exc}). Fix: check the "
-                          f"values against becos/data/schema.yaml, or pass the JSON the workflow's rule writes") from None
+        raise ConfigError(
+            f"--options: a value has the wrong type ({exc}). Fix: check the "
+            f"values against becos/data/schema.yaml, or pass the JSON the workflow's rule writes"
+        ) from None
     except FileNotFoundError as exc:
-        raise InputFileError(exc.filename or "?", "not found (an input of this stage)",
-                             f"run the stages before `becos {args.command}` (the workflow does), or check `results` "
-                             f"in --options ({config.get('results', 'results')!r})") from None
+        raise InputFileError(
+            exc.filename or "?",
+            "not found (an input of this stage)",
+            f"run the stages before `becos {args.command}` (the workflow does), or check `results` "
+            f"in --options ({config.get('results', 'results')!r})",
+        ) from None
 
 
 def _run_stage(args: argparse.Namespace, config: dict) -> int:
@@ -1270,8 +1494,9 @@ def _run_stage(args: argparse.Namespace, config: dict) -> int:
     elif args.command == "pairs":
         pairs_stage(config, args.setting, args.chunk, args.ground_truth, args.out)
     elif args.command == "metadata":
-        write_text(args.out, json.dumps(store_metadata(config, args.setting), indent=1, sort_keys=True,
-                                        default=str) + "\n")
+        write_text(
+            args.out, json.dumps(store_metadata(config, args.setting), indent=1, sort_keys=True, default=str) + "\n"
+        )
     elif args.command == "export-pairings":
         export_pairings_stage(config, args.setting, args.out, args.store)
     return 0

@@ -33,8 +33,7 @@ def composition_benchmark(repeats: int = 5) -> dict:
     entries = {e.name: e for e in DatasetSpec.load("tosca").list_shapes(root / "data", annotations)}
     cache = MeshCache(None)
     network = ShapeNetwork(annotations, lambda ds, name: cache.load(tosca / f"{name}.off") if ds == "tosca" else None)
-    pairs = [("cat3", "horse5"), ("wolf1", "cat2"), ("michael4", "victoria2"), ("centaur1", "horse7"),
-             ("cat0", "cat3")]
+    pairs = [("cat3", "horse5"), ("wolf1", "cat2"), ("michael4", "victoria2"), ("centaur1", "horse7"), ("cat0", "cat3")]
     remeshed = {}
     for name in {n for pair in pairs for n in pair}:
         prepared = prepare_shape(entries[name], cache)
@@ -43,17 +42,20 @@ def composition_benchmark(repeats: int = 5) -> dict:
     for x, y in pairs:
         hops = sum(h is not None for h in _hops(network, entries[x], entries[y])) + 2
         network.ground_truth(entries[x], entries[y], x_remesh=remeshed[x], y_remesh=remeshed[y])  # warm caches
-        network.ground_truth(entries[x], entries[y])                     # warm caches (original meshes)
+        network.ground_truth(entries[x], entries[y])  # warm caches (original meshes)
         times, originals = [], []
         for _ in range(repeats):
             t0 = time.perf_counter()
             network.ground_truth(entries[x], entries[y], x_remesh=remeshed[x], y_remesh=remeshed[y])
             t1 = time.perf_counter()
-            network.ground_truth(entries[x], entries[y])                 # `remesh: false`: exact transplant
+            network.ground_truth(entries[x], entries[y])  # `remesh: false`: exact transplant
             times.append(1000 * (t1 - t0))
             originals.append(1000 * (time.perf_counter() - t1))
-        rows[f"{x}->{y}"] = {"non_identity_hops": hops, "ms_median": round(statistics.median(times), 1),
-                             "ms_median_original_meshes": round(statistics.median(originals), 1)}
+        rows[f"{x}->{y}"] = {
+            "non_identity_hops": hops,
+            "ms_median": round(statistics.median(times), 1),
+            "ms_median_original_meshes": round(statistics.median(originals), 1),
+        }
     return rows
 
 

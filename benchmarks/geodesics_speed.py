@@ -40,8 +40,11 @@ def main() -> None:
     from becos.remesh import remesh
 
     root = Path(__file__).resolve().parents[1]
-    code = Path(subprocess.run([str(root.parent / "shared" / "unpack")], check=True, capture_output=True,
-                               text=True).stdout.strip().splitlines()[-1])
+    code = Path(
+        subprocess.run([str(root.parent / "shared" / "unpack")], check=True, capture_output=True, text=True)
+        .stdout.strip()
+        .splitlines()[-1]
+    )
     from becos.annotations import AnnotationSource
 
     cache = MeshCache(Path("/tmp/becos-geodesics-bench-cache"))
@@ -55,7 +58,7 @@ def main() -> None:
     old_solver = GeodesicDistances(TriMesh(v, f), "heat", cache_bytes=0)
     before = np.empty((n, n), dtype=np.float32)
     for start in range(0, n, 256):
-        before[start:start + 256] = old_solver.from_vertices(all_sources[start:start + 256])
+        before[start : start + 256] = old_solver.from_vertices(all_sources[start : start + 256])
     cpu_before = time.process_time() - t0
 
     t0 = time.process_time()
@@ -71,20 +74,38 @@ def main() -> None:
 
     rng = np.random.default_rng(0)
     picks = rng.choice(n, size=min(args.exact, n), replace=False)
-    exact = np.stack([igl.exact_geodesic(v, f.astype(np.int64), VS=np.array([s], dtype=np.int64), VT=all_sources) for s in picks])
+    exact = np.stack(
+        [igl.exact_geodesic(v, f.astype(np.int64), VS=np.array([s], dtype=np.int64), VT=all_sources) for s in picks]
+    )
     mask = exact > 3 * edge
-    err = {name: np.abs(m[picks][mask] - exact[mask]) / exact[mask] for name, m in (("before", before), ("after", after))}
-    print(json.dumps({
-        "shape": args.shape, "vertices": n, "faces": len(f), "load_average": os.getloadavg(),
-        "bytes_float32_matrix": int(after.nbytes),
-        "cpu_s": {"before": round(cpu_before, 2), "after": round(cpu_after, 2),
-                  "ratio": round(cpu_before / cpu_after, 1)},
-        "cpu_ms_per_row": {"before": round(1e3 * cpu_before / n, 3), "after": round(1e3 * cpu_after / n, 3)},
-        "after_vs_before_relative": {"mean": float(rel.mean()), "p99": float(np.quantile(rel, 0.99)),
-                                     "max": float(rel.max())},
-        "after_asymmetry_rel_to_max": sym_after,
-        "vs_exact_relative": {k: {"mean": float(e.mean()), "max": float(e.max())} for k, e in err.items()},
-    }, indent=1))
+    err = {
+        name: np.abs(m[picks][mask] - exact[mask]) / exact[mask] for name, m in (("before", before), ("after", after))
+    }
+    print(
+        json.dumps(
+            {
+                "shape": args.shape,
+                "vertices": n,
+                "faces": len(f),
+                "load_average": os.getloadavg(),
+                "bytes_float32_matrix": int(after.nbytes),
+                "cpu_s": {
+                    "before": round(cpu_before, 2),
+                    "after": round(cpu_after, 2),
+                    "ratio": round(cpu_before / cpu_after, 1),
+                },
+                "cpu_ms_per_row": {"before": round(1e3 * cpu_before / n, 3), "after": round(1e3 * cpu_after / n, 3)},
+                "after_vs_before_relative": {
+                    "mean": float(rel.mean()),
+                    "p99": float(np.quantile(rel, 0.99)),
+                    "max": float(rel.max()),
+                },
+                "after_asymmetry_rel_to_max": sym_after,
+                "vs_exact_relative": {k: {"mean": float(e.mean()), "max": float(e.max())} for k, e in err.items()},
+            },
+            indent=1,
+        )
+    )
 
 
 if __name__ == "__main__":

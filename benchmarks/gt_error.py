@@ -54,8 +54,7 @@ REPO = Path(__file__).resolve().parents[1]
 if str(REPO) not in sys.path:
     sys.path.insert(0, str(REPO))
 
-from becos.geometry import (barycentric_coordinates, closest_points_on_triangles,  # noqa: E402
-                            nearest_along_surface, surface_area)
+from becos.geometry import barycentric_coordinates, closest_points_on_triangles, nearest_along_surface, surface_area  # noqa: E402
 from becos.mesh import TriMesh  # noqa: E402
 from becos.record import SETTINGS  # noqa: E402
 from becos.remesh import Remeshed, load_remeshed  # noqa: E402
@@ -76,6 +75,7 @@ BOUND = 0.04
 
 # ----------------------------------------------------------------------------------------------
 # the shapes of a run
+
 
 class ClassPoses:
     """The original meshes of a run's catalog, grouped by (dataset, class); loaded on first use.
@@ -106,11 +106,15 @@ class ClassPoses:
         """(P, V, 3) vertices of every catalogued pose of the class (catalog order)."""
         key = (dataset, shape_class)
         if key not in self._stacks:
-            names = [r["name"] for r in self._rows.values() if r["dataset"] == dataset and str(r["class"]) == shape_class]
+            names = [
+                r["name"] for r in self._rows.values() if r["dataset"] == dataset and str(r["class"]) == shape_class
+            ]
             stack = [self.mesh(dataset, n).vertices for n in names]
             if len({len(v) for v in stack}) != 1:
-                raise ValueError(f"{dataset}/{shape_class}: poses with different vertex counts "
-                                 f"{sorted({len(v) for v in stack})}; not one triangulation")
+                raise ValueError(
+                    f"{dataset}/{shape_class}: poses with different vertex counts "
+                    f"{sorted({len(v) for v in stack})}; not one triangulation"
+                )
             self._stacks[key] = np.stack(stack)
         return self._stacks[key]
 
@@ -140,10 +144,13 @@ class RemeshTarget:
         m = remeshed.to_original
         if not m.matched.all():
             raise ValueError("a remesh vertex has no point on its original surface")
-        corners = np.asarray(original_faces)[m.face]                           # (V_r, 3) original vertices
+        corners = np.asarray(original_faces)[m.face]  # (V_r, 3) original vertices
         others = np.delete(np.arange(len(poses)), self_pose)
-        others = others[np.unique(np.linspace(0, len(others) - 1, min(MAX_POSES - 1, len(others))).round().astype(int))] \
-            if len(others) else others
+        others = (
+            others[np.unique(np.linspace(0, len(others) - 1, min(MAX_POSES - 1, len(others))).round().astype(int))]
+            if len(others)
+            else others
+        )
         self.pose_rows = np.concatenate([[self_pose], others]).astype(np.int64)  # row 0: this shape
         own_pose = poses[self_pose]
         poses = poses[self.pose_rows]
@@ -196,26 +203,26 @@ class RemeshTarget:
         face = np.empty(len(own), dtype=np.int64)
         weights = np.empty((len(own), 3))
         residual = np.empty(len(own))
-        block = max(1, 4_000_000 // (CANDIDATES * 9 * len(truth)))             # bounded memory
+        block = max(1, 4_000_000 // (CANDIDATES * 9 * len(truth)))  # bounded memory
         for start in range(0, len(own), block):
             sl = slice(start, start + block)
             face[sl], weights[sl], residual[sl] = self._locate_block(truth[:, sl], own[sl], triple[sl])
         return face, weights, residual
 
     def _locate_block(self, truth: np.ndarray, own: np.ndarray, triple: np.ndarray):
-        _, cand = self._centroids.query(own, k=CANDIDATES)                       # (N, K)
-        tri = self.mesh.vertices[self.mesh.faces[cand]]                          # (N, K, 3, 3)
+        _, cand = self._centroids.query(own, k=CANDIDATES)  # (N, K)
+        tri = self.mesh.vertices[self.mesh.faces[cand]]  # (N, K, 3, 3)
         closest = closest_points_on_triangles(own[:, None], tri[..., 0, :], tri[..., 1, :], tri[..., 2, :])
         flat = tri.reshape(-1, 3, 3)
         bary = barycentric_coordinates(closest.reshape(-1, 3), flat[:, 0], flat[:, 1], flat[:, 2])
         bary = bary.reshape(len(own), CANDIDATES, 3)
-        owners = self.owner[triple]                                              # (N, 3) remesh vertices
-        corners = self.mesh.faces[cand]                                          # (N, K, 3)
+        owners = self.owner[triple]  # (N, 3) remesh vertices
+        corners = self.mesh.faces[cand]  # (N, K, 3)
         near = np.zeros(cand.shape, dtype=bool)
         for a in range(3):
             for b in range(3):
                 near |= self._near(owners[:, a][:, None], corners[:, :, b])
-        distance = np.linalg.norm(closest - own[:, None], axis=2)                # (N, K) in this pose
+        distance = np.linalg.norm(closest - own[:, None], axis=2)  # (N, K) in this pose
         rows = np.arange(len(own))
         best = np.where(near, distance, np.inf).argmin(axis=1)
         lost = np.flatnonzero(~near.any(axis=1))
@@ -248,7 +255,9 @@ class RemeshTarget:
         d, idx = self._vertices.query(points, k=8)
         ok = np.stack([self.in_ring(idx[:, k], corners) for k in range(idx.shape[1])], axis=1)
         d = np.where(ok, d, np.inf)
-        return np.minimum(d.min(axis=1), np.linalg.norm(self.mesh.vertices[corners] - points[:, None], axis=2).min(axis=1))
+        return np.minimum(
+            d.min(axis=1), np.linalg.norm(self.mesh.vertices[corners] - points[:, None], axis=2).min(axis=1)
+        )
 
 
 class Run:
@@ -271,14 +280,20 @@ class Run:
         return self._remeshes[key]
 
     def class_names(self, dataset: str, shape_class: str) -> list[str]:
-        return [r["name"] for r in self.poses._rows.values() if r["dataset"] == dataset and str(r["class"]) == shape_class]
+        return [
+            r["name"] for r in self.poses._rows.values() if r["dataset"] == dataset and str(r["class"]) == shape_class
+        ]
 
     def target(self, dataset: str, name: str, variant: int) -> RemeshTarget:
         key = (dataset, name, int(variant))
         if key not in self._targets:
             shape_class = self.poses.shape_class(dataset, name)
-            t = RemeshTarget(self.remeshed(dataset, name, variant), self.poses.mesh(dataset, name).faces,
-                             self.poses.poses(dataset, shape_class), self.class_names(dataset, shape_class).index(name))
+            t = RemeshTarget(
+                self.remeshed(dataset, name, variant),
+                self.poses.mesh(dataset, name).faces,
+                self.poses.poses(dataset, shape_class),
+                self.class_names(dataset, shape_class).index(name),
+            )
             self._targets[key] = t
             while len(self._targets) > 24:
                 self._targets.popitem(last=False)
@@ -288,6 +303,7 @@ class Run:
 # ----------------------------------------------------------------------------------------------
 # one pair direction
 
+
 @dataclass
 class DirectionResult:
     """Per-vertex results of one direction of one pair (rows: source vertices with a prediction)."""
@@ -295,33 +311,51 @@ class DirectionResult:
     pair_id: str
     setting: str
     dataset: str
-    direction: str                  # "x->y" (corr_01) or "y->x" (corr_10)
+    direction: str  # "x->y" (corr_01) or "y->x" (corr_10)
     source: str
     target: str
-    source_vertex: np.ndarray       # (N,) partial index on the source
-    source_full: np.ndarray         # (N,) vertex of the source's full remesh
-    predicted_full: np.ndarray      # (N,) predicted vertex of the target's full remesh
-    error: np.ndarray               # (N,) x sqrt area of the target remesh
-    best: np.ndarray                # (N,) best possible vertex map, x sqrt area
-    gt_point_error: np.ndarray      # (N,) worst-pose distance of the record's GT point from the truth, x sqrt area
-    residual: np.ndarray            # (N,) worst-pose distance of the located truth, x sqrt area
+    source_vertex: np.ndarray  # (N,) partial index on the source
+    source_full: np.ndarray  # (N,) vertex of the source's full remesh
+    predicted_full: np.ndarray  # (N,) predicted vertex of the target's full remesh
+    error: np.ndarray  # (N,) x sqrt area of the target remesh
+    best: np.ndarray  # (N,) best possible vertex map, x sqrt area
+    gt_point_error: np.ndarray  # (N,) worst-pose distance of the record's GT point from the truth, x sqrt area
+    residual: np.ndarray  # (N,) worst-pose distance of the located truth, x sqrt area
     truth_original_vertex: np.ndarray  # (N,) largest-weight original vertex of the truth
     predicted_original_vertex: np.ndarray  # (N,) largest-weight original vertex of the prediction
 
     def summary(self) -> dict:
         e = self.error
-        return {"pair_id": self.pair_id, "setting": self.setting, "direction": self.direction,
-                "source": self.source, "target": self.target, "n": int(len(e)),
-                "mean": float(e.mean()) if len(e) else np.nan, "median": float(np.median(e)) if len(e) else np.nan,
-                "p95": float(np.percentile(e, 95)) if len(e) else np.nan, "max": float(e.max()) if len(e) else np.nan,
-                "best_mean": float(self.best.mean()) if len(e) else np.nan,
-                "gt_point_max": float(self.gt_point_error.max()) if len(e) else np.nan,
-                "residual_max": float(self.residual.max()) if len(e) else np.nan}
+        return {
+            "pair_id": self.pair_id,
+            "setting": self.setting,
+            "direction": self.direction,
+            "source": self.source,
+            "target": self.target,
+            "n": int(len(e)),
+            "mean": float(e.mean()) if len(e) else np.nan,
+            "median": float(np.median(e)) if len(e) else np.nan,
+            "p95": float(np.percentile(e, 95)) if len(e) else np.nan,
+            "max": float(e.max()) if len(e) else np.nan,
+            "best_mean": float(self.best.mean()) if len(e) else np.nan,
+            "gt_point_max": float(self.gt_point_error.max()) if len(e) else np.nan,
+            "residual_max": float(self.residual.max()) if len(e) else np.nan,
+        }
 
 
 def _side(record, s: str) -> dict:
-    return {k: record[f"{s}_{k}"] for k in ("partial_to_full", "full_face_ids", "remesh_variant", "faces",
-                                            "full_faces", "vertices", "full_vertices")}
+    return {
+        k: record[f"{s}_{k}"]
+        for k in (
+            "partial_to_full",
+            "full_face_ids",
+            "remesh_variant",
+            "faces",
+            "full_faces",
+            "vertices",
+            "full_vertices",
+        )
+    }
 
 
 def _check_record_shape(record, s: str, remeshed: Remeshed) -> None:
@@ -337,8 +371,10 @@ def _check_record_shape(record, s: str, remeshed: Remeshed) -> None:
     rot = u @ vt
     off = np.abs(a0 @ rot * scale - b0).max() / np.abs(b0).max()
     if off > 1e-6:
-        raise ValueError(f"pair {record.pair_id}: side {s} full vertices are not a similarity of its remesh file "
-                         f"(relative residual {off:.2e})")
+        raise ValueError(
+            f"pair {record.pair_id}: side {s} full vertices are not a similarity of its remesh file "
+            f"(relative residual {off:.2e})"
+        )
 
 
 def measure_direction(run: Run, record, setting: str, s: str, t: str) -> DirectionResult:
@@ -358,10 +394,10 @@ def measure_direction(run: Run, record, setting: str, s: str, t: str) -> Directi
     # the exact truth: the source remesh vertex's original point, carried by vertex identity into every pose
     to_orig = rs.to_original
     orig_faces_s = run.poses.mesh(dataset, meta_s["name"]).faces
-    triple = orig_faces_s[to_orig.face[source_full]]                              # (N, 3) original vertex ids
+    triple = orig_faces_s[to_orig.face[source_full]]  # (N, 3) original vertex ids
     w = to_orig.weights[source_full]
     poses = run.poses.poses(dataset, run.poses.shape_class(dataset, meta_t["name"]))
-    truth = np.einsum("nk,pnkd->pnd", w, poses[:, triple])                        # (P, N, 3)
+    truth = np.einsum("nk,pnkd->pnd", w, poses[:, triple])  # (P, N, 3)
     face, weights, residual = target.locate(truth, triple)
     error = target.errors(predicted_full, face, weights)
     best = target.best(face, weights)
@@ -375,9 +411,23 @@ def measure_direction(run: Run, record, setting: str, s: str, t: str) -> Directi
     pred_map = target.remeshed.to_original
     predicted_original = orig_faces_t[pred_map.face[predicted_full], pred_map.weights[predicted_full].argmax(axis=1)]
     scale = target.sqrt_area
-    return DirectionResult(record.pair_id, setting, dataset, f"{s}->{t}", meta_s["name"], meta_t["name"], has, source_full,
-                           predicted_full, error / scale, best / scale, gt_point_error / scale, residual / scale,
-                           triple[np.arange(len(has)), w.argmax(axis=1)], predicted_original)
+    return DirectionResult(
+        record.pair_id,
+        setting,
+        dataset,
+        f"{s}->{t}",
+        meta_s["name"],
+        meta_t["name"],
+        has,
+        source_full,
+        predicted_full,
+        error / scale,
+        best / scale,
+        gt_point_error / scale,
+        residual / scale,
+        triple[np.arange(len(has)), w.argmax(axis=1)],
+        predicted_original,
+    )
 
 
 def audit_setting(run: Run, setting: str, pair_ids: set[str] | None = None, log=None) -> list[DirectionResult]:
@@ -397,13 +447,16 @@ def audit_setting(run: Run, setting: str, pair_ids: set[str] | None = None, log=
             out.append(measure_direction(run, record, setting, s, t))
         if log is not None:
             r = out[-2].summary(), out[-1].summary()
-            log(f"{setting} {record.pair_id} {mx['name']}<->{my['name']}: max {r[0]['max']:.4f} / {r[1]['max']:.4f} "
-                f"({time.perf_counter() - started:.0f} s)")
+            log(
+                f"{setting} {record.pair_id} {mx['name']}<->{my['name']}: max {r[0]['max']:.4f} / {r[1]['max']:.4f} "
+                f"({time.perf_counter() - started:.0f} s)"
+            )
     return out
 
 
 # ----------------------------------------------------------------------------------------------
 # reporting
+
 
 def body_location(run: Run, dataset: str, shape_class: str, original_vertex: np.ndarray) -> list[str]:
     """Where original vertices are on the class's first pose: bounding-box fractions (x, y, z)."""
@@ -448,11 +501,21 @@ def worst_vertices(run: Run, results: list[DirectionResult], n: int) -> pd.DataF
         shape_class = run.poses.shape_class(dataset, r.target)
         loc_t = body_location(run, dataset, shape_class, np.array([r.truth_original_vertex[i]]))[0]
         loc_p = body_location(run, dataset, shape_class, np.array([r.predicted_original_vertex[i]]))[0]
-        out.append({"setting": r.setting, "pair_id": r.pair_id, "direction": f"{r.source}->{r.target}",
-                    "vertex": int(r.source_vertex[i]), "full vertex": int(r.source_full[i]),
-                    "error": e, "gt point off": float(r.gt_point_error[i]),
-                    "truth orig v": int(r.truth_original_vertex[i]), "truth at": loc_t,
-                    "pred orig v": int(r.predicted_original_vertex[i]), "pred at": loc_p})
+        out.append(
+            {
+                "setting": r.setting,
+                "pair_id": r.pair_id,
+                "direction": f"{r.source}->{r.target}",
+                "vertex": int(r.source_vertex[i]),
+                "full vertex": int(r.source_full[i]),
+                "error": e,
+                "gt point off": float(r.gt_point_error[i]),
+                "truth orig v": int(r.truth_original_vertex[i]),
+                "truth at": loc_t,
+                "pred orig v": int(r.predicted_original_vertex[i]),
+                "pred at": loc_p,
+            }
+        )
     return pd.DataFrame(out)
 
 
@@ -469,8 +532,13 @@ def _print_tables(summaries: list[dict]) -> None:
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("results", type=Path, nargs="?", help="a finished run's results folder")
-    parser.add_argument("--combine", type=Path, nargs="+", default=None,
-                        help="instead: print the tables of --json files of earlier runs (e.g. one per --pairs part)")
+    parser.add_argument(
+        "--combine",
+        type=Path,
+        nargs="+",
+        default=None,
+        help="instead: print the tables of --json files of earlier runs (e.g. one per --pairs part)",
+    )
     parser.add_argument("--settings", default=",".join(SETTINGS))
     parser.add_argument("--pairs", default=None, help="comma-separated pair ids (default: every same-class pair)")
     parser.add_argument("--worst", type=int, default=25, help="how many worst vertices to list")

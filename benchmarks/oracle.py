@@ -41,8 +41,9 @@ REPO = Path(__file__).resolve().parents[1]
 
 
 def becos_code() -> Path:
-    out = subprocess.run([str(REPO.parent / "shared" / "unpack")], check=True, capture_output=True,
-                         text=True).stdout.strip()
+    out = subprocess.run(
+        [str(REPO.parent / "shared" / "unpack")], check=True, capture_output=True, text=True
+    ).stdout.strip()
     return Path(out.splitlines()[-1])
 
 
@@ -70,8 +71,16 @@ def published_setup(root: Path, results: Path, settings: tuple[str, ...]) -> dic
     from becos.sampling import read_manifest, write_manifest
     from becos.workflow import Plan, build_catalog, build_manifest, resolve_config
 
-    config = resolve_config({"data_dir": str(root / "data"), "annotations": str(root), "datasets": ["tosca"],
-                             "original_settings": True, "setting": list(settings), "results": str(results)})
+    config = resolve_config(
+        {
+            "data_dir": str(root / "data"),
+            "annotations": str(root),
+            "datasets": ["tosca"],
+            "original_settings": True,
+            "setting": list(settings),
+            "results": str(results),
+        }
+    )
     catalog = build_catalog(config)
     manifests = {}
     for setting in settings:
@@ -123,7 +132,8 @@ def compare_full_side(remeshed, oracle_vertices: np.ndarray, oracle_faces: np.nd
     forward = reference_output(ours, info["surface_area"], info["random_rotation"], *align)
     undone = undo_reference_output(oracle_vertices, info["random_rotation"], *align)
     return {
-        "n_vertices": int(len(ours)), "n_faces": int(len(remeshed.mesh.faces)),
+        "n_vertices": int(len(ours)),
+        "n_faces": int(len(remeshed.mesh.faces)),
         "faces_identical": bool(np.array_equal(remeshed.mesh.faces, oracle_faces)),
         "max_abs_diff_forward": float(np.abs(forward - oracle_vertices).max()) if same_shape else float("inf"),
         "max_abs_diff_undo": float(np.abs(undone - ours).max()) if same_shape else float("inf"),
@@ -131,8 +141,9 @@ def compare_full_side(remeshed, oracle_vertices: np.ndarray, oracle_faces: np.nd
     }
 
 
-def bitwise_side(root: Path, name: str, target_faces: int, scale: float, rot_deg, info: dict,
-                 oracle_vertices: np.ndarray):
+def bitwise_side(
+    root: Path, name: str, target_faces: int, scale: float, rot_deg, info: dict, oracle_vertices: np.ndarray
+):
     """The reference's remesh of the file carried forward exactly as the reference does:
     (max |Δ| to the oracle's vertices, the :class:`ReferenceRemesh`, seconds)."""
     from becos.mesh import read_mesh
@@ -157,8 +168,9 @@ def casting_frames(root: Path, row: dict, infos: tuple[dict, dict], spec) -> tup
 
     out = []
     for side, info in zip(("x", "y"), infos):
-        ref = reference_remesh(read_mesh(root / "data" / "tosca-off" / f"{row[side + '_name']}.off"),
-                               int(row[f"{side}_face_target"]))
+        ref = reference_remesh(
+            read_mesh(root / "data" / "tosca-off" / f"{row[side + '_name']}.off"), int(row[f"{side}_face_target"])
+        )
         posed = reference_pose(ref.mesh.vertices, spec.scale, open3d_rotation(spec.rotation_deg))
         if info["align_rotation"] is not None:
             posed = posed @ info["align_rotation"] + info["align_translation"]
@@ -166,8 +178,9 @@ def casting_frames(root: Path, row: dict, infos: tuple[dict, dict], spec) -> tup
     return tuple(out)
 
 
-def compare_partial_pair(root: Path, setup: dict, row: dict, folder: Path, spec, cast: bool = True,
-                         stage: "StageRemeshes | None" = None) -> dict:
+def compare_partial_pair(
+    root: Path, setup: dict, row: dict, folder: Path, spec, cast: bool = True, stage: StageRemeshes | None = None
+) -> dict:
     """Our views of an oracle partial_partial pair from the published cameras vs the reference's partials.
 
     The kept try: the one whose camera the info pickles record when its overlaps are in range, else the
@@ -179,12 +192,18 @@ def compare_partial_pair(root: Path, setup: dict, row: dict, folder: Path, spec,
     where it was X); with ``stage`` (the
     remesh files), the overlap masks (:func:`compare_masks`)."""
     from becos.reference_remesh import open3d_rotation, reference_pose
-    from becos.reference_views import (cast_pinhole, full_faces_covering, full_triangles, pair_view_files,
-                                       read_triangle_ids, reference_component)
+    from becos.reference_views import (
+        cast_pinhole,
+        full_faces_covering,
+        full_triangles,
+        pair_view_files,
+        read_triangle_ids,
+        reference_component,
+    )
 
     sides = [oracle_side(folder, i) for i in (0, 1)]
     infos = (sides[0][3], sides[1][3])
-    cams = np.asarray(_published_cameras(setup)[row["pair_id"]])          # (2, 10, 3)
+    cams = np.asarray(_published_cameras(setup)[row["pair_id"]])  # (2, 10, 3)
     k_cam = int(np.flatnonzero(np.all(cams[0] == infos[0]["cam_pos"], axis=1))[0])
     lo, hi = setup["config"]["min_overlap"], setup["config"]["max_overlap"]
     accepted = all(lo <= i["overlap_percentage"] <= hi for i in infos)
@@ -205,18 +224,24 @@ def compare_partial_pair(root: Path, setup: dict, row: dict, folder: Path, spec,
         jaccard = jaccard_own = None
         if cast and source == "file":  # the cast the reference would do without the file, against the file
             jaccard = _jaccard(cast_pinhole(vertices, faces, cams[i][k]), ids)
-            if i == 1:   # Y in its own, unaligned frame (as when it was the X of another pair)
+            if i == 1:  # Y in its own, unaligned frame (as when it was the X of another pair)
                 own = reference_pose(frames[1][2].mesh.vertices, spec.scale, open3d_rotation(spec.rotation_deg))
                 jaccard_own = _jaccard(cast_pinhole(own / infos[1]["surface_area"], faces, cams[i][k]), ids)
         _, o_vertices, o_faces, info = sides[i]
         out[side] = {
-            "view_source": source, "seconds_view": round(seconds_view, 2), "cast_jaccard_vs_file": jaccard,
+            "view_source": source,
+            "seconds_view": round(seconds_view, 2),
+            "cast_jaccard_vs_file": jaccard,
             "cast_unaligned_jaccard_vs_file": jaccard_own,
-            "n_partial_vertices": int(len(comp.partial_vertices)), "n_oracle_vertices": int(len(o_vertices)),
+            "n_partial_vertices": int(len(comp.partial_vertices)),
+            "n_oracle_vertices": int(len(o_vertices)),
             "same_triangles": full_triangles(comp.partial_faces, comp.partial_to_full)
             == full_triangles(o_faces, info["partial2full"]),
-            "same_kept_full_faces": bool(np.array_equal(
-                comp.kept_faces, full_faces_covering(faces, len(vertices), info["partial2full"][o_faces])[0])),
+            "same_kept_full_faces": bool(
+                np.array_equal(
+                    comp.kept_faces, full_faces_covering(faces, len(vertices), info["partial2full"][o_faces])[0]
+                )
+            ),
             "same_partial2full": bool(np.array_equal(comp.partial_to_full, info["partial2full"])),
             "fill_faces_not_in_full_mesh": comp.unmatched_faces,
         }
@@ -226,7 +251,7 @@ def compare_partial_pair(root: Path, setup: dict, row: dict, folder: Path, spec,
     return out
 
 
-def pair_ground_truth(setup: dict, stage: "StageRemeshes", row: dict):
+def pair_ground_truth(setup: dict, stage: StageRemeshes, row: dict):
     """``([Remeshed x, Remeshed y], {"xy": SurfaceMap, "yx": SurfaceMap})``: the remesh stage's files and
     becos's exact ground truth between them (the network, as the ground-truth stage computes it)."""
     from becos.workflow import ShapeStore, remesh_token
@@ -239,13 +264,17 @@ def pair_ground_truth(setup: dict, stage: "StageRemeshes", row: dict):
         names = (row["x_name"], row["y_name"])
         remeshed = [stage.get("tosca", n, remesh_token(row, s, True)) for n, s in zip(names, ("x", "y"))]
         entries = [shapes.entry("tosca", n) for n in names]
-        setup[key] = (remeshed, {
-            "xy": shapes.network.ground_truth(entries[0], entries[1], x_remesh=remeshed[0], y_remesh=remeshed[1]),
-            "yx": shapes.network.ground_truth(entries[1], entries[0], x_remesh=remeshed[1], y_remesh=remeshed[0])})
+        setup[key] = (
+            remeshed,
+            {
+                "xy": shapes.network.ground_truth(entries[0], entries[1], x_remesh=remeshed[0], y_remesh=remeshed[1]),
+                "yx": shapes.network.ground_truth(entries[1], entries[0], x_remesh=remeshed[1], y_remesh=remeshed[0]),
+            },
+        )
     return setup[key]
 
 
-def compare_published_try(root: Path, setup: dict, stage: "StageRemeshes", row: dict, folder: Path) -> dict:
+def compare_published_try(root: Path, setup: dict, stage: StageRemeshes, row: dict, folder: Path) -> dict:
     """becos's own run of a published P2P pair (:func:`becos.reference_views.published_p2p`: its casting
     frames from the remesh files and its exact ground truth, views from the shipped files or cast) vs the
     oracle: the kept try, the recorded camera's try, the reference rule's overlaps against the info
@@ -258,30 +287,41 @@ def compare_published_try(root: Path, setup: dict, stage: "StageRemeshes", row: 
     infos = [oracle_side(folder, i) for i in (0, 1)]
     cams = np.asarray(_published_cameras(setup)[row["pair_id"]])
     frames = casting_frames(x, y, gt["xy"])
-    views = PublishedViews(root, row["x_name"], row["y_name"], cams, (frames.x_vertices, frames.y_vertices),
-                           (x.faces, y.faces))
+    views = PublishedViews(
+        root, row["x_name"], row["y_name"], cams, (frames.x_vertices, frames.y_vertices), (x.faces, y.faces)
+    )
     config = setup["config"]
     start = time.perf_counter()
-    got = published_p2p(x, y, gt["xy"], gt["yx"], views, config["n_cam_pos"], config["min_overlap"],
-                        config["max_overlap"])
+    got = published_p2p(
+        x, y, gt["xy"], gt["yx"], views, config["n_cam_pos"], config["min_overlap"], config["max_overlap"]
+    )
     seconds = time.perf_counter() - start
     k_cam = int(np.flatnonzero(np.all(cams[0] == infos[0][3]["cam_pos"], axis=1))[0])
     lo, hi = config["min_overlap"], config["max_overlap"]
     accepted = all(lo <= i[3]["overlap_percentage"] <= hi for i in infos)
-    expected = [full_faces_covering(m.faces, m.n_vertices, i[3]["partial2full"][i[2]])[0] for m, i in zip((x, y), infos)]
+    expected = [
+        full_faces_covering(m.faces, m.n_vertices, i[3]["partial2full"][i[2]])[0] for m, i in zip((x, y), infos)
+    ]
     cos = (np.trace(frames.rotation.T @ infos[1][3]["align_rotation"]) - 1) / 2
-    return {"try": got.try_index, "oracle_try": k_cam if accepted else cams.shape[1] - 1,
-            "camera_try": got.camera_try, "oracle_camera_try": k_cam, "accepted": got.accepted,
-            "reference_rule_overlaps": [float(v) for v in got.reference_overlaps[got.try_index]],
-            "oracle_overlaps": [float(infos[1][3]["overlap_percentage"]), float(infos[0][3]["overlap_percentage"])],
-            "exact_overlaps": [float(v) for v in got.exact_overlaps[got.try_index]],
-            "exact_try": got.exact_try, "exact_differs": got.exact_differs,
-            "same_kept_faces": bool(np.array_equal(got.kept_x, expected[0]) and np.array_equal(got.kept_y, expected[1])),
-            "alignment_angle_deg": float(np.degrees(np.arccos(np.clip(cos, -1, 1)))),
-            "sources": sorted(set(views.sources.values())), "seconds": round(seconds, 2)}
+    return {
+        "try": got.try_index,
+        "oracle_try": k_cam if accepted else cams.shape[1] - 1,
+        "camera_try": got.camera_try,
+        "oracle_camera_try": k_cam,
+        "accepted": got.accepted,
+        "reference_rule_overlaps": [float(v) for v in got.reference_overlaps[got.try_index]],
+        "oracle_overlaps": [float(infos[1][3]["overlap_percentage"]), float(infos[0][3]["overlap_percentage"])],
+        "exact_overlaps": [float(v) for v in got.exact_overlaps[got.try_index]],
+        "exact_try": got.exact_try,
+        "exact_differs": got.exact_differs,
+        "same_kept_faces": bool(np.array_equal(got.kept_x, expected[0]) and np.array_equal(got.kept_y, expected[1])),
+        "alignment_angle_deg": float(np.degrees(np.arccos(np.clip(cos, -1, 1)))),
+        "sources": sorted(set(views.sources.values())),
+        "seconds": round(seconds, 2),
+    }
 
 
-def compare_masks(setup: dict, stage: "StageRemeshes", row: dict, folder: Path, comps, refs) -> dict:
+def compare_masks(setup: dict, stage: StageRemeshes, row: dict, folder: Path, comps, refs) -> dict:
     """Overlap masks of the kept views: becos's exact ground truth vs the reference's masks.
 
     Per direction (``xy``: over partial-X vertices, the reference's mask in Y's info pickle; ``yx``
@@ -305,12 +345,12 @@ def compare_masks(setup: dict, stage: "StageRemeshes", row: dict, folder: Path, 
     for d, (a, b) in (("xy", (0, 1)), ("yx", (1, 0))):
         pa, pb = partials[a], partials[b]
         ours = overlap_mask(pa, gt[d], pb)
-        theirs = np.asarray(infos[b]["overlap_mask"], dtype=bool)   # the reference stores it in the other side's info
+        theirs = np.asarray(infos[b]["overlap_mask"], dtype=bool)  # the reference stores it in the other side's info
         assert np.array_equal(pa.partial_to_full, infos[a]["partial2full"])
         full_rows = pa.partial_to_full
         if same_class:
             ref_target = refs[b].source_to_remeshed[refs[a].remeshed_to_source][full_rows]
-        else:   # known where the reference found the image in its partial
+        else:  # known where the reference found the image in its partial
             ref_target = np.where(corres[d] >= 0, pb.partial_to_full[np.maximum(corres[d], 0)], -2)
         face = gt[d].face[full_rows]
         corners = np.asarray(remeshed[b].mesh.faces)[np.maximum(face, 0)]
@@ -325,14 +365,19 @@ def compare_masks(setup: dict, stage: "StageRemeshes", row: dict, folder: Path, 
         differ = gt_agree & ~agree
         on_border = border[np.maximum(ref_target, 0)] & (ref_target >= 0)
         off_border = gt_agree & ~on_border
-        out[d] = {"n_differ_gt_agree": int(differ.sum()),
-                  "n_gt_agree_off_border": int(off_border.sum()),
-                  "share_gt_agree_off_border": float(agree[off_border].mean()) if off_border.any() else None,
-                  "share_differ_at_border": float(on_border[differ].mean()) if differ.any() else None,
-                  "n": int(len(ours)), "ours_overlap": float(ours.mean()), "reference_overlap": float(theirs.mean()),
-                  "share_all": float(agree.mean()), "n_gt_agree": int(gt_agree.sum()),
-                  "share_gt_agree": float(agree[gt_agree].mean()) if gt_agree.any() else None,
-                  "reference_full_gt": "rounded maps" if same_class else "partial correspondences"}
+        out[d] = {
+            "n_differ_gt_agree": int(differ.sum()),
+            "n_gt_agree_off_border": int(off_border.sum()),
+            "share_gt_agree_off_border": float(agree[off_border].mean()) if off_border.any() else None,
+            "share_differ_at_border": float(on_border[differ].mean()) if differ.any() else None,
+            "n": int(len(ours)),
+            "ours_overlap": float(ours.mean()),
+            "reference_overlap": float(theirs.mean()),
+            "share_all": float(agree.mean()),
+            "n_gt_agree": int(gt_agree.sum()),
+            "share_gt_agree": float(agree[gt_agree].mean()) if gt_agree.any() else None,
+            "reference_full_gt": "rounded maps" if same_class else "partial correspondences",
+        }
     return out
 
 
@@ -343,9 +388,14 @@ def _published_cameras(setup: dict) -> dict:
     if "cameras" not in setup:
         config = setup["config"]
         path = Path(config["annotations"]) / "config" / "pairings_original_partial_partial.pkl"
-        setup["cameras"] = import_published(path, setting="partial_partial", seed=config["seed"],
-                                            n_variants=config["remesh_variants"], n_chunks=config["n_chunks"],
-                                            datasets=config["datasets"]).cameras
+        setup["cameras"] = import_published(
+            path,
+            setting="partial_partial",
+            seed=config["seed"],
+            n_variants=config["remesh_variants"],
+            n_chunks=config["n_chunks"],
+            datasets=config["datasets"],
+        ).cameras
     return setup["cameras"]
 
 
@@ -377,8 +427,13 @@ def run(results: Path) -> dict:
             token = remesh_token(row, side, True)
             result = compare_full_side(stage.get("tosca", name, token), vertices, faces, info)
             diff, ref, seconds = bitwise_side(root, name, int(token[1:]), spec.scale, spec.rotation_deg, info, vertices)
-            result.update(name=name, token=token, max_abs_diff_bitwise=diff, seconds_reference_remesh=seconds,
-                          seconds_remesh_stage=stage.seconds.get((name, token), 0.0))
+            result.update(
+                name=name,
+                token=token,
+                max_abs_diff_bitwise=diff,
+                seconds_reference_remesh=seconds,
+                seconds_remesh_stage=stage.seconds.get((name, token), 0.0),
+            )
             sides[side], refs[side] = result, ref
             infos.append(info)
         classes = setup["plan"]._catalog_rows
@@ -386,21 +441,40 @@ def run(results: Path) -> dict:
         corres = None
         if same_class:
             c01, c10 = np.load(folder / "corres_01.npy"), np.load(folder / "corres_10.npy")
-            corres = bool(np.array_equal(refs["y"].source_to_remeshed[refs["x"].remeshed_to_source], c01)
-                          and np.array_equal(refs["x"].source_to_remeshed[refs["y"].remeshed_to_source], c10))
-        rows_out.append({"setting": "full_full", "split": split, "index": index, "x": sides["x"], "y": sides["y"],
-                         "random_rotation_identical": rotation_identical(row, *infos),
-                         "reference_maps_reproduce_corres": corres})
+            corres = bool(
+                np.array_equal(refs["y"].source_to_remeshed[refs["x"].remeshed_to_source], c01)
+                and np.array_equal(refs["x"].source_to_remeshed[refs["y"].remeshed_to_source], c10)
+            )
+        rows_out.append(
+            {
+                "setting": "full_full",
+                "split": split,
+                "index": index,
+                "x": sides["x"],
+                "y": sides["y"],
+                "random_rotation_identical": rotation_identical(row, *infos),
+                "reference_maps_reproduce_corres": corres,
+            }
+        )
     for split, index, folder in oracle_pairs(root, "partial_partial"):
         row = manifest_row(setup["manifests"]["partial_partial"], split, index)
         (nx, *_, ix), (ny, *_, iy) = oracle_side(folder, 0), oracle_side(folder, 1)
         views = compare_partial_pair(root, setup, row, folder, spec, stage=stage)
         views["published_p2p"] = compare_published_try(root, setup, stage, row, folder)
-        rows_out.append({"setting": "partial_partial", "split": split, "index": index,
-                         "x": {"name": nx, **views["x"]}, "y": {"name": ny, **views["y"]},
-                         "try": views["try"], "accepted": views["accepted"], "masks": views["masks"],
-                         "published_p2p": views["published_p2p"],
-                         "random_rotation_identical": rotation_identical(row, ix, iy)})
+        rows_out.append(
+            {
+                "setting": "partial_partial",
+                "split": split,
+                "index": index,
+                "x": {"name": nx, **views["x"]},
+                "y": {"name": ny, **views["y"]},
+                "try": views["try"],
+                "accepted": views["accepted"],
+                "masks": views["masks"],
+                "published_p2p": views["published_p2p"],
+                "random_rotation_identical": rotation_identical(row, ix, iy),
+            }
+        )
     full = [r for r in rows_out if r["setting"] == "full_full"]
     partial = [r for r in rows_out if r["setting"] == "partial_partial"]
     summary = {
@@ -416,11 +490,19 @@ def run(results: Path) -> dict:
         "partial_sides_same_triangles": sum(r[s]["same_triangles"] for r in partial for s in "xy"),
         "partial_sides_same_partial2full": sum(r[s]["same_partial2full"] for r in partial for s in "xy"),
         "partial_sides": 2 * len(partial),
-        "cast_jaccard_vs_file_min": min((r[s]["cast_jaccard_vs_file"] for r in partial for s in "xy"
-                                         if r[s]["cast_jaccard_vs_file"] is not None), default=None),
+        "cast_jaccard_vs_file_min": min(
+            (r[s]["cast_jaccard_vs_file"] for r in partial for s in "xy" if r[s]["cast_jaccard_vs_file"] is not None),
+            default=None,
+        ),
         "cast_jaccard_vs_file_best_frame_min": min(
-            (max(v for v in (r[s]["cast_jaccard_vs_file"], r[s]["cast_unaligned_jaccard_vs_file"]) if v is not None)
-             for r in partial for s in "xy" if r[s]["cast_jaccard_vs_file"] is not None), default=None),
+            (
+                max(v for v in (r[s]["cast_jaccard_vs_file"], r[s]["cast_unaligned_jaccard_vs_file"]) if v is not None)
+                for r in partial
+                for s in "xy"
+                if r[s]["cast_jaccard_vs_file"] is not None
+            ),
+            default=None,
+        ),
         "mask_share_all": _pooled(partial, "share_all", "n"),
         "mask_share_gt_agree": _pooled(partial, "share_gt_agree", "n_gt_agree"),
         "mask_share_gt_agree_off_border": _pooled(partial, "share_gt_agree_off_border", "n_gt_agree_off_border"),
@@ -442,56 +524,72 @@ def _pooled(rows: list[dict], share: str, count: str) -> float:
 
 
 def table(report: dict) -> str:
-    lines = [f"{'setting':15} {'pair':10} {'x / y':22} {'n verts':>12} {'fwd max|d|':>11} {'undo max|d|':>11} "
-             f"{'bitwise':>9} {'faces':>6} {'rot':>5} {'corres':>6}"]
+    lines = [
+        f"{'setting':15} {'pair':10} {'x / y':22} {'n verts':>12} {'fwd max|d|':>11} {'undo max|d|':>11} "
+        f"{'bitwise':>9} {'faces':>6} {'rot':>5} {'corres':>6}"
+    ]
     for r in report["pairs"]:
         pair = f"{r['split']}/{r['index']}"
         names = f"{r['x']['name']} / {r['y']['name']}"
         if r["setting"] == "full_full":
             x, y = r["x"], r["y"]
-            lines.append(f"{r['setting']:15} {pair:10} {names:22} {x['n_vertices']:>5}/{y['n_vertices']:<6} "
-                         f"{max(x['max_abs_diff_forward'], y['max_abs_diff_forward']):>11.2e} "
-                         f"{max(x['max_abs_diff_undo'], y['max_abs_diff_undo']):>11.2e} "
-                         f"{max(x['max_abs_diff_bitwise'], y['max_abs_diff_bitwise']):>9.1e} "
-                         f"{str(x['faces_identical'] and y['faces_identical']):>6} "
-                         f"{str(r['random_rotation_identical']):>5} {str(r['reference_maps_reproduce_corres']):>6}")
+            lines.append(
+                f"{r['setting']:15} {pair:10} {names:22} {x['n_vertices']:>5}/{y['n_vertices']:<6} "
+                f"{max(x['max_abs_diff_forward'], y['max_abs_diff_forward']):>11.2e} "
+                f"{max(x['max_abs_diff_undo'], y['max_abs_diff_undo']):>11.2e} "
+                f"{max(x['max_abs_diff_bitwise'], y['max_abs_diff_bitwise']):>9.1e} "
+                f"{str(x['faces_identical'] and y['faces_identical']):>6} "
+                f"{str(r['random_rotation_identical']):>5} {str(r['reference_maps_reproduce_corres']):>6}"
+            )
     lines.append("")
-    lines.append(f"{'setting':15} {'pair':10} {'x / y':22} {'try':>3} {'acc':>5} {'source x/y':>10} "
-                 f"{'n verts (ours=oracle)':>22} {'same tri':>8} {'kept':>5} {'p2f':>5} {'cast J x/y/y own':>20} {'rot':>5}")
+    lines.append(
+        f"{'setting':15} {'pair':10} {'x / y':22} {'try':>3} {'acc':>5} {'source x/y':>10} "
+        f"{'n verts (ours=oracle)':>22} {'same tri':>8} {'kept':>5} {'p2f':>5} {'cast J x/y/y own':>20} {'rot':>5}"
+    )
     for r in report["pairs"]:
         if r["setting"] != "partial_partial":
             continue
         x, y = r["x"], r["y"]
         verts = f"{x['n_partial_vertices']}={x['n_oracle_vertices']} {y['n_partial_vertices']}={y['n_oracle_vertices']}"
-        lines.append(f"{r['setting']:15} {r['split'] + '/' + str(r['index']):10} {x['name'] + ' / ' + y['name']:22} "
-                     f"{r['try']:>3} {str(r['accepted']):>5} {x['view_source'] + '/' + y['view_source']:>10} "
-                     f"{verts:>22} {str(x['same_triangles']) + '/' + str(y['same_triangles']):>8} "
-                     f"{str(x['same_kept_full_faces'] and y['same_kept_full_faces']):>5} "
-                     f"{str(x['same_partial2full'] and y['same_partial2full']):>5} "
-                     f"{_jaccards(x, y):>20} {str(r['random_rotation_identical']):>5}")
+        lines.append(
+            f"{r['setting']:15} {r['split'] + '/' + str(r['index']):10} {x['name'] + ' / ' + y['name']:22} "
+            f"{r['try']:>3} {str(r['accepted']):>5} {x['view_source'] + '/' + y['view_source']:>10} "
+            f"{verts:>22} {str(x['same_triangles']) + '/' + str(y['same_triangles']):>8} "
+            f"{str(x['same_kept_full_faces'] and y['same_kept_full_faces']):>5} "
+            f"{str(x['same_partial2full'] and y['same_partial2full']):>5} "
+            f"{_jaccards(x, y):>20} {str(r['random_rotation_identical']):>5}"
+        )
     lines.append("")
-    lines.append(f"{'published_p2p (becos)':26} {'try':>3} {'oracle':>6} {'cam':>3} {'ref-rule overlaps':>17} "
-                 f"{'oracle overlaps':>15} {'exact overlaps':>14} {'exact try':>9} {'kept':>5} {'align°':>7}")
+    lines.append(
+        f"{'published_p2p (becos)':26} {'try':>3} {'oracle':>6} {'cam':>3} {'ref-rule overlaps':>17} "
+        f"{'oracle overlaps':>15} {'exact overlaps':>14} {'exact try':>9} {'kept':>5} {'align°':>7}"
+    )
     for r in report["pairs"]:
         p = r.get("published_p2p")
         if p is None:
             continue
         ov = lambda v: f"{v[0]:.3f}/{v[1]:.3f}"  # noqa: E731
-        lines.append(f"{r['split'] + '/' + str(r['index']) + ' ' + r['x']['name'] + '/' + r['y']['name']:26} "
-                     f"{p['try']:>3} {p['oracle_try']:>6} {p['camera_try']:>3} {ov(p['reference_rule_overlaps']):>17} "
-                     f"{ov(p['oracle_overlaps']):>15} {ov(p['exact_overlaps']):>14} {p['exact_try']:>9} "
-                     f"{str(p['same_kept_faces']):>5} {p['alignment_angle_deg']:>7.3f}")
+        lines.append(
+            f"{r['split'] + '/' + str(r['index']) + ' ' + r['x']['name'] + '/' + r['y']['name']:26} "
+            f"{p['try']:>3} {p['oracle_try']:>6} {p['camera_try']:>3} {ov(p['reference_rule_overlaps']):>17} "
+            f"{ov(p['oracle_overlaps']):>15} {ov(p['exact_overlaps']):>14} {p['exact_try']:>9} "
+            f"{str(p['same_kept_faces']):>5} {p['alignment_angle_deg']:>7.3f}"
+        )
     lines.append("")
-    lines.append(f"{'overlap masks':26} {'dir':>3} {'n':>5} {'ours':>6} {'ref':>6} {'agree':>7} {'n GT=':>6} "
-                 f"{'agree|GT=':>9} {'at border':>9} {'n GT= off':>9} {'agree':>7}  reference GT from")
+    lines.append(
+        f"{'overlap masks':26} {'dir':>3} {'n':>5} {'ours':>6} {'ref':>6} {'agree':>7} {'n GT=':>6} "
+        f"{'agree|GT=':>9} {'at border':>9} {'n GT= off':>9} {'agree':>7}  reference GT from"
+    )
     for r in report["pairs"]:
         for d, m in sorted(r.get("masks", {}).items()):
             f = lambda v: "-" if v is None else f"{v:.4f}"  # noqa: E731
-            lines.append(f"{r['split'] + '/' + str(r['index']) + ' ' + r['x']['name'] + '/' + r['y']['name']:26} "
-                         f"{d:>3} {m['n']:>5} {m['ours_overlap']:>6.3f} {m['reference_overlap']:>6.3f} "
-                         f"{m['share_all']:>7.4f} {m['n_gt_agree']:>6} {f(m['share_gt_agree']):>9} "
-                         f"{f(m['share_differ_at_border']):>9} {m['n_gt_agree_off_border']:>9} "
-                         f"{f(m['share_gt_agree_off_border']):>7}  {m['reference_full_gt']}")
+            lines.append(
+                f"{r['split'] + '/' + str(r['index']) + ' ' + r['x']['name'] + '/' + r['y']['name']:26} "
+                f"{d:>3} {m['n']:>5} {m['ours_overlap']:>6.3f} {m['reference_overlap']:>6.3f} "
+                f"{m['share_all']:>7.4f} {m['n_gt_agree']:>6} {f(m['share_gt_agree']):>9} "
+                f"{f(m['share_differ_at_border']):>9} {m['n_gt_agree_off_border']:>9} "
+                f"{f(m['share_gt_agree_off_border']):>7}  {m['reference_full_gt']}"
+            )
     return "\n".join(lines)
 
 

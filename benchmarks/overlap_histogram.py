@@ -72,14 +72,17 @@ def main(argv=None) -> int:
     published = np.asarray(P2P_OVERLAP_HISTOGRAM)
     result = {
         "bin_centre_percent": list(range(5, 100, 10)),
-        "published": {"count": published.tolist(),
-                      "share": [round(float(s), 4) for s in published / published.sum()],
-                      "n_directions": int(published.sum())},
+        "published": {
+            "count": published.tolist(),
+            "share": [round(float(s), 4) for s in published / published.sum()],
+            "n_directions": int(published.sum()),
+        },
         "runs": [summarise(p) for p in args.stores],
     }
     # one line per list of numbers, so the histograms read side by side
-    text = re.sub(r"\[\s+([^\[\]{}]*?)\s+\]", lambda m: "[" + re.sub(r"\s+", " ", m.group(1)) + "]",
-                  json.dumps(result, indent=1))
+    text = re.sub(
+        r"\[\s+([^\[\]{}]*?)\s+\]", lambda m: "[" + re.sub(r"\s+", " ", m.group(1)) + "]", json.dumps(result, indent=1)
+    )
     print(text)
     if args.out:
         write_text(args.out, text + "\n")

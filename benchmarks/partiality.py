@@ -42,8 +42,14 @@ from becos.seeding import rng_for  # noqa: E402
 from becos.surface_map import SurfaceMap, compose_path  # noqa: E402
 from becos.visibility import VisibilityScene  # noqa: E402
 
-SHAPE_PAIRS = [("cat0", "cat3"), ("dog0", "dog5"), ("horse0", "horse5"), ("michael0", "michael3"),
-               ("victoria0", "victoria4"), ("centaur0", "centaur1")]
+SHAPE_PAIRS = [
+    ("cat0", "cat3"),
+    ("dog0", "dog5"),
+    ("horse0", "horse5"),
+    ("michael0", "michael3"),
+    ("victoria0", "victoria4"),
+    ("centaur0", "centaur1"),
+]
 TARGET_VERTICES = 10_000
 
 
@@ -120,9 +126,12 @@ def bench_p2f(pairs, n: int) -> dict:
             times.append(time.perf_counter() - t0)
             cpu.append(time.process_time() - c0)
             shares.append(r.partial_y.vertex_share)
-    return {"n_pairs": len(times), "median_s_per_pair_cold": float(np.median(times)),
-            "median_cpu_s_per_pair_cold": float(np.median(cpu)),
-            "mean_partial_vertex_share": float(np.mean(shares))}
+    return {
+        "n_pairs": len(times),
+        "median_s_per_pair_cold": float(np.median(times)),
+        "median_cpu_s_per_pair_cold": float(np.median(cpu)),
+        "mean_partial_vertex_share": float(np.mean(shares)),
+    }
 
 
 def bench_visibility(pairs, cameras_per_shape: int, resolution: int) -> dict:
@@ -150,13 +159,17 @@ def bench_visibility(pairs, cameras_per_shape: int, resolution: int) -> dict:
                 wall_ratio.append((w4 - w2) / (w2 - w0))
                 ours_ms.append(1e3 * (w2 - w0))
                 dense_s.append(w4 - w2)
-    return {"resolution": resolution, "n_views": len(jaccard),
-            "jaccard_mean": float(np.mean(jaccard)), "jaccard_min": float(np.min(jaccard)),
-            "median_ms_ours_with_component_wall": float(np.median(ours_ms)),
-            "median_s_dense_with_component_wall": float(np.median(dense_s)),
-            "time_ratio_dense_over_ours_cast_only_cpu": float(np.median(ratio_cast)),
-            "time_ratio_dense_over_ours_with_component_cpu": float(np.median(ratio_total)),
-            "time_ratio_dense_over_ours_with_component_wall": float(np.median(wall_ratio))}
+    return {
+        "resolution": resolution,
+        "n_views": len(jaccard),
+        "jaccard_mean": float(np.mean(jaccard)),
+        "jaccard_min": float(np.min(jaccard)),
+        "median_ms_ours_with_component_wall": float(np.median(ours_ms)),
+        "median_s_dense_with_component_wall": float(np.median(dense_s)),
+        "time_ratio_dense_over_ours_cast_only_cpu": float(np.median(ratio_cast)),
+        "time_ratio_dense_over_ours_with_component_cpu": float(np.median(ratio_total)),
+        "time_ratio_dense_over_ours_with_component_wall": float(np.median(wall_ratio)),
+    }
 
 
 def main(argv=None) -> dict:

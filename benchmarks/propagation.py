@@ -33,8 +33,9 @@ THRESHOLD = 0.98
 
 
 def _becos_code() -> Path:
-    out = subprocess.run([str(REPO.parent / "shared" / "unpack")], check=True, capture_output=True,
-                         text=True).stdout.strip()
+    out = subprocess.run(
+        [str(REPO.parent / "shared" / "unpack")], check=True, capture_output=True, text=True
+    ).stdout.strip()
     return Path(out.splitlines()[-1])
 
 
@@ -44,16 +45,17 @@ def propagation_benchmark(names: list[str] | None = None) -> dict:
     from becos.datasets import DatasetSpec, prepare_shape
     from becos.mesh import MeshCache
     from becos.network import ShapeNetwork
-    from becos.propagation import (NO_LABEL, agreement, labels_through_remesh, nearest_annotated,
-                                   propagate_labels)
+    from becos.propagation import NO_LABEL, agreement, labels_through_remesh, nearest_annotated, propagate_labels
     from becos.remesh import remesh, variant_target_vertices
 
     root = _becos_code()
     annotations = AnnotationSource(root)
     entries = {e.name: e for e in DatasetSpec.load("tosca").list_shapes(root / "data", annotations)}
     if names is None:
-        names = sorted((n for n in entries if re.match(rf"^({'|'.join(CLASSES)})\d+$", n)),
-                       key=lambda n: (re.match(r"[a-z]+", n).group(), int(re.search(r"\d+", n).group())))
+        names = sorted(
+            (n for n in entries if re.match(rf"^({'|'.join(CLASSES)})\d+$", n)),
+            key=lambda n: (re.match(r"[a-z]+", n).group(), int(re.search(r"\d+", n).group())),
+        )
     cache = MeshCache(None)
 
     def meshes(dataset, name):
@@ -78,26 +80,38 @@ def propagation_benchmark(names: list[str] | None = None) -> dict:
         t3 = time.perf_counter()
         differ = (a != b) & ((a != NO_LABEL) | (b != NO_LABEL))
         rows[name] = {
-            "annotated_template": source.key, "hops": hops,
-            "original_vertices": int(prepared.mesh.n_vertices), "remeshed_vertices": int(r.mesh.n_vertices),
+            "annotated_template": source.key,
+            "hops": hops,
+            "original_vertices": int(prepared.mesh.n_vertices),
+            "remeshed_vertices": int(r.mesh.n_vertices),
             "agreement": round(agreement(a, b), 6),
             "disagreeing_vertices": int(differ.sum()),
             "labelled_in_either": int(((a != NO_LABEL) | (b != NO_LABEL)).sum()),
-            "none_direct": int((a == NO_LABEL).sum()), "none_carried": int((b == NO_LABEL).sum()),
+            "none_direct": int((a == NO_LABEL).sum()),
+            "none_carried": int((b == NO_LABEL).sum()),
             "left_share_direct": round(float((a == 1).mean()), 4),
-            "seconds_remesh": round(t1 - t0, 3), "seconds_direct": round(t2 - t1, 3),
+            "seconds_remesh": round(t1 - t0, 3),
+            "seconds_direct": round(t2 - t1, 3),
             "seconds_original_and_carry": round(t3 - t2, 3),
         }
-        print(f"{name}: agreement {rows[name]['agreement']:.4f} ({rows[name]['disagreeing_vertices']} of "
-              f"{rows[name]['labelled_in_either']} differ) via {source.key}, {t3 - t0:.1f} s", file=sys.stderr)
+        print(
+            f"{name}: agreement {rows[name]['agreement']:.4f} ({rows[name]['disagreeing_vertices']} of "
+            f"{rows[name]['labelled_in_either']} differ) via {source.key}, {t3 - t0:.1f} s",
+            file=sys.stderr,
+        )
     scores = np.array([row["agreement"] for row in rows.values()])
     summary = {
-        "shapes": len(rows), "threshold": THRESHOLD,
-        "min_agreement": float(scores.min()), "mean_agreement": round(float(scores.mean()), 6),
+        "shapes": len(rows),
+        "threshold": THRESHOLD,
+        "min_agreement": float(scores.min()),
+        "mean_agreement": round(float(scores.mean()), 6),
         "min_shape": min(rows, key=lambda n: rows[n]["agreement"]),
         "all_pass": bool((scores >= THRESHOLD).all()),
-        "per_class_min": {c: min(row["agreement"] for n, row in rows.items() if re.match(rf"{c}\d+$", n))
-                          for c in CLASSES if any(re.match(rf"{c}\d+$", n) for n in rows)},
+        "per_class_min": {
+            c: min(row["agreement"] for n, row in rows.items() if re.match(rf"{c}\d+$", n))
+            for c in CLASSES
+            if any(re.match(rf"{c}\d+$", n) for n in rows)
+        },
         "seconds": round(time.perf_counter() - started, 1),
     }
     return {"seed": SEED, "rows": rows, "summary": summary}

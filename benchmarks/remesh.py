@@ -38,8 +38,9 @@ SAMPLE = ["cat0", "centaur3", "david0", "dog0", "horse5", "michael0", "victoria0
 
 
 def _tosca_dir() -> Path:
-    out = subprocess.run([str(REPO.parent / "shared" / "unpack")], check=True, capture_output=True,
-                         text=True).stdout.strip()
+    out = subprocess.run(
+        [str(REPO.parent / "shared" / "unpack")], check=True, capture_output=True, text=True
+    ).stdout.strip()
     return Path(out.splitlines()[-1]) / "data" / "tosca-off"
 
 
@@ -54,8 +55,13 @@ def remesh_benchmark(names: list[str] | None = None, variant_shapes: list[str] |
     """
     from becos.geometry import SurfaceLocator, points_on_surface
     from becos.mesh import MeshCache
-    from becos.remesh import (intrinsic_coincidence, mesh_checks, remesh_with_stats, shared_vertex_share,
-                              variant_target_vertices)
+    from becos.remesh import (
+        intrinsic_coincidence,
+        mesh_checks,
+        remesh_with_stats,
+        shared_vertex_share,
+        variant_target_vertices,
+    )
 
     tosca = _tosca_dir()
     all_names = sorted(p.stem for p in tosca.glob("*.off"))
@@ -75,11 +81,15 @@ def remesh_benchmark(names: list[str] | None = None, variant_shapes: list[str] |
         bf, bw, _ = loc.closest(on_remesh)
         round_trip = np.linalg.norm(points_on_surface(original, bf, bw) - original.vertices, axis=1)
         rows[name] = {
-            "original_vertices": original.n_vertices, "target_vertices": target,
-            "vertices": r.mesh.n_vertices, "faces": r.mesh.n_faces, "seconds": round(r.seconds, 3),
+            "original_vertices": original.n_vertices,
+            "target_vertices": target,
+            "vertices": r.mesh.n_vertices,
+            "faces": r.mesh.n_faces,
+            "seconds": round(r.seconds, 3),
             "seconds_prepare": round(stats["seconds_prepare"], 3),
             "seconds_decimate": round(stats["seconds_decimate"], 3),
-            "attempts": stats["attempts"], "dropped_faces": stats["dropped_faces"],
+            "attempts": stats["attempts"],
+            "dropped_faces": stats["dropped_faces"],
             "snap_flipped_faces": stats["snap_flipped_faces"],
             "unsnapped_vertices": stats["unsnapped_vertices"],
             "presnap_distance_mean_rel": stats["snap_distance_mean"] / d,
@@ -90,7 +100,8 @@ def remesh_benchmark(names: list[str] | None = None, variant_shapes: list[str] |
             "from_original_distance_max_rel": float(r.from_original.distance.max()) / d,
             "round_trip_mean_rel": float(round_trip.mean()) / d,
             "round_trip_max_rel": float(round_trip.max()) / d,
-            "components": facts["components"], "non_manifold_edges": facts["non_manifold_edges"],
+            "components": facts["components"],
+            "non_manifold_edges": facts["non_manifold_edges"],
             "misoriented_edges": facts["misoriented_edges"],
             "euler_ok": facts["euler_characteristic"] == mesh_checks(original)["euler_characteristic"],
         }
@@ -109,8 +120,9 @@ def remesh_benchmark(names: list[str] | None = None, variant_shapes: list[str] |
             (oa, ra), (ob, rb) = results[a], results[b]
             same_class[f"{a}/{b}"] = {
                 "shared_original_vertex": shared_vertex_share(ra, oa.faces, rb, ob.faces),
-                "intrinsic": max(intrinsic_coincidence(ra, oa.faces, rb, ob),
-                                 intrinsic_coincidence(rb, ob.faces, ra, oa)),
+                "intrinsic": max(
+                    intrinsic_coincidence(ra, oa.faces, rb, ob), intrinsic_coincidence(rb, ob.faces, ra, oa)
+                ),
             }
     variants = {}
     for name in variant_shapes:
@@ -118,9 +130,11 @@ def remesh_benchmark(names: list[str] | None = None, variant_shapes: list[str] |
             continue
         original, r0 = results[name]
         r1, _ = remesh_with_stats(original, variant_target_vertices(SEED, "tosca", name, 1))
-        variants[name] = {"targets": [r0.target_vertices, r1.target_vertices],
-                          "shared_original_vertex": shared_vertex_share(r0, original.faces, r1, original.faces),
-                          "intrinsic": intrinsic_coincidence(r0, original.faces, r1, original)}
+        variants[name] = {
+            "targets": [r0.target_vertices, r1.target_vertices],
+            "shared_original_vertex": shared_vertex_share(r0, original.faces, r1, original.faces),
+            "intrinsic": intrinsic_coincidence(r0, original.faces, r1, original),
+        }
 
     secs = np.array([row["seconds"] for row in rows.values()])
     humans = [row["seconds"] for n, row in rows.items() if n.startswith(("michael", "david"))]
@@ -133,7 +147,8 @@ def remesh_benchmark(names: list[str] | None = None, variant_shapes: list[str] |
         "vertex_range": [min(r["vertices"] for r in rows.values()), max(r["vertices"] for r in rows.values())],
         "all_single_component_manifold_oriented": all(
             r["components"] == 1 and r["non_manifold_edges"] == 0 and r["misoriented_edges"] == 0 and r["euler_ok"]
-            for r in rows.values()),
+            for r in rows.values()
+        ),
         "snap_flipped_faces_total": sum(r["snap_flipped_faces"] for r in rows.values()),
         "dropped_faces_total": sum(r["dropped_faces"] for r in rows.values()),
         "unsnapped_vertices_max": max(r["unsnapped_vertices"] for r in rows.values()),
@@ -141,22 +156,49 @@ def remesh_benchmark(names: list[str] | None = None, variant_shapes: list[str] |
         "from_original_distance_mean_rel_max": max(r["from_original_distance_mean_rel"] for r in rows.values()),
         "from_original_distance_max_rel_max": max(r["from_original_distance_max_rel"] for r in rows.values()),
         "round_trip_mean_rel_max": max(r["round_trip_mean_rel"] for r in rows.values()),
-        "same_class_shared_original_vertex_max": max((v["shared_original_vertex"] for v in same_class.values()),
-                                                     default=None),
+        "same_class_shared_original_vertex_max": max(
+            (v["shared_original_vertex"] for v in same_class.values()), default=None
+        ),
         "same_class_intrinsic_max": max((v["intrinsic"] for v in same_class.values()), default=None),
-        "variants_shared_original_vertex_max": max((v["shared_original_vertex"] for v in variants.values()),
-                                                   default=None),
+        "variants_shared_original_vertex_max": max(
+            (v["shared_original_vertex"] for v in variants.values()), default=None
+        ),
         "variants_intrinsic_max": max((v["intrinsic"] for v in variants.values()), default=None),
     }
     return {"summary": summary, "shapes": rows, "same_class": same_class, "variants": variants}
 
 
-STEP_SAMPLE = ["michael0", "michael5", "michael11", "victoria0", "victoria7", "david0", "cat0", "cat5",
-               "dog0", "horse5", "centaur3", "wolf0"]
+STEP_SAMPLE = [
+    "michael0",
+    "michael5",
+    "michael11",
+    "victoria0",
+    "victoria7",
+    "david0",
+    "cat0",
+    "cat5",
+    "dog0",
+    "horse5",
+    "centaur3",
+    "wolf0",
+]
 """The ``--steps`` shapes: TOSCA's classes in about their proportions (humans are half of its 76)."""
 
-STEPS = ("startup", "load", "prepare", "repair", "orient", "jitter", "subdivide", "decimate", "snap",
-         "from_original", "save", "other", "total")
+STEPS = (
+    "startup",
+    "load",
+    "prepare",
+    "repair",
+    "orient",
+    "jitter",
+    "subdivide",
+    "decimate",
+    "snap",
+    "from_original",
+    "save",
+    "other",
+    "total",
+)
 
 
 def _run_job(tree: Path, config: dict, row: dict, token: str, out: Path) -> str:
@@ -165,9 +207,22 @@ def _run_job(tree: Path, config: dict, row: dict, token: str, out: Path) -> str:
 
     from becos.workflow import job_options
 
-    cmd = [sys.executable, "-m", "becos.cli", "remesh", "--options", job_options(config, "remesh"),
-           "--shape", json.dumps(row, sort_keys=True), "--token", token, "--out", str(out),
-           "--ply", str(out.with_suffix(".ply"))]
+    cmd = [
+        sys.executable,
+        "-m",
+        "becos.cli",
+        "remesh",
+        "--options",
+        job_options(config, "remesh"),
+        "--shape",
+        json.dumps(row, sort_keys=True),
+        "--token",
+        token,
+        "--out",
+        str(out),
+        "--ply",
+        str(out.with_suffix(".ply")),
+    ]
     env = {**os.environ, "PYTHONPATH": str(tree), "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
     # cwd: ``python -m`` puts the working directory first on the path, before PYTHONPATH
     proc = subprocess.run(cmd, env=env, cwd=tree, capture_output=True, text=True, check=False)
@@ -222,11 +277,21 @@ def step_benchmark(trees: dict[str, Path], names: list[str], variants: int, work
 
     becos_code = _tosca_dir().parents[1]
     work = Path(tempfile.mkdtemp(prefix="remesh-steps-", dir=workdir))
-    configs = {label: resolve_config({"synthetic": {"enabled": False}, "data_dir": str(becos_code / "data"),
-                                      "annotations": str(becos_code), "datasets": ["tosca"],
-                                      "template_file": "templates_tosca_demo.csv", "remesh_variants": variants,
-                                      "store_vis": False, "results": str(work / label / "results")})
-               for label in trees}
+    configs = {
+        label: resolve_config(
+            {
+                "synthetic": {"enabled": False},
+                "data_dir": str(becos_code / "data"),
+                "annotations": str(becos_code),
+                "datasets": ["tosca"],
+                "template_file": "templates_tosca_demo.csv",
+                "remesh_variants": variants,
+                "store_vis": False,
+                "results": str(work / label / "results"),
+            }
+        )
+        for label in trees
+    }
     catalog = build_catalog(next(iter(configs.values())))
     rows = {r["name"]: r for r in catalog.to_dict("records")}
     unknown = sorted(set(names) - set(rows))
@@ -253,8 +318,7 @@ def step_benchmark(trees: dict[str, Path], names: list[str], variants: int, work
                 guarantees[label][f"{name}/{token}"] = _guarantees(original, r, target)
                 files[label][(name, v)] = r
                 print(f"{label} {name} {token}: {steps['total']:.2f} CPU-s", file=sys.stderr, flush=True)
-    out: dict = {"shapes": names, "variants_per_shape": variants, "cpu_seconds_per_variant": {},
-                 "guarantees": {}}
+    out: dict = {"shapes": names, "variants_per_shape": variants, "cpu_seconds_per_variant": {}, "guarantees": {}}
     for label in trees:
         table = {k: np.array([j[k] for j in jobs[label]]) for k in STEPS}
         remesh_only = table["total"] - table["startup"] - table["other"]
@@ -262,29 +326,42 @@ def step_benchmark(trees: dict[str, Path], names: list[str], variants: int, work
             "median": {k: round(float(np.median(x)), 3) for k, x in table.items()},
             "max": {k: round(float(x.max()), 3) for k, x in table.items()},
             "median_without_startup": round(float(np.median(remesh_only)), 3),
-            "jobs": jobs[label]}
+            "jobs": jobs[label],
+        }
         g = guarantees[label]
         originals = prepared
         fl = files[label]
-        variant_share = [shared_vertex_share(fl[(n, 0)], originals[n].faces, fl[(n, 1)], originals[n].faces)
-                         for n in names if variants > 1]
-        variant_intrinsic = [intrinsic_coincidence(fl[(n, 0)], originals[n].faces, fl[(n, 1)], originals[n])
-                             for n in names if variants > 1]
+        variant_share = [
+            shared_vertex_share(fl[(n, 0)], originals[n].faces, fl[(n, 1)], originals[n].faces)
+            for n in names
+            if variants > 1
+        ]
+        variant_intrinsic = [
+            intrinsic_coincidence(fl[(n, 0)], originals[n].faces, fl[(n, 1)], originals[n])
+            for n in names
+            if variants > 1
+        ]
         classes: dict[str, list[str]] = {}
         for n in names:
             classes.setdefault(re.sub(r"\d+$", "", n), []).append(n)
         pose_pairs = [(a, b) for members in classes.values() for a in members[:1] for b in members[1:]]
-        pose_share = [shared_vertex_share(fl[(a, 0)], originals[a].faces, fl[(b, 0)], originals[b].faces)
-                      for a, b in pose_pairs]
-        pose_intrinsic = [max(intrinsic_coincidence(fl[(a, 0)], originals[a].faces, fl[(b, 0)], originals[b]),
-                              intrinsic_coincidence(fl[(b, 0)], originals[b].faces, fl[(a, 0)], originals[a]))
-                          for a, b in pose_pairs]
+        pose_share = [
+            shared_vertex_share(fl[(a, 0)], originals[a].faces, fl[(b, 0)], originals[b].faces) for a, b in pose_pairs
+        ]
+        pose_intrinsic = [
+            max(
+                intrinsic_coincidence(fl[(a, 0)], originals[a].faces, fl[(b, 0)], originals[b]),
+                intrinsic_coincidence(fl[(b, 0)], originals[b].faces, fl[(a, 0)], originals[a]),
+            )
+            for a, b in pose_pairs
+        ]
         out["guarantees"][label] = {
             "all_exact_vertex_target": all(x["exact_vertex_target"] for x in g.values()),
             "all_single_component": all(x["single_component"] for x in g.values()),
             "all_manifold_oriented_euler_kept": all(x["manifold_oriented"] and x["euler_kept"] for x in g.values()),
-            "all_maps_complete_both_ways": all(x["to_original_complete"] and x["from_original_complete"]
-                                               for x in g.values()),
+            "all_maps_complete_both_ways": all(
+                x["to_original_complete"] and x["from_original_complete"] for x in g.values()
+            ),
             "unsnapped_vertices_max": max(x["unsnapped_vertices"] for x in g.values()),
             "to_original_distance_max_rel": max(x["to_original_distance_max_rel"] for x in g.values()),
             "from_original_distance_mean_rel_max": max(x["from_original_distance_mean_rel"] for x in g.values()),

@@ -34,16 +34,39 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from workflow import REPO, becos_code, write_config  # noqa: E402
 
 # becos sub-command -> rule
-RULES = {"write-config": "resolved_config", "check": "check_datasets", "catalog": "catalog", "manifest": "manifest",
-         "remesh": "remesh", "ground-truth": "ground_truth", "pairs": "pairs", "metadata": "store_metadata",
-         "export-zarr": "zarr_store", "validate": "validate_store", "export-released": "released_layout",
-         "export-psmal": "psmal_layout", "export-geodesics": "geodesics", "export-pairings": "published_pairings",
-         "report": "report",
-         "baseline": "baseline", "evaluate": "evaluate", "synthetic": "synthetic_collection"}
+RULES = {
+    "write-config": "resolved_config",
+    "check": "check_datasets",
+    "catalog": "catalog",
+    "manifest": "manifest",
+    "remesh": "remesh",
+    "ground-truth": "ground_truth",
+    "pairs": "pairs",
+    "metadata": "store_metadata",
+    "export-zarr": "zarr_store",
+    "validate": "validate_store",
+    "export-released": "released_layout",
+    "export-psmal": "psmal_layout",
+    "export-geodesics": "geodesics",
+    "export-pairings": "published_pairings",
+    "report": "report",
+    "baseline": "baseline",
+    "evaluate": "evaluate",
+    "synthetic": "synthetic_collection",
+}
 SETTINGS = ("full_full", "partial_full", "partial_partial")
 # rules whose time grows with pairs: per chunk (ground truth, pairs) or per setting (the rest)
-PAIR_RULES = ("ground_truth", "pairs", "zarr_store", "validate_store", "released_layout", "psmal_layout",
-              "report", "baseline", "evaluate")
+PAIR_RULES = (
+    "ground_truth",
+    "pairs",
+    "zarr_store",
+    "validate_store",
+    "released_layout",
+    "psmal_layout",
+    "report",
+    "baseline",
+    "evaluate",
+)
 
 
 class JobSampler:
@@ -65,7 +88,7 @@ class JobSampler:
             now = time.monotonic()
             for p in children:
                 try:
-                    key = (p.pid, p.create_time())         # pids are reused over a long run
+                    key = (p.pid, p.create_time())  # pids are reused over a long run
                     job = self.jobs.get(key)
                     if job is None:
                         cmd = p.cmdline()
@@ -73,8 +96,13 @@ class JobSampler:
                         if len(cmd) < 2 or not any(Path(w).name == "becos" for w in cmd[:2]):
                             continue
                         sub = words[words.index(next(w for w in words if Path(w).name == "becos")) + 1]
-                        job = self.jobs[key] = {"rule": RULES.get(sub, sub), "cmd": cmd, "peak": 0,
-                                                  "start": now, "end": now}
+                        job = self.jobs[key] = {
+                            "rule": RULES.get(sub, sub),
+                            "cmd": cmd,
+                            "peak": 0,
+                            "start": now,
+                            "end": now,
+                        }
                     job["peak"] = max(job["peak"], p.memory_info().rss)
                     job["end"] = now
                 except (psutil.NoSuchProcess, psutil.AccessDenied, StopIteration, IndexError):
@@ -117,20 +145,24 @@ def summarise(workdir: Path, jobs: list[dict]) -> dict:
 
 # rules this benchmark does not run (baselines and evaluation need `evaluation.baselines`; the PSMAL
 # layout is off by default): written as estimates, marked so
-ESTIMATES = {"psmal_layout": {"mem_mb": 4000, "runtime": 60},
-             "baseline": {"mem_mb": 4000, "runtime": 120},
-             "evaluate": {"mem_mb": 6000, "runtime": 240}}
+ESTIMATES = {
+    "psmal_layout": {"mem_mb": 4000, "runtime": 60},
+    "baseline": {"mem_mb": 4000, "runtime": 120},
+    "evaluate": {"mem_mb": 6000, "runtime": 240},
+}
 
 
 def resources_yaml(measured: dict, source: str) -> str:
     """workflow/resources.yaml text from the measured peaks (see the module docstring for the margins)."""
-    lines = ["# Per-rule resources for schedulers (mem_mb: MiB, runtime: minutes), from measured peaks.",
-             f"# Measured by benchmarks/resources.py: {source}.",
-             "# memory = peak x 1.5, time = longest x 3",
-             "# (rules with seconds_per_pair: at least that x 3 x the pairs of the job's chunk or setting).",
-             "# A retried job gets attempt x these (profiles set retries). Rules not listed get",
-             "# becos.resources.DEFAULT. Override one rule with --set-resources RULE:mem_mb=N.",
-             "rules:"]
+    lines = [
+        "# Per-rule resources for schedulers (mem_mb: MiB, runtime: minutes), from measured peaks.",
+        f"# Measured by benchmarks/resources.py: {source}.",
+        "# memory = peak x 1.5, time = longest x 3",
+        "# (rules with seconds_per_pair: at least that x 3 x the pairs of the job's chunk or setting).",
+        "# A retried job gets attempt x these (profiles set retries). Rules not listed get",
+        "# becos.resources.DEFAULT. Override one rule with --set-resources RULE:mem_mb=N.",
+        "rules:",
+    ]
     for rule, r in measured.items():
         mem = max(500, math.ceil(r["peak_rss_mb"] * 1.5 / 250) * 250)
         entry = f"  {rule}: {{mem_mb: {mem}, runtime: {max(5, math.ceil(r['max_seconds'] * 3 / 60))}"
@@ -153,12 +185,28 @@ def main() -> None:
     code = becos_code()
     shutil.rmtree(args.workdir, ignore_errors=True)
     # usage_scale 0.38 gives ~1,038 partial-to-partial pairs on TOSCA (benchmarks/workflow.py)
-    write_config(args.workdir, code, setting=["full_full", "partial_full", "partial_partial"],
-                 usage_scale=round(0.38 * args.pairs / 1038, 4), n_chunks=args.chunks,
-                 caps={"train": None, "val": None, "test": None},
-                 exports={"released": True, "published_pickle": True, "report": True})
-    cmd = [sys.executable, "-m", "snakemake", "-s", str(REPO / "Snakefile"), "-d", str(args.workdir),
-           "--configfile", str(args.workdir / "config.yaml"), "--cores", "2"]
+    write_config(
+        args.workdir,
+        code,
+        setting=["full_full", "partial_full", "partial_partial"],
+        usage_scale=round(0.38 * args.pairs / 1038, 4),
+        n_chunks=args.chunks,
+        caps={"train": None, "val": None, "test": None},
+        exports={"released": True, "published_pickle": True, "report": True},
+    )
+    cmd = [
+        sys.executable,
+        "-m",
+        "snakemake",
+        "-s",
+        str(REPO / "Snakefile"),
+        "-d",
+        str(args.workdir),
+        "--configfile",
+        str(args.workdir / "config.yaml"),
+        "--cores",
+        "2",
+    ]
     started = time.perf_counter()
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     sampler = JobSampler(proc.pid)
@@ -167,10 +215,16 @@ def main() -> None:
     if proc.returncode != 0:
         raise SystemExit(f"snakemake failed in {args.workdir}:\n{out[-5000:]}")
     measured = summarise(args.workdir, jobs)
-    pairs = {s: sum(1 for _ in open(args.workdir / "results" / s / "manifest.csv")) - 1
-             for s in ("full_full", "partial_full", "partial_partial")}
-    result = {"seconds": round(time.perf_counter() - started, 1), "pairs": pairs, "chunks_per_setting": args.chunks,
-              "rules": measured}
+    pairs = {
+        s: sum(1 for _ in open(args.workdir / "results" / s / "manifest.csv")) - 1
+        for s in ("full_full", "partial_full", "partial_partial")
+    }
+    result = {
+        "seconds": round(time.perf_counter() - started, 1),
+        "pairs": pairs,
+        "chunks_per_setting": args.chunks,
+        "rules": measured,
+    }
     if args.write:
         source = f"{date.today()}, TOSCA 76 shapes, {sum(pairs.values())} pairs, {args.chunks} chunks per setting"
         (REPO / "workflow" / "resources.yaml").write_text(resources_yaml(measured, source))

@@ -66,16 +66,20 @@ def imports(args: list[str], env: dict, cwd: Path | None = None, top: int = 5) -
             root = name.split(".")[0]
             heavy[root] = heavy.get(root, 0) + int(cumulative)
     ranked = sorted(heavy.items(), key=lambda kv: -kv[1])[:top]
-    return {"modules": len(rows), "import_ms": round(sum(int(c) for _, c, i, _ in rows if len(i) == 1) / 1000),
-            "heaviest_ms": {k: round(v / 1000) for k, v in ranked}}
+    return {
+        "modules": len(rows),
+        "import_ms": round(sum(int(c) for _, c, i, _ in rows if len(i) == 1) / 1000),
+        "heaviest_ms": {k: round(v / 1000) for k, v in ranked},
+    }
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repo", type=Path, default=REPO, help="the checkout to measure (default: this one)")
     parser.add_argument("--repeat", type=int, default=5)
-    parser.add_argument("--job", action="append", default=[],
-                        help="a real job's arguments after `becos` (quoted), run in --cwd")
+    parser.add_argument(
+        "--job", action="append", default=[], help="a real job's arguments after `becos` (quoted), run in --cwd"
+    )
     parser.add_argument("--cwd", type=Path, help="working directory of the --job runs")
     parser.add_argument("--only", nargs="+", help="measure only these sub-commands' --help (and becos --help)")
     args = parser.parse_args()
@@ -84,8 +88,9 @@ def main() -> None:
     sys.path.insert(0, str(repo))
     from becos.cli import SUBCOMMANDS
 
-    commit = subprocess.run(["git", "-C", str(repo), "rev-parse", "--short", "HEAD"], capture_output=True,
-                            text=True).stdout.strip()
+    commit = subprocess.run(
+        ["git", "-C", str(repo), "rev-parse", "--short", "HEAD"], capture_output=True, text=True
+    ).stdout.strip()
     result: dict = {"repo": str(repo), "commit": commit, "repeat": args.repeat, "help": {}}
     for name in [None, *dict.fromkeys(n for n, _, _ in SUBCOMMANDS if not args.only or n in args.only)]:
         argv = ["--help"] if name is None else [name, "--help"]
@@ -94,7 +99,10 @@ def main() -> None:
     for job in args.job:
         argv = shlex.split(job)
         result.setdefault("jobs", {})[" ".join(argv[:1] + ["..."])] = {
-            "args": job, **timed(argv, env, args.repeat, args.cwd), **imports(argv, env, args.cwd)}
+            "args": job,
+            **timed(argv, env, args.repeat, args.cwd),
+            **imports(argv, env, args.cwd),
+        }
     print(json.dumps(result, indent=1))
 
 

@@ -57,8 +57,16 @@ def sphere_record(subdivisions: int = 5) -> PairRecord:
     mesh = TriMesh(np.asarray(sphere.vertices, dtype=np.float64), np.asarray(sphere.faces, dtype=np.int64))
     shape = ShapeInstance("synthetic", "sphere", "four-legged", "sphere", mesh)
     gt = SurfaceMap.identity(mesh.faces, mesh.n_vertices)
-    return build_pair(shape, shape, gt, gt, pair_id="bench000000000000", seed=0, split="train",
-                      options=PairOptions(setting="full_full"))
+    return build_pair(
+        shape,
+        shape,
+        gt,
+        gt,
+        pair_id="bench000000000000",
+        seed=0,
+        split="train",
+        options=PairOptions(setting="full_full"),
+    )
 
 
 def _cpu() -> float:
@@ -87,14 +95,22 @@ def read_timings(store: Path, npz_of: dict[str, Path], npz_v1_of: dict[str, Path
     bench = open_benchmark(store)
     rows = np.random.default_rng(1).integers(0, len(bench), size=n_random)
     ids = list(bench.table["pair_id"])
-    bench.record(0), _np_load(npz_of[ids[0]])                 # warm: imports, shard indexes
+    bench.record(0), _np_load(npz_of[ids[0]])  # warm: imports, shard indexes
     t_store = t_npz = t_v1 = t_zarr = 0.0
     for i in rows:
-        t = _cpu(); bench.record(int(i)); t_store += _cpu() - t
-        t = _cpu(); _np_load(npz_of[ids[i]]); t_npz += _cpu() - t
+        t = _cpu()
+        bench.record(int(i))
+        t_store += _cpu() - t
+        t = _cpu()
+        _np_load(npz_of[ids[i]])
+        t_npz += _cpu() - t
         if npz_v1_of is not None:
-            t = _cpu(); _np_load(npz_v1_of[ids[i]]); t_v1 += _cpu() - t
-        t = _cpu(); bench.read_block(int(i), int(i) + 1).record(0); t_zarr += _cpu() - t
+            t = _cpu()
+            _np_load(npz_v1_of[ids[i]])
+            t_v1 += _cpu() - t
+        t = _cpu()
+        bench.read_block(int(i), int(i) + 1).record(0)
+        t_zarr += _cpu() - t
     t = _cpu()
     n_seq = sum(1 for _ in bench.records())
     seq_store = _cpu() - t
@@ -102,16 +118,24 @@ def read_timings(store: Path, npz_of: dict[str, Path], npz_v1_of: dict[str, Path
     for pid in ids:
         _np_load(npz_of[pid])
     seq_npz = _cpu() - t
-    out = {"n_random": int(n_random),
-           "record_cpu_ms": round(1000 * t_store / n_random, 2),
-           "np_load_cpu_ms": round(1000 * t_npz / n_random, 2),
-           "record_over_np_load": round(t_store / t_npz, 3),
-           "zarr_read_block_cpu_ms": round(1000 * t_zarr / n_random, 2)}
+    out = {
+        "n_random": int(n_random),
+        "record_cpu_ms": round(1000 * t_store / n_random, 2),
+        "np_load_cpu_ms": round(1000 * t_npz / n_random, 2),
+        "record_over_np_load": round(t_store / t_npz, 3),
+        "zarr_read_block_cpu_ms": round(1000 * t_zarr / n_random, 2),
+    }
     if npz_v1_of is not None:
-        out.update(np_load_format_1_cpu_ms=round(1000 * t_v1 / n_random, 2),
-                   record_over_np_load_format_1=round(t_store / t_v1, 3))
-    out["sequential"] = {"n_pairs": n_seq, "records_cpu_s": round(seq_store, 3), "np_load_cpu_s": round(seq_npz, 3),
-                         "records_over_np_load": round(seq_store / seq_npz, 3)}
+        out.update(
+            np_load_format_1_cpu_ms=round(1000 * t_v1 / n_random, 2),
+            record_over_np_load_format_1=round(t_store / t_v1, 3),
+        )
+    out["sequential"] = {
+        "n_pairs": n_seq,
+        "records_cpu_s": round(seq_store, 3),
+        "np_load_cpu_s": round(seq_npz, 3),
+        "records_over_np_load": round(seq_store / seq_npz, 3),
+    }
     return out
 
 
@@ -138,8 +162,12 @@ def run_artefacts(results: Path, work: Path, n_random: int) -> dict:
         if not pairs:
             continue
         n = len(pairs)
-        found = {"pairs": _bytes(pairs), "ground_truth": _tree_bytes(setting_dir / "ground_truth"),
-                 "store": _tree_bytes(setting_dir / "benchmark.zarr"), "released": _tree_bytes(setting_dir / "released")}
+        found = {
+            "pairs": _bytes(pairs),
+            "ground_truth": _tree_bytes(setting_dir / "ground_truth"),
+            "store": _tree_bytes(setting_dir / "benchmark.zarr"),
+            "released": _tree_bytes(setting_dir / "released"),
+        }
         dest = work / setting
         (dest / "pairs").mkdir(parents=True, exist_ok=True)
         (dest / "pairs_v1").mkdir(exist_ok=True)
@@ -149,16 +177,27 @@ def run_artefacts(results: Path, work: Path, n_random: int) -> dict:
             record = PairRecord.load(path)
             record.save(dest / "pairs" / path.name)
             _save_format_1(record, dest / "pairs_v1" / path.name)
-            npz_of[record.pair_id], npz_v1_of[record.pair_id] = dest / "pairs" / path.name, dest / "pairs_v1" / path.name
+            npz_of[record.pair_id], npz_v1_of[record.pair_id] = (
+                dest / "pairs" / path.name,
+                dest / "pairs_v1" / path.name,
+            )
             new_pairs.append(dest / "pairs" / path.name)
         for path in sorted((setting_dir / "ground_truth").glob("*.npz")):
             with np.load(path) as d:
                 g = {k: d[k] for k in d.files}
-            save_npz(dest / "ground_truth" / path.name, compressed=True, input_key=g["input_key"],
-                     **{k: (_narrow(v) if k.endswith("_face") else v) for k, v in g.items() if k != "input_key"})
+            save_npz(
+                dest / "ground_truth" / path.name,
+                compressed=True,
+                input_key=g["input_key"],
+                **{k: (_narrow(v) if k.endswith("_face") else v) for k, v in g.items() if k != "input_key"},
+            )
         write_store(new_pairs, dest / "benchmark.zarr", setting=setting, progress=False)
-        after = {"pairs": _bytes(new_pairs), "ground_truth": _tree_bytes(dest / "ground_truth"),
-                 "store": _tree_bytes(dest / "benchmark.zarr"), "released": found["released"]}
+        after = {
+            "pairs": _bytes(new_pairs),
+            "ground_truth": _tree_bytes(dest / "ground_truth"),
+            "store": _tree_bytes(dest / "benchmark.zarr"),
+            "released": found["released"],
+        }
         out[setting] = {"n_pairs": n}
         for label, sizes in (("before", found), ("after", after)):
             mb = {k: round(v / n / 1e6, 3) for k, v in sizes.items()}
@@ -166,8 +205,12 @@ def run_artefacts(results: Path, work: Path, n_random: int) -> dict:
             out[setting][label] = mb
         timings[setting] = read_timings(dest / "benchmark.zarr", npz_of, npz_v1_of, n_random)
         shutil.rmtree(dest, ignore_errors=True)
-    every = {label: round(sum(v[label]["total"] * v["n_pairs"] for v in out.values())
-                          / sum(v["n_pairs"] for v in out.values()), 3) for label in ("before", "after")}
+    every = {
+        label: round(
+            sum(v[label]["total"] * v["n_pairs"] for v in out.values()) / sum(v["n_pairs"] for v in out.values()), 3
+        )
+        for label in ("before", "after")
+    }
     return {"disk_mb_per_pair": out, "disk_mb_per_pair_all_settings": every, "reads": timings}
 
 
@@ -175,12 +218,19 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--n", type=int, default=1000, help="number of pair records")
     parser.add_argument("--record", type=Path, help="a saved pair record to duplicate (default: a sphere pair)")
-    parser.add_argument("--no-jitter", dest="jitter", action="store_false",
-                        help="store exact copies (default: vertex coordinates jittered per copy)")
+    parser.add_argument(
+        "--no-jitter",
+        dest="jitter",
+        action="store_false",
+        help="store exact copies (default: vertex coordinates jittered per copy)",
+    )
     parser.add_argument("--keep", type=Path, help="work folder to keep (default: a temporary one, deleted)")
-    parser.add_argument("--results", type=Path,
-                        help="a workflow run's results folder: measure MB per pair by artefact kind (as found and "
-                             "re-encoded by this becos) and the reads on its own records, instead of the sphere copies")
+    parser.add_argument(
+        "--results",
+        type=Path,
+        help="a workflow run's results folder: measure MB per pair by artefact kind (as found and "
+        "re-encoded by this becos) and the reads on its own records, instead of the sphere copies",
+    )
     parser.add_argument("--random", type=int, default=50, help="random record(i) reads timed (default 50)")
     args = parser.parse_args()
     load = os.getloadavg()[0]
@@ -231,20 +281,25 @@ def main() -> None:
         reads = read_timings(store, {p.stem: p for p in paths}, None, args.random)
         record_bytes = sum(a.nbytes for a in record.arrays.values())
         store_bytes = sum(p.stat().st_size for p in store.rglob("*") if p.is_file())
-        print(json.dumps({
-            "n_pairs": n_read,
-            "write_seconds": round(write_seconds, 2),
-            "read_all_seconds": round(read_all_seconds, 2),
-            "n_files": count_files(store),
-            "one_record_ms": round(one_record_ms, 1),
-            "record_mb": round(record_bytes / 2**20, 2),
-            "store_mb": round(store_bytes / 2**20, 1),
-            "prepare_seconds": round(prepare_seconds, 2),
-            "vertices_per_shape": int(len(record["x_vertices"])),
-            "npz_mb_per_pair": round(sum(p.stat().st_size for p in paths) / len(paths) / 2**20, 3),
-            "load_average_1min": round(load, 2),
-            "reads": reads,
-        }, indent=1))
+        print(
+            json.dumps(
+                {
+                    "n_pairs": n_read,
+                    "write_seconds": round(write_seconds, 2),
+                    "read_all_seconds": round(read_all_seconds, 2),
+                    "n_files": count_files(store),
+                    "one_record_ms": round(one_record_ms, 1),
+                    "record_mb": round(record_bytes / 2**20, 2),
+                    "store_mb": round(store_bytes / 2**20, 1),
+                    "prepare_seconds": round(prepare_seconds, 2),
+                    "vertices_per_shape": int(len(record["x_vertices"])),
+                    "npz_mb_per_pair": round(sum(p.stat().st_size for p in paths) / len(paths) / 2**20, 3),
+                    "load_average_1min": round(load, 2),
+                    "reads": reads,
+                },
+                indent=1,
+            )
+        )
     finally:
         if args.keep is None:
             shutil.rmtree(work, ignore_errors=True)

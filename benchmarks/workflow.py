@@ -89,10 +89,17 @@ def becos_code() -> Path:
 
 
 def write_config(workdir: Path, code: Path, **overrides) -> None:
-    config = {"synthetic": {"enabled": False}, "data_dir": str(code / "data"), "annotations": str(code),
-              "datasets": ["tosca"], "template_file": "templates_tosca_demo.csv", "setting": "partial_partial",
-              "combinations": "all", "store_vis": False,
-              "exports": {"released": False, "published_pickle": False, "report": False}}
+    config = {
+        "synthetic": {"enabled": False},
+        "data_dir": str(code / "data"),
+        "annotations": str(code),
+        "datasets": ["tosca"],
+        "template_file": "templates_tosca_demo.csv",
+        "setting": "partial_partial",
+        "combinations": "all",
+        "store_vis": False,
+        "exports": {"released": False, "published_pickle": False, "report": False},
+    }
     config.update(overrides)
     workdir.mkdir(parents=True, exist_ok=True)
     (workdir / "config.yaml").write_text(yaml.safe_dump(config, sort_keys=False))
@@ -133,11 +140,22 @@ def _children_cpu() -> float:
     return usage.ru_utime + usage.ru_stime
 
 
-def snakemake(workdir: Path, *args: str, repo: Path = REPO, hook: Path | None = None,
-              env_extra: dict | None = None) -> tuple[float, str, dict]:
+def snakemake(
+    workdir: Path, *args: str, repo: Path = REPO, hook: Path | None = None, env_extra: dict | None = None
+) -> tuple[float, str, dict]:
     """Run ``repo``'s Snakefile in ``workdir``; ``hook``: a folder put first on ``PYTHONPATH``."""
-    cmd = [sys.executable, "-m", "snakemake", "-s", str(repo / "Snakefile"), "-d", str(workdir),
-           "--configfile", str(workdir / "config.yaml"), *args]
+    cmd = [
+        sys.executable,
+        "-m",
+        "snakemake",
+        "-s",
+        str(repo / "Snakefile"),
+        "-d",
+        str(workdir),
+        "--configfile",
+        str(workdir / "config.yaml"),
+        *args,
+    ]
     start = time.perf_counter()
     cpu_start = _children_cpu()
     # the jobs' `becos` runs this checkout's code, whatever the environment installed
@@ -170,28 +188,46 @@ def split_counts(manifest) -> dict[str, int]:
 def plan_run(run: Path, config: dict, quiet: bool = True) -> dict:
     """Write ``config`` (every key) to ``run/config.yaml``; run the dataset check, catalog and manifests
     (``--until manifest``), then time ``snakemake -n`` (and ``-n --quiet``); pairs per split."""
+    from standin import PUBLISHED_PAIRS, PUBLISHED_SETTINGS
+
     from becos.sampling import read_manifest
     from becos.workflow import settings_of
-    from standin import PUBLISHED_PAIRS, PUBLISHED_SETTINGS
 
     run.mkdir(parents=True)
     (run / "config.yaml").write_text(yaml.safe_dump(config, sort_keys=False))
-    out: dict = {"config": {k: config[k] for k in ("original_settings", "setting", "usage_scale", "caps",
-                                                   "remesh_variants", "n_chunks")}}
+    out: dict = {
+        "config": {
+            k: config[k] for k in ("original_settings", "setting", "usage_scale", "caps", "remesh_variants", "n_chunks")
+        }
+    }
     seconds, _, memory = snakemake(run, "--cores", "2", "--until", "manifest")
-    out["setup"] = {"command": "snakemake --cores 2 --until manifest", "seconds": round(seconds, 2),
-                    "cpu_seconds": memory["cpu_seconds"]}
+    out["setup"] = {
+        "command": "snakemake --cores 2 --until manifest",
+        "seconds": round(seconds, 2),
+        "cpu_seconds": memory["cpu_seconds"],
+    }
     seconds, text, memory = snakemake(run, "-n", "--cores", "2")
-    out["dry_run"] = {"command": "snakemake -n --cores 2", "seconds": round(seconds, 2),
-                      "cpu_seconds": memory["cpu_seconds"], "peak_rss_mb": memory["peak_rss_mb"],
-                      "jobs": job_counts(text)}
+    out["dry_run"] = {
+        "command": "snakemake -n --cores 2",
+        "seconds": round(seconds, 2),
+        "cpu_seconds": memory["cpu_seconds"],
+        "peak_rss_mb": memory["peak_rss_mb"],
+        "jobs": job_counts(text),
+    }
     if quiet:
         seconds, _, memory = snakemake(run, "-n", "--quiet", "--cores", "2")
-        out["dry_run_quiet"] = {"command": "snakemake -n --quiet --cores 2", "seconds": round(seconds, 2),
-                                "cpu_seconds": memory["cpu_seconds"]}
-    out["pairs"] = {s: {"manifest": split_counts(read_manifest(run / "results" / s / "manifest.csv")),
-                        "published": PUBLISHED_PAIRS if s in PUBLISHED_SETTINGS else None}
-                    for s in settings_of(config)}
+        out["dry_run_quiet"] = {
+            "command": "snakemake -n --quiet --cores 2",
+            "seconds": round(seconds, 2),
+            "cpu_seconds": memory["cpu_seconds"],
+        }
+    out["pairs"] = {
+        s: {
+            "manifest": split_counts(read_manifest(run / "results" / s / "manifest.csv")),
+            "published": PUBLISHED_PAIRS if s in PUBLISHED_SETTINGS else None,
+        }
+        for s in settings_of(config)
+    }
     return out
 
 
@@ -212,18 +248,37 @@ def profile_dry_run(run: Path) -> dict:
     import pstats
 
     out = run / "dry_run.prof"
-    cmd = [sys.executable, "-m", "cProfile", "-o", str(out), "-m", "snakemake", "-s", str(REPO / "Snakefile"),
-           "-d", str(run), "--configfile", str(run / "config.yaml"), "-n", "--cores", "2"]
+    cmd = [
+        sys.executable,
+        "-m",
+        "cProfile",
+        "-o",
+        str(out),
+        "-m",
+        "snakemake",
+        "-s",
+        str(REPO / "Snakefile"),
+        "-d",
+        str(run),
+        "--configfile",
+        str(run / "config.yaml"),
+        "-n",
+        "--cores",
+        "2",
+    ]
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in (str(REPO), os.environ.get("PYTHONPATH")) if p)}
     subprocess.run(cmd, check=True, capture_output=True, env=env)
     stats = pstats.Stats(str(out)).stats
     total = max(ct for (_, _, _, ct, _) in stats.values())
     found = {"total": round(total, 1)}
     for label, (path_end, name) in PROFILED.items():
-        found[label] = round(sum(ct for (file, _, fn), (_, _, _, ct, _) in stats.items()
-                                 if fn == name and file.endswith(path_end)), 1)
-    return {"cumulative_seconds_under_cprofile": found,
-            "share": {k: round(v / total, 3) for k, v in found.items() if k != "total"}}
+        found[label] = round(
+            sum(ct for (file, _, fn), (_, _, _, ct, _) in stats.items() if fn == name and file.endswith(path_end)), 1
+        )
+    return {
+        "cumulative_seconds_under_cprofile": found,
+        "share": {k: round(v / total, 3) for k, v in found.items() if k != "total"},
+    }
 
 
 def plan_build_profile(config: dict) -> dict:
@@ -244,23 +299,39 @@ def plan_build_profile(config: dict) -> dict:
     t = time.perf_counter()
     n_inputs = sum(len(plan.chunk_inputs(s, c)) for s in plan.manifests for c in plan.chunks(s))
     timings["chunk_inputs_every_chunk_once"] = round(time.perf_counter() - t, 2)
-    return {"seconds": timings, "shapes": len(plan.catalog), "remesh_jobs": len(plan.remesh_jobs),
-            "chunks_per_stage": {s: len(plan.chunks(s)) for s in plan.manifests},
-            "remesh_inputs_over_all_chunks": n_inputs}
+    return {
+        "seconds": timings,
+        "shapes": len(plan.catalog),
+        "remesh_jobs": len(plan.remesh_jobs),
+        "chunks_per_stage": {s: len(plan.chunks(s)) for s in plan.manifests},
+        "remesh_inputs_over_all_chunks": n_inputs,
+    }
 
 
 def full_plan(workdir: Path, code: Path, profile: bool = False) -> dict:
     """The ``full_plan`` figures (module docstring) for a stand-in tree built under ``workdir``."""
-    from becos.workflow import resolve_config
     from standin import DATASETS, PUBLISHED_SETTINGS, build_standin_tree
+
+    from becos.workflow import resolve_config
 
     shutil.rmtree(workdir, ignore_errors=True)
     tree = build_standin_tree(workdir / "standin", code)
-    out: dict = {"standin": {"files": len(tree.files), "published_shapes": len(tree.published),
-                             "real_size_templates": len(tree.template_vertices), "seconds": tree.seconds}}
-    base = {"synthetic": {"enabled": False}, "data_dir": str(tree.data_dir), "annotations": str(code),
-            "datasets": list(DATASETS), "template_file": "templates_all.csv",
-            "check_geometry": False}                      # stand-in meshes have no real geometry
+    out: dict = {
+        "standin": {
+            "files": len(tree.files),
+            "published_shapes": len(tree.published),
+            "real_size_templates": len(tree.template_vertices),
+            "seconds": tree.seconds,
+        }
+    }
+    base = {
+        "synthetic": {"enabled": False},
+        "data_dir": str(tree.data_dir),
+        "annotations": str(code),
+        "datasets": list(DATASETS),
+        "template_file": "templates_all.csv",
+        "check_geometry": False,
+    }  # stand-in meshes have no real geometry
     config = resolve_config(base)
     out["default"] = plan_run(workdir / "default", config)
     out["default"]["plan_build"] = plan_build_profile({**config, "results": str(workdir / "default" / "results")})
@@ -313,8 +384,9 @@ def measured_run(workdir: Path, run: Path, repo: Path, remeshed: Path | None = N
     (hook / "sitecustomize.py").write_text(CPU_HOOK)
     log = workdir / "cpu-by-process.jsonl"
     log.unlink(missing_ok=True)
-    seconds, out, memory = snakemake(run, "--cores", "2", repo=repo, hook=hook,
-                                     env_extra={"BECOS_BENCH_CPU_LOG": str(log)})
+    seconds, out, memory = snakemake(
+        run, "--cores", "2", repo=repo, hook=hook, env_extra={"BECOS_BENCH_CPU_LOG": str(log)}
+    )
     by_kind: dict[str, dict] = {}
     for line in log.read_text().splitlines():
         entry = json.loads(line)
@@ -324,12 +396,18 @@ def measured_run(workdir: Path, run: Path, repo: Path, remeshed: Path | None = N
     for kind in by_kind.values():
         kind["cpu_seconds"] = round(kind["cpu_seconds"], 1)
         kind["cpu_seconds_per_process"] = round(kind["cpu_seconds"] / kind["processes"], 2)
-    return {"repo": str(repo), "commit": subprocess.run(["git", "-C", str(repo), "rev-parse", "--short", "HEAD"],
-                                                        capture_output=True, text=True).stdout.strip(),
-            "remeshed_copied_from": str(remeshed) if remeshed else None,
-            "wall_seconds": round(seconds, 1), "cpu_seconds_total": memory["cpu_seconds"],
-            "peak_rss_mb": memory["peak_rss_mb"], "jobs": job_counts(out),
-            "cpu_by_process": dict(sorted(by_kind.items(), key=lambda kv: -kv[1]["cpu_seconds"]))}
+    return {
+        "repo": str(repo),
+        "commit": subprocess.run(
+            ["git", "-C", str(repo), "rev-parse", "--short", "HEAD"], capture_output=True, text=True
+        ).stdout.strip(),
+        "remeshed_copied_from": str(remeshed) if remeshed else None,
+        "wall_seconds": round(seconds, 1),
+        "cpu_seconds_total": memory["cpu_seconds"],
+        "peak_rss_mb": memory["peak_rss_mb"],
+        "jobs": job_counts(out),
+        "cpu_by_process": dict(sorted(by_kind.items(), key=lambda kv: -kv[1]["cpu_seconds"])),
+    }
 
 
 def stages(workdir: Path, code: Path, repo: Path, remeshed: Path | None = None) -> dict:
@@ -347,30 +425,49 @@ TARGET_FACTOR = {150: 10, 1000: 30}
 """Issue 16's end-to-end targets: this many times the reference's pairs/s at 150 and 1,000 pairs."""
 
 
-def scaling(workdir: Path, code: Path, repo: Path, sizes: list[int], settings: list[str],
-            remeshed: Path | None = None) -> dict:
+def scaling(
+    workdir: Path, code: Path, repo: Path, sizes: list[int], settings: list[str], remeshed: Path | None = None
+) -> dict:
     """Pairs/s and CPU seconds by stage per (setting, size) (module docstring, ``--scaling``)."""
-    out: dict = {"repo": str(repo), "remeshed_copied_from": str(remeshed) if remeshed else None,
-                 "from_scratch": remeshed is None, "runs": {}}
+    out: dict = {
+        "repo": str(repo),
+        "remeshed_copied_from": str(remeshed) if remeshed else None,
+        "from_scratch": remeshed is None,
+        "runs": {},
+    }
     for size in sizes:
         for setting in settings:
             run = workdir / "scaling" / f"{setting}-{size}"
             shutil.rmtree(run, ignore_errors=True)
-            write_config(run, code, setting=setting, caps={"train": size - 30, "val": 15, "test": 15},
-                         usage_scale=0.5, remesh_variants=1, n_chunks=64)
+            write_config(
+                run,
+                code,
+                setting=setting,
+                caps={"train": size - 30, "val": 15, "test": 15},
+                usage_scale=0.5,
+                remesh_variants=1,
+                n_chunks=64,
+            )
             result = measured_run(workdir, run, repo, remeshed)
             pairs = len((run / "results" / setting / "manifest.csv").read_text().splitlines()) - 1
             kinds = result["cpu_by_process"]
             python_cpu = sum(k["cpu_seconds"] for k in kinds.values())
             reference = REFERENCE_PAIRS_PER_SECOND[setting]
             per_second = pairs / result["wall_seconds"]
-            summary = {"pairs": pairs, "pairs_per_second": round(per_second, 3),
-                       "reference_pairs_per_second": reference, "times_reference": round(per_second / reference, 2),
-                       "cpu_seconds_by_stage": {k: v["cpu_seconds"] for k, v in kinds.items()},
-                       "cpu_seconds_other": round(result["cpu_seconds_total"] - python_cpu, 1),
-                       "cpu_seconds_per_pair": {k: round(kinds[k]["cpu_seconds"] / pairs, 3)
-                                                for k in ("ground-truth", "pairs", "remesh", "snakemake") if k in kinds},
-                       "load_average": [round(x, 2) for x in os.getloadavg()]}
+            summary = {
+                "pairs": pairs,
+                "pairs_per_second": round(per_second, 3),
+                "reference_pairs_per_second": reference,
+                "times_reference": round(per_second / reference, 2),
+                "cpu_seconds_by_stage": {k: v["cpu_seconds"] for k, v in kinds.items()},
+                "cpu_seconds_other": round(result["cpu_seconds_total"] - python_cpu, 1),
+                "cpu_seconds_per_pair": {
+                    k: round(kinds[k]["cpu_seconds"] / pairs, 3)
+                    for k in ("ground-truth", "pairs", "remesh", "snakemake")
+                    if k in kinds
+                },
+                "load_average": [round(x, 2) for x in os.getloadavg()],
+            }
             if size in TARGET_FACTOR:
                 summary["target_pairs_per_second"] = round(TARGET_FACTOR[size] * reference, 2)
             out["runs"][f"{setting}/{size}"] = {**summary, **result}
@@ -383,26 +480,45 @@ def main() -> None:
     parser.add_argument("--workdir", type=Path, default=Path("/tmp/becos-bench"))
     parser.add_argument("--variants", type=int, default=1, help="remesh variants per shape (default 1)")
     parser.add_argument("--skip-run", action="store_true", help="only the 10k-pair dry run")
-    parser.add_argument("--full-plan", action="store_true",
-                        help="only the plan of the whole published benchmark on a stand-in data root")
-    parser.add_argument("--profile", action="store_true",
-                        help="with --full-plan: also profile the dry run (cProfile; ~2 min more)")
-    parser.add_argument("--stages", action="store_true",
-                        help="only the CPU seconds by stage of a ~150-pair TOSCA run from scratch")
-    parser.add_argument("--repo", type=Path, default=REPO,
-                        help="with --stages/--scaling: the checkout whose Snakefile and code run (default: this one)")
+    parser.add_argument(
+        "--full-plan",
+        action="store_true",
+        help="only the plan of the whole published benchmark on a stand-in data root",
+    )
+    parser.add_argument(
+        "--profile", action="store_true", help="with --full-plan: also profile the dry run (cProfile; ~2 min more)"
+    )
+    parser.add_argument(
+        "--stages", action="store_true", help="only the CPU seconds by stage of a ~150-pair TOSCA run from scratch"
+    )
+    parser.add_argument(
+        "--repo",
+        type=Path,
+        default=REPO,
+        help="with --stages/--scaling: the checkout whose Snakefile and code run (default: this one)",
+    )
     parser.add_argument("--remeshed", type=Path, help="with --stages/--scaling: copy this results/remeshed in first")
-    parser.add_argument("--scaling", action="store_true",
-                        help="only pairs/s and CPU by stage per setting and size (issue 16, target 3)")
+    parser.add_argument(
+        "--scaling", action="store_true", help="only pairs/s and CPU by stage per setting and size (issue 16, target 3)"
+    )
     parser.add_argument("--sizes", default="150,1000", help="with --scaling: pairs per setting (comma-separated)")
-    parser.add_argument("--settings", default="full_full,partial_full,partial_partial",
-                        help="with --scaling: the settings (comma-separated)")
+    parser.add_argument(
+        "--settings",
+        default="full_full,partial_full,partial_partial",
+        help="with --scaling: the settings (comma-separated)",
+    )
     args = parser.parse_args()
     code = becos_code()
     result: dict = {"machine_cores": os.cpu_count()}
     if args.scaling:
-        result["scaling"] = scaling(args.workdir, code, args.repo.resolve(), [int(n) for n in args.sizes.split(",")],
-                                    args.settings.split(","), args.remeshed)
+        result["scaling"] = scaling(
+            args.workdir,
+            code,
+            args.repo.resolve(),
+            [int(n) for n in args.sizes.split(",")],
+            args.settings.split(","),
+            args.remeshed,
+        )
         print(json.dumps(result, indent=1))
         return
     if args.stages:
@@ -430,9 +546,15 @@ def main() -> None:
     write_config(big, code, usage_scale=0.38, remesh_variants=args.variants, caps=caps)
     seconds, out, memory = snakemake(big, "--cores", "2")
     pairs = n_pairs(big)
-    result["run_1000"] = {"pairs": pairs, "seconds": round(seconds, 1), "pairs_per_second": round(pairs / seconds, 3),
-                          "reference_pairs_per_second": 0.16, **memory, "jobs": job_counts(out),
-                          "remesh_variants": args.variants}
+    result["run_1000"] = {
+        "pairs": pairs,
+        "seconds": round(seconds, 1),
+        "pairs_per_second": round(pairs / seconds, 3),
+        "reference_pairs_per_second": 0.16,
+        **memory,
+        "jobs": job_counts(out),
+        "remesh_variants": args.variants,
+    }
     seconds, out, _ = snakemake(big, "--cores", "2")
     result["noop_rerun"] = {"seconds": round(seconds, 2), "nothing_to_do": "Nothing to be done" in out}
 

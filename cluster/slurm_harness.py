@@ -64,11 +64,25 @@ from pathlib import Path
 
 PACKAGES = ["slurm-wlm", "slurmdbd", "munge", "mariadb-server"]
 # the executables each package provides
-BINARIES = {"munged": "munge", "munge": "munge", "mariadbd": "mariadb-server", "mariadb-install-db": "mariadb-server",
-            "mariadb": "mariadb-server", "mariadb-admin": "mariadb-server", "slurmdbd": "slurmdbd",
-            "slurmctld": "slurm-wlm", "slurmd": "slurm-wlm", "sinfo": "slurm-wlm", "sacct": "slurm-wlm",
-            "sacctmgr": "slurm-wlm", "sbatch": "slurm-wlm", "srun": "slurm-wlm", "scontrol": "slurm-wlm",
-            "scancel": "slurm-wlm", "squeue": "slurm-wlm"}
+BINARIES = {
+    "munged": "munge",
+    "munge": "munge",
+    "mariadbd": "mariadb-server",
+    "mariadb-install-db": "mariadb-server",
+    "mariadb": "mariadb-server",
+    "mariadb-admin": "mariadb-server",
+    "slurmdbd": "slurmdbd",
+    "slurmctld": "slurm-wlm",
+    "slurmd": "slurm-wlm",
+    "sinfo": "slurm-wlm",
+    "sacct": "slurm-wlm",
+    "sacctmgr": "slurm-wlm",
+    "sbatch": "slurm-wlm",
+    "srun": "slurm-wlm",
+    "scontrol": "slurm-wlm",
+    "scancel": "slurm-wlm",
+    "squeue": "slurm-wlm",
+}
 ETC_SLURM_CONF = Path("/etc/slurm/slurm.conf")
 MARKER = "# written by becos cluster/slurm_harness.py"
 DAEMONS = ("slurmd", "slurmctld", "slurmdbd", "mariadbd", "munged")  # stop order
@@ -132,13 +146,19 @@ def install_packages(log=print) -> float:
         return 0.0
     packages = sorted(set(missing.values()))
     if os.geteuid() != 0:
-        raise HarnessError("installing SLURM", f"apt-get install -y {' '.join(packages)}",
-                           f"missing {', '.join(sorted(missing))} and not root: install {' '.join(packages)} "
-                           "(Debian/Ubuntu) as root, then rerun")
+        raise HarnessError(
+            "installing SLURM",
+            f"apt-get install -y {' '.join(packages)}",
+            f"missing {', '.join(sorted(missing))} and not root: install {' '.join(packages)} "
+            "(Debian/Ubuntu) as root, then rerun",
+        )
     if shutil.which("apt-get") is None:
-        raise HarnessError("installing SLURM", f"apt-get install -y {' '.join(packages)}",
-                           f"missing {', '.join(sorted(missing))} and no apt-get: install SLURM (slurmctld, slurmd, "
-                           "slurmdbd, client commands), munge and MariaDB with this system's package manager")
+        raise HarnessError(
+            "installing SLURM",
+            f"apt-get install -y {' '.join(packages)}",
+            f"missing {', '.join(sorted(missing))} and no apt-get: install SLURM (slurmctld, slurmd, "
+            "slurmdbd, client commands), munge and MariaDB with this system's package manager",
+        )
     start = time.perf_counter()
     policy = Path("/usr/sbin/policy-rc.d")
     own_policy = not policy.exists()
@@ -163,8 +183,11 @@ def install_packages(log=print) -> float:
     seconds = time.perf_counter() - start
     still = missing_binaries()
     if still:
-        raise HarnessError("apt-get install", "apt-get install -y " + " ".join(PACKAGES),
-                           f"installed, but still missing: {', '.join(sorted(still))}")
+        raise HarnessError(
+            "apt-get install",
+            "apt-get install -y " + " ".join(PACKAGES),
+            f"installed, but still missing: {', '.join(sorted(still))}",
+        )
     log(f"installed {' '.join(PACKAGES)} in {seconds:.1f} s")
     return seconds
 
@@ -189,8 +212,15 @@ class SlurmHarness:
     ``<state>/harness.log``).
     """
 
-    def __init__(self, state: str | Path, cluster: str = "becos", account: str = "becos-test",
-                 partition: str = "becos", etc_conf: bool = True, log=None):
+    def __init__(
+        self,
+        state: str | Path,
+        cluster: str = "becos",
+        account: str = "becos-test",
+        partition: str = "becos",
+        etc_conf: bool = True,
+        log=None,
+    ):
         self.state = Path(state).resolve()
         self.cluster, self.account, self.partition = cluster, account, partition
         self.etc_conf = etc_conf
@@ -220,15 +250,20 @@ class SlurmHarness:
         """Run a command with this cluster's environment; raise :class:`HarnessError` on failure if ``check``."""
         env = dict(os.environ, **self.env())
         try:
-            result = subprocess.run(list(cmd), capture_output=True, text=True, env=env, timeout=timeout,
-                                    cwd=self.state)
+            result = subprocess.run(list(cmd), capture_output=True, text=True, env=env, timeout=timeout, cwd=self.state)
         except subprocess.TimeoutExpired as e:
-            raise HarnessError(f"{cmd[0]} (timed out after {timeout:.0f} s)", list(cmd),
-                               f"{e.stdout or ''}{e.stderr or ''}", self.state) from None
+            raise HarnessError(
+                f"{cmd[0]} (timed out after {timeout:.0f} s)",
+                list(cmd),
+                f"{e.stdout or ''}{e.stderr or ''}",
+                self.state,
+            ) from None
         if log:
             self.log(f"$ {' '.join(cmd)}\n{(result.stdout + result.stderr).rstrip()}")
         if check and result.returncode != 0:
-            raise HarnessError(cmd[0], list(cmd), f"exit {result.returncode}\n{result.stdout}{result.stderr}", self.state)
+            raise HarnessError(
+                cmd[0], list(cmd), f"exit {result.returncode}\n{result.stdout}{result.stderr}", self.state
+            )
         return result
 
     def _wait(self, what: str, probe, timeout: float, last_command: list[str], logfile: Path | None = None) -> None:
@@ -242,7 +277,9 @@ class SlurmHarness:
             time.sleep(0.5)
         tail = ""
         if logfile and logfile.exists():
-            tail = f"\n--- last lines of {logfile}:\n" + "\n".join(logfile.read_text(errors="replace").splitlines()[-15:])
+            tail = f"\n--- last lines of {logfile}:\n" + "\n".join(
+                logfile.read_text(errors="replace").splitlines()[-15:]
+            )
         raise HarnessError(f"waiting for {what} ({timeout:.0f} s)", last_command, output + tail, self.state)
 
     def _start_daemon(self, name: str, cmd: list[str], logfile: Path) -> None:
@@ -252,15 +289,24 @@ class SlurmHarness:
         if result.returncode != 0:
             tail = ""
             if logfile.exists():
-                tail = "\n--- " + str(logfile) + ":\n" + "\n".join(logfile.read_text(errors="replace").splitlines()[-15:])
-            raise HarnessError(f"starting {name}", cmd, f"exit {result.returncode}\n{result.stdout}{result.stderr}{tail}",
-                               self.state)
+                tail = (
+                    "\n--- " + str(logfile) + ":\n" + "\n".join(logfile.read_text(errors="replace").splitlines()[-15:])
+                )
+            raise HarnessError(
+                f"starting {name}", cmd, f"exit {result.returncode}\n{result.stdout}{result.stderr}{tail}", self.state
+            )
 
     # -- configuration -------------------------------------------------------------------------
     def _paths(self) -> dict[str, Path]:
         s = self.state
-        return {"munge_run": s / "munge", "munge_key_dir": s / "munge-key", "munge_socket": s / "munge" / "munge.socket.2",
-                "mysql": s / "mysql", "slurm": s / "slurm", "log": s / "log"}
+        return {
+            "munge_run": s / "munge",
+            "munge_key_dir": s / "munge-key",
+            "munge_socket": s / "munge" / "munge.socket.2",
+            "mysql": s / "mysql",
+            "slurm": s / "slurm",
+            "log": s / "log",
+        }
 
     def _write_configs(self, ports: dict[str, int], hw: dict[str, int]) -> None:
         p = self._paths()
@@ -271,39 +317,79 @@ class SlurmHarness:
         for sub in ("ctld", "spool"):
             (slurm / sub).mkdir(parents=True, exist_ok=True)
         common = ["AuthType=auth/munge", f"AuthInfo=socket={p['munge_socket']}"]
-        dbd = "\n".join([
-            MARKER, *common,
-            "DbdHost=localhost", "DbdAddr=127.0.0.1", f"DbdPort={ports['slurmdbd']}", f"SlurmUser={user}",
-            f"PidFile={slurm / 'slurmdbd.pid'}", f"LogFile={p['log'] / 'slurmdbd.log'}", "DebugLevel=info",
-            "StorageType=accounting_storage/mysql", "StorageHost=127.0.0.1", f"StoragePort={ports['mariadb']}",
-            "StorageUser=slurm", f"StoragePass={self._db_password}", f"StorageLoc={self.cluster}_acct_db", ""])
+        dbd = "\n".join(
+            [
+                MARKER,
+                *common,
+                "DbdHost=localhost",
+                "DbdAddr=127.0.0.1",
+                f"DbdPort={ports['slurmdbd']}",
+                f"SlurmUser={user}",
+                f"PidFile={slurm / 'slurmdbd.pid'}",
+                f"LogFile={p['log'] / 'slurmdbd.log'}",
+                "DebugLevel=info",
+                "StorageType=accounting_storage/mysql",
+                "StorageHost=127.0.0.1",
+                f"StoragePort={ports['mariadb']}",
+                "StorageUser=slurm",
+                f"StoragePass={self._db_password}",
+                f"StorageLoc={self.cluster}_acct_db",
+                "",
+            ]
+        )
         _write(slurm / "slurmdbd.conf", dbd, 0o600)  # slurmdbd refuses a readable file (password)
-        conf = "\n".join([
-            MARKER + f" (state {self.state}); removed when the harness stops",
-            f"ClusterName={self.cluster}", f"SlurmctldHost={host}(127.0.0.1)",
-            f"SlurmctldPort={ports['slurmctld']}", f"SlurmdPort={ports['slurmd']}",
-            *common, "CredType=cred/munge",
-            # the dbd connection authenticates through this munge socket (slurm.conf(5) AccountingStoragePass)
-            f"AccountingStoragePass={p['munge_socket']}",
-            f"SlurmUser={user}", "SlurmdUser=root",
-            f"StateSaveLocation={slurm / 'ctld'}", f"SlurmdSpoolDir={slurm / 'spool'}",
-            f"SlurmctldPidFile={slurm / 'slurmctld.pid'}", f"SlurmdPidFile={slurm / 'slurmd.pid'}",
-            f"SlurmctldLogFile={p['log'] / 'slurmctld.log'}", f"SlurmdLogFile={p['log'] / 'slurmd.log'}",
-            "SlurmctldDebug=info", "SlurmdDebug=info",
-            "ProctrackType=proctrack/linuxproc", "TaskPlugin=task/none", "MpiDefault=none", "SwitchType=switch/none",
-            "ReturnToService=2", "SchedulerType=sched/backfill",
-            "SelectType=select/cons_tres", "SelectTypeParameters=CR_Core_Memory",
-            "JobAcctGatherType=jobacct_gather/linux", "JobAcctGatherFrequency=task=1",  # MaxRSS of short steps
-            "AccountingStorageType=accounting_storage/slurmdbd", "AccountingStorageHost=localhost",
-            f"AccountingStoragePort={ports['slurmdbd']}", "AccountingStorageEnforce=associations",
-            "AccountingStoreFlags=job_comment",  # sacct shows the plugin's comment: rule and wildcards
-            "JobCompType=jobcomp/none", "MailProg=/bin/true", "MinJobAge=300", "KillWait=10",
-            f"NodeName={host} NodeAddr=127.0.0.1 CPUs={hw['CPUs']} Boards={hw['Boards']} "
-            f"SocketsPerBoard={hw['SocketsPerBoard']} CoresPerSocket={hw['CoresPerSocket']} "
-            f"ThreadsPerCore={hw['ThreadsPerCore']} RealMemory={hw['RealMemory']} State=UNKNOWN",
-            f"PartitionName={self.partition} Nodes={host} Default=YES MaxTime=INFINITE State=UP", ""])
+        conf = "\n".join(
+            [
+                MARKER + f" (state {self.state}); removed when the harness stops",
+                f"ClusterName={self.cluster}",
+                f"SlurmctldHost={host}(127.0.0.1)",
+                f"SlurmctldPort={ports['slurmctld']}",
+                f"SlurmdPort={ports['slurmd']}",
+                *common,
+                "CredType=cred/munge",
+                # the dbd connection authenticates through this munge socket (slurm.conf(5) AccountingStoragePass)
+                f"AccountingStoragePass={p['munge_socket']}",
+                f"SlurmUser={user}",
+                "SlurmdUser=root",
+                f"StateSaveLocation={slurm / 'ctld'}",
+                f"SlurmdSpoolDir={slurm / 'spool'}",
+                f"SlurmctldPidFile={slurm / 'slurmctld.pid'}",
+                f"SlurmdPidFile={slurm / 'slurmd.pid'}",
+                f"SlurmctldLogFile={p['log'] / 'slurmctld.log'}",
+                f"SlurmdLogFile={p['log'] / 'slurmd.log'}",
+                "SlurmctldDebug=info",
+                "SlurmdDebug=info",
+                "ProctrackType=proctrack/linuxproc",
+                "TaskPlugin=task/none",
+                "MpiDefault=none",
+                "SwitchType=switch/none",
+                "ReturnToService=2",
+                "SchedulerType=sched/backfill",
+                "SelectType=select/cons_tres",
+                "SelectTypeParameters=CR_Core_Memory",
+                "JobAcctGatherType=jobacct_gather/linux",
+                "JobAcctGatherFrequency=task=1",  # MaxRSS of short steps
+                "AccountingStorageType=accounting_storage/slurmdbd",
+                "AccountingStorageHost=localhost",
+                f"AccountingStoragePort={ports['slurmdbd']}",
+                "AccountingStorageEnforce=associations",
+                "AccountingStoreFlags=job_comment",  # sacct shows the plugin's comment: rule and wildcards
+                "JobCompType=jobcomp/none",
+                "MailProg=/bin/true",
+                "MinJobAge=300",
+                "KillWait=10",
+                f"NodeName={host} NodeAddr=127.0.0.1 CPUs={hw['CPUs']} Boards={hw['Boards']} "
+                f"SocketsPerBoard={hw['SocketsPerBoard']} CoresPerSocket={hw['CoresPerSocket']} "
+                f"ThreadsPerCore={hw['ThreadsPerCore']} RealMemory={hw['RealMemory']} State=UNKNOWN",
+                f"PartitionName={self.partition} Nodes={host} Default=YES MaxTime=INFINITE State=UP",
+                "",
+            ]
+        )
         _write(self.conf, conf)
-        _write(self.state / "env.sh", f"# source me: the SLURM client environment of this cluster\nexport SLURM_CONF={self.conf}\n")
+        _write(
+            self.state / "env.sh",
+            f"# source me: the SLURM client environment of this cluster\nexport SLURM_CONF={self.conf}\n",
+        )
 
     def _install_etc_conf(self) -> None:
         if not self.etc_conf:
@@ -318,10 +404,13 @@ class SlurmHarness:
             return
         lines = ETC_SLURM_CONF.read_text(errors="replace").splitlines()
         if not lines or not lines[0].startswith(MARKER):
-            raise HarnessError("writing /etc/slurm/slurm.conf", f"cp {self.conf} {ETC_SLURM_CONF}",
-                               f"{ETC_SLURM_CONF} exists and was not written by this harness (a real SLURM "
-                               "installation?): the harness will not overwrite it; run it on a machine without "
-                               "SLURM, or pass etc_conf=False (jobs of the SLURM executor plugin then fail)")
+            raise HarnessError(
+                "writing /etc/slurm/slurm.conf",
+                f"cp {self.conf} {ETC_SLURM_CONF}",
+                f"{ETC_SLURM_CONF} exists and was not written by this harness (a real SLURM "
+                "installation?): the harness will not overwrite it; run it on a machine without "
+                "SLURM, or pass etc_conf=False (jobs of the SLURM executor plugin then fail)",
+            )
         other = _writer_state(ETC_SLURM_CONF)
         if other is not None and other != self.state:
             pid_file = other / "slurm" / "slurmctld.pid"
@@ -330,9 +419,12 @@ class SlurmHarness:
             except (OSError, ValueError, IndexError):
                 pid = None
             if pid is not None and _alive(pid):
-                raise HarnessError("writing /etc/slurm/slurm.conf", f"cp {self.conf} {ETC_SLURM_CONF}",
-                                   f"another harness cluster (state {other}, slurmctld pid {pid}) owns it: stop "
-                                   f"that one first (slurm_harness.py stop --state {other})")
+                raise HarnessError(
+                    "writing /etc/slurm/slurm.conf",
+                    f"cp {self.conf} {ETC_SLURM_CONF}",
+                    f"another harness cluster (state {other}, slurmctld pid {pid}) owns it: stop "
+                    f"that one first (slurm_harness.py stop --state {other})",
+                )
 
     def _remove_etc_conf(self) -> None:
         if _writer_state(ETC_SLURM_CONF) == self.state:
@@ -351,13 +443,19 @@ class SlurmHarness:
         os.chmod(self.state, 0o755)  # munged requires execute permission for all on its socket's path
         self.log(f"SLURM harness, state {self.state}")
         if os.geteuid() != 0:
-            raise HarnessError("starting the SLURM harness", f"id -u -> {os.geteuid()}",
-                               "slurmd must run as root to start jobs: run the harness (and the test) as root")
+            raise HarnessError(
+                "starting the SLURM harness",
+                f"id -u -> {os.geteuid()}",
+                "slurmd must run as root to start jobs: run the harness (and the test) as root",
+            )
         self.timings["install_s"] = install_packages(self.log) if install else 0.0
         still = missing_binaries()
         if still:
-            raise HarnessError("finding SLURM", "which " + " ".join(sorted(still)),
-                               f"not installed: {', '.join(sorted(still))} (packages {' '.join(PACKAGES)})")
+            raise HarnessError(
+                "finding SLURM",
+                "which " + " ".join(sorted(still)),
+                f"not installed: {', '.join(sorted(still))} (packages {' '.join(PACKAGES)})",
+            )
         self._check_etc_conf()
         t1 = time.perf_counter()
         p = self._paths()
@@ -372,9 +470,21 @@ class SlurmHarness:
         self._db_password = os.urandom(12).hex()
         hw = node_hardware()
         self._write_configs(ports, hw)
-        _write(self.state / "harness.json", json.dumps({"ports": ports, "hardware": hw, "cluster": self.cluster,
-                                                        "account": self.account, "partition": self.partition,
-                                                        "node": self.node}, indent=1) + "\n")
+        _write(
+            self.state / "harness.json",
+            json.dumps(
+                {
+                    "ports": ports,
+                    "hardware": hw,
+                    "cluster": self.cluster,
+                    "account": self.account,
+                    "partition": self.partition,
+                    "node": self.node,
+                },
+                indent=1,
+            )
+            + "\n",
+        )
         self.log(f"node {self.node}: {hw}; ports {ports}")
         self._start_munge()
         self._start_mariadb()
@@ -394,14 +504,21 @@ class SlurmHarness:
         key = p["munge_key_dir"] / "munge.key"
         if not key.exists():
             _write(key, os.urandom(1024).hex(), 0o400)
-        cmd = ["munged", f"--key-file={key}", f"--socket={p['munge_socket']}", f"--pid-file={p['munge_run'] / 'munged.pid'}",
-               f"--log-file={p['log'] / 'munged.log'}", f"--seed-file={p['munge_key_dir'] / 'munged.seed'}"]
+        cmd = [
+            "munged",
+            f"--key-file={key}",
+            f"--socket={p['munge_socket']}",
+            f"--pid-file={p['munge_run'] / 'munged.pid'}",
+            f"--log-file={p['log'] / 'munged.log'}",
+            f"--seed-file={p['munge_key_dir'] / 'munged.seed'}",
+        ]
         self._start_daemon("munged", cmd, p["log"] / "munged.log")
         check = f"munge -S {p['munge_socket']} -n | unmunge -S {p['munge_socket']}"
 
         def probe():
             r = subprocess.run(check, shell=True, capture_output=True, text=True)
             return r.returncode == 0 and "Success" in r.stdout, r.stdout + r.stderr
+
         self._wait("munged", probe, 20, check, p["log"] / "munged.log")
         self.log(f"munged: ok ({check})")
 
@@ -411,39 +528,79 @@ class SlurmHarness:
         sock = p["mysql"] / "mysqld.sock"
         user = getpass.getuser()
         if not (data / "mysql").is_dir():
-            cmd = ["mariadb-install-db", "--no-defaults", f"--user={user}", f"--datadir={data}",
-                   "--auth-root-authentication-method=socket", "--skip-test-db"]
+            cmd = [
+                "mariadb-install-db",
+                "--no-defaults",
+                f"--user={user}",
+                f"--datadir={data}",
+                "--auth-root-authentication-method=socket",
+                "--skip-test-db",
+            ]
             self.log(f"$ {' '.join(cmd)}")
             r = subprocess.run(cmd, capture_output=True, text=True, cwd=self.state)
             if r.returncode != 0:
-                raise HarnessError("initialising the MariaDB data folder", cmd, r.stdout[-3000:] + r.stderr[-3000:], self.state)
-        cmd = ["mariadbd", "--no-defaults", f"--user={user}", f"--datadir={data}", f"--socket={sock}",
-               f"--port={self.ports['mariadb']}", "--bind-address=127.0.0.1", "--skip-name-resolve",
-               f"--pid-file={p['mysql'] / 'mysqld.pid'}", f"--log-error={p['log'] / 'mariadb.log'}",
-               "--innodb-buffer-pool-size=128M", "--innodb-lock-wait-timeout=900", "--skip-log-bin"]
+                raise HarnessError(
+                    "initialising the MariaDB data folder", cmd, r.stdout[-3000:] + r.stderr[-3000:], self.state
+                )
+        cmd = [
+            "mariadbd",
+            "--no-defaults",
+            f"--user={user}",
+            f"--datadir={data}",
+            f"--socket={sock}",
+            f"--port={self.ports['mariadb']}",
+            "--bind-address=127.0.0.1",
+            "--skip-name-resolve",
+            f"--pid-file={p['mysql'] / 'mysqld.pid'}",
+            f"--log-error={p['log'] / 'mariadb.log'}",
+            "--innodb-buffer-pool-size=128M",
+            "--innodb-lock-wait-timeout=900",
+            "--skip-log-bin",
+        ]
         self.log(f"$ {' '.join(cmd)}")
         with open(p["log"] / "mariadb.out", "ab") as out:
-            self._mariadb = subprocess.Popen(cmd, stdout=out, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
-                                             start_new_session=True, cwd=self.state)
+            self._mariadb = subprocess.Popen(
+                cmd,
+                stdout=out,
+                stderr=subprocess.STDOUT,
+                stdin=subprocess.DEVNULL,
+                start_new_session=True,
+                cwd=self.state,
+            )
         ping = ["mariadb-admin", "--no-defaults", f"--socket={sock}", "-u", user, "ping"]
 
         def probe():
             if self._mariadb.poll() is not None:
-                raise HarnessError("starting mariadbd", cmd, f"exited with {self._mariadb.returncode}\n"
-                                   + (p["log"] / "mariadb.log").read_text(errors="replace")[-3000:], self.state)
+                raise HarnessError(
+                    "starting mariadbd",
+                    cmd,
+                    f"exited with {self._mariadb.returncode}\n"
+                    + (p["log"] / "mariadb.log").read_text(errors="replace")[-3000:],
+                    self.state,
+                )
             r = subprocess.run(ping, capture_output=True, text=True)
             return r.returncode == 0, r.stdout + r.stderr
+
         self._wait("mariadbd", probe, 60, ping, p["log"] / "mariadb.log")
         db = f"{self.cluster}_acct_db"
-        sql = "; ".join([f"CREATE USER IF NOT EXISTS 'slurm'@'127.0.0.1' IDENTIFIED BY '{self._db_password}'",
-                         f"ALTER USER 'slurm'@'127.0.0.1' IDENTIFIED BY '{self._db_password}'",
-                         f"CREATE DATABASE IF NOT EXISTS {db}",
-                         f"GRANT ALL ON {db}.* TO 'slurm'@'127.0.0.1'", "FLUSH PRIVILEGES"])
+        sql = "; ".join(
+            [
+                f"CREATE USER IF NOT EXISTS 'slurm'@'127.0.0.1' IDENTIFIED BY '{self._db_password}'",
+                f"ALTER USER 'slurm'@'127.0.0.1' IDENTIFIED BY '{self._db_password}'",
+                f"CREATE DATABASE IF NOT EXISTS {db}",
+                f"GRANT ALL ON {db}.* TO 'slurm'@'127.0.0.1'",
+                "FLUSH PRIVILEGES",
+            ]
+        )
         cmd = ["mariadb", "--no-defaults", f"--socket={sock}", "-u", user, "-e", sql]
         r = subprocess.run(cmd, capture_output=True, text=True)
         if r.returncode != 0:
-            raise HarnessError("creating the accounting database user", cmd[:-2] + ["-e", "'CREATE USER slurm ...'"],
-                               r.stdout + r.stderr, self.state)
+            raise HarnessError(
+                "creating the accounting database user",
+                cmd[:-2] + ["-e", "'CREATE USER slurm ...'"],
+                r.stdout + r.stderr,
+                self.state,
+            )
         self.log(f"mariadbd: ok (127.0.0.1:{self.ports['mariadb']}, database {db})")
 
     def _start_slurmdbd(self) -> None:
@@ -455,6 +612,7 @@ class SlurmHarness:
         def probe():
             r = self.run(*cmd, check=False, timeout=20)
             return r.returncode == 0, r.stdout + r.stderr
+
         self._wait("slurmdbd", probe, 60, cmd, p["log"] / "slurmdbd.log")
         self.log(f"slurmdbd: ok (127.0.0.1:{self.ports['slurmdbd']})")
 
@@ -465,12 +623,24 @@ class SlurmHarness:
             self.run("sacctmgr", "-i", "add", "cluster", self.cluster, log=True)
         accounts = self.run("sacctmgr", "-n", "-P", "list", "account", "format=account").stdout.split()
         if self.account not in accounts:
-            self.run("sacctmgr", "-i", "add", "account", self.account, f"cluster={self.cluster}",
-                     "Description=becos test account", "Organization=becos", log=True)
-        users = self.run("sacctmgr", "-n", "-P", "list", "association", f"account={self.account}",
-                         "format=user").stdout.split()
+            self.run(
+                "sacctmgr",
+                "-i",
+                "add",
+                "account",
+                self.account,
+                f"cluster={self.cluster}",
+                "Description=becos test account",
+                "Organization=becos",
+                log=True,
+            )
+        users = self.run(
+            "sacctmgr", "-n", "-P", "list", "association", f"account={self.account}", "format=user"
+        ).stdout.split()
         if user not in users:
-            self.run("sacctmgr", "-i", "add", "user", user, f"account={self.account}", f"cluster={self.cluster}", log=True)
+            self.run(
+                "sacctmgr", "-i", "add", "user", user, f"account={self.account}", f"cluster={self.cluster}", log=True
+            )
 
     def _start_slurmctld(self) -> None:
         p = self._paths()
@@ -480,6 +650,7 @@ class SlurmHarness:
         def probe():
             r = self.run(*cmd, check=False, timeout=20)
             return r.returncode == 0 and "UP" in r.stdout, r.stdout + r.stderr
+
         self._wait("slurmctld", probe, 60, cmd, p["log"] / "slurmctld.log")
         self.log(f"slurmctld: ok (127.0.0.1:{self.ports['slurmctld']})")
 
@@ -491,6 +662,7 @@ class SlurmHarness:
         def probe():
             r = self.run(*cmd, check=False, timeout=20)
             return r.returncode == 0 and r.stdout.strip() == "idle", r.stdout + r.stderr
+
         self._wait("slurmd (node idle in sinfo)", probe, 60, cmd, p["log"] / "slurmd.log")
         # the controller has registered with slurmdbd once sacctmgr knows its address
         cmd = ["sacctmgr", "-n", "-P", "list", "cluster", self.cluster, "format=cluster,controlhost,controlport"]
@@ -499,36 +671,45 @@ class SlurmHarness:
             r = self.run(*cmd, check=False, timeout=20)
             fields = r.stdout.strip().split("|")
             return r.returncode == 0 and len(fields) == 3 and fields[1] != "", r.stdout + r.stderr
+
         self._wait("slurmctld registering with slurmdbd", registered, 60, cmd, p["log"] / "slurmctld.log")
         self.log(f"slurmd: ok (127.0.0.1:{self.ports['slurmd']})")
         self.run("sinfo", log=True)
         self.run(*cmd, log=True)
 
     def _smoke_test(self) -> None:
-        r = self.run("srun", "-A", self.account, "-p", self.partition, "-t", "1", "--mem", "10", "hostname",
-                     timeout=60, log=True)
+        r = self.run(
+            "srun", "-A", self.account, "-p", self.partition, "-t", "1", "--mem", "10", "hostname", timeout=60, log=True
+        )
         if r.stdout.strip() != socket.gethostname():
-            raise HarnessError("srun hostname", "srun hostname", f"printed {r.stdout!r}, expected {socket.gethostname()!r}",
-                               self.state)
+            raise HarnessError(
+                "srun hostname", "srun hostname", f"printed {r.stdout!r}, expected {socket.gethostname()!r}", self.state
+            )
         cmd = ["sinfo", "-h", "-N", "-n", self.node, "-o", "%t"]
 
         def idle():
             r = self.run(*cmd, check=False, timeout=20)
             return r.returncode == 0 and r.stdout.strip() == "idle", r.stdout + r.stderr
+
         self._wait("the node to be idle after srun", idle, 60, cmd, self._paths()["log"] / "slurmd.log")
         cmd = ["sacct", "-a", "-X", "-n", "-P", "-S", "now-1days", "--name", "hostname", "-o", "JobID,State,ExitCode"]
 
         def accounted():
             r = self.run(*cmd, check=False, timeout=20)
             return r.returncode == 0 and "|COMPLETED|0:0" in r.stdout, r.stdout + r.stderr
+
         self._wait("sacct to list the srun job", accounted, 60, cmd, self._paths()["log"] / "slurmdbd.log")
         self.run(*cmd, log=True)
 
     def sinfo(self) -> str:
         return self.run("sinfo", "-N", "-o", "%N %P %t %c %m %O", check=False).stdout
 
-    def sacct(self, fmt: str = "JobID,JobName%40,Account,State,ExitCode,Elapsed,MaxRSS", all_steps: bool = False,
-              extra: tuple[str, ...] = ()) -> str:
+    def sacct(
+        self,
+        fmt: str = "JobID,JobName%40,Account,State,ExitCode,Elapsed,MaxRSS",
+        all_steps: bool = False,
+        extra: tuple[str, ...] = (),
+    ) -> str:
         """``sacct`` of every job of this cluster since the harness started (``-X``: allocations only)."""
         args = ["sacct", "-a", "-S", "now-1days", f"--format={fmt}", *extra]
         if not all_steps:
@@ -544,9 +725,13 @@ class SlurmHarness:
 
     def _pid(self, name: str) -> int | None:
         p = self._paths()
-        files = {"munged": p["munge_run"] / "munged.pid", "mariadbd": p["mysql"] / "mysqld.pid",
-                 "slurmdbd": p["slurm"] / "slurmdbd.pid", "slurmctld": p["slurm"] / "slurmctld.pid",
-                 "slurmd": p["slurm"] / "slurmd.pid"}
+        files = {
+            "munged": p["munge_run"] / "munged.pid",
+            "mariadbd": p["mysql"] / "mysqld.pid",
+            "slurmdbd": p["slurm"] / "slurmdbd.pid",
+            "slurmctld": p["slurm"] / "slurmctld.pid",
+            "slurmd": p["slurm"] / "slurmd.pid",
+        }
         try:
             return int(files[name].read_text().split()[0])
         except (OSError, ValueError, IndexError):
@@ -559,8 +744,10 @@ class SlurmHarness:
                 if self.run("squeue", "-h", "-o", "%i", check=False, timeout=20).stdout.strip():
                     self.run("scancel", "-u", getpass.getuser(), check=False, timeout=20, log=True)
                     deadline = time.monotonic() + 30
-                    while time.monotonic() < deadline and self.run("squeue", "-h", "-o", "%i", check=False,
-                                                                   timeout=20).stdout.strip():
+                    while (
+                        time.monotonic() < deadline
+                        and self.run("squeue", "-h", "-o", "%i", check=False, timeout=20).stdout.strip()
+                    ):
                         time.sleep(1)
             except HarnessError:
                 pass
@@ -616,8 +803,12 @@ def _alive(pid: int) -> bool:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("action", choices=["start", "stop", "status"])
-    parser.add_argument("--state", type=Path, default=Path(tempfile.gettempdir()) / "becos-slurm",
-                        help="folder for configuration, logs and daemon state (default: %(default)s)")
+    parser.add_argument(
+        "--state",
+        type=Path,
+        default=Path(tempfile.gettempdir()) / "becos-slurm",
+        help="folder for configuration, logs and daemon state (default: %(default)s)",
+    )
     parser.add_argument("--cluster", default="becos")
     parser.add_argument("--account", default="becos-test")
     parser.add_argument("--partition", default="becos")

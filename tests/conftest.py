@@ -79,8 +79,17 @@ def tosca_pair_inputs(tosca_entries, tosca_network, mesh_cache):
         entry = entries[name]
         prepared = prepare_shape(entry, mesh_cache)
         remeshes[name] = remesh(prepared.mesh, target_vertices=target)
-        shapes[name] = ShapeInstance(entry.dataset, entry.name, entry.category, entry.shape_class,
-                                     remeshes[name].mesh, entry.scale, entry.frame_rotation, prepared.centre, 0)
+        shapes[name] = ShapeInstance(
+            entry.dataset,
+            entry.name,
+            entry.category,
+            entry.shape_class,
+            remeshes[name].mesh,
+            entry.scale,
+            entry.frame_rotation,
+            prepared.centre,
+            0,
+        )
     x, y = entries["cat0"], entries["cat3"]
     gt_xy = network.ground_truth(x, y, x_remesh=remeshes["cat0"], y_remesh=remeshes["cat3"])
     gt_yx = network.ground_truth(y, x, x_remesh=remeshes["cat3"], y_remesh=remeshes["cat0"])
@@ -102,8 +111,9 @@ def pair_record_files(tosca_pair_inputs, tmp_path_factory) -> dict[str, list[Pat
         paths = []
         for i, split in enumerate(("train", "test")):
             pair_id = f"{setting[:1]}{setting.split('_')[1][:1]}{i:014d}"
-            record = build_pair(x, y, gt_xy, gt_yx, pair_id=pair_id, seed=100 + i, split=split,
-                                options=PairOptions(setting=setting))
+            record = build_pair(
+                x, y, gt_xy, gt_yx, pair_id=pair_id, seed=100 + i, split=split, options=PairOptions(setting=setting)
+            )
             path = folder / f"{pair_id}.npz"
             record.save(path)
             paths.append(path)

@@ -64,7 +64,7 @@ def bipyramid(n_vertices: int) -> tuple[np.ndarray, np.ndarray]:
     vertices = np.concatenate([ring, [[0.0, 1.0, 0.0], [0.0, -1.0, 0.0]]])
     i = np.arange(n)
     j = (i + 1) % n
-    top = np.stack([i, np.full(n, n), j], axis=1)          # ring i -> apex -> ring i+1: outward (+y side)
+    top = np.stack([i, np.full(n, n), j], axis=1)  # ring i -> apex -> ring i+1: outward (+y side)
     bottom = np.stack([j, np.full(n, n + 1), i], axis=1)
     return vertices, np.concatenate([top, bottom]).astype(np.int64)
 
@@ -81,8 +81,10 @@ def mesh_bytes(vertices: np.ndarray, faces: np.ndarray, file_type: str) -> bytes
         body = ("v %.6f %.6f %.6f\n" * v) % coords + ("f %d %d %d\n" * f) % tuple((faces + 1).ravel().tolist())
         return body.encode()
     if file_type == "ply":
-        header = (f"ply\nformat binary_little_endian 1.0\nelement vertex {v}\nproperty float x\nproperty float y\n"
-                  f"property float z\nelement face {f}\nproperty list uchar int vertex_indices\nend_header\n")
+        header = (
+            f"ply\nformat binary_little_endian 1.0\nelement vertex {v}\nproperty float x\nproperty float y\n"
+            f"property float z\nelement face {f}\nproperty list uchar int vertex_indices\nend_header\n"
+        )
         rows = np.zeros(f, dtype=[("k", "u1"), ("i", "<i4", (3,))])
         rows["k"], rows["i"] = 3, faces
         return header.encode() + vertices.astype("<f4").tobytes() + rows.tobytes()
@@ -141,8 +143,10 @@ def template_needs(annotations: Path, cache_dir: Path | None = None) -> dict[tup
         report = source.edge_report(edge.source, edge.target)
         n = int(report["rows"])
         if rows.setdefault(edge.source, n) != n:
-            raise ValueError(f"edge files out of template {edge.source} disagree on its vertex count "
-                             f"({rows[edge.source]} vs {n}, {edge.path})")
+            raise ValueError(
+                f"edge files out of template {edge.source} disagree on its vertex count "
+                f"({rows[edge.source]} vs {n}, {edge.path})"
+            )
         max_face[edge.target] = max(max_face.get(edge.target, -1), int(report["max_face"]))
     out: dict[tuple[str, str], TemplateNeeds] = {}
     for group in nx.connected_components(identity):
@@ -152,13 +156,12 @@ def template_needs(annotations: Path, cache_dir: Path | None = None) -> dict[tup
         if not counts:
             continue
         n = counts.pop()
-        min_faces = max(max_face.get(node, -1) for node in group) + 1   # one triangulation for the group
+        min_faces = max(max_face.get(node, -1) for node in group) + 1  # one triangulation for the group
         for node in group:
             dataset, template = source.node_template(node)
             faces = source.default_faces(template, dataset)
             if faces is not None and int(faces.max()) + 1 != n:
-                raise ValueError(f"default faces of {node} index {int(faces.max()) + 1} vertices, its edge files "
-                                 f"{n}")
+                raise ValueError(f"default faces of {node} index {int(faces.max()) + 1} vertices, its edge files {n}")
             out[(dataset, template)] = TemplateNeeds(n, min_faces, faces)
     return out
 
@@ -184,8 +187,9 @@ def template_mesh(key: tuple[str, str], needs: TemplateNeeds) -> tuple[np.ndarra
     else:
         vertices, faces = bipyramid(needs.n_vertices)
     if len(faces) < needs.min_faces:
-        raise ValueError(f"stand-in template {key[0]}/{key[1]}: {len(faces)} faces, but its edge files index "
-                         f"{needs.min_faces}")
+        raise ValueError(
+            f"stand-in template {key[0]}/{key[1]}: {len(faces)} faces, but its edge files index {needs.min_faces}"
+        )
     return vertices, faces
 
 
@@ -210,7 +214,9 @@ class StandinTree:
     seconds: float = 0.0
 
 
-def standin_shapes(annotations: Path, published: dict[tuple[str, str], str] | None = None) -> dict[tuple[str, str], str]:
+def standin_shapes(
+    annotations: Path, published: dict[tuple[str, str], str] | None = None
+) -> dict[tuple[str, str], str]:
     """``(dataset, name) -> path relative to the reference checkout`` of every stand-in shape: the
     published ones (``published``: :func:`published_file_paths`, read if not given), plus DT4D frames
     of the info files that no published pair uses (at the path the registry lists them)."""
@@ -260,5 +266,6 @@ def build_standin_tree(out: str | Path, annotations: str | Path, cache_dir: str 
             folders.add(path.parent)
         path.write_bytes(data)
         files[key] = path
-    return StandinTree(out / "data", annotations, files, frozenset(published), written_counts,
-                       round(time.perf_counter() - start, 2))
+    return StandinTree(
+        out / "data", annotations, files, frozenset(published), written_counts, round(time.perf_counter() - start, 2)
+    )

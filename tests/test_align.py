@@ -29,7 +29,7 @@ def motion():
 
 def test_recovers_known_motion(motion):
     _, source, truth = motion
-    target = source @ truth.rotation.T + truth.translation          # documented convention
+    target = source @ truth.rotation.T + truth.translation  # documented convention
     fit = procrustes(source, target)
     np.testing.assert_allclose(fit.rotation, truth.rotation, atol=1e-9)
     np.testing.assert_allclose(fit.translation, truth.translation, atol=1e-9)
@@ -40,11 +40,11 @@ def test_recovers_known_motion(motion):
 def test_masked_garbage_is_ignored(motion):
     rng, source, truth = motion
     target = truth.apply(source)
-    mask = rng.random(len(source)) >= 0.4                             # ~40 % masked
+    mask = rng.random(len(source)) >= 0.4  # ~40 % masked
     assert 0.35 < 1 - mask.mean() < 0.45
     garbage_target = target.copy()
     garbage_target[~mask] = rng.normal(size=((~mask).sum(), 3)) * 1e3
-    garbage_target[np.flatnonzero(~mask)[:10]] = np.nan               # like -1 ground-truth positions
+    garbage_target[np.flatnonzero(~mask)[:10]] = np.nan  # like -1 ground-truth positions
     garbage_source = source.copy()
     garbage_source[np.flatnonzero(~mask)[10:20]] = np.inf
     fit = procrustes(garbage_source, garbage_target, mask=mask)
@@ -55,7 +55,7 @@ def test_masked_garbage_is_ignored(motion):
     broken = procrustes(garbage_source, garbage_target, mask=finite)
     assert np.abs(broken.translation - truth.translation).max() > 1.0
     with pytest.raises(ValueError):
-        procrustes(garbage_source, garbage_target)                    # NaN reaches the sums
+        procrustes(garbage_source, garbage_target)  # NaN reaches the sums
 
 
 def test_inverse_and_composition(motion):
@@ -102,6 +102,6 @@ def test_align_to_recovers_motion_of_a_tosca_mesh(tosca_dir, mesh_cache):
     gt = SurfaceMap.identity(x.faces, x.n_vertices)
     dropped = rng.random(x.n_vertices) < 0.3
     gt = SurfaceMap(np.where(dropped, -1, gt.face), np.where(dropped[:, None], 0.0, gt.weights))
-    fit = align_to(x, y, gt)              # moves Y onto X: the inverse motion
+    fit = align_to(x, y, gt)  # moves Y onto X: the inverse motion
     np.testing.assert_allclose(fit.rotation, truth.rotation.T, atol=1e-9)
     np.testing.assert_allclose(fit.apply(y.vertices), x.vertices, atol=1e-8)

@@ -13,11 +13,16 @@ from becos.annotations import AnnotationSource, file_name_part, parse_edge_file
 from becos.errors import BecosError, InputFileError
 
 ZERO_WEIGHT_EDGES = {  # facts §3.3: the 11 used files whose weights were truncated to 0/1
-    ("dt4d_animal_bear3EP", "dt4d_animal_pumaRW"), ("dt4d_animal_deerK5L", "dt4d_animal_pumaRW"),
-    ("dt4d_animal_bullMJ6", "dt4d_animal_goatS4J6Y"), ("dt4d_animal_deerFEL", "dt4d_animal_moose6OK9"),
-    ("dt4d_animal_moose1DOG", "dt4d_animal_moose45D"), ("dt4d_animal_moose45D", "dt4d_animal_moose6OK9"),
-    ("dt4d_animal_pumaRW", "dt4d_animal_bullMJ6"), ("dt4d_animal_pumaRW", "dt4d_animal_rhinoDJ7S"),
-    ("shrec20_camel_a", "shrec20_giraffe_b"), ("shrec20_cow", "dt4d_animal_bullMJ6"),
+    ("dt4d_animal_bear3EP", "dt4d_animal_pumaRW"),
+    ("dt4d_animal_deerK5L", "dt4d_animal_pumaRW"),
+    ("dt4d_animal_bullMJ6", "dt4d_animal_goatS4J6Y"),
+    ("dt4d_animal_deerFEL", "dt4d_animal_moose6OK9"),
+    ("dt4d_animal_moose1DOG", "dt4d_animal_moose45D"),
+    ("dt4d_animal_moose45D", "dt4d_animal_moose6OK9"),
+    ("dt4d_animal_pumaRW", "dt4d_animal_bullMJ6"),
+    ("dt4d_animal_pumaRW", "dt4d_animal_rhinoDJ7S"),
+    ("shrec20_camel_a", "shrec20_giraffe_b"),
+    ("shrec20_cow", "dt4d_animal_bullMJ6"),
     ("tosca_horse0", "dt4d_animal_elephantLN0"),
 }
 
@@ -161,11 +166,17 @@ def test_tosca_edges_fit_the_tosca_meshes(source, tosca_dir, mesh_cache):
             checked += 1
     assert checked == 8  # cat-dog, dog-horse, dog-wolf, horse-centaur, both directions
     cat = mesh_cache.load(tosca_dir / "cat0.off")
-    with pytest.raises(InputFileError, match="tosca_cat0_tosca_dog0_corres.txt: has 27894 rows but template "
-                                             "tosca_cat0 has 27895 vertices. Fix: .*restore"):
+    with pytest.raises(
+        InputFileError,
+        match="tosca_cat0_tosca_dog0_corres.txt: has 27894 rows but template "
+        "tosca_cat0 has 27895 vertices. Fix: .*restore",
+    ):
         source.check_edge("tosca_cat0", "tosca_dog0", cat.n_vertices + 1, 10**6)
-    with pytest.raises(InputFileError, match="tosca_cat0_tosca_dog0_corres.txt: face index .* is out of range for "
-                                             "template tosca_dog0 \\(100 faces\\). Fix: restore"):
+    with pytest.raises(
+        InputFileError,
+        match="tosca_cat0_tosca_dog0_corres.txt: face index .* is out of range for "
+        "template tosca_dog0 \\(100 faces\\). Fix: restore",
+    ):
         source.check_edge("tosca_cat0", "tosca_dog0", cat.n_vertices, 100)
 
 
@@ -206,15 +217,18 @@ from test_faults import EDGE, _set  # noqa: E402
 from test_faults import annotation_copy as faulty_copy  # noqa: E402
 
 
-@pytest.mark.parametrize("edit, message", [
-    (lambda ls: _set(ls, 4, "235 0.7 abc 0.3"), "line 5 holds non-numeric text 'abc'"),
-    (lambda ls: _set(ls, 9, "235 0.7 0.3"), "line 10 has fewer than 4 columns"),
-    (lambda ls: _set(ls, 9, "235 0.7 0.3 0.0 1"), "different numbers of columns"),
-    (lambda ls: [" ".join(l.split()[:3]) for l in ls], "has 3 columns"),
-    (lambda ls: _set(ls, 2, "-7 0 0 0"), "line 3: face index -7 is below -1"),
-    (lambda ls: _set(ls, 2, "12.5 0.2 0.3 0.5"), "line 3: face index 12.5 is not an integer"),
-    (lambda ls: [], "empty"),
-])
+@pytest.mark.parametrize(
+    "edit, message",
+    [
+        (lambda ls: _set(ls, 4, "235 0.7 abc 0.3"), "line 5 holds non-numeric text 'abc'"),
+        (lambda ls: _set(ls, 9, "235 0.7 0.3"), "line 10 has fewer than 4 columns"),
+        (lambda ls: _set(ls, 9, "235 0.7 0.3 0.0 1"), "different numbers of columns"),
+        (lambda ls: [" ".join(l.split()[:3]) for l in ls], "has 3 columns"),
+        (lambda ls: _set(ls, 2, "-7 0 0 0"), "line 3: face index -7 is below -1"),
+        (lambda ls: _set(ls, 2, "12.5 0.2 0.3 0.5"), "line 3: face index 12.5 is not an integer"),
+        (lambda ls: [], "empty"),
+    ],
+)
 def test_faulty_edge_file_is_an_error_naming_it(becos_code, tmp_path, edit, message):
     root = faulty_copy(becos_code, tmp_path, edit_edge=edit)
     source = AnnotationSource(root, cache_dir=tmp_path / "cache")
@@ -253,13 +267,16 @@ def _flip(rows, i, j, value):
     rows[i][j] = value
 
 
-@pytest.mark.parametrize("edit, message", [
-    (lambda r: _flip(r, 1, 5, "1"), "not symmetric"),                         # centaur0 -> david0 only
-    (lambda r: _flip(r, 2, 3, "2"), "only 0 and 1 are allowed"),
-    (lambda r: (_flip(r, 3, 5, "1"), _flip(r, 5, 3, "1")), "not a tree"),       # victoria0 <-> david0: a cycle
-    (lambda r: [_flip(r, i, 2, "0") or _flip(r, 2, i, "0") for i in range(1, len(r))], "not connected"),
-    (lambda r: _flip(r, 4, 4, "1"), "linked to itself"),
-])
+@pytest.mark.parametrize(
+    "edit, message",
+    [
+        (lambda r: _flip(r, 1, 5, "1"), "not symmetric"),  # centaur0 -> david0 only
+        (lambda r: _flip(r, 2, 3, "2"), "only 0 and 1 are allowed"),
+        (lambda r: (_flip(r, 3, 5, "1"), _flip(r, 5, 3, "1")), "not a tree"),  # victoria0 <-> david0: a cycle
+        (lambda r: [_flip(r, i, 2, "0") or _flip(r, 2, i, "0") for i in range(1, len(r))], "not connected"),
+        (lambda r: _flip(r, 4, 4, "1"), "linked to itself"),
+    ],
+)
 def test_faulty_adjacency_matrix_is_an_error_naming_it(becos_code, tmp_path, edit, message):
     root = faulty_copy(becos_code, tmp_path, edit_adjacency=edit)
     with pytest.raises(InputFileError) as err:

@@ -8,7 +8,7 @@ import time
 import numpy as np
 import pytest
 
-from becos.baselines import (BASELINES, ZoomOutOptions, nearest_neighbour, run_baseline, wks_zoomout)
+from becos.baselines import BASELINES, ZoomOutOptions, nearest_neighbour, run_baseline, wks_zoomout
 from becos.evaluate import evaluate_record, full_shape, open_predictions
 from becos.geodesics import dijkstra_to_points
 from becos.record import PairRecord
@@ -41,8 +41,12 @@ def auc_within(record: PairRecord, pred: np.ndarray, max_threshold: float = 0.10
     truth = record["corr_10"]
     ok = np.flatnonzero((truth >= 0) & (pred >= 0))
     point = SurfaceMap.from_vertex_indices(full.vertex_to_full[truth[ok]], full.mesh.faces)
-    d = dijkstra_to_points(full.mesh, full.vertex_to_full[pred[ok]], point.face, point.weights,
-                           limit=max_threshold * full.sqrt_area) / full.sqrt_area
+    d = (
+        dijkstra_to_points(
+            full.mesh, full.vertex_to_full[pred[ok]], point.face, point.weights, limit=max_threshold * full.sqrt_area
+        )
+        / full.sqrt_area
+    )
     errors = np.full(int((truth >= 0).sum()), np.inf)
     errors[np.searchsorted(np.flatnonzero(truth >= 0), ok)] = d
     thresholds = np.linspace(0.0, max_threshold, steps)
@@ -69,8 +73,10 @@ def test_zoomout_beats_the_nearest_neighbour_floor_on_an_f2f_cat_pair(records, p
     record = records["full_full"][0]
     nn = auc_within(record, predictions["full_full", "nn"][0].map)
     zoomout = auc_within(record, predictions["full_full", "zoomout"][0].map)
-    print(f"\nF2F cat0 -> cat3, AUC x100 (mean-0.10x40, edge-graph geodesics): nn {100 * nn:.1f}, "
-          f"zoomout {100 * zoomout:.1f}")
+    print(
+        f"\nF2F cat0 -> cat3, AUC x100 (mean-0.10x40, edge-graph geodesics): nn {100 * nn:.1f}, "
+        f"zoomout {100 * zoomout:.1f}"
+    )
     assert zoomout > 0.4 and zoomout > nn + 0.15
     # the spectral method is blind to the random rotations: the other F2F record holds the same two
     # shapes rotated differently, and gets (nearly) the same map; the 3D floor does not
@@ -85,8 +91,9 @@ def test_zoomout_beats_the_nearest_neighbour_floor_on_an_f2f_cat_pair(records, p
 
 def test_p2p_overlap_masks(records, predictions):
     record = records["partial_partial"][0]
-    rows = {name: evaluate_record(record, {name: predictions["partial_partial", name][0]}).rows[0]
-            for name in BASELINES}
+    rows = {
+        name: evaluate_record(record, {name: predictions["partial_partial", name][0]}).rows[0] for name in BASELINES
+    }
     print("\nP2P IoU x100: " + ", ".join(f"{n} {100 * r['iou']:.1f}" for n, r in rows.items()))
     for row in rows.values():
         assert row["overlap_source"] == "files" and 0.0 <= row["iou"] <= 1.0
@@ -96,7 +103,10 @@ def test_p2p_overlap_masks(records, predictions):
 def test_run_baseline_writes_the_folder_format(records, tmp_path):
     pairs = records["partial_partial"]
     facts = run_baseline("nn", pairs, tmp_path / "nn")
-    assert facts["n_pairs"] == len(pairs) and json.loads((tmp_path / "nn" / "baseline.json").read_text())["baseline"] == "nn"
+    assert (
+        facts["n_pairs"] == len(pairs)
+        and json.loads((tmp_path / "nn" / "baseline.json").read_text())["baseline"] == "nn"
+    )
     source = open_predictions(tmp_path / "nn")
     assert source.name == "nn" and sorted(source.pair_ids()) == sorted(r.pair_id for r in pairs)
     for record in pairs:
@@ -115,6 +125,8 @@ def test_baseline_command_on_a_store(records, store_of, tmp_path):
     assert main(["baseline", "nn", str(store), "--out", str(tmp_path / "nn"), "--split", "test"]) == 0
     test_ids = [r.pair_id for r in records["full_full"] if r.meta["split"] == "test"]
     assert sorted(open_predictions(tmp_path / "nn").pair_ids()) == sorted(test_ids)
-    assert main(["evaluate", str(store), str(tmp_path / "nn"), "--out", str(tmp_path / "eval"),
-                 "--geodesics", "dijkstra"]) == 0
+    assert (
+        main(["evaluate", str(store), str(tmp_path / "nn"), "--out", str(tmp_path / "eval"), "--geodesics", "dijkstra"])
+        == 0
+    )
     assert (tmp_path / "eval" / "pck.png").is_file()

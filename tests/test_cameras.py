@@ -5,9 +5,20 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from becos.cameras import (CAMERA_REGIMES, ELEVATION_MAX, ELEVATION_MIN, REFERENCE_REGIMES, REGIMES, Camera,
-                           axis_frame, camera_angles, camera_from_angles, draw_camera, draw_camera_pair,
-                           normalise_to_unit_box)
+from becos.cameras import (
+    CAMERA_REGIMES,
+    ELEVATION_MAX,
+    ELEVATION_MIN,
+    REFERENCE_REGIMES,
+    REGIMES,
+    Camera,
+    axis_frame,
+    camera_angles,
+    camera_from_angles,
+    draw_camera,
+    draw_camera_pair,
+    normalise_to_unit_box,
+)
 from becos.seeding import rng_for
 
 
@@ -19,9 +30,11 @@ def _wrapped(a: np.ndarray) -> np.ndarray:
 
 def _pair_angles(regime: str, up_axis: str, n: int) -> np.ndarray:
     """(n, 2, 2) [camera][azimuth, elevation] measured from the drawn positions (not from internals)."""
-    e1, e2, u = {"x": (np.eye(3)[1], np.eye(3)[2], np.eye(3)[0]),
-                 "y": (np.eye(3)[2], np.eye(3)[0], np.eye(3)[1]),
-                 "z": (np.eye(3)[0], np.eye(3)[1], np.eye(3)[2])}[up_axis]
+    e1, e2, u = {
+        "x": (np.eye(3)[1], np.eye(3)[2], np.eye(3)[0]),
+        "y": (np.eye(3)[2], np.eye(3)[0], np.eye(3)[1]),
+        "z": (np.eye(3)[0], np.eye(3)[1], np.eye(3)[2]),
+    }[up_axis]
     out = np.empty((n, 2, 2))
     for i in range(n):
         for j, cam in enumerate(draw_camera_pair(rng_for(7, f"pair-{i}", "cameras", 0), regime, up_axis)):
@@ -46,7 +59,7 @@ def test_normalise_to_unit_box_centres_and_scales():
 @pytest.mark.parametrize("up_axis", ["x", "y", "z"])
 def test_camera_geometry_never_degenerates(up_axis):
     azimuths = np.linspace(0, 2 * np.pi, 13)
-    elevations = np.array([-np.pi / 2, -1.0, 0.0, 0.3, 1.2, np.pi / 2])   # includes both poles
+    elevations = np.array([-np.pi / 2, -1.0, 0.0, 0.3, 1.2, np.pi / 2])  # includes both poles
     _, _, u = axis_frame(up_axis)
     for a in azimuths:
         for e in elevations:
@@ -69,13 +82,17 @@ def test_camera_geometry_never_degenerates(up_axis):
 
 
 def test_frustum_is_square_90_degrees():
-    cam = camera_from_angles(0.0, 0.0, "y", 1.0)          # at +z looking at the origin
+    cam = camera_from_angles(0.0, 0.0, "y", 1.0)  # at +z looking at the origin
     right, up, forward = cam.basis()
-    pts = np.array([cam.position + forward + 0.99 * right,           # 44.7° off-axis: inside
-                    cam.position + forward + 1.01 * right,           # 45.3°: outside
-                    cam.position + forward + 0.99 * right + 0.99 * up,  # corner: inside (square)
-                    cam.position + forward - 1.01 * up,
-                    cam.position - forward])                        # behind the eye
+    pts = np.array(
+        [
+            cam.position + forward + 0.99 * right,  # 44.7° off-axis: inside
+            cam.position + forward + 1.01 * right,  # 45.3°: outside
+            cam.position + forward + 0.99 * right + 0.99 * up,  # corner: inside (square)
+            cam.position + forward - 1.01 * up,
+            cam.position - forward,
+        ]
+    )  # behind the eye
     np.testing.assert_array_equal(cam.in_frustum(pts), [True, False, True, False, False])
 
 
@@ -89,11 +106,11 @@ def test_regime_bounds_hold_over_1000_draws(regime):
     assert d_el.max() <= max_el + 1e-9
     # every camera inside the elevation band
     assert angles[:, :, 1].min() >= ELEVATION_MIN - 1e-9 and angles[:, :, 1].max() <= ELEVATION_MAX + 1e-9
-    if regime == "low":   # independent: differences cover the whole range
+    if regime == "low":  # independent: differences cover the whole range
         assert d_az.max() > 0.95 * np.pi
         assert d_el.max() > 0.9 * (ELEVATION_MAX - ELEVATION_MIN)
         assert np.corrcoef(angles[:, 0, 1], angles[:, 1, 1])[0, 1] < 0.15
-    else:                 # the bounds are used, not collapsed to a tiny spread
+    else:  # the bounds are used, not collapsed to a tiny spread
         assert d_az.max() > 0.9 * max_az and d_el.max() > 0.8 * max_el
     # the first camera's azimuth is uniform: each quadrant holds about a quarter
     quadrant = np.bincount((((angles[:, 0, 0] % (2 * np.pi)) // (np.pi / 2)).astype(int)), minlength=4)
@@ -163,8 +180,9 @@ def _reference_pairs(regime: str, n: int, up_axis: str = "y") -> np.ndarray:
     return out
 
 
-@pytest.mark.parametrize("regime, median_deg, max_deg", [("reference-high", 13.3, 47.0),
-                                                         ("reference-medium", 28.0, 92.0)])
+@pytest.mark.parametrize(
+    "regime, median_deg, max_deg", [("reference-high", 13.3, 47.0), ("reference-medium", 28.0, 92.0)]
+)
 def test_reference_regimes_match_the_reference_pair_angles(regime, median_deg, max_deg):
     """Pair angles over 2000 draws match those measured on the reference's cam_generator (facts §7.7)."""
     d = _reference_pairs(regime, 2000)
@@ -191,14 +209,15 @@ def test_reference_regime_uses_seven_uniform_draws_per_pair():
     rng, twin = rng_for(3, "cat0|cat3", "cameras", 0), rng_for(3, "cat0|cat3", "cameras", 0)
     cams = draw_camera_pair(rng, "reference-high")
     a0, a1, b0, b1, c, coin, dd = twin.random(7)
-    assert rng.random() == twin.random()       # both streams advanced by the same 7 draws
+    assert rng.random() == twin.random()  # both streams advanced by the same 7 draws
     r = np.pi / 8
     sign = 1.0 if coin < 0.5 else -1.0
     for cam, a, b in zip(cams, (a0, a1), (b0, b1)):
         alpha = a * 2 * r + c * 2 * (np.pi - r)
         phi = b * r - r / 2 + sign * dd * (np.pi - r) / 2
-        np.testing.assert_allclose(cam.position, [np.cos(phi) * np.sin(alpha), np.cos(phi) * np.cos(alpha),
-                                                  np.sin(phi)], atol=1e-12)
+        np.testing.assert_allclose(
+            cam.position, [np.cos(phi) * np.sin(alpha), np.cos(phi) * np.cos(alpha), np.sin(phi)], atol=1e-12
+        )
         # the reference's up is +y (made orthogonal to the view)
         assert cam.up @ np.array([0.0, 1.0, 0.0]) > 0
 

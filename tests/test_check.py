@@ -25,9 +25,14 @@ from becos.datasets import CONFIG_DIR
 from becos.errors import ConfigError, InputFileError
 
 # what AnnotationSource needs (plus a few small files), copied into the served archive
-ANNOTATION_FILES = ("config/adjacency_matrix.csv", "config/templates_all.csv", "config/templates_tosca_demo.csv",
-                    "config/templates_chirality_all.csv", "data/info_dt4d_humanoids.json",
-                    "precomputed_corr_templates/same_triangulation_dt4d_animals.txt")
+ANNOTATION_FILES = (
+    "config/adjacency_matrix.csv",
+    "config/templates_all.csv",
+    "config/templates_tosca_demo.csv",
+    "config/templates_chirality_all.csv",
+    "data/info_dt4d_humanoids.json",
+    "precomputed_corr_templates/same_triangulation_dt4d_animals.txt",
+)
 
 
 # --- check_datasets ---------------------------------------------------------------------------------
@@ -43,8 +48,10 @@ def test_tosca_present_reports_76_shapes(becos_code):
     # TOSCA's 8 templates are joined through faust_tr_reg_000 (centaur top, the humans): 9 nodes, 8 edges
     assert ann["edge_files"] == {"needed": 16, "missing": []}
     assert ann["default_faces"] == {"needed": 1, "missing": []}
-    assert all(ann["files"][k] for k in ("config/adjacency_matrix.csv", "config/templates_all.csv",
-                                         "precomputed_corr_templates"))
+    assert all(
+        ann["files"][k]
+        for k in ("config/adjacency_matrix.csv", "config/templates_all.csv", "precomputed_corr_templates")
+    )
     json.dumps(report)  # JSON-able
 
 
@@ -52,14 +59,27 @@ def test_missing_dataset_says_where_to_get_it_and_where_to_put_it(becos_code, tm
     data = tmp_path / "data"
     data.mkdir()
     out = tmp_path / "report.json"
-    args = ["check", "--datasets", "tosca", "faust", "--data-dir", str(data), "--annotations", str(becos_code),
-            "--out", str(out)]
+    args = [
+        "check",
+        "--datasets",
+        "tosca",
+        "faust",
+        "--data-dir",
+        str(data),
+        "--annotations",
+        str(becos_code),
+        "--out",
+        str(out),
+    ]
     assert becos_main(args) == 2
     message = capsys.readouterr().err
     faust_folder = data / "MPI-FAUST" / "training" / "registrations"
     assert "https://faust-leaderboard.is.tuebingen.mpg.de/download" in message
     assert f"create {faust_folder}" in message and "account required" in message
-    assert "http://tosca.cs.technion.ac.il/book/resources_data.html" in message and f"create {data / 'tosca-off'}" in message
+    assert (
+        "http://tosca.cs.technion.ac.il/book/resources_data.html" in message
+        and f"create {data / 'tosca-off'}" in message
+    )
     assert "`data_dir`" in message and "`datasets`" in message and "2 problem(s)" in message
     report = json.loads(out.read_text())  # the report is written on failure too
     assert report["ok"] is False and report["faust"]["ok"] is False and report["faust"]["found"] == 0

@@ -66,9 +66,10 @@ def _set_attrs(store, **attrs):
 
 def test_identical_copy_and_rebuild(stores, records, tmp_path):
     copy = _copy(stores, "partial_partial", tmp_path)
-    rebuilt = write_store(records["partial_partial"], tmp_path / "rebuilt.zarr", setting="partial_partial",
-                          progress=False)
-    assert open_benchmark(rebuilt).metadata["created"]       # differs between builds: not compared
+    rebuilt = write_store(
+        records["partial_partial"], tmp_path / "rebuilt.zarr", setting="partial_partial", progress=False
+    )
+    assert open_benchmark(rebuilt).metadata["created"]  # differs between builds: not compared
     for other in (copy, rebuilt):
         c = compare_stores(stores["partial_partial"], other)
         assert c.identical and c.data_identical, c.summary()
@@ -89,9 +90,11 @@ def test_perturbed_x_vertices_is_remeshing_of_x(stores, tmp_path):
     keys = c.pair_keys(ids[1])
     assert list(keys) == ["x_vertices"] and keys["x_vertices"]["values"] == 2
     assert keys["x_vertices"]["max_abs"] == pytest.approx(2e-3, rel=1e-6)
-    assert f"remeshing of X differs: 1 pair(s), e.g. {ids[1]} (x_vertices: 1 pair(s), 2 value(s), max |diff| 0.002)" \
+    assert (
+        f"remeshing of X differs: 1 pair(s), e.g. {ids[1]} (x_vertices: 1 pair(s), 2 value(s), max |diff| 0.002)"
         in c.summary()
-    assert compare_stores(a, b, atol=1e-2).identical            # within tolerance
+    )
+    assert compare_stores(a, b, atol=1e-2).identical  # within tolerance
     assert not compare_stores(a, b, atol=1e-3).identical
 
 
@@ -101,21 +104,25 @@ def test_partial_shapes_reasons(stores, tmp_path):
     b = _copy(stores, "partial_partial", tmp_path)
     ids = list(open_benchmark(a).table["pair_id"])
     _perturb(b, "x_full_vertices", 0, 5, 1e-6)
-    camera = _array(b, "y_camera")                               # stacked (N, 3, 3)
+    camera = _array(b, "y_camera")  # stacked (N, 3, 3)
     camera[1] = camera[1] + np.array([[0.0, 0.0, 0.1], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]])
     row = _rows(b, "corr_01", 1)[0] + 3
     corr = _array(b, "corr_01")
     corr[row] = corr[row] + 1
-    _perturb(b, "x_vertices", 1, 0, 1e-9)                       # a partial X: its partial view differs
+    _perturb(b, "x_vertices", 1, 0, 1e-9)  # a partial X: its partial view differs
     c = compare_stores(a, b)
     assert c.pair_reasons(ids[0]) == ["remeshing of X differs"]
     assert c.pair_reasons(ids[1]) == ["partial view of X differs", "partial view of Y differs", "ground truth differs"]
-    assert c.pair_keys(ids[1])["corr_01"] == {"values": 1, "max_abs": None}      # ints: count only
+    assert c.pair_keys(ids[1])["corr_01"] == {"values": 1, "max_abs": None}  # ints: count only
     assert c.pair_keys(ids[1])["y_camera"]["max_abs"] == pytest.approx(0.1)
-    assert c.reason_counts() == {"remeshing of X differs": 1, "partial view of X differs": 1,
-                                 "partial view of Y differs": 1, "ground truth differs": 1}
+    assert c.reason_counts() == {
+        "remeshing of X differs": 1,
+        "partial view of X differs": 1,
+        "partial view of Y differs": 1,
+        "ground truth differs": 1,
+    }
     whole = compare_stores(a, b)
-    pairwise = compare_stores(a, b, max_bytes=1)                # one pair per read: same answer
+    pairwise = compare_stores(a, b, max_bytes=1)  # one pair per read: same answer
     for key in whole.values:
         assert np.array_equal(whole.values[key], pairwise.values[key]), key
         if key in whole.max_abs:
@@ -135,7 +142,7 @@ def test_new_random_rotation_is_not_a_remeshing(stores, tmp_path):
     rotation[1] = old @ turn
     start, stop = _rows(b, "x_vertices", 1)
     vertices = _array(b, "x_vertices")
-    vertices[start:stop] = vertices[start:stop] @ turn                 # (v @ R.T) @ (R @ turn) = v @ turn
+    vertices[start:stop] = vertices[start:stop] @ turn  # (v @ R.T) @ (R @ turn) = v @ turn
     c = compare_stores(a, b)
     assert c.pair_reasons(pid) == ["rotations of X differ"], c.summary()
     assert c.pair_keys(pid)["x_vertices"]["same_in_common_frame"] is True
@@ -154,8 +161,10 @@ def test_removed_pair_and_changed_versions(stores, records, tmp_path):
     _set_attrs(b, versions=versions)
     c = compare_stores(a, b)
     assert c.only_a == [ids[1]] and c.only_b == [] and c.differing_ids == [] and not c.identical
-    assert c.version_differences == {"embreex": [open_benchmark(a).metadata["versions"]["embreex"], None],
-                                     "pymeshlab": [open_benchmark(a).metadata["versions"]["pymeshlab"], "2022.2.post3"]}
+    assert c.version_differences == {
+        "embreex": [open_benchmark(a).metadata["versions"]["embreex"], None],
+        "pymeshlab": [open_benchmark(a).metadata["versions"]["pymeshlab"], "2022.2.post3"],
+    }
     assert c.attributes["n_pairs"] == [2, 1] and c.attributes["splits.test"] == [2, 1]
     text = c.summary()
     assert f"only in {a}: 1 pair(s), e.g. {ids[1]}" in text
@@ -170,7 +179,7 @@ def test_versions_only_and_config_change(stores, tmp_path):
     b = _copy(stores, "full_full", tmp_path)
     _set_attrs(b, versions={**open_benchmark(a).metadata["versions"], "numpy": "1.26.4"})
     c = compare_stores(a, b)
-    assert c.data_identical and c.identical                  # same data, built with another numpy
+    assert c.data_identical and c.identical  # same data, built with another numpy
     assert c.version_differences == {"numpy": [open_benchmark(a).metadata["versions"]["numpy"], "1.26.4"]}
     assert "result: identical data (built with other library versions)" in c.summary()
     _set_attrs(b, config_hash="abc123", config={"remesh": {"target_vertices": 5000}, "seed": 1})
@@ -213,10 +222,15 @@ def test_another_pair_under_the_same_id(stores, records, tmp_path):
     c = compare_stores(stores["partial_partial"], b)
     pid = PairRecord.load(records["partial_partial"][0]).pair_id
     assert c.differing_ids == [pid]
-    assert c.pair_keys(pid)["x_vertices"] == {"values": -1, "max_abs": None}          # 3585 vs 3730 rows
+    assert c.pair_keys(pid)["x_vertices"] == {"values": -1, "max_abs": None}  # 3585 vs 3730 rows
     reasons = c.pair_reasons(pid)
-    assert {"partial view of X differs", "partial view of Y differs", "ground truth differs",
-            "rotations of X differ", "meta differs"} <= set(reasons)
+    assert {
+        "partial view of X differs",
+        "partial view of Y differs",
+        "ground truth differs",
+        "rotations of X differ",
+        "meta differs",
+    } <= set(reasons)
     # the same remeshed cat0 / cat3 under other random rotations: not a remeshing change
     assert "remeshing of X differs" not in reasons and "remeshing of Y differs" not in reasons
     assert c.pair_keys(pid)["x_full_vertices"]["same_in_common_frame"] is True
@@ -249,7 +263,7 @@ def test_cli_against(stores, tmp_path, capsys):
     assert main(["validate", str(a), "--against", str(b), "--json", str(out)]) == 1
     stdout = capsys.readouterr().out
     print(stdout)
-    assert json.loads(stdout.splitlines()[0])["valid"] is True      # STORE validated first
+    assert json.loads(stdout.splitlines()[0])["valid"] is True  # STORE validated first
     assert f"remeshing of X differs: 1 pair(s), e.g. {pid}" in stdout
     assert "versions differ: trimesh " in stdout and "-> 4.0.0" in stdout
     report = json.loads(out.read_text())
@@ -266,7 +280,7 @@ def test_cli_against(stores, tmp_path, capsys):
     assert "1 of its arrays missing: arrays/x_faces" in err and "Traceback" not in err
     c = _copy(stores, "full_full", tmp_path, "c.zarr")
     chunk = next((c / "arrays" / "x_vertices").glob("c.*"))
-    chunk.write_bytes(chunk.read_bytes()[:50])                      # a truncated chunk in OTHER
+    chunk.write_bytes(chunk.read_bytes()[:50])  # a truncated chunk in OTHER
     assert main(["validate", str(a), "--against", str(c)]) == 2
     err = capsys.readouterr().err
     assert f"becos validate: --against: {c}: pairs 0:2 cannot be read" in err and "Fix: re-export" in err, err

@@ -10,8 +10,14 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from becos.datasets import (DatasetSpec, available_datasets, frame_rotation_matrix, prepare_shape,
-                            reference_sort_key, up_vector)
+from becos.datasets import (
+    DatasetSpec,
+    available_datasets,
+    frame_rotation_matrix,
+    prepare_shape,
+    reference_sort_key,
+    up_vector,
+)
 from becos.errors import BecosError, ConfigError, InputFileError
 
 TOSCA_CLASSES = {"cat": 11, "centaur": 6, "david": 7, "dog": 9, "horse": 8, "michael": 20, "victoria": 12, "wolf": 3}
@@ -29,7 +35,7 @@ def prepared(tosca, mesh_cache):
 
 def test_registry_lists_the_eight_datasets():
     reference = ["dt4d_animal", "dt4d_human", "faust", "kids", "scape", "shrec20", "smal", "tosca"]
-    assert set(reference) <= set(available_datasets())   # plus the built-in synthetic ones
+    assert set(reference) <= set(available_datasets())  # plus the built-in synthetic ones
     for name in reference:
         spec = DatasetSpec.load(name)
         assert spec.name == name and spec.expected_count > 0 and spec.usage > 0
@@ -41,8 +47,16 @@ def test_registry_lists_the_eight_datasets():
 def test_tosca_listing(tosca, annotations):
     assert len(tosca) == 76
     assert Counter(e.shape_class for e in tosca.values()) == TOSCA_CLASSES
-    category = {"michael": "human", "david": "human", "victoria": "human", "cat": "four-legged",
-                "dog": "four-legged", "horse": "four-legged", "wolf": "four-legged", "centaur": "centaur"}
+    category = {
+        "michael": "human",
+        "david": "human",
+        "victoria": "human",
+        "cat": "four-legged",
+        "dog": "four-legged",
+        "horse": "four-legged",
+        "wolf": "four-legged",
+        "centaur": "centaur",
+    }
     for e in tosca.values():
         assert e.category == category[e.shape_class]
         assert e.template_key == f"tosca_{e.shape_class}"
@@ -52,8 +66,11 @@ def test_tosca_listing(tosca, annotations):
     splits = {}
     for e in tosca.values():
         splits.setdefault(e.split, set()).add(e.shape_class)
-    assert splits == {"train": {"michael", "horse", "wolf", "centaur"}, "val": {"david", "dog"},
-                      "test": {"victoria", "cat"}}
+    assert splits == {
+        "train": {"michael", "horse", "wolf", "centaur"},
+        "val": {"david", "dog"},
+        "test": {"victoria", "cat"},
+    }
     # class hold-out: no class in two splits
     per_class = {}
     for e in tosca.values():
@@ -72,7 +89,7 @@ def test_michael_is_head_up_with_the_reference_extents(prepared):
     # the top-most vertices are the head: narrow and central in x (the hands lie far to the sides)
     top = v[v[:, 1] > np.quantile(v[:, 1], 0.99)]
     assert abs(top[:, 0].mean()) < 0.05 and np.ptp(top[:, 0]) < 0.25
-    assert p.area == pytest.approx(p.sqrt_area ** 2) and 1.84 <= p.area <= 1.93  # facts §10
+    assert p.area == pytest.approx(p.sqrt_area**2) and 1.84 <= p.area <= 1.93  # facts §10
 
 
 @pytest.mark.parametrize("name", ["horse0", "cat0", "dog0", "wolf0"])
@@ -116,18 +133,21 @@ def test_frame_rotation_is_open3d_xyz():
         up_vector("w")
 
 
-@pytest.mark.parametrize("dataset, name, category, shape_class, key", [
-    ("faust", "tr_reg_015", "human", "subject01", "faust"),
-    ("faust", "tr_reg_099", "human", "subject09", "faust"),
-    ("dt4d_animal", "bear3EP/Attack4009", "four-legged", "bear3EP", "dt4d_animal_bear3EP"),
-    ("dt4d_human", "crypto/Standing2HMagicAttack01058", "human", "crypto", "dt4d_human_crypto"),
-    ("smal", "big_cats/lion3", "four-legged", "big_cats", "smal_big_cats"),
-    ("kids", "0001.isometry.4", "human", "kid0001", "kids"),
-    ("scape", "mesh012", "human", "scape", "scape"),
-    ("shrec20", "elephant_b", "four-legged", "elephant_b", "shrec20_elephant_b"),
-    ("tosca", "centaur3", "centaur", "centaur", "tosca_centaur"),
-    ("tosca", "Victoria10", "human", "Victoria", "tosca_Victoria"),  # categories are case-insensitive
-])
+@pytest.mark.parametrize(
+    "dataset, name, category, shape_class, key",
+    [
+        ("faust", "tr_reg_015", "human", "subject01", "faust"),
+        ("faust", "tr_reg_099", "human", "subject09", "faust"),
+        ("dt4d_animal", "bear3EP/Attack4009", "four-legged", "bear3EP", "dt4d_animal_bear3EP"),
+        ("dt4d_human", "crypto/Standing2HMagicAttack01058", "human", "crypto", "dt4d_human_crypto"),
+        ("smal", "big_cats/lion3", "four-legged", "big_cats", "smal_big_cats"),
+        ("kids", "0001.isometry.4", "human", "kid0001", "kids"),
+        ("scape", "mesh012", "human", "scape", "scape"),
+        ("shrec20", "elephant_b", "four-legged", "elephant_b", "shrec20_elephant_b"),
+        ("tosca", "centaur3", "centaur", "centaur", "tosca_centaur"),
+        ("tosca", "Victoria10", "human", "Victoria", "tosca_Victoria"),  # categories are case-insensitive
+    ],
+)
 def test_name_rules_of_every_dataset(dataset, name, category, shape_class, key, annotations):
     spec = DatasetSpec.load(dataset)
     assert (spec.category_of(name), spec.class_of(name), spec.template_key_of(name)) == (category, shape_class, key)
@@ -137,8 +157,9 @@ def test_name_rules_of_every_dataset(dataset, name, category, shape_class, key, 
 
 def test_name_based_splits(annotations):
     smal, shrec = DatasetSpec.load("smal"), DatasetSpec.load("shrec20")
-    assert [smal.split_of(n) for n in ("big_cats/lion3", "dogs/dog2", "horses/grazing", "hippos/hippo5", "cows/cow2")] \
-        == ["train", "train", "train", "val", "test"]
+    assert [
+        smal.split_of(n) for n in ("big_cats/lion3", "dogs/dog2", "horses/grazing", "hippos/hippo5", "cows/cow2")
+    ] == ["train", "train", "train", "val", "test"]
     assert [shrec.split_of(n) for n in ("cow", "giraffe_b", "rhino", "bear")] == ["train", "val", "test", "excluded"]
     with pytest.raises(BecosError, match="shrec20.yaml.*unicorn"):
         shrec.split_of("unicorn")
@@ -160,14 +181,17 @@ def test_count_based_slices_follow_the_numeric_order_not_the_input_order():
     splits = DatasetSpec.load("scape").assign_splits(scape[::-1])
     assert Counter(splits.values()) == {"train": 56, "val": 7, "test": 8}
     assert splits["mesh056"] == "train" and splits["mesh057"] == "val" and splits["mesh064"] == "test"
-    kids = [f"000{k}.{kind}.{i}" for k in (1, 2) for kind, n in (("isometry", range(1, 16)), ("null", [0]))
-            for i in n]
+    kids = [f"000{k}.{kind}.{i}" for k in (1, 2) for kind, n in (("isometry", range(1, 16)), ("null", [0])) for i in n]
     random.Random(2).shuffle(kids)
     splits = DatasetSpec.load("kids").assign_splits(kids)
     # the reference's realised KIDS split (facts §2.2)
     assert sorted(n for n, s in splits.items() if s == "val") == [f"0002.isometry.{i}" for i in (3, 4, 5, 6)]
-    assert sorted(n for n, s in splits.items() if s == "test") == ["0002.isometry.7", "0002.isometry.8",
-                                                                  "0002.isometry.9", "0002.null.0"]
+    assert sorted(n for n, s in splits.items() if s == "test") == [
+        "0002.isometry.7",
+        "0002.isometry.8",
+        "0002.isometry.9",
+        "0002.null.0",
+    ]
     assert reference_sort_key("tr_reg_010.ply") > reference_sort_key("tr_reg_009.ply")
     with pytest.raises(BecosError, match="cover 100 shapes but 99"):
         DatasetSpec.load("faust").assign_splits(faust[:99])
@@ -221,7 +245,7 @@ def test_smal_rotations_come_from_the_reference_config(annotations, tmp_path):
     for key in rot:
         cls = next(c for c in ("big_cats", "cows", "dogs", "hippos", "horses") if key.startswith(c + "_"))
         (tmp_path / "smal" / cls).mkdir(parents=True, exist_ok=True)
-        (tmp_path / "smal" / cls / f"{key[len(cls) + 1:]}.ply").touch()
+        (tmp_path / "smal" / cls / f"{key[len(cls) + 1 :]}.ply").touch()
     entries = smal.list_shapes(tmp_path, annotations)
     assert len(entries) == 49
     assert Counter(e.split for e in entries) == {"train": 35, "val": 6, "test": 8}
@@ -236,8 +260,22 @@ def test_shrec20_listing_marks_excluded_shapes(tmp_path):
     spec = DatasetSpec.load("shrec20")
     folder = tmp_path / spec.folder
     folder.mkdir(parents=True)
-    names = ["bison", "camel_a", "cow", "dog", "elephant_a", "pig", "elephant_b", "giraffe_b", "leopard",
-             "giraffe_a", "rhino", "bear", "camel_b", "hippo"]
+    names = [
+        "bison",
+        "camel_a",
+        "cow",
+        "dog",
+        "elephant_a",
+        "pig",
+        "elephant_b",
+        "giraffe_b",
+        "leopard",
+        "giraffe_a",
+        "rhino",
+        "bear",
+        "camel_b",
+        "hippo",
+    ]
     for n in names:
         (folder / f"{n}.obj").touch()
     entries = spec.list_shapes(tmp_path)

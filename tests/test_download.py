@@ -29,27 +29,47 @@ from archive_server import ArchiveServer
 from becos.check import DatasetCheckError, check_datasets
 from becos.cli import main as becos_main
 from becos.datasets import CONFIG_DIR, DatasetSpec
-from becos.download import (RECORD_NAME, ArchiveLayoutError, ChecksumMismatchError, CorruptArchiveError,
-                            DownloadError, UnsafeArchiveError, download_dataset, partial_path)
+from becos.download import (
+    RECORD_NAME,
+    ArchiveLayoutError,
+    ChecksumMismatchError,
+    CorruptArchiveError,
+    DownloadError,
+    UnsafeArchiveError,
+    download_dataset,
+    partial_path,
+)
 from becos.errors import ConfigError, InputFileError
 from becos.workflow import resolve_config
 
 REPO = Path(__file__).resolve().parents[1]
 KIDS_NAMES = [f"000{kid}.isometry.{i}" for kid in (1, 2) for i in range(1, 16)] + ["0001.null.0", "0002.null.0"]
-SHREC_NAMES = ["bison", "camel_a", "cow", "dog", "elephant_a", "pig", "elephant_b", "giraffe_b", "leopard",
-               "giraffe_a", "rhino", "bear", "camel_b", "hippo"]
+SHREC_NAMES = [
+    "bison",
+    "camel_a",
+    "cow",
+    "dog",
+    "elephant_a",
+    "pig",
+    "elephant_b",
+    "giraffe_b",
+    "leopard",
+    "giraffe_a",
+    "rhino",
+    "bear",
+    "camel_b",
+    "hippo",
+]
 
 
 # --- stand-in archives -----------------------------------------------------------------------------
 def _off(i: int) -> bytes:
     """A tetrahedron as OFF, its apex moved by ``i`` (so every file differs)."""
-    return (f"OFF\n4 4 0\n0 0 0\n1 0 0\n0 1 0\n0 0 {1 + i / 10:.1f}\n"
-            "3 0 2 1\n3 0 1 3\n3 1 2 3\n3 2 0 3\n").encode()
+    return (f"OFF\n4 4 0\n0 0 0\n1 0 0\n0 1 0\n0 0 {1 + i / 10:.1f}\n3 0 2 1\n3 0 1 3\n3 1 2 3\n3 2 0 3\n").encode()
 
 
 def _obj(i: int) -> bytes:
-    return (f"v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 {1 + i / 10:.1f}\n"
-            "f 1 3 2\nf 1 2 4\nf 2 3 4\nf 3 1 4\n").encode()
+    return (f"v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 {1 + i / 10:.1f}\nf 1 3 2\nf 1 2 4\nf 2 3 4\nf 3 1 4\n").encode()
 
 
 def kids_members() -> dict[str, bytes]:
@@ -70,7 +90,7 @@ def zip_bytes(members: dict[str, bytes], links: dict[str, str] | None = None) ->
             zf.writestr(zipfile.ZipInfo(name, (2024, 1, 1, 0, 0, 0)), data)
         for name, target in (links or {}).items():
             info = zipfile.ZipInfo(name, (2024, 1, 1, 0, 0, 0))
-            info.external_attr = (0o120777 << 16)
+            info.external_attr = 0o120777 << 16
             zf.writestr(info, target)
     return buffer.getvalue()
 
@@ -103,8 +123,11 @@ def registry_with(tmp_path: Path, dataset: str, sha256: str | None, folder: Path
 
 def installed(folder: Path) -> dict[str, bytes]:
     """Files below ``folder`` (relative names -> content), without the download record."""
-    return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*"))
-            if p.is_file() and p.name != RECORD_NAME}
+    return {
+        str(p.relative_to(folder)): p.read_bytes()
+        for p in sorted(folder.rglob("*"))
+        if p.is_file() and p.name != RECORD_NAME
+    }
 
 
 # --- fresh download, records, checksums -------------------------------------------------------------
@@ -318,8 +341,12 @@ def test_unsafe_members_are_refused_and_nothing_is_written(tmp_path, kind, capsy
         assert os.listdir(data) == [] and not outside.exists()
         assert sorted(p.name for p in tmp_path.iterdir()) == ["data", "registry"]
         # the command line: one line naming the URL, exit 2
-        assert becos_main(["download-dataset", "kids", "--data-dir", str(data), "--url", server.url("kids.zip"),
-                           "--no-progress"]) == 2
+        assert (
+            becos_main(
+                ["download-dataset", "kids", "--data-dir", str(data), "--url", server.url("kids.zip"), "--no-progress"]
+            )
+            == 2
+        )
         err = capsys.readouterr().err.strip()
         assert err.startswith(f"becos download-dataset: {server.url('kids.zip')}: member ") and "Traceback" not in err
         assert os.listdir(data) == []
@@ -361,10 +388,13 @@ def test_network_errors_are_one_line_messages(tmp_path, capsys):
         refused = f"http://127.0.0.1:{sock.getsockname()[1]}/kids.zip"  # nothing listens once closed
     with ArchiveServer({}) as server:
         missing = server.url("kids.zip")
-        for url, problem in ((refused, "cannot download (Connection refused)"),
-                             (missing, "the server answered HTTP 404 (Not Found)")):
-            code = becos_main(["download-dataset", "kids", "--data-dir", str(tmp_path / "data"), "--url", url,
-                               "--no-progress"])
+        for url, problem in (
+            (refused, "cannot download (Connection refused)"),
+            (missing, "the server answered HTTP 404 (Not Found)"),
+        ):
+            code = becos_main(
+                ["download-dataset", "kids", "--data-dir", str(tmp_path / "data"), "--url", url, "--no-progress"]
+            )
             err = capsys.readouterr().err.strip()
             assert code == 2 and err.startswith(f"becos download-dataset: {url}: {problem}. Fix: ")
             assert "download_urls" in err and len(err.splitlines()) == 1
@@ -372,8 +402,13 @@ def test_network_errors_are_one_line_messages(tmp_path, capsys):
 
 # --- config keys, datasets that cannot be downloaded -----------------------------------------------
 def _config(**overrides) -> dict:
-    return {"synthetic": {"enabled": False}, "data_dir": "data", "annotations": "ann", "datasets": ["kids"],
-            **overrides}
+    return {
+        "synthetic": {"enabled": False},
+        "data_dir": "data",
+        "annotations": "ann",
+        "datasets": ["kids"],
+        **overrides,
+    }
 
 
 @pytest.mark.parametrize("dataset", ["faust", "scape", "smal", "dt4d_animal"])
@@ -391,10 +426,13 @@ def test_download_config_keys():
     ok = resolve_config(_config(download=["kids"], download_urls={"kids": "http://mirror.example/kids.zip"}))
     assert ok["download"] == ["kids"]
     for overrides, problem in (
-            ({"download": ["shrec20"]}, "download lists 'shrec20', which is not in `datasets`"),
-            ({"download": ["kids"], "download_urls": {"shrec20": "http://m/s.zip"}},
-             "download_urls names 'shrec20', which is not in `download`"),
-            ({"download": ["kids"], "download_urls": {"kids": "ftp://m/kids.zip"}}, "download_urls")):
+        ({"download": ["shrec20"]}, "download lists 'shrec20', which is not in `datasets`"),
+        (
+            {"download": ["kids"], "download_urls": {"shrec20": "http://m/s.zip"}},
+            "download_urls names 'shrec20', which is not in `download`",
+        ),
+        ({"download": ["kids"], "download_urls": {"kids": "ftp://m/kids.zip"}}, "download_urls"),
+    ):
         with pytest.raises(ConfigError, match=problem):
             resolve_config(_config(**overrides))
 
@@ -409,25 +447,31 @@ def test_missing_manual_datasets_say_where_to_get_them_and_where_to_put_them(tmp
     for name in names:
         spec = DatasetSpec.load(name)
         text = next(p for p in problems if p.startswith(f"dataset '{name}'"))
-        assert f"Site: {spec.source['url']} ." in text                          # where to get it
+        assert f"Site: {spec.source['url']} ." in text  # where to get it
         assert spec.source["licence"].rstrip(".") in text
-        assert f"Put it there: create {data / spec.folder}" in text             # where to put it
+        assert f"Put it there: create {data / spec.folder}" in text  # where to put it
         assert f"place the {spec.file_type.upper()} files in it" in text
         assert "download" not in text.split("Put it there")[1]  # no automatic download offered
     # KIDS can be downloaded: its message says how
     with pytest.raises(DatasetCheckError) as info:
         check_datasets(["kids"], data, None, read_meshes=False)
-    assert f"add 'kids' to the config key `download`" in info.value.problems[0]
+    assert "add 'kids' to the config key `download`" in info.value.problems[0]
     assert f"becos download-dataset kids --data-dir {data}" in info.value.problems[0]
 
 
-@pytest.mark.parametrize("archive, problem", [
-    ({"url": "kids.zip", "sha256": None, "extract_to": "KIDS"}, "is not an http(s):// or file:// URL"),
-    ({"url": "https://h/kids.zip", "sha256": "abc", "extract_to": "KIDS"}, "is not 64 hex digits"),
-    ({"url": "https://h/kids.zip", "sha256": None, "extract_to": "../KIDS"}, "is not a folder below the data root"),
-    ({"url": "https://h/kids.zip", "sha256": None, "extract_to": "Shrec20"}, "is not inside source.archive.extract_to"),
-    ({"url": "https://h/kids.zip", "sha256": None}, "must have exactly the keys url, sha256, extract_to"),
-])
+@pytest.mark.parametrize(
+    "archive, problem",
+    [
+        ({"url": "kids.zip", "sha256": None, "extract_to": "KIDS"}, "is not an http(s):// or file:// URL"),
+        ({"url": "https://h/kids.zip", "sha256": "abc", "extract_to": "KIDS"}, "is not 64 hex digits"),
+        ({"url": "https://h/kids.zip", "sha256": None, "extract_to": "../KIDS"}, "is not a folder below the data root"),
+        (
+            {"url": "https://h/kids.zip", "sha256": None, "extract_to": "Shrec20"},
+            "is not inside source.archive.extract_to",
+        ),
+        ({"url": "https://h/kids.zip", "sha256": None}, "must have exactly the keys url, sha256, extract_to"),
+    ],
+)
 def test_a_bad_archive_entry_in_a_dataset_yaml_names_the_file(tmp_path, archive, problem):
     raw = yaml.safe_load((CONFIG_DIR / "kids.yaml").read_text())
     raw["source"]["archive"] = archive
@@ -445,16 +489,35 @@ def test_workflow_downloads_kids_before_the_dataset_check(becos_code, tmp_path):
     workdir = tmp_path / "run"
     workdir.mkdir()
     data = tmp_path / "data"
-    env = dict(os.environ, PYTHONUNBUFFERED="1",
-               PYTHONPATH=os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")]))
-    snakemake = [sys.executable, "-m", "snakemake", "-s", str(REPO / "Snakefile"), "-d", str(workdir),
-                 "--configfile", str(workdir / "config.yaml"), "--cores", "1"]
+    env = dict(
+        os.environ, PYTHONUNBUFFERED="1", PYTHONPATH=os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")])
+    )
+    snakemake = [
+        sys.executable,
+        "-m",
+        "snakemake",
+        "-s",
+        str(REPO / "Snakefile"),
+        "-d",
+        str(workdir),
+        "--configfile",
+        str(workdir / "config.yaml"),
+        "--cores",
+        "1",
+    ]
     with ArchiveServer({"mirror/kids.zip": archive}) as server:
-        config = {"synthetic": {"enabled": False}, "data_dir": str(data), "annotations": str(becos_code),
-                  "datasets": ["kids"], "download": ["kids"], "download_urls": {"kids": server.url("mirror/kids.zip")}}
+        config = {
+            "synthetic": {"enabled": False},
+            "data_dir": str(data),
+            "annotations": str(becos_code),
+            "datasets": ["kids"],
+            "download": ["kids"],
+            "download_urls": {"kids": server.url("mirror/kids.zip")},
+        }
         (workdir / "config.yaml").write_text(yaml.safe_dump(config))
-        dry = subprocess.run([*snakemake, "-n", "results/checks/datasets.json"], capture_output=True, text=True,
-                             env=env)
+        dry = subprocess.run(
+            [*snakemake, "-n", "results/checks/datasets.json"], capture_output=True, text=True, env=env
+        )
         assert dry.returncode == 0, dry.stderr[-3000:]
         assert "rule download_dataset:" in dry.stdout and "checkpoint check_datasets:" in dry.stdout
         assert dry.stdout.index("rule download_dataset:") < dry.stdout.index("checkpoint check_datasets:")

@@ -39,10 +39,10 @@ def synthetic_animation(n_frames: int, seed: int = 0, phase: float = 0.0, subdiv
     rng = np.random.default_rng(seed)
     body = trimesh.creation.icosphere(subdivisions=subdivisions)
     small = trimesh.creation.icosphere(subdivisions=0, radius=0.1)
-    v_body = body.vertices * [0.5, 0.25, 0.2]                     # metres-like, long along x
+    v_body = body.vertices * [0.5, 0.25, 0.2]  # metres-like, long along x
     v = np.vstack([v_body, small.vertices + [0.9, 0.0, 0.0]])
     f = np.vstack([body.faces[1:], small.faces + len(body.vertices)])
-    perm = rng.permutation(len(v))                                # new row of old vertex i: inverse[i]
+    perm = rng.permutation(len(v))  # new row of old vertex i: inverse[i]
     inverse = np.empty_like(perm)
     inverse[perm] = np.arange(len(v))
     v, f = v[perm], inverse[f]
@@ -50,7 +50,7 @@ def synthetic_animation(n_frames: int, seed: int = 0, phase: float = 0.0, subdiv
     t = np.linspace(0.0, 2.0 * np.pi, n_frames)[1:, None] + phase
     x = v[None, :, 0]
     offsets = np.zeros((n_frames - 1, len(v), 3))
-    offsets[:, :, 2] = 0.15 * np.sin(t) * x ** 2 + 0.01 * np.cos(3 * t)   # bend up/down along the body
+    offsets[:, :, 2] = 0.15 * np.sin(t) * x**2 + 0.01 * np.cos(3 * t)  # bend up/down along the body
     offsets[:, :, 1] = 0.05 * np.sin(2 * t) * x
     return v.astype(np.float32), f.astype(np.int32), offsets.astype(np.float32), len(body.vertices)
 
@@ -59,8 +59,12 @@ def write_anime(path: Path, frame0: np.ndarray, faces: np.ndarray, offsets: np.n
     """A little-endian .anime: int32 nf, nv, nt; float32 frame 0; int32 faces; float32 offsets."""
     path.parent.mkdir(parents=True, exist_ok=True)
     header = np.array([len(offsets) + 1, len(frame0), len(faces)], dtype="<i4")
-    path.write_bytes(header.tobytes() + frame0.astype("<f4").tobytes() + faces.astype("<i4").tobytes()
-                     + offsets.astype("<f4").tobytes())
+    path.write_bytes(
+        header.tobytes()
+        + frame0.astype("<f4").tobytes()
+        + faces.astype("<i4").tobytes()
+        + offsets.astype("<f4").tobytes()
+    )
     return path
 
 
@@ -86,8 +90,12 @@ def make_download(data_dir: Path, kind: str, classes: dict[str, dict[str, int]],
     for i, (cls, actions) in enumerate(classes.items()):
         for j, (action, n_frames) in enumerate(actions.items()):
             frame0, faces, offsets, _ = synthetic_animation(n_frames, phase=phase + 0.7 * i + 0.3 * j)
-            write_anime(data_dir / "DeformingThings4D" / kind / f"{cls}_{action}" / f"{cls}_{action}.anime",
-                        frame0, faces, offsets)
+            write_anime(
+                data_dir / "DeformingThings4D" / kind / f"{cls}_{action}" / f"{cls}_{action}.anime",
+                frame0,
+                faces,
+                offsets,
+            )
 
 
 def run_cli(capsys, *args) -> tuple[int, str, str]:
@@ -118,16 +126,18 @@ def test_prepared_frames_equal_the_reference_procedure(tmp_path, capsys):
             ref = reference_frame(anime, k)
             # the body (hole filled: 320 faces), not the small component; rows in trimesh's split order
             assert len(ref.vertices) == n_body and len(ref.faces) == 320
-            assert not np.allclose(ref.vertices, raw_order[:n_body])       # the shuffle matters
+            assert not np.allclose(ref.vertices, raw_order[:n_body])  # the shuffle matters
             back = trimesh.load(path, process=False, maintain_order=True, force="mesh")
             ours = read_mesh(path)
             for got in (np.asarray(back.vertices), ours.vertices):
                 assert got.shape == ref.vertices.shape
                 assert np.abs(got - ref.vertices).max() <= 1e-6
             assert np.array_equal(np.asarray(back.faces), ref.faces) and np.array_equal(ours.faces, ref.faces)
-            assert path.read_text() == ref.export(file_type="obj")     # the reference's mesh.export bytes
-    print(f"\n{sum(map(len, info['catBG'].values()))} frames equal the reference procedure "
-          f"({n_body} vertices, 320 faces each; max |dv| <= 1e-6; files equal to the reference's export)")
+            assert path.read_text() == ref.export(file_type="obj")  # the reference's mesh.export bytes
+    print(
+        f"\n{sum(map(len, info['catBG'].values()))} frames equal the reference procedure "
+        f"({n_body} vertices, 320 faces each; max |dv| <= 1e-6; files equal to the reference's export)"
+    )
 
 
 def test_a_prepared_obj_is_rewritten_only_when_its_anime_changed(tmp_path, capsys):
@@ -142,17 +152,17 @@ def test_a_prepared_obj_is_rewritten_only_when_its_anime_changed(tmp_path, capsy
     stamp = json.loads((data / "dt4d_animals" / "catBG" / ".becos-dt4d.json").read_text())
     assert set(stamp["animations"]) == {"run", "walk"} and len(stamp["animations"]["run"]["sha256"]) == 64
 
-    code, out, _ = run_cli(capsys, *args)                              # unchanged: nothing read or written
+    code, out, _ = run_cli(capsys, *args)  # unchanged: nothing read or written
     assert code == 0 and json.loads(out)["written"] == 0 and json.loads(out)["animations_read"] == 0
     run = data / "DeformingThings4D" / "animals" / "catBG_run" / "catBG_run.anime"
-    os.utime(run, ns=(time.time_ns(), time.time_ns() + 10**9))          # re-extracted: same bytes, new mtime
+    os.utime(run, ns=(time.time_ns(), time.time_ns() + 10**9))  # re-extracted: same bytes, new mtime
     code, out, _ = run_cli(capsys, *args)
     assert code == 0 and json.loads(out)["written"] == 0
     assert {p: p.stat().st_mtime_ns for p in objs} == mtimes
 
-    killed = data / "dt4d_animals" / "catBG" / ".run001.obj.k1ll3d.tmp"   # what a killed atomic write leaves
+    killed = data / "dt4d_animals" / "catBG" / ".run001.obj.k1ll3d.tmp"  # what a killed atomic write leaves
     killed.write_text("v 0 0")
-    frame0, faces, offsets, _ = synthetic_animation(20, seed=99)          # new content: its frames only
+    frame0, faces, offsets, _ = synthetic_animation(20, seed=99)  # new content: its frames only
     write_anime(run, frame0, faces, offsets)
     code, out, _ = run_cli(capsys, *args)
     assert code == 0 and json.loads(out)["written"] == 2
@@ -168,21 +178,25 @@ def _corrupt(path: Path, edit) -> None:
 
 def _set(dtype: str, offset: int, value):
     def edit(data: bytearray) -> bytearray:
-        data[offset:offset + 4] = np.array([value], dtype=dtype).tobytes()
+        data[offset : offset + 4] = np.array([value], dtype=dtype).tobytes()
         return data
+
     return edit
 
 
-NV, NT = 174, 339          # icosphere(2) body + 12-vertex component; 319 + 20 faces
+NV, NT = 174, 339  # icosphere(2) body + 12-vertex component; 319 + 20 faces
 FACES_AT = 12 + 12 * NV
 OFFSETS_AT = FACES_AT + 12 * NT
 
 BAD_INPUTS = {
     # case: (edit of the .anime bytes, listed frames, words the message must hold)
-    "truncated file": (lambda d: d[:FACES_AT + 100], [1], ["is truncated", "needs"]),
+    "truncated file": (lambda d: d[: FACES_AT + 100], [1], ["is truncated", "needs"]),
     "header shorter than 12 bytes": (lambda d: d[:7], [1], ["is truncated", "12-byte header"]),
-    "counts inconsistent with the size": (_set("<i4", 0, 30), [1], ["counts are inconsistent with the file size",
-                                                                    "nf=30"]),
+    "counts inconsistent with the size": (
+        _set("<i4", 0, 30),
+        [1],
+        ["counts are inconsistent with the file size", "nf=30"],
+    ),
     "extra bytes": (lambda d: d + bytes(24), [1], ["counts are inconsistent with the file size"]),
     "frame id beyond nf": (None, [1, 20], ["frame 20", "has 20 frames"]),
     "face index >= nv": (_set("<i4", FACES_AT + 4 * 7, NV), [1], ["outside [0, 174)"]),
@@ -218,11 +232,25 @@ def test_the_installed_command_exits_2_without_a_traceback(tmp_path):
     data = tmp_path / "data"
     make_download(data, "animals", {"catBG": {"run": 20}})
     anime = data / "DeformingThings4D" / "animals" / "catBG_run" / "catBG_run.anime"
-    _corrupt(anime, lambda d: d[:FACES_AT + 100])
+    _corrupt(anime, lambda d: d[: FACES_AT + 100])
     (tmp_path / "info.json").write_text(json.dumps({"catBG": {"run": [1]}}))
-    result = subprocess.run([sys.executable, "-m", "becos", "prepare-dt4d", "--data-dir", str(data), "--info",
-                             str(tmp_path / "info.json"), "--kind", "animals"], capture_output=True, text=True,
-                            env=dict(os.environ, PYTHONPATH=str(REPO)))
+    result = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "becos",
+            "prepare-dt4d",
+            "--data-dir",
+            str(data),
+            "--info",
+            str(tmp_path / "info.json"),
+            "--kind",
+            "animals",
+        ],
+        capture_output=True,
+        text=True,
+        env=dict(os.environ, PYTHONPATH=str(REPO)),
+    )
     assert result.returncode == 2 and "Traceback" not in result.stderr
     assert f"{anime}: is truncated" in result.stderr and "Fix: re-download" in result.stderr
 
@@ -268,12 +296,23 @@ def test_workflow_prepares_catalogs_remeshes_and_pairs_dt4d(becos_code, tmp_path
     annotations = dt4d_annotations(becos_code, tmp_path / "becos-code", first)
     monkeypatch.setenv("BECOS_DATASETS_DIR", str(dt4d_registry(tmp_path / "registry", first)))
     monkeypatch.setenv("PYTHONPATH", os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")]))
-    write_config_file(workdir, {
-        "synthetic": {"enabled": False}, "data_dir": str(data), "annotations": str(annotations),
-        "datasets": ["dt4d_animal"], "template_file": "templates_all.csv", "setting": "partial_partial",
-        "remesh_variants": 1, "store_vis": False, "propagate_annotations": False, "n_chunks": 2,
-        "caps": {"train": 3, "val": 0, "test": 0},
-        "exports": {"released": False, "published_pickle": False, "report": False}})
+    write_config_file(
+        workdir,
+        {
+            "synthetic": {"enabled": False},
+            "data_dir": str(data),
+            "annotations": str(annotations),
+            "datasets": ["dt4d_animal"],
+            "template_file": "templates_all.csv",
+            "setting": "partial_partial",
+            "remesh_variants": 1,
+            "store_vis": False,
+            "propagate_annotations": False,
+            "n_chunks": 2,
+            "caps": {"train": 3, "val": 0, "test": 0},
+            "exports": {"released": False, "published_pickle": False, "report": False},
+        },
+    )
     t0 = time.perf_counter()
     snakemake(workdir, "--cores", "1")
     t1 = time.perf_counter()
@@ -299,9 +338,11 @@ def test_workflow_prepares_catalogs_remeshes_and_pairs_dt4d(becos_code, tmp_path
     t2 = time.perf_counter()
     snakemake(workdir, "--cores", "1")
     t3 = time.perf_counter()
-    assert {p: (p.stat().st_mtime_ns, p.read_bytes()) for p in cat.iterdir()} == before   # catBG untouched
-    assert sorted(p.name for p in (data / "dt4d_animals" / "leopardSLM").glob("*.obj")) == ["roam024.obj",
-                                                                                           "roam031.obj"]
+    assert {p: (p.stat().st_mtime_ns, p.read_bytes()) for p in cat.iterdir()} == before  # catBG untouched
+    assert sorted(p.name for p in (data / "dt4d_animals" / "leopardSLM").glob("*.obj")) == [
+        "roam024.obj",
+        "roam031.obj",
+    ]
     remeshed_after = {str(p) for p in (workdir / "results" / "remeshed").rglob("*.npz")}
     assert remeshed_before < remeshed_after and all("leopardSLM" in p for p in remeshed_after - remeshed_before)
     assert json.loads((base / "validation.json").read_text())["valid"]
@@ -316,11 +357,14 @@ def test_workflow_prepares_catalogs_remeshes_and_pairs_dt4d(becos_code, tmp_path
     os.utime(anime, ns=(time.time_ns(), time.time_ns() + 10**9))
     snakemake(workdir, "--cores", "1", "--max-checksum-file-size", "0", str(cat / ".becos-dt4d.json"))
     assert "0 frames written, 3 kept" in (workdir / "logs" / "prepare_dt4d" / "animals" / "catBG.log").read_text()
-    assert {p: p.stat().st_mtime_ns for p in cat.glob("*.obj")} == {p: m for p, (m, _) in before.items()
-                                                                     if p.suffix == ".obj"}
-    print(f"\nfirst run (catBG) {t1 - t0:.1f} s; second run (+leopardSLM) {t3 - t2:.1f} s, prepare jobs planned: "
-          f"{planned}; pairs: "
-          f"{table[['x_name', 'y_name']].to_numpy().tolist()}")
+    assert {p: p.stat().st_mtime_ns for p in cat.glob("*.obj")} == {
+        p: m for p, (m, _) in before.items() if p.suffix == ".obj"
+    }
+    print(
+        f"\nfirst run (catBG) {t1 - t0:.1f} s; second run (+leopardSLM) {t3 - t2:.1f} s, prepare jobs planned: "
+        f"{planned}; pairs: "
+        f"{table[['x_name', 'y_name']].to_numpy().tolist()}"
+    )
 
 
 def test_check_without_dt4d_says_what_to_request_and_where_to_put_it(becos_code, tmp_path):
@@ -336,7 +380,7 @@ def test_check_without_dt4d_says_what_to_request_and_where_to_put_it(becos_code,
     assert f"unpack the download into {data / 'DeformingThings4D'}" in text
     assert f"prepares {data / 'dt4d_animals'} from {data / 'DeformingThings4D' / 'animals'}" in text
     assert "is present but not prepared yet" not in text
-    (data / "DeformingThings4D" / "animals").mkdir(parents=True)        # download there, not yet prepared
+    (data / "DeformingThings4D" / "animals").mkdir(parents=True)  # download there, not yet prepared
     with pytest.raises(DatasetCheckError, match="is present but not prepared yet: run the workflow"):
         check_datasets(["dt4d_animal"], data, becos_code, read_meshes=False)
     print(f"\n{text}")
@@ -350,13 +394,24 @@ def test_the_plan_has_one_job_per_class_and_leaves_a_missing_anime_to_the_job(tm
     (annotations / "data").mkdir(parents=True)
     (annotations / "data" / "info_dt4d_animals.json").write_text(json.dumps(info))
     config = {"data_dir": str(data), "annotations": str(annotations), "datasets": ["tosca", "dt4d_animal"]}
-    assert preparation_plan(config) == []                                  # no DeformingThings4D: the check explains
-    make_download(data, "animals", {"catBG": {"run": 5}, "leopardSLM": {"roam": 5}})   # leopardSLM_walk missing
+    assert preparation_plan(config) == []  # no DeformingThings4D: the check explains
+    make_download(data, "animals", {"catBG": {"run": 5}, "leopardSLM": {"roam": 5}})  # leopardSLM_walk missing
     jobs = {job.cls: job for job in preparation_plan(config)}
     assert sorted(jobs) == ["catBG", "leopardSLM"]
     assert [p.name for p in jobs["leopardSLM"].anime] == ["leopardSLM_roam.anime"]
     assert jobs["catBG"].stamp == data / "dt4d_animals" / "catBG" / ".becos-dt4d.json"
     assert json.loads(jobs["leopardSLM"].listing) == info["leopardSLM"]
-    code = becos_main(["prepare-dt4d", "--data-dir", str(data), "--info", str(jobs["leopardSLM"].info), "--kind",
-                       "animals", "--classes", "leopardSLM"])
+    code = becos_main(
+        [
+            "prepare-dt4d",
+            "--data-dir",
+            str(data),
+            "--info",
+            str(jobs["leopardSLM"].info),
+            "--kind",
+            "animals",
+            "--classes",
+            "leopardSLM",
+        ]
+    )
     assert code == 2 and not (data / "dt4d_animals" / "leopardSLM" / "walk004.obj").exists()

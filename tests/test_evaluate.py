@@ -8,8 +8,17 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from becos.evaluate import (Prediction, PredictionError, evaluate_record, evaluate_records, full_shape,
-                            open_predictions, summary_table, write_evaluation, write_prediction)
+from becos.evaluate import (
+    Prediction,
+    PredictionError,
+    evaluate_record,
+    evaluate_records,
+    full_shape,
+    open_predictions,
+    summary_table,
+    write_evaluation,
+    write_prediction,
+)
 from becos.geodesics import GeodesicsCache
 from becos.metrics import DEFAULT_AUC_PRESET, PAPER_PRESET
 from becos.record import PairRecord
@@ -105,18 +114,27 @@ def test_ground_truth_other_direction_and_exact_points(records):
 
     # against the exact barycentric points the vertex-form truth is off by its rounding: with exact
     # edge-graph distances that is Σ_k w_k |corner* - corner_k| (neighbouring corners: one edge each)
-    row, errors = (lambda r: (r.rows[0], r.errors["truth"]))(evaluate_record(
-        record, {"truth": ground_truth(record)}, truth="point", geodesics=GeodesicsCache("dijkstra")))
+    row, errors = (lambda r: (r.rows[0], r.errors["truth"]))(
+        evaluate_record(record, {"truth": ground_truth(record)}, truth="point", geodesics=GeodesicsCache("dijkstra"))
+    )
     full = full_shape(record, "x")
     face, weights = record["corr_10_face"], record["corr_10_weights"]
     ok = face >= 0
     corners = full.mesh.faces[full.face_to_full[face[ok]]]
     nearest = corners[np.arange(ok.sum()), weights[ok].argmax(axis=1)]
-    rounding = np.einsum("nk,nk->n", weights[ok], np.linalg.norm(
-        full.mesh.vertices[corners] - full.mesh.vertices[nearest][:, None], axis=2)) / full.sqrt_area
+    rounding = (
+        np.einsum(
+            "nk,nk->n",
+            weights[ok],
+            np.linalg.norm(full.mesh.vertices[corners] - full.mesh.vertices[nearest][:, None], axis=2),
+        )
+        / full.sqrt_area
+    )
     np.testing.assert_allclose(errors[ok], rounding, rtol=1e-9, atol=1e-15)
-    print(f"\nvertex truth vs exact points: AUC x100 {row['auc'] * 100:.2f} ({DEFAULT_AUC_PRESET}), "
-          f"{row[f'auc_{PAPER_PRESET}'] * 100:.2f} (paper); mean rounding {rounding.mean():.4f} x sqrt(area)")
+    print(
+        f"\nvertex truth vs exact points: AUC x100 {row['auc'] * 100:.2f} ({DEFAULT_AUC_PRESET}), "
+        f"{row[f'auc_{PAPER_PRESET}'] * 100:.2f} (paper); mean rounding {rounding.mean():.4f} x sqrt(area)"
+    )
     assert 0.8 < row["auc"] < 1.0 and rounding.max() < 0.05  # at most about one edge (~0.01-0.03)
 
 
@@ -154,8 +172,10 @@ def test_displaced_prediction_gives_the_geodesic_distance(setting, records, geod
     np.testing.assert_allclose(errors[chosen], independent / full.sqrt_area, rtol=1e-9)
     edge = np.linalg.norm(full.mesh.vertices[to_full[pred[one]]] - full.mesh.vertices[to_full[truth[one]]], axis=1)
     ratio = errors[one] / (edge / full.sqrt_area)
-    print(f"\n{setting}: heat / one edge: median {np.median(ratio):.3f}; 4-edge walk errors "
-          f"{np.percentile(errors[walk], [0, 50, 100]).round(4)} x sqrt(area)")
+    print(
+        f"\n{setting}: heat / one edge: median {np.median(ratio):.3f}; 4-edge walk errors "
+        f"{np.percentile(errors[walk], [0, 50, 100]).round(4)} x sqrt(area)"
+    )
     assert 0.8 < np.median(ratio) < 1.2
     assert np.median(errors[walk]) > 1.5 * np.median(errors[one])
 
@@ -171,8 +191,8 @@ def test_p2p_infinity_rule_on_a_hand_built_case(records, geodesics):
     truth = record["corr_10"]
     matched, unmatched = np.flatnonzero(truth >= 0), np.flatnonzero(truth < 0)
     pred = truth.copy()
-    missed = matched[:25]             # unmatched though they have a counterpart -> inf
-    spurious = unmatched[:15]         # matched though they have none -> inf
+    missed = matched[:25]  # unmatched though they have a counterpart -> inf
+    spurious = unmatched[:15]  # matched though they have none -> inf
     pred[missed] = -1
     pred[spurious] = 0
     result = evaluate_record(record, {"p": Prediction(pred)}, geodesics=geodesics)
@@ -256,8 +276,9 @@ def test_prediction_formats_tables_and_plot(records, geodesics, tmp_path):
     assert meta["preset"] == DEFAULT_AUC_PRESET and meta["truth"] == "vertex"
 
     # summary of a per-pair table alone (e.g. several runs concatenated) is the same
-    pd.testing.assert_frame_equal(summary_table(per_pair, DEFAULT_AUC_PRESET).reset_index(drop=True),
-                                  summary, check_dtype=False)
+    pd.testing.assert_frame_equal(
+        summary_table(per_pair, DEFAULT_AUC_PRESET).reset_index(drop=True), summary, check_dtype=False
+    )
 
 
 def test_bad_predictions_are_reported(records, tmp_path):

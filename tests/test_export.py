@@ -36,8 +36,10 @@ def records(pair_record_files) -> dict[str, list[PairRecord]]:
     for setting, paths in pair_record_files.items():
         base = [PairRecord.load(p) for p in paths]
         labels = (np.arange(len(base[0]["x_vertices"])) % 3 - 1).astype(np.int8)  # -1, 0, 1, -1, ...
-        extra = [_copy(base[1], "a" + base[1].pair_id, "train"),
-                 _copy(base[0], "z" + base[0].pair_id, "train", x_annotation=labels)]
+        extra = [
+            _copy(base[1], "a" + base[1].pair_id, "train"),
+            _copy(base[0], "z" + base[0].pair_id, "train", x_annotation=labels),
+        ]
         out[setting] = base + extra
     return out
 
@@ -72,9 +74,9 @@ def read_off(path: Path) -> tuple[np.ndarray, np.ndarray]:
     assert lines[0] == "OFF"
     nv, nf, ne = (int(t) for t in lines[1].split())
     assert ne == 0
-    v = np.array([float(t) for t in " ".join(lines[2:2 + nv]).split()], dtype=np.float64).reshape(nv, 3)
-    f = np.array([int(t) for t in " ".join(lines[2 + nv:2 + nv + nf]).split()], dtype=np.int64).reshape(nf, 4)
-    assert (f[:, 0] == 3).all() and lines[2 + nv + nf:] == [""]
+    v = np.array([float(t) for t in " ".join(lines[2 : 2 + nv]).split()], dtype=np.float64).reshape(nv, 3)
+    f = np.array([int(t) for t in " ".join(lines[2 + nv : 2 + nv + nf]).split()], dtype=np.int64).reshape(nf, 4)
+    assert (f[:, 0] == 3).all() and lines[2 + nv + nf :] == [""]
     return v, f[:, 1:]
 
 
@@ -326,8 +328,9 @@ def small_record() -> PairRecord:
     x = ShapeInstance("synthetic", "ball", "blob", "ball", TriMesh(v, f))
     y = ShapeInstance("synthetic", "egg_1", "blob", "egg", TriMesh(v * [1.2, 1.0, 0.9], f))
     gt = SurfaceMap.identity(f, len(v))
-    record = build_pair(x, y, gt, gt, pair_id="small", seed=3, split="test",
-                        options=PairOptions(setting="partial_partial"))
+    record = build_pair(
+        x, y, gt, gt, pair_id="small", seed=3, split="test", options=PairOptions(setting="partial_partial")
+    )
     assert len(record["x_vertices"]) < len(v) and len(record["y_vertices"]) < len(v)
     return record
 
@@ -384,14 +387,14 @@ def test_cli_exports_a_store(records, pair_record_files, small_record, tmp_path,
     from becos.cli import main
 
     setting = "partial_partial"
-    store_path = store.write_store(pair_record_files[setting], tmp_path / "pp.zarr", setting=setting,
-                                   progress=False)
+    store_path = store.write_store(pair_record_files[setting], tmp_path / "pp.zarr", setting=setting, progress=False)
     out = tmp_path / "BeCoS" / setting
     assert main(["export-released", str(store_path), str(out)]) == 0
     result = json.loads(capsys.readouterr().out)
     assert result["pairs"] == {"train": 1, "test": 1} and result["setting"] == setting
-    direct = write_released([PairRecord.load(p) for p in pair_record_files[setting]], tmp_path / "direct",
-                            setting=setting)
+    direct = write_released(
+        [PairRecord.load(p) for p in pair_record_files[setting]], tmp_path / "direct", setting=setting
+    )
     files = sorted(p.relative_to(direct) for p in direct.rglob("*") if p.is_file() and p.parent.name != "logs")
     assert files == sorted(p.relative_to(out) for p in out.rglob("*") if p.is_file() and p.parent.name != "logs")
     assert all((direct / f).read_bytes() == (out / f).read_bytes() for f in files)
@@ -410,7 +413,7 @@ def test_cli_exports_a_store(records, pair_record_files, small_record, tmp_path,
     assert d.shape == (len(small_record["y_vertices"]),) * 2
     assert main(["export-geodesics", str(small_store), str(tmp_path / "geo"), "--splits", "train"]) == 0
     result = json.loads(capsys.readouterr().out)
-    assert result["matrices"] == 0 and result["splits"] == ["train"]   # the small pair is in "test"
+    assert result["matrices"] == 0 and result["splits"] == ["train"]  # the small pair is in "test"
     assert main(["export-geodesics", str(small_store), str(tmp_path / "geo"), "--force", "--jobs", "2"]) == 0
     result = json.loads(capsys.readouterr().out)
     assert result["matrices"] == 2 and result["bytes"] > 4 * len(small_record["y_vertices"]) ** 2
@@ -422,7 +425,7 @@ def test_cli_exports_a_store(records, pair_record_files, small_record, tmp_path,
 
 
 def _ball_records(setting: str) -> list[PairRecord]:
-    """"ball" remeshed twice (variant 0: 162 vertices, variant 1: 642) paired with "egg"; egg vertices
+    """ "ball" remeshed twice (variant 0: 162 vertices, variant 1: 642) paired with "egg"; egg vertices
     with y > 0.25 are a semantic missing part (no counterpart on the ball). Pairs ball0a, ball0b
     (variant 0, two seeds) and ball1 (variant 1)."""
     import trimesh
@@ -438,14 +441,17 @@ def _ball_records(setting: str) -> list[PairRecord]:
     out = []
     for pair_id, variant, sphere, seed in (("ball0a", 0, coarse, 1), ("ball0b", 0, coarse, 2), ("ball1", 1, fine, 3)):
         v, f = np.asarray(sphere.vertices), np.asarray(sphere.faces)
-        assert np.allclose(v, fv[:len(v)])  # icosphere levels share their first vertices
+        assert np.allclose(v, fv[: len(v)])  # icosphere levels share their first vertices
         ball = ShapeInstance("synthetic", "ball", "blob", "ball", TriMesh(v * 0.5, f), remesh_variant=variant)
         from_egg = cKDTree(v).query(fv)[1]
         from_egg[fv[:, 1] > 0.5] = -1  # the missing part
         gt_xy = SurfaceMap.from_vertex_indices(np.arange(len(v)), ff)
         gt_yx = SurfaceMap.from_vertex_indices(from_egg, f)
-        out.append(build_pair(ball, egg, gt_xy, gt_yx, pair_id=pair_id, seed=seed, split="test",
-                              options=PairOptions(setting=setting)))
+        out.append(
+            build_pair(
+                ball, egg, gt_xy, gt_yx, pair_id=pair_id, seed=seed, split="test", options=PairOptions(setting=setting)
+            )
+        )
     return out
 
 
@@ -507,15 +513,15 @@ def test_geodesic_matrices_where_loaders_read_them(tmp_path, monkeypatch):
     from becos.export import GEODESIC_FOLDER, write_geodesic_matrices
 
     recs = _ball_records("partial_full")
-    recs[2] = _copy(recs[2], recs[2].pair_id, "train")     # ball v1 in train: left out by splits=["test"]
+    recs[2] = _copy(recs[2], recs[2].pair_id, "train")  # ball v1 in train: left out by splits=["test"]
     released = write_released(recs, tmp_path / "BeCoS" / "partial_full", setting="partial_full")
     out = write_geodesic_matrices(recs, tmp_path / "geodesics", splits=["test"], jobs=2)
     with open(out / GEODESIC_FOLDER / "index.csv", encoding="utf-8", newline="") as fh:
         index = list(csv.DictReader(fh))
-    assert {row["split"] for row in index} == {"test"} and len(index) == 4   # 2 test pairs x 2 shapes
+    assert {row["split"] for row in index} == {"test"} and len(index) == 4  # 2 test pairs x 2 shapes
     files = sorted(p.name for p in (out / GEODESIC_FOLDER).glob("*.npy"))
-    assert len(files) == 3   # ball v0 once (two pairs), two scans of the egg
-    monkeypatch.chdir(out)   # geo-lora reads ./geodesic_dist_matrices relative to its working folder
+    assert len(files) == 3  # ball v0 once (two pairs), two scans of the egg
+    monkeypatch.chdir(out)  # geo-lora reads ./geodesic_dist_matrices relative to its working folder
     by_id = {r.pair_id: r for r in recs}
     for row in read_ids(released):
         if row["split"] != "test":
@@ -530,7 +536,9 @@ def test_geodesic_matrices_where_loaders_read_them(tmp_path, monkeypatch):
             assert d.dtype == np.float32 and d.shape == (len(vertices),) * 2
             assert np.array_equal(d, d.T) and not np.diag(d).any()
             (entry,) = [e for e in index if e["pair_id"] == r.pair_id and e["side"] == str(k)]
-            assert float(entry["sqrt_area"]) == info["surface_area_after_scaling"] and entry["mesh_id"] == info["mesh_id"]
+            assert (
+                float(entry["sqrt_area"]) == info["surface_area_after_scaling"] and entry["mesh_id"] == info["mesh_id"]
+            )
             if s == "x":  # the ball: a sphere of radius 0.5, geodesics are great-circle arcs
                 unit = vertices / np.linalg.norm(vertices, axis=1, keepdims=True)
                 arc = 0.5 * np.arccos(np.clip(unit @ unit.T, -1, 1)) / info["surface_area_after_scaling"]
@@ -540,7 +548,7 @@ def test_geodesic_matrices_where_loaders_read_them(tmp_path, monkeypatch):
                 p2f = info["partial2full"]
                 full = _edge_dijkstra(r["y_full_vertices"], r["y_full_faces"])[np.ix_(p2f, p2f)]
                 ratio = full[d > 0.05] / (d[d > 0.05] * info["surface_area_after_scaling"])
-                assert 1.0 < np.median(ratio) < 1.2   # edge paths a little longer than surface geodesics
+                assert 1.0 < np.median(ratio) < 1.2  # edge paths a little longer than surface geodesics
 
 
 # --------------------------------------------------------------------------------------------------
@@ -575,8 +583,11 @@ def ulrssm_pair(data_root: Path, first: int, second: int, with_dist: bool) -> di
     items = []
     for i in (first, second):
         mesh = trimesh.load(offs[i], process=False, maintain_order=True)
-        item = {"name": Path(offs[i]).stem, "verts": np.asarray(mesh.vertices, np.float32),
-                "corr": np.loadtxt(corrs[i], dtype=np.int32) - 1}
+        item = {
+            "name": Path(offs[i]).stem,
+            "verts": np.asarray(mesh.vertices, np.float32),
+            "corr": np.loadtxt(corrs[i], dtype=np.int32) - 1,
+        }
         if with_dist:
             item["dist"] = scipy.io.loadmat(dists[i])["dist"].astype(np.float32)
         items.append(item)
@@ -601,9 +612,9 @@ def test_ulrssm_layout_reads_like_ulrssm(setting, records, tmp_path):
         assert np.array_equal(second["verts"], r["y_vertices"].astype(np.float32))
         x_of_t, y_of_t = first["corr"], second["corr"]
         assert len(x_of_t) == len(y_of_t) == int((r["corr_10"] >= 0).sum())  # one template point per matched Y vertex
-        assert x_of_t.min() >= 0 and y_of_t.min() >= 0                        # never the -1 ULRSSM cannot express
-        assert np.array_equal(r["corr_10"][y_of_t], x_of_t)                    # the ground truth Y -> X exactly
-        back = ulrssm_pair(root, 1, 0, with_dist=False)                        # the reversed pair: same points
+        assert x_of_t.min() >= 0 and y_of_t.min() >= 0  # never the -1 ULRSSM cannot express
+        assert np.array_equal(r["corr_10"][y_of_t], x_of_t)  # the ground truth Y -> X exactly
+        back = ulrssm_pair(root, 1, 0, with_dist=False)  # the reversed pair: same points
         assert np.array_equal(back["first"]["corr"], y_of_t)
 
 
@@ -617,7 +628,7 @@ def dpfm_pairs(data_root: Path, name: str = "") -> dict:
     used = sorted(p.stem for p in (data_root / "shapes").iterdir() if name in p.stem)
     pairs = {}
     for stem in (p.stem for p in (data_root / "maps").iterdir() if name in p.stem):
-        x, y = stem[:stem.rfind("_")], stem[stem.rfind("_") + 1:]
+        x, y = stem[: stem.rfind("_")], stem[stem.rfind("_") + 1 :]
         if x in used and y in used:
             map21 = np.loadtxt(data_root / "maps" / f"{x}_{y}.map", dtype=np.int32)
             n1 = len(trimesh.load(data_root / "shapes" / f"{y}.off", process=False).vertices)
@@ -639,12 +650,14 @@ def test_dpfm_layout_reads_like_dpfm(setting, records, tmp_path):
     for split in {row["split"] for row in rows}:
         pairs = dpfm_pairs(out / split)
         split_rows = [row for row in rows if row["split"] == split]
-        assert len(pairs) == 2 * len(split_rows)   # both directions of every pair survive the id parsing
+        assert len(pairs) == 2 * len(split_rows)  # both directions of every pair survive the id parsing
         for row in split_rows:
             r = by_id[row["pair_id"]]
             assert "_" not in row["x_id"] + row["y_id"]
-            for (x, y), corr, mask_x, mask_y in (((row["x_id"], row["y_id"]), r["corr_01"], "x", "y"),
-                                                 ((row["y_id"], row["x_id"]), r["corr_10"], "y", "x")):
+            for (x, y), corr, mask_x, mask_y in (
+                ((row["x_id"], row["y_id"]), r["corr_01"], "x", "y"),
+                ((row["y_id"], row["x_id"]), r["corr_10"], "y", "x"),
+            ):
                 got = pairs[(x, y)]
                 assert np.array_equal(got["map21"], corr)
                 assert np.array_equal(got["mask21"].astype(bool), r[f"{mask_x}_overlap_mask"])
@@ -680,7 +693,7 @@ def test_nested_export_keys_on_the_snakemake_command_line():
 
     base = {"data_dir": "d", "annotations": "a", "datasets": ["tosca"]}
     given = parse_config(["exports={zarr: true, psmal: True, geodesics: false, geodesic_splits: [test, val]}"])
-    assert given["exports"]["psmal"] == "True"   # what Snakemake passes on
+    assert given["exports"]["psmal"] == "True"  # what Snakemake passes on
     exports = resolve_config({**base, **given})["exports"]
     assert exports["zarr"] is True and exports["psmal"] is True and exports["geodesics"] is False
     assert exports["geodesic_splits"] == ["test", "val"] and exports["released"] is True  # defaults kept

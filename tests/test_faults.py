@@ -36,7 +36,7 @@ from becos.network import ShapeNetwork
 from becos.remesh import mesh_checks, remesh, remesh_with_stats
 
 N_WOLF = 4344
-SPREAD = np.arange(0, 8684, 997)[:8]          # face rows spread over the wolf
+SPREAD = np.arange(0, 8684, 997)[:8]  # face rows spread over the wolf
 EDGE = "tosca_cat0_tosca_dog0_corres.txt"
 
 
@@ -54,7 +54,7 @@ def zero_area_rows(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     tri = vertices[faces]
     area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
     longest = max(float(np.ptp(vertices, axis=0).max()), 1.0)
-    return np.flatnonzero(area <= 1e-9 * longest ** 2)
+    return np.flatnonzero(area <= 1e-9 * longest**2)
 
 
 def vertex_weights(face: np.ndarray, weights: np.ndarray, faces: np.ndarray, n: int) -> sp.csr_matrix:
@@ -77,33 +77,33 @@ def injected(kind: str, mesh: TriMesh) -> tuple[np.ndarray, np.ndarray, dict]:
     v, f = mesh.vertices.copy(), mesh.faces.copy()
     n_faces = len(f)
     info = {"bad_rows": np.zeros(0, np.int64), "off_surface": np.zeros(0, np.int64), "level": logging.WARNING}
-    if kind == "repeated_index":      # 8 faces naming a vertex twice, inserted between the original rows
+    if kind == "repeated_index":  # 8 faces naming a vertex twice, inserted between the original rows
         bad = np.stack([f[SPREAD, 0], f[SPREAD, 0], f[SPREAD, 1]], axis=1)
         f = np.insert(f, SPREAD, bad, axis=0)
         info["bad_rows"] = SPREAD + np.arange(len(SPREAD))
         info["words"] = "dropped 8 faces with a repeated vertex index"
-    elif kind == "zero_area":         # a corner moved onto the opposite edge: 8 collinear (zero-area) faces
+    elif kind == "zero_area":  # a corner moved onto the opposite edge: 8 collinear (zero-area) faces
         v[f[SPREAD, 2]] = 0.5 * (v[f[SPREAD, 0]] + v[f[SPREAD, 1]])
         info["bad_rows"] = zero_area_rows(v, f)
         assert set(SPREAD) <= set(info["bad_rows"].tolist())
         info["words"] = "found 8 zero-area faces (kept"
-    elif kind == "duplicate":         # repeated rows, same winding and reversed, appended
+    elif kind == "duplicate":  # repeated rows, same winding and reversed, appended
         f = np.vstack([f, f[SPREAD], f[SPREAD + 1, ::-1]])
         info["bad_rows"] = np.arange(n_faces, len(f))
         info["words"] = "dropped 16 duplicate faces"
-    elif kind == "unreferenced":      # KIDS-like: 3 vertices lost every face (vertex count unchanged)
+    elif kind == "unreferenced":  # KIDS-like: 3 vertices lost every face (vertex count unchanged)
         lost = np.array([100, 2000, 4000])
         f = f[~np.isin(f, lost).any(axis=1)]
         info["off_surface"] = lost
         info["words"] = "ignored 3 unreferenced vertices"
-    elif kind == "components":        # the faces crossing a plane removed: the ear tips float free
+    elif kind == "components":  # the faces crossing a plane removed: the ear tips float free
         z = v[:, 2]
         cut = np.percentile(z, 97)
         side = z[f] > cut
         f = f[side.all(axis=1) | (~side).all(axis=1)]
         info["off_surface"] = np.flatnonzero(z > cut)
         info["words"] = "kept the largest of"
-    elif kind == "flipped":           # every 5th face wound the other way (as in TOSCA michael0)
+    elif kind == "flipped":  # every 5th face wound the other way (as in TOSCA michael0)
         f[::5] = f[::5, ::-1]
         info["words"] = "re-orients inconsistently wound faces"
         info["level"] = logging.INFO
@@ -119,6 +119,7 @@ def wolves(tosca_dir) -> dict[str, TriMesh]:
 
 def network_with(annotations, tosca_dir, mesh_cache, replaced: dict[str, TriMesh]) -> ShapeNetwork:
     """A TOSCA-only network whose ``replaced`` shapes are the given (faulty) meshes."""
+
     def meshes(dataset, name):
         if dataset != "tosca":
             return None
@@ -126,6 +127,7 @@ def network_with(annotations, tosca_dir, mesh_cache, replaced: dict[str, TriMesh
             return replaced[name]
         path = tosca_dir / f"{name}.off"
         return mesh_cache.load(path) if path.is_file() else None
+
     return ShapeNetwork(annotations, meshes)
 
 
@@ -173,23 +175,23 @@ def run_check(args: list[str], capsys) -> tuple[int, str]:
 
 
 # --- mesh faults that a repair handles ----------------------------------------------------------------
-@pytest.mark.parametrize("kind", ["repeated_index", "zero_area", "duplicate", "unreferenced", "components",
-                                  "flipped"])
-def test_repaired_mesh_fault_keeps_ground_truth_exact(kind, wolves, tmp_path, caplog, annotations, tosca_entries,
-                                                      tosca_dir, mesh_cache):
+@pytest.mark.parametrize("kind", ["repeated_index", "zero_area", "duplicate", "unreferenced", "components", "flipped"])
+def test_repaired_mesh_fault_keeps_ground_truth_exact(
+    kind, wolves, tmp_path, caplog, annotations, tosca_entries, tosca_dir, mesh_cache
+):
     v, f, info = injected(kind, wolves["wolf1"])
     path = tmp_path / "wolf1.off"
     written = write_off(path, v, f)
-    faulty = read_mesh(path)                                   # the real reader accepts it as it is
+    faulty = read_mesh(path)  # the real reader accepts it as it is
     assert np.array_equal(faulty.vertices, v) and np.array_equal(faulty.faces, f)
-    assert faulty.n_vertices == N_WOLF                         # the class's vertex order is intact
+    assert faulty.n_vertices == N_WOLF  # the class's vertex order is intact
 
     with caplog.at_level(logging.INFO, logger="becos.remesh"):
         r, stats = remesh_with_stats(faulty, target_vertices=1000, source=path)
     said = [rec for rec in caplog.records if rec.getMessage().startswith(f"{path}: ")]
     assert len(said) == 1 and said[0].levelno == info["level"] and info["words"] in said[0].getMessage()
     assert "the file is unchanged" in said[0].getMessage()
-    assert path.read_bytes() == written                        # never rewritten
+    assert path.read_bytes() == written  # never rewritten
     repair = stats["input_repair"]
     assert repair["n_input_vertices"] == N_WOLF and repair["n_input_faces"] == len(f)
 
@@ -198,7 +200,7 @@ def test_repaired_mesh_fault_keeps_ground_truth_exact(kind, wolves, tmp_path, ca
     assert r.mesh.n_vertices == 1000
     assert facts["components"] == 1 and facts["non_manifold_edges"] == 0 and facts["misoriented_edges"] == 0
     if kind in ("repeated_index", "zero_area", "duplicate", "flipped"):
-        assert facts["boundary_edges"] == 0                    # closed like the wolf: no hole cut by a repair
+        assert facts["boundary_edges"] == 0  # closed like the wolf: no hole cut by a repair
 
     # to_original: rows of the FILE as given, never a degenerate/duplicate row, well-defined weights,
     # and the point IS the remeshed vertex
@@ -234,8 +236,9 @@ def test_repaired_mesh_fault_keeps_ground_truth_exact(kind, wolves, tmp_path, ca
     assert (plain.to_vertex_indices(f)[plain.matched] == np.flatnonzero(plain.matched)).all()
 
 
-def test_messy_download_through_the_workflow_remesh_stage(wolves, tmp_path, caplog, annotations, tosca_entries,
-                                                          tosca_dir, mesh_cache):
+def test_messy_download_through_the_workflow_remesh_stage(
+    wolves, tmp_path, caplog, annotations, tosca_entries, tosca_dir, mesh_cache
+):
     """Every repairable fault at once, through the workflow's remesh stage (catalog row -> prepared shape
     -> remesh -> .npz), then the network's ground truth from the saved remesh."""
     from dataclasses import replace
@@ -246,9 +249,9 @@ def test_messy_download_through_the_workflow_remesh_stage(wolves, tmp_path, capl
     from becos.workflow import remesh_stage
 
     v, f = wolves["wolf1"].vertices.copy(), wolves["wolf1"].faces.copy()
-    f[::5] = f[::5, ::-1]                                                     # flipped
-    v[f[SPREAD, 2]] = 0.5 * (v[f[SPREAD, 0]] + v[f[SPREAD, 1]])              # zero area
-    f = f[~np.isin(f, [100, 2000]).any(axis=1)]                               # 2 unreferenced vertices
+    f[::5] = f[::5, ::-1]  # flipped
+    v[f[SPREAD, 2]] = 0.5 * (v[f[SPREAD, 0]] + v[f[SPREAD, 1]])  # zero area
+    f = f[~np.isin(f, [100, 2000]).any(axis=1)]  # 2 unreferenced vertices
     n_clean = len(f)
     f = np.vstack([f, np.stack([f[:4, 0], f[:4, 1], f[:4, 0]], axis=1), f[10:14, ::-1]])  # repeated, duplicate
     bad_rows = np.concatenate([zero_area_rows(v, f), np.arange(n_clean, len(f))])
@@ -263,14 +266,19 @@ def test_messy_download_through_the_workflow_remesh_stage(wolves, tmp_path, capl
         remesh_stage({"results": str(tmp_path / "results"), "seed": 42}, row, "f2000", out)
     assert path.read_bytes() == written
     message = " ".join(rec.getMessage() for rec in caplog.records)
-    for words in ("dropped 4 faces with a repeated vertex index", "dropped 4 duplicate faces",
-                  "ignored 2 unreferenced vertices", "zero-area faces (kept", "re-orients"):
+    for words in (
+        "dropped 4 faces with a repeated vertex index",
+        "dropped 4 duplicate faces",
+        "ignored 2 unreferenced vertices",
+        "zero-area faces (kept",
+        "re-orients",
+    ):
         assert words in message
     assert str(path) in message  # the warning names the user's file
 
     r = load_remeshed(out)
     assert abs(r.mesh.n_faces - 2000) <= 1 and mesh_checks(r.mesh)["misoriented_edges"] == 0
-    prepared = prepare_shape(entry)                             # the geometry the stage remeshed
+    prepared = prepare_shape(entry)  # the geometry the stage remeshed
     t = r.to_original
     assert not np.isin(t.face, bad_rows).any() and t.face.max() < len(f)
     snapped = t.distance == 0
@@ -291,7 +299,7 @@ def test_several_large_components_are_an_error(wolves, tmp_path):
     v, f = wolves["wolf1"].vertices, wolves["wolf1"].faces
     side = v[:, 2][f] > np.median(v[:, 2])
     path = tmp_path / "wolf1.off"
-    write_off(path, v, f[side.all(axis=1) | (~side).all(axis=1)])        # cut in two halves
+    write_off(path, v, f[side.all(axis=1) | (~side).all(axis=1)])  # cut in two halves
     with pytest.raises(InputFileError) as err:
         remesh(read_mesh(path), target_vertices=1000, source=path)
     text = str(err.value)
@@ -311,8 +319,9 @@ def test_non_manifold_edges_are_an_error(wolves, tmp_path):
     assert "Fix: repair the mesh" in str(err.value)
 
 
-def test_check_full_parse_lists_repairs_and_rejects_what_it_cannot_repair(wolves, tosca_dir, tmp_path, becos_code,
-                                                                          capsys, monkeypatch):
+def test_check_full_parse_lists_repairs_and_rejects_what_it_cannot_repair(
+    wolves, tosca_dir, tmp_path, becos_code, capsys, monkeypatch
+):
     """``becos check --full-parse``: a repairable mesh is listed with the repair remeshing will apply (not a
     problem); a mesh of two large pieces is a problem naming the file and the fix."""
     folder = tmp_path / "data" / "tosca-off"
@@ -324,8 +333,17 @@ def test_check_full_parse_lists_repairs_and_rejects_what_it_cannot_repair(wolves
     side = v2[:, 2][f2] > np.median(v2[:, 2])
     write_off(folder / "wolf2.off", v2, f2[side.all(axis=1) | (~side).all(axis=1)])
     monkeypatch.setenv("BECOS_DATASETS_DIR", str(small_registry(tmp_path, {"wolf": 3})))
-    args = ["--datasets", "tosca", "--data-dir", str(tmp_path / "data"), "--annotations", str(becos_code),
-            "--full-parse", "--out", str(tmp_path / "report.json")]
+    args = [
+        "--datasets",
+        "tosca",
+        "--data-dir",
+        str(tmp_path / "data"),
+        "--annotations",
+        str(becos_code),
+        "--full-parse",
+        "--out",
+        str(tmp_path / "report.json"),
+    ]
     code, err = run_check(args, capsys)
     assert code == 2 and "1 problem(s)" in err
     assert f"{folder / 'wolf2.off'}: has 2 connected components" in err and "a shape must be one connected" in err
@@ -348,7 +366,7 @@ def test_check_names_nan_and_garbage_meshes(tosca_dir, tmp_path, becos_code):
     folder.mkdir(parents=True)
     shutil.copy(tosca_dir / "wolf0.off", folder / "wolf0.off")
     lines = (tosca_dir / "wolf1.off").read_text().splitlines()
-    lines[2 + 1234] = "12.5 nan 3.0"                           # vertex line 1235 of 4344
+    lines[2 + 1234] = "12.5 nan 3.0"  # vertex line 1235 of 4344
     (folder / "wolf1.off").write_text("\n".join(lines) + "\n")
     (folder / "wolf2.off").write_bytes(np.random.default_rng(1).bytes(4096))
     with pytest.raises(DatasetCheckError) as err:
@@ -367,11 +385,23 @@ def test_check_names_a_single_missing_shape(tosca_dir, tmp_path, becos_code, cap
     for p in tosca_dir.glob("*.off"):
         if p.name != "wolf2.off":
             (folder / p.name).symlink_to(p)
-    code, err = run_check(["--datasets", "tosca", "--data-dir", str(tmp_path / "data"), "--annotations",
-                           str(becos_code), "--no-mesh-check"], capsys)
+    code, err = run_check(
+        [
+            "--datasets",
+            "tosca",
+            "--data-dir",
+            str(tmp_path / "data"),
+            "--annotations",
+            str(becos_code),
+            "--no-mesh-check",
+        ],
+        capsys,
+    )
     assert code == 2
-    assert f"found 75 shapes (*.off) in {folder}, expected 76; missing files named by the published BeCoS " \
-           f"pair lists: wolf2.off. Fix: complete or re-extract the download" in err
+    assert (
+        f"found 75 shapes (*.off) in {folder}, expected 76; missing files named by the published BeCoS "
+        f"pair lists: wolf2.off. Fix: complete or re-extract the download" in err
+    )
     assert "{'wolf': (2, 3)}" in err
 
 
@@ -381,14 +411,22 @@ def _set(lines, i, text):
     return lines
 
 
-@pytest.mark.parametrize("edit, problem", [
-    (lambda ls: ls[:-1], r"has 27893 rows but template tosca.cat0 has 27894 vertices"),
-    (lambda ls: _set(ls, 7, "999999 0.2 0.3 0.5"), r"face index 999999 is out of range for template tosca.dog0 "
-                                                    r"\(50528 faces\)"),
-    (lambda ls: _set(ls, 4, "235 0.7 abc 0.3"), r"line 5 holds non-numeric text 'abc' in column 3"),
-], ids=["row_count", "face_out_of_range", "non_numeric"])
-def test_faulty_edge_file_is_named_by_ground_truth_and_check(edit, problem, becos_code, tmp_path, tosca_dir,
-                                                             mesh_cache, tosca_entries, capsys, monkeypatch):
+@pytest.mark.parametrize(
+    "edit, problem",
+    [
+        (lambda ls: ls[:-1], r"has 27893 rows but template tosca.cat0 has 27894 vertices"),
+        (
+            lambda ls: _set(ls, 7, "999999 0.2 0.3 0.5"),
+            r"face index 999999 is out of range for template tosca.dog0 "
+            r"\(50528 faces\)",
+        ),
+        (lambda ls: _set(ls, 4, "235 0.7 abc 0.3"), r"line 5 holds non-numeric text 'abc' in column 3"),
+    ],
+    ids=["row_count", "face_out_of_range", "non_numeric"],
+)
+def test_faulty_edge_file_is_named_by_ground_truth_and_check(
+    edit, problem, becos_code, tmp_path, tosca_dir, mesh_cache, tosca_entries, capsys, monkeypatch
+):
     root = annotation_copy(becos_code, tmp_path, edit_edge=edit)
     edge_path = root / "precomputed_corr_templates" / EDGE
     source = AnnotationSource(root, cache_dir=tmp_path / "cache")
@@ -404,22 +442,33 @@ def test_faulty_edge_file_is_named_by_ground_truth_and_check(edit, problem, beco
     for name in ("cat0", "dog0"):
         (folder / f"{name}.off").symlink_to(tosca_dir / f"{name}.off")
     monkeypatch.setenv("BECOS_DATASETS_DIR", str(small_registry(tmp_path, {"cat": 1, "dog": 1})))
-    code, text = run_check(["--datasets", "tosca", "--data-dir", str(tmp_path / "data"), "--annotations", str(root)],
-                           capsys)
+    code, text = run_check(
+        ["--datasets", "tosca", "--data-dir", str(tmp_path / "data"), "--annotations", str(root)], capsys
+    )
     assert code == 2 and "1 problem(s)" in text
     assert f"annotation folder: {edge_path}: " in text
     assert re.search(problem + r".*\. Fix: .*restore the .*annotation folder", text)
 
 
-@pytest.mark.parametrize("fault, problem, fix", [
-    ("asymmetric", "the matrix is not symmetric: (tosca_dog0, tosca_wolf0) = 1 but (tosca_wolf0, tosca_dog0) = 0",
-     "Fix: make the edge two-way (set both entries)"),
-    ("no_path", "the network is not connected (2 parts; smallest: ['shrec20_leopard', 'tosca_wolf0'])",
-     "Fix: add the missing edges so every template is reachable"),
-])
+@pytest.mark.parametrize(
+    "fault, problem, fix",
+    [
+        (
+            "asymmetric",
+            "the matrix is not symmetric: (tosca_dog0, tosca_wolf0) = 1 but (tosca_wolf0, tosca_dog0) = 0",
+            "Fix: make the edge two-way (set both entries)",
+        ),
+        (
+            "no_path",
+            "the network is not connected (2 parts; smallest: ['shrec20_leopard', 'tosca_wolf0'])",
+            "Fix: add the missing edges so every template is reachable",
+        ),
+    ],
+)
 def test_faulty_network_stops_before_any_pair(fault, problem, fix, becos_code, tmp_path, capsys):
     """An asymmetric matrix, or a pair of templates with no path between them (wolf0 cut off): the annotation
     folder is refused where it is opened (the workflow, ShapeNetwork users) and by ``becos check``."""
+
     def edit(rows):
         names = rows[0]
         i, j = names.index("tosca_wolf0"), names.index("tosca_dog0")
@@ -427,28 +476,35 @@ def test_faulty_network_stops_before_any_pair(fault, problem, fix, becos_code, t
         rows[i][j] = "0"
         if fault == "no_path":
             rows[j][i] = "0"
+
     root = annotation_copy(becos_code, tmp_path, edit_adjacency=edit)
     adjacency = root / "config" / "adjacency_matrix.csv"
     with pytest.raises(InputFileError) as err:
         AnnotationSource(root, cache_dir=tmp_path / "cache")
     assert str(err.value) == f"{adjacency}: {problem}. {fix}"
-    code, text = run_check(["--datasets", "tosca", "--data-dir", str(becos_code / "data"), "--annotations", str(root),
-                            "--no-mesh-check"], capsys)
+    code, text = run_check(
+        ["--datasets", "tosca", "--data-dir", str(becos_code / "data"), "--annotations", str(root), "--no-mesh-check"],
+        capsys,
+    )
     assert code == 2 and f"{adjacency}: {problem}. {fix}" in text
 
 
 def test_template_table_naming_a_missing_template(becos_code, tmp_path, tosca_dir, mesh_cache, tosca_entries):
-    root = annotation_copy(becos_code, tmp_path,
-                           edit_table=lambda text: text.replace("tosca_wolf,wolf0,-,wolf0,tosca",
-                                                                "tosca_wolf,wolf9,-,wolf0,tosca"))
+    root = annotation_copy(
+        becos_code,
+        tmp_path,
+        edit_table=lambda text: text.replace("tosca_wolf,wolf0,-,wolf0,tosca", "tosca_wolf,wolf9,-,wolf0,tosca"),
+    )
     table = root / "config" / "templates_all.csv"
     source = AnnotationSource(root, cache_dir=tmp_path / "cache")
     network = network_with(source, tosca_dir, mesh_cache, {})
     with pytest.raises(BecosError) as err:
         network.ground_truth(tosca_entries["wolf1"], tosca_entries["cat2"])
     text = str(err.value)
-    assert text.startswith(f"{table}: template 'wolf9' of 'tosca_wolf' is node 'tosca_wolf9', which "
-                           f"{root / 'config' / 'adjacency_matrix.csv'} does not contain. Fix: ")
+    assert text.startswith(
+        f"{table}: template 'wolf9' of 'tosca_wolf' is node 'tosca_wolf9', which "
+        f"{root / 'config' / 'adjacency_matrix.csv'} does not contain. Fix: "
+    )
     with pytest.raises(DatasetCheckError) as err:
         check_datasets(["tosca"], becos_code / "data", root, read_meshes=False)
     assert "shapes of 'tosca' use template key 'tosca_wolf'" in str(err.value) and "'wolf9'" in str(err.value)
@@ -482,8 +538,11 @@ def test_scaled_shape_is_named_by_the_dataset_check(wolves, tosca_dir, tmp_path,
     write_off(folder / "wolf1.off", wolves["wolf1"].vertices * 1e6, wolves["wolf1"].faces)
     text = _check_wolves(tmp_path, becos_code)
     assert "1 problem(s)" in text and "1 mesh files do not fit their class template" in text
-    assert re.search(rf"{re.escape(str(folder / 'wolf1.off'))}: its edges are 1e\+06 times as long as those of its "
-                     rf"class template {re.escape(str(folder / 'wolf0.off'))} .*scaled or in other units", text)
+    assert re.search(
+        rf"{re.escape(str(folder / 'wolf1.off'))}: its edges are 1e\+06 times as long as those of its "
+        rf"class template {re.escape(str(folder / 'wolf0.off'))} .*scaled or in other units",
+        text,
+    )
     assert "Fix: restore the original file" in text
 
 
@@ -491,14 +550,14 @@ def test_permuted_vertex_lines_are_named_by_the_dataset_check(wolves, tosca_dir,
     """BAD 3: wolf1's vertex lines permuted and its faces remapped: the same surface, but vertex i is no
     longer vertex i of the class (before: the check passed; ground truth off by a median of 0.56)."""
     mesh = wolves["wolf1"]
-    order = np.random.default_rng(3).permutation(mesh.n_vertices)   # new vertex j = old vertex order[j]
+    order = np.random.default_rng(3).permutation(mesh.n_vertices)  # new vertex j = old vertex order[j]
     new_index = np.argsort(order)
     folder = tmp_path / "data" / "tosca-off"
     folder.mkdir(parents=True)
     for name in ("wolf0", "wolf2"):
         (folder / f"{name}.off").symlink_to(tosca_dir / f"{name}.off")
     write_off(folder / "wolf1.off", mesh.vertices[order], new_index[mesh.faces])
-    assert np.allclose(read_mesh(folder / "wolf1.off").vertices[new_index], mesh.vertices)   # same surface
+    assert np.allclose(read_mesh(folder / "wolf1.off").vertices[new_index], mesh.vertices)  # same surface
     text = _check_wolves(tmp_path, becos_code)
     assert f"{folder / 'wolf1.off'}: has the vertex count of its class template {folder / 'wolf0.off'}" in text
     assert "its vertex lines are re-ordered" in text and "vertex i no longer corresponds" in text
@@ -512,17 +571,23 @@ def test_off_header_announcing_fewer_faces_than_the_file_holds(tosca_dir, tmp_pa
     lines[1] = "4344 8584 0"
     folder = _wolf_folder(tmp_path, tosca_dir, "\n".join(lines) + "\n")
     text = _check_wolves(tmp_path, becos_code)
-    assert (f"{folder / 'wolf1.off'}: the OFF header announces 4344 vertices and 8584 faces but 13028 data lines "
-            f"follow, 100 more than announced") in text
+    assert (
+        f"{folder / 'wolf1.off'}: the OFF header announces 4344 vertices and 8584 faces but 13028 data lines "
+        f"follow, 100 more than announced"
+    ) in text
     assert "correct the header's counts (e.g. 4344 8684" in text
-    with pytest.raises(InputFileError, match=r"announces 4344 vertices and 8584 faces but 13028 data lines follow, "
-                                             r"100 more than announced") as err:
+    with pytest.raises(
+        InputFileError,
+        match=r"announces 4344 vertices and 8584 faces but 13028 data lines follow, "
+        r"100 more than announced",
+    ) as err:
         read_mesh(folder / "wolf1.off")
     assert err.value.path == folder / "wolf1.off" and "'4344 8684 0'" in err.value.fix
 
 
-def test_edge_file_holding_another_edges_map_is_named_by_the_dataset_check(becos_code, tmp_path, tosca_dir,
-                                                                            monkeypatch):
+def test_edge_file_holding_another_edges_map_is_named_by_the_dataset_check(
+    becos_code, tmp_path, tosca_dir, monkeypatch
+):
     """BAD 4: tosca_dog0_tosca_wolf0_corres.txt holding tosca_dog0_smal_dog2_corres.txt (row count and face
     range pass; before: ground truth off by a median of 0.65). The mapped template must land near the target
     after alignment (real TOSCA edges: residual <= 0.17, stretch <= 1.38; this file: 1.12 and 4.85)."""
@@ -539,8 +604,11 @@ def test_edge_file_holding_another_edges_map_is_named_by_the_dataset_check(becos
         check_datasets(["tosca"], tmp_path / "data", root, config_dir=registry)
     text = str(err.value)
     assert "1 problem(s)" in text
-    match = re.search(rf"annotation folder: {re.escape(str(edge_path))}: the map does not land where its template "
-                      r"belongs: .* a median ([0-9.]+) RMS radii .* a median ([0-9.]+) mesh edges apart", text)
+    match = re.search(
+        rf"annotation folder: {re.escape(str(edge_path))}: the map does not land where its template "
+        r"belongs: .* a median ([0-9.]+) RMS radii .* a median ([0-9.]+) mesh edges apart",
+        text,
+    )
     assert match and float(match[1]) > 1.0 and float(match[2]) > 4.0, text
     assert "Fix: restore the annotation folder's original file" in text
     # the real folder passes, and its statistics are those documented

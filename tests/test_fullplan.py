@@ -10,15 +10,22 @@ from collections import defaultdict
 
 import numpy as np
 import pytest
+from standin import (
+    DATASETS,
+    PUBLISHED_PAIRS,
+    PUBLISHED_SETTINGS,
+    PUBLISHED_SHAPES,
+    bipyramid,
+    build_standin_tree,
+    mesh_bytes,
+)
 
 from becos.catalog import read_catalog
 from becos.check import check_datasets
+from becos.mesh import read_mesh
 from becos.published import load_published
 from becos.sampling import read_manifest
 from becos.workflow import resolve_config, write_catalog_stage, write_manifest_stage
-from becos.mesh import read_mesh
-from standin import (DATASETS, PUBLISHED_PAIRS, PUBLISHED_SETTINGS, PUBLISHED_SHAPES, bipyramid, build_standin_tree,
-                     mesh_bytes)
 
 
 @pytest.fixture(scope="module")
@@ -36,9 +43,17 @@ def catalog_path(tree, tmp_path_factory):
 
 
 def full_config(tree, results, **overrides) -> dict:
-    return resolve_config({"synthetic": {"enabled": False}, "data_dir": str(tree.data_dir),
-                           "annotations": str(tree.annotations), "datasets": list(DATASETS),
-                           "template_file": "templates_all.csv", "results": str(results), **overrides})
+    return resolve_config(
+        {
+            "synthetic": {"enabled": False},
+            "data_dir": str(tree.data_dir),
+            "annotations": str(tree.annotations),
+            "datasets": list(DATASETS),
+            "template_file": "templates_all.csv",
+            "results": str(results),
+            **overrides,
+        }
+    )
 
 
 @pytest.mark.parametrize("file_type", ["off", "obj", "ply"])
@@ -49,7 +64,7 @@ def test_standin_mesh_is_a_closed_outward_surface_read_back_exactly(file_type, t
     directed = {tuple(e) for e in edges.tolist()}
     assert len(directed) == len(edges) and all((b, a) in directed for a, b in directed)  # closed, oriented
     a, b, c = (vertices[faces[:, i]] for i in range(3))
-    assert np.einsum("ij,ij->i", a, np.cross(b, c)).sum() > 0                            # outward
+    assert np.einsum("ij,ij->i", a, np.cross(b, c)).sum() > 0  # outward
     path = tmp_path / f"m.{file_type}"
     path.write_bytes(mesh_bytes(vertices, faces, file_type))
     mesh = read_mesh(path)
@@ -60,7 +75,7 @@ def test_standin_mesh_is_a_closed_outward_surface_read_back_exactly(file_type, t
 def test_standin_meshes_pass_the_dataset_check(tree):
     assert len(tree.files) == PUBLISHED_SHAPES + 4 and tree.published <= set(tree.files)
     assert tree.template_vertices[("faust", "tr_reg_000")] == 6890
-    faust = read_mesh(tree.files[("faust", "tr_reg_000")])     # real template faces (default faces)
+    faust = read_mesh(tree.files[("faust", "tr_reg_000")])  # real template faces (default faces)
     assert (faust.n_vertices, faust.n_faces) == (6890, 13776)
     # stand-ins are not real geometry: no class-template or edge-plausibility comparison (check_geometry)
     report = check_datasets(list(DATASETS), tree.data_dir, tree.annotations, compare_geometry=False)
@@ -83,8 +98,12 @@ def test_registry_lists_every_published_shape_as_published(tree, catalog_path, b
                     published[(s["org_dataset"], s["name"])].add((s["category"], split, float(s["scale"])))
     assert len(published) == PUBLISHED_SHAPES
     catalog = read_catalog(catalog_path)
-    listed = {(d, n): (c, s, sc) for d, n, c, s, sc in
-              zip(catalog["dataset"], catalog["name"], catalog["category"], catalog["split"], catalog["scale"])}
+    listed = {
+        (d, n): (c, s, sc)
+        for d, n, c, s, sc in zip(
+            catalog["dataset"], catalog["name"], catalog["category"], catalog["split"], catalog["scale"]
+        )
+    }
     wrong = {k: (sorted(v), listed.get(k)) for k, v in published.items() if v != {listed.get(k)}}
     assert not wrong, f"{len(wrong)} published shapes listed otherwise, e.g. {list(wrong.items())[:3]}"
     extra = sorted(set(listed) - set(published))

@@ -31,8 +31,17 @@ def small_tosca(tosca_entries, tosca_network, mesh_cache):
         entry = tosca_entries[name]
         prepared = prepare_shape(entry, mesh_cache)
         remeshes[name] = remesh(prepared.mesh, target_vertices=target)
-        shapes[name] = ShapeInstance(entry.dataset, entry.name, entry.category, entry.shape_class,
-                                     remeshes[name].mesh, entry.scale, entry.frame_rotation, prepared.centre, 0)
+        shapes[name] = ShapeInstance(
+            entry.dataset,
+            entry.name,
+            entry.category,
+            entry.shape_class,
+            remeshes[name].mesh,
+            entry.scale,
+            entry.frame_rotation,
+            prepared.centre,
+            0,
+        )
     x, y = tosca_entries["cat0"], tosca_entries["cat3"]
     gt_xy = tosca_network.ground_truth(x, y, x_remesh=remeshes["cat0"], y_remesh=remeshes["cat3"])
     gt_yx = tosca_network.ground_truth(y, x, x_remesh=remeshes["cat3"], y_remesh=remeshes["cat0"])
@@ -47,9 +56,19 @@ def small_records(small_tosca) -> dict:
     x, y, gt_xy, gt_yx = small_tosca
     out = {}
     for setting in SETTINGS:
-        out[setting] = [build_pair(x, y, gt_xy, gt_yx, pair_id=f"{setting[:1]}{setting.split('_')[1][:1]}{i:014d}",
-                                   seed=i + 1, split=split, options=PairOptions(setting=setting))
-                        for i, split in enumerate(("test", "test", "train"))]
+        out[setting] = [
+            build_pair(
+                x,
+                y,
+                gt_xy,
+                gt_yx,
+                pair_id=f"{setting[:1]}{setting.split('_')[1][:1]}{i:014d}",
+                seed=i + 1,
+                split=split,
+                options=PairOptions(setting=setting),
+            )
+            for i, split in enumerate(("test", "test", "train"))
+        ]
     return out
 
 
@@ -65,22 +84,22 @@ def test_batched_heat_solver_matches_potpourri3d_and_exact_geodesics(small_tosca
     assert rows.dtype == np.float32 and rows.shape == (len(sources), mesh.n_vertices)
     assert not rows[np.arange(len(sources)), sources].any() and (rows >= 0).all()
     solver = HeatDistanceSolver(v, f)
-    one_block = solver.distances(sources)          # all sources in one multi-column solve
-    in_pieces = np.concatenate([solver.distances(sources[i:i + 5]) for i in range(0, len(sources), 5)])
-    np.testing.assert_allclose(one_block, in_pieces, rtol=1e-9, atol=1e-12)   # columns independent
+    one_block = solver.distances(sources)  # all sources in one multi-column solve
+    in_pieces = np.concatenate([solver.distances(sources[i : i + 5]) for i in range(0, len(sources), 5)])
+    np.testing.assert_allclose(one_block, in_pieces, rtol=1e-9, atol=1e-12)  # columns independent
     before = GeodesicDistances(mesh, "heat").from_vertices(sources)
     edge = float(np.linalg.norm(v[f[:, [1, 2, 0]]] - v[f], axis=2).mean())
     far = before > 3 * edge
     rel = np.abs(rows[far] - before[far]) / before[far]
-    assert rel.mean() < 0.015 and rel.max() < 0.06   # measured 0.0063 and 0.028 (mesh angles 2-173 degrees)
+    assert rel.mean() < 0.015 and rel.max() < 0.06  # measured 0.0063 and 0.028 (mesh angles 2-173 degrees)
     exact = np.stack([igl.exact_geodesic(v, f, VS=np.array([s]), VT=np.arange(len(v))) for s in sources[:4]])
     far = exact > 3 * edge
     error = (np.abs(rows[:4][far] - exact[far]) / exact[far]).mean()
     error_before = (np.abs(before[:4][far] - exact[far]) / exact[far]).mean()
-    assert error < 0.03 and error < 1.25 * error_before   # measured 0.0216 and 0.0202
+    assert error < 0.03 and error < 1.25 * error_before  # measured 0.0216 and 0.0202
     # symmetric up to the method's error
     square = distance_rows(v, f, np.arange(len(v)))
-    assert np.abs(square - square.T).max() < 0.06 * square.max()   # measured 0.030
+    assert np.abs(square - square.T).max() < 0.06 * square.max()  # measured 0.030
 
 
 # --------------------------------------------------------------------------------------------------
@@ -125,8 +144,8 @@ def dsmk_becos_dist(data_root: str, off_file_x: str) -> np.ndarray | None:
 
     info_x = pickle.load(open(off_file_x.replace(".off", "_info.pkl"), "rb"))  # noqa: SIM115 (as transcribed)
     mesh_x = trimesh.load(off_file_x, process=False, maintain_order=True)
-    verts = np.asarray(mesh_x.vertices).astype(np.float32)     # torch.from_numpy(verts_x).float()
-    faces = np.asarray(mesh_x.faces).astype(np.int64)          # torch.from_numpy(faces_x).long()
+    verts = np.asarray(mesh_x.vertices).astype(np.float32)  # torch.from_numpy(verts_x).float()
+    faces = np.asarray(mesh_x.faces).astype(np.int64)  # torch.from_numpy(faces_x).long()
     dist = dsmk_cached_result(verts, faces, os.path.join(data_root, "dist"))
     if dist is None:
         return None
@@ -158,18 +177,20 @@ def test_plan_rows_and_layouts_read_by_the_loaders(small_records, store_of, tmp_
 
     stores = [store_of(small_records[s], s) for s in SETTINGS]
     plan, parts = tmp_path / "plan", 3
-    assert main(["geodesic-plan", *map(str, stores), "--out", str(plan), "--parts", str(parts),
-                 "--splits", "test"]) == 0
+    assert (
+        main(["geodesic-plan", *map(str, stores), "--out", str(plan), "--parts", str(parts), "--splits", "test"]) == 0
+    )
     summary = json.loads((plan / "plan.json").read_text())
     # every setting's shapes come from the two remeshed full meshes: each is solved once
-    assert len(summary["meshes"]) == 2 and sorted(m["n_vertices"] for m in summary["meshes"].values()) == \
-        sorted(len(small_records["full_full"][0][f"{s}_vertices"]) for s in "xy")
-    assert {m["part"] for m in summary["meshes"].values()} == {0, 1}   # largest first, one per part
+    assert len(summary["meshes"]) == 2 and sorted(m["n_vertices"] for m in summary["meshes"].values()) == sorted(
+        len(small_records["full_full"][0][f"{s}_vertices"]) for s in "xy"
+    )
+    assert {m["part"] for m in summary["meshes"].values()} == {0, 1}  # largest first, one per part
     rows = [tmp_path / f"rows_{k}" for k in range(parts)]
     for k in range(parts):
         assert main(["geodesic-rows", str(plan / f"part_{k}.npz"), str(rows[k])]) == 0
     capsys.readouterr()
-    assert not list(rows[2].glob("*.npy"))   # the empty part
+    assert not list(rows[2].glob("*.npy"))  # the empty part
 
     for setting, store in zip(SETTINGS, stores):
         recs = small_records[setting]
@@ -184,7 +205,7 @@ def test_plan_rows_and_layouts_read_by_the_loaders(small_records, store_of, tmp_
         data_root = released / "test"
         # DeepShapeMatchingKit reads <data_root>/dist: link the export's folder there
         (data_root / "dist").symlink_to(out / "dsmk" / "test" / "dist")
-        monkeypatch.chdir(out)   # geo-lora reads ./geodesic_dist_matrices
+        monkeypatch.chdir(out)  # geo-lora reads ./geodesic_dist_matrices
         n_dsmk = 0
         for folder in sorted(p for p in data_root.iterdir() if p.name.isdigit()):
             off0 = min(folder.glob("0_*.off"))
@@ -209,19 +230,36 @@ def test_plan_rows_and_layouts_read_by_the_loaders(small_records, store_of, tmp_
                     import trimesh
 
                     mesh = trimesh.load(off, process=False, maintain_order=True)
-                    raw = dsmk_cached_result(np.asarray(mesh.vertices).astype(np.float32),
-                                             np.asarray(mesh.faces).astype(np.int64), str(data_root / "dist"))
+                    raw = dsmk_cached_result(
+                        np.asarray(mesh.vertices).astype(np.float32),
+                        np.asarray(mesh.faces).astype(np.int64),
+                        str(data_root / "dist"),
+                    )
                     assert raw.dtype == np.float32 and raw.shape == d.shape
-                    assert np.array_equal(raw / sqrt_area, d)   # the same matrix in the record's units
-                    np.testing.assert_allclose(dsmk, d, rtol=1e-6, atol=1e-7)   # after its division: geo-lora's
+                    assert np.array_equal(raw / sqrt_area, d)  # the same matrix in the record's units
+                    np.testing.assert_allclose(dsmk, d, rtol=1e-6, atol=1e-7)  # after its division: geo-lora's
                 else:
                     assert dsmk is None
             assert info0["mesh_id"].startswith("tosca/cat0")
         assert n_dsmk == (2 if setting == "partial_full" else 4)
         assert printed["matrices"] == len({r["stem"] for r in index})
     # one layout only
-    assert main(["export-geodesics", str(stores[0]), str(tmp_path / "geo-only"), "--splits", "test",
-                 "--layouts", "geo-lora", "--rows", *map(str, rows)]) == 0
+    assert (
+        main(
+            [
+                "export-geodesics",
+                str(stores[0]),
+                str(tmp_path / "geo-only"),
+                "--splits",
+                "test",
+                "--layouts",
+                "geo-lora",
+                "--rows",
+                *map(str, rows),
+            ]
+        )
+        == 0
+    )
     assert json.loads(capsys.readouterr().out)["dsmk_files"] == 0 and not (tmp_path / "geo-only" / "dsmk").exists()
     # rows without this store's meshes (the empty part) are refused with a message naming the fix
     assert main(["export-geodesics", str(stores[2]), str(tmp_path / "geo-bad"), "--rows", str(rows[2])]) == 2
@@ -236,8 +274,9 @@ def test_workflow_plans_one_geodesic_plan_parallel_rows_and_one_layout_job_per_s
 
     from becos.geodesic_jobs import WORKFLOW_PARTS
 
-    workdir = write_config(tmp_path / "geo", becos_code, shapes=TINY_SHAPES,
-                           exports={"geodesics": True, "geodesic_splits": ["test"]})
+    workdir = write_config(
+        tmp_path / "geo", becos_code, shapes=TINY_SHAPES, exports={"geodesics": True, "geodesic_splits": ["test"]}
+    )
     planned = jobs_planned(snakemake(workdir, "-n", "--cores", "2").stdout)
     assert planned.get("geodesic_plan") == 1 and planned.get("geodesic_rows") == WORKFLOW_PARTS > 1, planned
     assert planned.get("geodesics") == 3, planned

@@ -50,12 +50,16 @@ def test_dijkstra_over_heat_ratio_on_tosca(name, small_tosca):
     far = heat > 0.1 * scale  # pairs not too close
     ratio = graph[far] / heat[far]
     p = np.percentile(ratio, [0, 1, 50, 99, 100])
-    print(f"\n{name} ({mesh.n_vertices} V): Dijkstra/heat over {far.sum()} pairs: min {p[0]:.3f}, "
-          f"1% {p[1]:.3f}, median {p[2]:.3f}, 99% {p[3]:.3f}, max {p[4]:.3f}")
+    print(
+        f"\n{name} ({mesh.n_vertices} V): Dijkstra/heat over {far.sum()} pairs: min {p[0]:.3f}, "
+        f"1% {p[1]:.3f}, median {p[2]:.3f}, 99% {p[3]:.3f}, max {p[4]:.3f}"
+    )
     inside = np.mean((ratio >= 0.97) & (ratio <= 1.2))
     print(f"  share of pairs with a ratio in [0.97, 1.2]: {inside:.4f}")
     assert far.sum() > 0.5 * far.size
-    assert inside >= 0.97  # measured 0.981-0.997; the tails are skinny decimated triangles (Dijkstra) and thin parts (heat)
+    assert (
+        inside >= 0.97
+    )  # measured 0.981-0.997; the tails are skinny decimated triangles (Dijkstra) and thin parts (heat)
     assert 1.0 <= p[2] <= 1.1  # the edge graph is an upper bound of the surface geodesic
 
 
@@ -88,15 +92,17 @@ def test_heat_close_to_exact_geodesic_paths(tosca_dir, mesh_cache):
     mesh = mesh_cache.load(tosca_dir / "wolf0.off")
     rng = np.random.default_rng(3)
     pairs = rng.choice(mesh.n_vertices, (40, 2), replace=False)
-    heat = GeodesicDistances(mesh, "heat").between(
-        pairs[:, 0], *vertex_points(mesh, pairs[:, 1]))
+    heat = GeodesicDistances(mesh, "heat").between(pairs[:, 0], *vertex_points(mesh, pairs[:, 1]))
     flip = pp3d.EdgeFlipGeodesicSolver(mesh.vertices, mesh.faces)
-    exact = np.array([np.linalg.norm(np.diff(flip.find_geodesic_path(int(a), int(b)), axis=0), axis=1).sum()
-                      for a, b in pairs])
+    exact = np.array(
+        [np.linalg.norm(np.diff(flip.find_geodesic_path(int(a), int(b)), axis=0), axis=1).sum() for a, b in pairs]
+    )
     far = exact > 0.05 * np.sqrt(surface_area(mesh))  # the heat method smooths within an edge or two
     ratio = heat[far] / exact[far]
-    print(f"\nheat / edge-flip geodesic over {far.sum()} pairs: min, median, max "
-          f"{np.percentile(ratio, [0, 50, 100]).round(4)}")
+    print(
+        f"\nheat / edge-flip geodesic over {far.sum()} pairs: min, median, max "
+        f"{np.percentile(ratio, [0, 50, 100]).round(4)}"
+    )
     assert far.sum() >= 30
     assert 0.98 <= np.median(ratio) <= 1.02
     # an edge-flip path is only locally shortest (an upper bound), so heat may fall a little below it
@@ -151,8 +157,9 @@ def test_dijkstra_to_points_is_exact_and_bounded(small_tosca):
     rows = GeodesicDistances(mesh, "dijkstra").from_vertices(sources)
     corners = mesh.faces[face]
     points = np.einsum("nk,nkd->nd", weights, mesh.vertices[corners])
-    brute = (rows[np.arange(n)[:, None], corners]
-             + np.linalg.norm(mesh.vertices[corners] - points[:, None], axis=2)).min(axis=1)
+    brute = (
+        rows[np.arange(n)[:, None], corners] + np.linalg.norm(mesh.vertices[corners] - points[:, None], axis=2)
+    ).min(axis=1)
 
     exact = dijkstra_to_points(mesh, sources, face, weights)
     np.testing.assert_allclose(exact, brute, rtol=1e-12)
@@ -180,8 +187,10 @@ def test_flat_grid_distances():
     graph = GeodesicDistances(mesh, "dijkstra").from_vertices([centre])[0]
     heat_ratio = heat[ring] / euclid[ring]
     graph_ratio = graph[ring] / euclid[ring]
-    print(f"\nflat grid: heat/euclid {heat_ratio.min():.4f}..{heat_ratio.max():.4f}, "
-          f"dijkstra/euclid {graph_ratio.min():.4f}..{graph_ratio.max():.4f}")
+    print(
+        f"\nflat grid: heat/euclid {heat_ratio.min():.4f}..{heat_ratio.max():.4f}, "
+        f"dijkstra/euclid {graph_ratio.min():.4f}..{graph_ratio.max():.4f}"
+    )
     assert np.abs(heat_ratio - 1).max() < 0.05
     dx, dy = (mesh.vertices[:, :2] - mesh.vertices[centre, :2]).T
     lo, hi = np.minimum(abs(dx), abs(dy)), np.maximum(abs(dx), abs(dy))
@@ -201,7 +210,8 @@ def test_rows_are_cached_per_mesh(small_tosca):
     assert geo.n_computed == before + 2
     np.testing.assert_array_equal(again, first[[1, 0]])
     uncached = GeodesicDistances(mesh, "dijkstra", cache_bytes=0)
-    uncached.from_vertices([3]); uncached.from_vertices([3])
+    uncached.from_vertices([3])
+    uncached.from_vertices([3])
     assert uncached.n_computed == 2
 
 
@@ -234,7 +244,9 @@ def test_point_to_vertices_reads_rows_from_the_points_side(method, small_tosca):
     out = geo.point_to_vertices(face, weights, targets)
     assert out.shape == (n, 2) and np.isnan(out[:10, 1]).all() and np.isfinite(out[10:]).all()
     rows = geo.from_vertices(mesh.faces[face].ravel()).reshape(n, 3, -1)
-    expected = np.einsum("nk,nkm->nm", weights, rows[np.arange(n)[:, None], :, np.maximum(targets, 0)].transpose(0, 2, 1))
+    expected = np.einsum(
+        "nk,nkm->nm", weights, rows[np.arange(n)[:, None], :, np.maximum(targets, 0)].transpose(0, 2, 1)
+    )
     np.testing.assert_allclose(out[:, 0], expected[:, 0], rtol=1e-12)
     from_target = GeodesicDistances(mesh, method).between(targets[:, 0], face, weights)
     rel = np.abs(out[:, 0] - from_target) / from_target

@@ -21,13 +21,13 @@ def remeshed(tosca_dir, mesh_cache):
     from becos.remesh import remesh
 
     targets = {"cat0": 9100, "cat3": 9900, "michael0": 9300, "michael3": 9700, "horse0": 9200, "horse5": 9800}
-    return {name: remesh(mesh_cache.load(tosca_dir / f"{name}.off"), target_vertices=t)
-            for name, t in targets.items()}
+    return {name: remesh(mesh_cache.load(tosca_dir / f"{name}.off"), target_vertices=t) for name, t in targets.items()}
 
 
 @pytest.mark.parametrize("x_name, y_name", [("cat0", "cat3"), ("michael0", "michael3"), ("horse0", "horse5")])
-def test_same_class_remeshed_ground_truth_is_accurate(x_name, y_name, tosca_network, tosca_entries, remeshed,
-                                                     tosca_dir, mesh_cache):
+def test_same_class_remeshed_ground_truth_is_accurate(
+    x_name, y_name, tosca_network, tosca_entries, remeshed, tosca_dir, mesh_cache
+):
     x, y = tosca_entries[x_name], tosca_entries[y_name]
     rx, ry = remeshed[x_name], remeshed[y_name]
     gt = tosca_network.ground_truth(x, y, x_remesh=rx, y_remesh=ry)
@@ -44,17 +44,20 @@ def test_same_class_remeshed_ground_truth_is_accurate(x_name, y_name, tosca_netw
     true_normals = oriented_face_normals(oy)[to_x.face]
     true_face, true_weights, off_surface = SurfaceLocator(ry.mesh).closest(true_on_y, true_normals)
     errors = dijkstra_to_points(ry.mesh, predicted, true_face, true_weights) / np.sqrt(surface_area(ry.mesh))
-    print(f"\n{x_name}->{y_name}: mean error {errors.mean():.5f}, max {errors.max():.5f}, "
-          f"true point off the remesh by at most {off_surface.max() / np.sqrt(surface_area(ry.mesh)):.2e}")
+    print(
+        f"\n{x_name}->{y_name}: mean error {errors.mean():.5f}, max {errors.max():.5f}, "
+        f"true point off the remesh by at most {off_surface.max() / np.sqrt(surface_area(ry.mesh)):.2e}"
+    )
     assert errors.mean() <= 0.008
     assert errors.max() <= 0.04
 
 
-@pytest.mark.parametrize("x_name, y_name, reversed_rows", [("michael0", "michael3", 1594), ("horse5", "horse0", 108),
-                                                          ("cat0", "cat3", 0)])
-def test_same_class_ground_truth_onto_an_original_pose_is_the_identity_transplant(x_name, y_name, reversed_rows,
-                                                                                  tosca_network, tosca_entries, remeshed,
-                                                                                  tosca_dir, mesh_cache):
+@pytest.mark.parametrize(
+    "x_name, y_name, reversed_rows", [("michael0", "michael3", 1594), ("horse5", "horse0", 108), ("cat0", "cat3", 0)]
+)
+def test_same_class_ground_truth_onto_an_original_pose_is_the_identity_transplant(
+    x_name, y_name, reversed_rows, tosca_network, tosca_entries, remeshed, tosca_dir, mesh_cache
+):
     """Poses of a class share vertex i, but michael0 and horse5 wind some faces the other way (real
     TOSCA data). The ground truth of a remeshed X vertex on Y's original mesh must be its point on X
     carried over by vertex identity: the same vertices with the same weights (permuted into Y's
@@ -66,7 +69,7 @@ def test_same_class_ground_truth_onto_an_original_pose_is_the_identity_transplan
     oy = mesh_cache.load(tosca_dir / f"{y_name}.off")
     differ = (ox.faces != oy.faces).any(axis=1)
     assert differ.sum() == reversed_rows
-    assert (np.sort(ox.faces, axis=1) == np.sort(oy.faces, axis=1)).all()   # same triangles, winding aside
+    assert (np.sort(ox.faces, axis=1) == np.sort(oy.faces, axis=1)).all()  # same triangles, winding aside
 
     to_x = remeshed[x_name].to_original
     gt = tosca_network.ground_truth(x, y, x_remesh=remeshed[x_name])
@@ -78,7 +81,7 @@ def test_same_class_ground_truth_onto_an_original_pose_is_the_identity_transplan
     assert gt.matched.all()
     diff = abs(vertex_weights(gt.face, gt.weights, oy.faces) - vertex_weights(to_x.face, to_x.weights, ox.faces))
     assert diff.max() <= 1e-12
-    assert np.nanmax(gt.distance) == np.nanmax(to_x.distance)      # no projection added on the way
+    assert np.nanmax(gt.distance) == np.nanmax(to_x.distance)  # no projection added on the way
 
 
 def cycle_error(tosca_network, x, y, mx, my) -> np.ndarray:
@@ -93,12 +96,15 @@ def cycle_error(tosca_network, x, y, mx, my) -> np.ndarray:
     return d / np.sqrt(surface_area(mx))
 
 
-@pytest.mark.parametrize("x_name, y_name, via, missing_range", [
-    ("cat3", "horse5", ["tosca_cat0", "tosca_dog0", "tosca_horse0"], (0.0, 0.10)),
-    ("wolf1", "cat2", ["tosca_wolf0", "tosca_dog0", "tosca_cat0"], (0.0, 0.10)),
-    ("michael4", "victoria2", ["tosca_michael0", "faust_tr_reg_000", "tosca_victoria0"], (0.0, 0.10)),
-    ("centaur1", "horse7", ["tosca_centaur0", "tosca_horse0"], (0.55, 0.70)),
-])
+@pytest.mark.parametrize(
+    "x_name, y_name, via, missing_range",
+    [
+        ("cat3", "horse5", ["tosca_cat0", "tosca_dog0", "tosca_horse0"], (0.0, 0.10)),
+        ("wolf1", "cat2", ["tosca_wolf0", "tosca_dog0", "tosca_cat0"], (0.0, 0.10)),
+        ("michael4", "victoria2", ["tosca_michael0", "faust_tr_reg_000", "tosca_victoria0"], (0.0, 0.10)),
+        ("centaur1", "horse7", ["tosca_centaur0", "tosca_horse0"], (0.55, 0.70)),
+    ],
+)
 def test_cross_class_paths(x_name, y_name, via, missing_range, tosca_network, tosca_entries, tosca_dir, mesh_cache):
     x, y = tosca_entries[x_name], tosca_entries[y_name]
     nodes = [s.node for s in tosca_network.surface_path(x, y) if s.node is not None]
@@ -115,9 +121,11 @@ def test_cross_class_paths(x_name, y_name, via, missing_range, tosca_network, to
     scale = np.sqrt(surface_area(my))
     projection = np.nanmax(gt.distance) / scale
     errors = cycle_error(tosca_network, x, y, mx, my)
-    print(f"\n{x_name}->{y_name} via {'->'.join(via)}: missing {gt.missing_fraction:.3f}, largest projection "
-          f"{projection:.4f} (x sqrt area), cycle error mean {errors.mean():.4f} median {np.median(errors):.4f} "
-          f"over {len(errors)} vertices")
+    print(
+        f"\n{x_name}->{y_name} via {'->'.join(via)}: missing {gt.missing_fraction:.3f}, largest projection "
+        f"{projection:.4f} (x sqrt area), cycle error mean {errors.mean():.4f} median {np.median(errors):.4f} "
+        f"over {len(errors)} vertices"
+    )
     assert projection < 0.1
     assert np.median(errors) < 0.05
 
@@ -143,7 +151,8 @@ def test_wrong_vertex_count_in_a_class_is_an_error(tosca_network, tosca_entries,
     from becos.network import ShapeNetwork
 
     def meshes(dataset, name):
-        from becos.mesh import read_mesh, TriMesh
+        from becos.mesh import TriMesh, read_mesh
+
         mesh = read_mesh(tosca_dir / f"{name}.off")
         if name == "cat3":  # a shape whose file lost its last vertex
             keep = (mesh.faces < mesh.n_vertices - 1).all(axis=1)

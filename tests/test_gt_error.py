@@ -26,7 +26,7 @@ import pytest
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "benchmarks"))
 
-import gt_error
+import gt_error  # noqa: E402 (benchmarks/ is put on the path above)
 
 SEED = 42
 """config/schema.yaml's default seed: the remesh targets of issue #20's run."""
@@ -37,7 +37,7 @@ def exact_truth_errors(network, entries, prepared, remeshes, x: str, y: str):
     rx, ry = remeshes[x], remeshes[y]
     predicted = network.ground_truth(entries[x], entries[y], x_remesh=rx, y_remesh=ry).to_vertex_indices(ry.mesh.faces)
     assert (predicted >= 0).all()
-    poses = np.stack([prepared[x].vertices, prepared[y].vertices])           # one triangulation
+    poses = np.stack([prepared[x].vertices, prepared[y].vertices])  # one triangulation
     target = gt_error.RemeshTarget(ry, prepared[y].faces, poses, 1)
     m = rx.to_original
     triple = prepared[x].faces[m.face]
@@ -52,8 +52,9 @@ def test_no_vertex_crosses_a_contact(x, y, variant, tosca_entries, tosca_network
     from becos.remesh import remesh, variant_target_vertices
 
     prepared = {n: prepare_shape(tosca_entries[n], mesh_cache).mesh for n in (x, y)}
-    remeshes = {n: remesh(prepared[n], target_vertices=variant_target_vertices(SEED, "tosca", n, variant))
-                for n in (x, y)}
+    remeshes = {
+        n: remesh(prepared[n], target_vertices=variant_target_vertices(SEED, "tosca", n, variant)) for n in (x, y)
+    }
     for a, b in ((x, y), (y, x)):
         errors, best = exact_truth_errors(tosca_network, tosca_entries, prepared, remeshes, a, b)
         print(f"\n{a} -> {b}: mean {errors.mean():.5f} (best vertex map {best.mean():.5f}), max {errors.max():.4f}")

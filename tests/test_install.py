@@ -53,19 +53,36 @@ def installed(tmp_path_factory) -> Path:
         shutil.copy(REPO / name, source / name)
     shutil.copytree(REPO / "becos", source / "becos", ignore=shutil.ignore_patterns("__pycache__"))
     run = dict(check=True, capture_output=True, text=True, env=_clean_env())
-    subprocess.run([sys.executable, "-m", "pip", "wheel", "-q", "--no-deps", "--no-build-isolation",
-                    "-w", str(tmp / "wheels"), str(source)], cwd=tmp, **run)
+    subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "pip",
+            "wheel",
+            "-q",
+            "--no-deps",
+            "--no-build-isolation",
+            "-w",
+            str(tmp / "wheels"),
+            str(source),
+        ],
+        cwd=tmp,
+        **run,
+    )
     wheel = next((tmp / "wheels").glob("becos-*.whl"))
     venv = tmp / "venv"
     subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(venv)], **run)
     python = venv / "bin" / "python"
-    site = subprocess.run([str(python), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"],
-                          **run).stdout.strip()
+    site = subprocess.run(
+        [str(python), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"], **run
+    ).stdout.strip()
     # the dependencies come from the test venv; a plain path line does not run that venv's own .pth files,
     # so its editable becos stays invisible
     (Path(site) / "test-venv-dependencies.pth").write_text(sysconfig.get_paths()["purelib"] + "\n")
-    subprocess.run([sys.executable, "-m", "pip", "--python", str(python), "install", "-q", "--no-deps",
-                    "--no-index", str(wheel)], **run)
+    subprocess.run(
+        [sys.executable, "-m", "pip", "--python", str(python), "install", "-q", "--no-deps", "--no-index", str(wheel)],
+        **run,
+    )
     return venv
 
 
@@ -77,14 +94,24 @@ def _clean_env() -> dict:
 
 
 def _becos(venv: Path, cwd: Path, *args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([str(venv / "bin" / "becos"), *args], cwd=cwd, capture_output=True, text=True,
-                          env=_clean_env(), timeout=120)
+    return subprocess.run(
+        [str(venv / "bin" / "becos"), *args], cwd=cwd, capture_output=True, text=True, env=_clean_env(), timeout=120
+    )
 
 
 def test_the_installed_wheel_runs_outside_the_repository(installed, tmp_path):
-    where = subprocess.run([str(installed / "bin" / "python"), "-c",
-                            "import becos.workflow as w, becos.datasets as d; print(w.SCHEMA_PATH); print(d.CONFIG_DIR)"],
-                           cwd=tmp_path, capture_output=True, text=True, env=_clean_env(), check=True)
+    where = subprocess.run(
+        [
+            str(installed / "bin" / "python"),
+            "-c",
+            "import becos.workflow as w, becos.datasets as d; print(w.SCHEMA_PATH); print(d.CONFIG_DIR)",
+        ],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        env=_clean_env(),
+        check=True,
+    )
     schema, registry = (Path(line) for line in where.stdout.split())
     assert schema.is_file() and installed in schema.parents, where.stdout
     assert (registry / "tosca.yaml").is_file() and installed in registry.parents, where.stdout
@@ -98,7 +125,14 @@ def test_the_installed_wheel_runs_outside_the_repository(installed, tmp_path):
     # the same resolved config (schema defaults, registry check) as the checkout gives
     assert json.loads((tmp_path / "config.json").read_text()) == resolve_config(dict(OPTIONS))
 
-    wrong = _becos(installed, tmp_path, "write-config", "--options", json.dumps({**OPTIONS, "datasets": ["toska"]}),
-                   "--out", "bad.json")
+    wrong = _becos(
+        installed,
+        tmp_path,
+        "write-config",
+        "--options",
+        json.dumps({**OPTIONS, "datasets": ["toska"]}),
+        "--out",
+        "bad.json",
+    )
     assert wrong.returncode == 2 and "did you mean 'tosca'" in wrong.stderr, wrong.stderr
     assert "Traceback" not in wrong.stderr

@@ -19,18 +19,21 @@ def test_read_keeps_file_order_and_cache_returns_same_arrays(tosca_dir, tmp_path
     assert np.allclose(mesh.vertices[0], first)
     cache = MeshCache(tmp_path / "cache")
     a = cache.load(tosca_dir / "wolf0.off")
-    b = MeshCache(tmp_path / "cache").load(tosca_dir / "wolf0.off")   # a new process would read the .npz
+    b = MeshCache(tmp_path / "cache").load(tosca_dir / "wolf0.off")  # a new process would read the .npz
     assert np.array_equal(a.vertices, b.vertices) and np.array_equal(a.faces, b.faces)
     assert len(list((tmp_path / "cache").glob("*.npz"))) == 1
 
 
-@pytest.mark.parametrize("fault, message", [
-    ("missing", "mesh file not found"),
-    ("empty", "could not be parsed|no vertices"),
-    ("truncated", "OFF header announces|face indices span|could not be parsed|no triangles"),
-    ("garbage", "could not be parsed|no vertices|no triangles"),
-    ("nan", "NaN or infinite"),
-])
+@pytest.mark.parametrize(
+    "fault, message",
+    [
+        ("missing", "mesh file not found"),
+        ("empty", "could not be parsed|no vertices"),
+        ("truncated", "OFF header announces|face indices span|could not be parsed|no triangles"),
+        ("garbage", "could not be parsed|no vertices|no triangles"),
+        ("nan", "NaN or infinite"),
+    ],
+)
 def test_bad_mesh_files_raise_errors_naming_the_file(fault, message, tosca_dir, tmp_path):
     path = tmp_path / "wolf0.off"
     if fault != "missing":
@@ -42,7 +45,7 @@ def test_bad_mesh_files_raise_errors_naming_the_file(fault, message, tosca_dir, 
             lines = text.splitlines()
             # keep the header and half the vertices, then the faces: indices beyond the vertices read
             n_vertices = int(lines[1].split()[0])
-            path.write_text("\n".join(lines[:2 + n_vertices // 2] + lines[2 + n_vertices:]) + "\n")
+            path.write_text("\n".join(lines[: 2 + n_vertices // 2] + lines[2 + n_vertices :]) + "\n")
         elif fault == "garbage":
             path.write_bytes(np.random.default_rng(0).bytes(5000))
         elif fault == "nan":

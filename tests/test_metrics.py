@@ -8,9 +8,22 @@ import pytest
 
 from becos.geodesics import GeodesicDistances
 from becos.geometry import surface_area
-from becos.metrics import (AUC_PRESETS, DEFAULT_AUC_PRESET, PAPER_PRESET, auc, auc_preset, get_preset,
-                           left_right_accuracy, overlap_f1, overlap_iou, pair_errors, pair_record, pck_curve,
-                           preset_name, summarise)
+from becos.metrics import (
+    AUC_PRESETS,
+    DEFAULT_AUC_PRESET,
+    PAPER_PRESET,
+    auc,
+    auc_preset,
+    get_preset,
+    left_right_accuracy,
+    overlap_f1,
+    overlap_iou,
+    pair_errors,
+    pair_record,
+    pck_curve,
+    preset_name,
+    summarise,
+)
 from becos.surface_map import SurfaceMap
 
 
@@ -231,15 +244,24 @@ def test_summarise_means_per_pair_then_over_pairs(wolf):
     rng = np.random.default_rng(11)
     truth = np.arange(x.n_vertices)
     rows = []
-    for k, (split, category) in enumerate([("test", "four-legged"), ("test", "four-legged"),
-                                           ("val", "four-legged"), ("test", "human")]):
+    for k, (split, category) in enumerate(
+        [("test", "four-legged"), ("test", "four-legged"), ("val", "four-legged"), ("test", "human")]
+    ):
         pred = truth.copy()
         moved = rng.random(x.n_vertices) < 0.2 * (k + 1)
         pred[moved] = a_neighbour(x, rng)[pred[moved]]
         errors = pair_errors(pred, truth, geo, sqrt_area)
         for preset in AUC_PRESETS:
-            rows.append({"method": "shifted", "split": split, "category": category, "dataset": "tosca",
-                         "pair": k, **pair_record(errors, presets=(preset,))})
+            rows.append(
+                {
+                    "method": "shifted",
+                    "split": split,
+                    "category": category,
+                    "dataset": "tosca",
+                    "pair": k,
+                    **pair_record(errors, presets=(preset,)),
+                }
+            )
     per_pair = pd.DataFrame(rows)
     table = summarise(per_pair)
     assert set(table["grouping"]) == {"all", "split", "category", "dataset"}

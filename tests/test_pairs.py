@@ -18,8 +18,9 @@ def pair_inputs(tosca_pair_inputs):
 @pytest.mark.parametrize("setting", ["full_full", "partial_full", "partial_partial"])
 def test_pair_record_is_consistent(setting, pair_inputs, tmp_path):
     x, y, gt_xy, gt_yx = pair_inputs
-    record = build_pair(x, y, gt_xy, gt_yx, pair_id=f"test-{setting}", seed=7, split="test",
-                        options=PairOptions(setting=setting))
+    record = build_pair(
+        x, y, gt_xy, gt_yx, pair_id=f"test-{setting}", seed=7, split="test", options=PairOptions(setting=setting)
+    )
     record.save(tmp_path / "r.npz")
     loaded = PairRecord.load(tmp_path / "r.npz")
     assert loaded.meta == record.meta
@@ -75,8 +76,9 @@ def test_full_shape_travels_with_a_partial_record(pair_inputs):
     from becos.record import full_shape
 
     x, y, gt_xy, gt_yx = pair_inputs
-    record = build_pair(x, y, gt_xy, gt_yx, pair_id="full-shape", seed=3, split="test",
-                        options=PairOptions(setting="partial_partial"))
+    record = build_pair(
+        x, y, gt_xy, gt_yx, pair_id="full-shape", seed=3, split="test", options=PairOptions(setting="partial_partial")
+    )
     for side, shape in (("x", x), ("y", y)):
         full_v, full_f = full_shape(record, side)
         assert full_v.shape == shape.mesh.vertices.shape and np.array_equal(full_f, shape.mesh.faces)

@@ -14,7 +14,7 @@ import pytest
 from becos.align import RigidTransform
 from becos.cameras import REGIMES, camera_angles
 from becos.mesh import TriMesh
-from becos.partiality import (Partial, Scanner, cast_p2f, cast_p2p, cut, overlap_mask, partial_map, whole)
+from becos.partiality import Partial, Scanner, cast_p2f, cast_p2p, cut, overlap_mask, partial_map, whole
 from becos.seeding import rng_for
 from becos.surface_map import SurfaceMap, compose_path
 
@@ -71,7 +71,7 @@ def brute_force_mask(full_x: TriMesh, gt_xy: SurfaceMap, full_y: TriMesh, px_mes
     is looked up as a triangle of positions among Ŷ's triangles."""
     full_index = _position_index(full_x.vertices)
     rows = np.array([full_index[p.tobytes()] for p in np.ascontiguousarray(px_mesh.vertices)])
-    tri_key = lambda t: b"".join(sorted(r.tobytes() for r in t))          # noqa: E731
+    tri_key = lambda t: b"".join(sorted(r.tobytes() for r in t))  # noqa: E731
     kept = {tri_key(t) for t in py_mesh.vertices[py_mesh.faces]}
     out = np.zeros(len(rows), dtype=bool)
     for i, r in enumerate(rows):
@@ -84,8 +84,7 @@ def n_components(mesh: TriMesh) -> int:
     import trimesh
 
     tm = trimesh.Trimesh(mesh.vertices, mesh.faces, process=False)
-    return len(trimesh.graph.connected_components(tm.face_adjacency, nodes=np.arange(len(mesh.faces)),
-                                                  min_len=1))
+    return len(trimesh.graph.connected_components(tm.face_adjacency, nodes=np.arange(len(mesh.faces)), min_len=1))
 
 
 def check_partial(full: TriMesh, p: Partial):
@@ -96,10 +95,10 @@ def check_partial(full: TriMesh, p: Partial):
     np.testing.assert_array_equal(p.full_to_partial[p.partial_to_full], np.arange(len(p.partial_to_full)))
     assert (p.full_to_partial >= 0).sum() == len(p.partial_to_full)
     assert p.mesh.vertices.dtype == np.float64
-    np.testing.assert_array_equal(p.mesh.vertices, full.vertices[p.partial_to_full])          # exact copies
-    np.testing.assert_array_equal(p.partial_to_full[p.mesh.faces], full.faces[p.face_ids])   # same corners, same order
+    np.testing.assert_array_equal(p.mesh.vertices, full.vertices[p.partial_to_full])  # exact copies
+    np.testing.assert_array_equal(p.partial_to_full[p.mesh.faces], full.faces[p.face_ids])  # same corners, same order
     np.testing.assert_array_equal(np.flatnonzero(p.kept_faces), p.face_ids)
-    assert np.unique(p.mesh.faces).size == p.mesh.n_vertices                                  # no unused vertex
+    assert np.unique(p.mesh.faces).size == p.mesh.n_vertices  # no unused vertex
 
 
 # ---------------------------------------------------------------- tests
@@ -139,13 +138,16 @@ def test_p2p_pair_is_consistent(pair_name, request):
         assert r.accepted == (0.1 <= r.overlap_x <= 0.9 and 0.1 <= r.overlap_y <= 0.9)
         assert 0 <= r.try_index < r.n_tries_used <= 10
         # partial maps: -1 exactly off the mask; the points are the ground truth's points on Ŷ
-        for m, mask, src, gt, dst, full_dst in ((r.map_xy, r.mask_x, px, gt_xy, py, y),
-                                                (r.map_yx, r.mask_y, py, gt_yx, px, x)):
+        for m, mask, src, gt, dst, full_dst in (
+            (r.map_xy, r.mask_x, px, gt_xy, py, y),
+            (r.map_yx, r.mask_y, py, gt_yx, px, x),
+        ):
             assert len(m) == src.mesh.n_vertices
             np.testing.assert_array_equal(m.face >= 0, mask)
             assert m.face.max() < dst.mesh.n_faces
-            np.testing.assert_allclose(m.positions(dst.mesh)[mask],
-                                       gt.positions(full_dst)[src.partial_to_full[mask]], atol=1e-12)
+            np.testing.assert_allclose(
+                m.positions(dst.mesh)[mask], gt.positions(full_dst)[src.partial_to_full[mask]], atol=1e-12
+            )
         # geometry, camera and masks belong together: re-scanning the stored camera gives the stored partial
         np.testing.assert_array_equal(Scanner(x).kept_faces(r.camera_x), px.kept_faces)
         np.testing.assert_array_equal(Scanner(y).kept_faces(r.camera_y), py.kept_faces)
@@ -155,7 +157,7 @@ def test_overlap_rule_with_missing_ground_truth(cat_pair):
     """-1 ground truth never counts; rows whose point leaves Ŷ's kept faces are -1 in the partial map."""
     x, y, gt_xy, gt_yx = cat_pair
     r = cast_p2p(x, y, gt_xy, gt_yx, (1, "missing"))
-    head = x.vertices[:, 1] > np.quantile(x.vertices[:, 1], 0.8)            # pretend Y lacks this part
+    head = x.vertices[:, 1] > np.quantile(x.vertices[:, 1], 0.8)  # pretend Y lacks this part
     gt_cut = SurfaceMap(np.where(head, -1, gt_xy.face), np.where(head[:, None], 0.0, gt_xy.weights))
     mask = overlap_mask(r.partial_x, gt_cut, r.partial_y)
     np.testing.assert_array_equal(mask, r.mask_x & ~head[r.partial_x.partial_to_full])
@@ -190,10 +192,23 @@ def test_kept_try_is_the_closest_to_the_range(cat_pair):
     assert not r.accepted and r.n_tries_used == 4
     dist = []
     for k in range(4):
-        single = cast_p2p(x, y, gt_xy, gt_yx, lambda _, k=k: rng_for(5, "fallback", "cameras", k), n_tries=1,
-                          min_overlap=lo, max_overlap=hi, scanners=scanners)
-        dist.append(max(0, lo - single.overlap_x) + max(0, single.overlap_x - hi)
-                    + max(0, lo - single.overlap_y) + max(0, single.overlap_y - hi))
+        single = cast_p2p(
+            x,
+            y,
+            gt_xy,
+            gt_yx,
+            lambda _, k=k: rng_for(5, "fallback", "cameras", k),
+            n_tries=1,
+            min_overlap=lo,
+            max_overlap=hi,
+            scanners=scanners,
+        )
+        dist.append(
+            max(0, lo - single.overlap_x)
+            + max(0, single.overlap_x - hi)
+            + max(0, lo - single.overlap_y)
+            + max(0, single.overlap_y - hi)
+        )
         if k == r.try_index:
             np.testing.assert_array_equal(single.partial_x.face_ids, r.partial_x.face_ids)
             np.testing.assert_array_equal(single.drawn_cameras[1].position, r.drawn_cameras[1].position)
@@ -211,7 +226,9 @@ def test_alignment_makes_the_scan_frame_independent(cat_pair):
     a = cast_p2p(x, y, gt_xy, gt_yx, (8, "frame"))
     b = cast_p2p(x, moved, gt_xy, gt_yx, (8, "frame"))
     np.testing.assert_allclose(b.alignment.rotation, a.alignment.rotation @ q.T, atol=1e-9)
-    ja = (a.partial_y.kept_faces & b.partial_y.kept_faces).sum() / (a.partial_y.kept_faces | b.partial_y.kept_faces).sum()
+    ja = (a.partial_y.kept_faces & b.partial_y.kept_faces).sum() / (
+        a.partial_y.kept_faces | b.partial_y.kept_faces
+    ).sum()
     assert ja > 0.99
     assert abs(a.overlap_x - b.overlap_x) < 0.01 and abs(a.overlap_y - b.overlap_y) < 0.01
 

@@ -60,17 +60,20 @@ def test_job_options_are_the_stage_keys_results_and_version(config):
     assert bw.job_options(dict(reversed(list(config.items()))), "pairs", "partial_partial") == text
 
 
-@pytest.mark.parametrize("edit, reruns", [
-    ({"min_overlap": 0.2}, {("pairs", "partial_partial")}),
-    ({"cam_pos_regime": "medium"}, {("pairs", "partial_partial")}),
-    ({"camera_distance": 2.0}, {("pairs", "partial_partial"), ("pairs", "partial_full")}),
-    ({"one_axis_rotation": False}, {("pairs", s) for s in SETTINGS}),
-    ({"seed": 7}, {("remesh", None), *(("manifest", s) for s in SETTINGS)}),
-    ({"n_renders": 1}, set()),
-    ({"store_vis": False}, set()),
-    ({"exports": {"psmal": True}}, set()),
-    ({"results": "elsewhere"}, None),   # every job: the paths change
-])
+@pytest.mark.parametrize(
+    "edit, reruns",
+    [
+        ({"min_overlap": 0.2}, {("pairs", "partial_partial")}),
+        ({"cam_pos_regime": "medium"}, {("pairs", "partial_partial")}),
+        ({"camera_distance": 2.0}, {("pairs", "partial_partial"), ("pairs", "partial_full")}),
+        ({"one_axis_rotation": False}, {("pairs", s) for s in SETTINGS}),
+        ({"seed": 7}, {("remesh", None), *(("manifest", s) for s in SETTINGS)}),
+        ({"n_renders": 1}, set()),
+        ({"store_vis": False}, set()),
+        ({"exports": {"psmal": True}}, set()),
+        ({"results": "elsewhere"}, None),  # every job: the paths change
+    ],
+)
 def test_an_edit_reaches_exactly_the_stages_that_read_the_key(config, edit, reruns):
     changed = _rerun(config, **edit)
     if reruns is None:
@@ -86,13 +89,16 @@ def test_a_stage_version_bump_reruns_only_that_stage(config, monkeypatch):
     assert {job for job in before if before[job] != after[job]} == {("ground_truth", None)}
 
 
-@pytest.mark.parametrize("row, remesh, token", [
-    ({"x_variant": 2, "x_face_target": 11734}, True, "f11734"),       # a published face target wins
-    ({"x_variant": 2, "x_face_target": math.nan}, True, "v2"),         # none published: the variant
-    ({"x_variant": 0, "x_face_target": 0}, True, "v0"),
-    ({"x_variant": 1}, True, "v1"),                                    # no face-target column at all
-    ({"x_variant": 1, "x_face_target": 500}, False, "original"),       # remesh off: the original mesh
-])
+@pytest.mark.parametrize(
+    "row, remesh, token",
+    [
+        ({"x_variant": 2, "x_face_target": 11734}, True, "f11734"),  # a published face target wins
+        ({"x_variant": 2, "x_face_target": math.nan}, True, "v2"),  # none published: the variant
+        ({"x_variant": 0, "x_face_target": 0}, True, "v0"),
+        ({"x_variant": 1}, True, "v1"),  # no face-target column at all
+        ({"x_variant": 1, "x_face_target": 500}, False, "original"),  # remesh off: the original mesh
+    ],
+)
 def test_remesh_tokens(row, remesh, token):
     assert bw.remesh_token(row, "x", remesh) == token
     assert bw.remesh_token(pd.Series(row), "x", remesh) == token
@@ -101,24 +107,38 @@ def test_remesh_tokens(row, remesh, token):
 def test_remesh_targets_follow_the_token(config):
     assert bw.remesh_target(config, "tosca", "cat0", "f9000") == {"target_faces": 9000}
     v0 = bw.remesh_target(config, "tosca", "cat0", "v0")["target_vertices"]
-    assert v0 == bw.remesh_target(config, "tosca", "cat0", "v0")["target_vertices"]   # seeded, stable
-    assert {bw.remesh_target(config, "tosca", n, "v0")["target_vertices"] for n in ("cat0", "cat1", "dog0")} \
-        <= set(range(9000, 10001))
+    assert v0 == bw.remesh_target(config, "tosca", "cat0", "v0")["target_vertices"]  # seeded, stable
+    assert {bw.remesh_target(config, "tosca", n, "v0")["target_vertices"] for n in ("cat0", "cat1", "dog0")} <= set(
+        range(9000, 10001)
+    )
 
 
 def _plan(config: dict) -> bw.Plan:
     """A plan over 4 TOSCA-named shapes: full_full has 3 pairs in chunks 0 and 5, one pair per side
     pinned to a published face target."""
     names = ["cat0", "cat1", "dog0", "dog1"]
-    catalog = pd.DataFrame({"dataset": "tosca", "name": names, "file": [f"data/{n}.off" for n in names],
-                            "template_key": [f"tosca_{n}" for n in names]})
-    manifest = pd.DataFrame({
-        "pair_id": ["p0", "p1", "p2"], "chunk": [0, 0, 5],
-        "x_dataset": "tosca", "x_name": ["cat0", "cat1", "cat0"], "x_variant": [0, 1, 0],
-        "x_face_target": [math.nan, math.nan, 12000],
-        "y_dataset": "tosca", "y_name": ["cat1", "dog0", "dog1"], "y_variant": [1, 0, 2],
-        "y_face_target": [math.nan, math.nan, math.nan],
-    })
+    catalog = pd.DataFrame(
+        {
+            "dataset": "tosca",
+            "name": names,
+            "file": [f"data/{n}.off" for n in names],
+            "template_key": [f"tosca_{n}" for n in names],
+        }
+    )
+    manifest = pd.DataFrame(
+        {
+            "pair_id": ["p0", "p1", "p2"],
+            "chunk": [0, 0, 5],
+            "x_dataset": "tosca",
+            "x_name": ["cat0", "cat1", "cat0"],
+            "x_variant": [0, 1, 0],
+            "x_face_target": [math.nan, math.nan, 12000],
+            "y_dataset": "tosca",
+            "y_name": ["cat1", "dog0", "dog1"],
+            "y_variant": [1, 0, 2],
+            "y_face_target": [math.nan, math.nan, math.nan],
+        }
+    )
     return bw.Plan(config, catalog, {"full_full": manifest})
 
 
@@ -126,15 +146,25 @@ def test_chunk_inputs_are_the_remeshes_the_chunk_reads(config):
     plan = _plan(config)
     remeshed = plan.layout.remeshed
     assert plan.chunks("full_full") == [0, 5]
-    assert plan.chunk_inputs("full_full", 0) == sorted(str(remeshed("tosca", n, t)) for n, t in
-                                                       [("cat0", "v0"), ("cat1", "v1"), ("dog0", "v0")])
+    assert plan.chunk_inputs("full_full", 0) == sorted(
+        str(remeshed("tosca", n, t)) for n, t in [("cat0", "v0"), ("cat1", "v1"), ("dog0", "v0")]
+    )
     # cat1 v1 appears on both sides of chunk 0 and is listed once; the published target is its own file
-    assert plan.chunk_inputs("full_full", 5) == [str(remeshed("tosca", "cat0", "f12000")),
-                                                 str(remeshed("tosca", "dog1", "v2"))]
-    assert plan.chunk_inputs("full_full", 3) == []                       # a chunk without pairs reads nothing
+    assert plan.chunk_inputs("full_full", 5) == [
+        str(remeshed("tosca", "cat0", "f12000")),
+        str(remeshed("tosca", "dog1", "v2")),
+    ]
+    assert plan.chunk_inputs("full_full", 3) == []  # a chunk without pairs reads nothing
     assert plan.chunk_inputs("full_full", 0) is not plan.chunk_inputs("full_full", 0)  # callers get a copy
-    assert plan.remesh_jobs == sorted({("tosca", "cat0", "v0"), ("tosca", "cat1", "v1"), ("tosca", "dog0", "v0"),
-                                       ("tosca", "cat0", "f12000"), ("tosca", "dog1", "v2")})
+    assert plan.remesh_jobs == sorted(
+        {
+            ("tosca", "cat0", "v0"),
+            ("tosca", "cat1", "v1"),
+            ("tosca", "dog0", "v0"),
+            ("tosca", "cat0", "f12000"),
+            ("tosca", "dog1", "v2"),
+        }
+    )
     assert json.loads(plan.shape_json("tosca", "dog0"))["file"] == "data/dog0.off"
 
 
@@ -150,12 +180,12 @@ def test_stored_input_keys(tmp_path):
     gt = tmp_path / "gt.npz"
     save_npz(gt, input_key=np.array("abc123"), xy_face=np.zeros(3, dtype=np.int64))
     assert bw._stored_key(gt, "input_key") == "abc123"
-    assert bw._stored_key(gt, "other") is None                         # written before keys existed
+    assert bw._stored_key(gt, "other") is None  # written before keys existed
     record = tmp_path / "record.npz"
     save_npz(record, __meta__=np.array(json.dumps({"pair_id": "p0", "input_key": "def456"})))
     assert bw._stored_key(record, "__meta__") == "def456"
     broken = tmp_path / "broken.npz"
-    broken.write_bytes(gt.read_bytes()[:40])                            # a killed write
+    broken.write_bytes(gt.read_bytes()[:40])  # a killed write
     assert bw._stored_key(broken, "input_key") is None
     assert bw._stored_key(tmp_path / "absent.npz", "input_key") is None
     # the key is a digest of everything the pair reads: any change gives another key
@@ -178,6 +208,6 @@ def test_the_overlap_range_has_one_default():
 
 
 def test_exports_zarr_false_is_a_named_config_error():
-    assert bw.resolve_config({**BASE, "exports": {"zarr": True}})["exports"]["zarr"] is True   # older configs
+    assert bw.resolve_config({**BASE, "exports": {"zarr": True}})["exports"]["zarr"] is True  # older configs
     with pytest.raises(ConfigError, match=r"exports.zarr: false is not supported.*Fix: remove exports.zarr"):
         bw.resolve_config({**BASE, "exports": {"zarr": False}})

@@ -18,25 +18,29 @@ from becos.store import DamagedStoreError, PairKeyError, open_benchmark, write_s
 
 @pytest.fixture
 def store(pair_record_files, tmp_path) -> Path:
-    return write_store(pair_record_files["full_full"], tmp_path / "full_full.zarr", setting="full_full",
-                       progress=False)
+    return write_store(pair_record_files["full_full"], tmp_path / "full_full.zarr", setting="full_full", progress=False)
 
 
 @pytest.mark.parametrize("key", [1.5, True, None, [0]])
 def test_a_pair_key_that_is_no_row_nor_pair_id_is_refused(store, key):
     bench = open_benchmark(store)
-    with pytest.raises(PairKeyError, match=r"a pair is chosen by its row \(an int\) or its pair_id \(a str\), not") as err:
+    with pytest.raises(
+        PairKeyError, match=r"a pair is chosen by its row \(an int\) or its pair_id \(a str\), not"
+    ) as err:
         bench.record(key)
     assert isinstance(err.value, TypeError) and isinstance(err.value, BecosError)
-    assert bench.record(1).pair_id == bench.table["pair_id"][1]          # an int still works
+    assert bench.record(1).pair_id == bench.table["pair_id"][1]  # an int still works
 
 
 def test_a_store_of_a_newer_format_says_so(store):
     meta = json.loads((store / "zarr.json").read_text())
     meta["attributes"]["becos_store"]["format"] += 1
     (store / "zarr.json").write_text(json.dumps(meta))
-    with pytest.raises(InputFileError, match=r"was written by a newer becos: store format 3, this becos reads format 2"
-                                             r"\. Fix: upgrade becos"):
+    with pytest.raises(
+        InputFileError,
+        match=r"was written by a newer becos: store format 3, this becos reads format 2"
+        r"\. Fix: upgrade becos",
+    ):
         open_benchmark(store)
 
 
@@ -47,9 +51,12 @@ def test_a_store_rewritten_under_a_reader_is_a_named_error(store, pair_record_fi
     folder = store.parent / "one"
     folder.mkdir()
     records[1].save(folder / "only.npz")
-    write_store([folder / "only.npz"], store, setting="full_full", progress=False)   # another store, same path
-    with pytest.raises(DamagedStoreError, match=r"was rewritten or removed while this reader had it open \(reading "
-                                                r"pairs 0:1\)\. Fix: open it again") as err:
+    write_store([folder / "only.npz"], store, setting="full_full", progress=False)  # another store, same path
+    with pytest.raises(
+        DamagedStoreError,
+        match=r"was rewritten or removed while this reader had it open \(reading "
+        r"pairs 0:1\)\. Fix: open it again",
+    ) as err:
         bench.record(0)
     assert err.value.path == store
     with pytest.raises(DamagedStoreError, match="was rewritten or removed"):
@@ -57,16 +64,39 @@ def test_a_store_rewritten_under_a_reader_is_a_named_error(store, pair_record_fi
     assert open_benchmark(store).record(0).pair_id == records[1].pair_id != first.pair_id
 
 
-@pytest.mark.parametrize("argv, message", [
-    (["catalog", "--options", "{bad"], "becos catalog: --options: not valid JSON (Expecting property name enclosed "
-                                       "in double quotes at line 1 column 2: '{bad'). Fix: pass the JSON"),
-    (["catalog", "--options", "[1, 2]"], "becos catalog: --options: a JSON object {...} is needed, not a JSON list"),
-    (["catalog", "--options", "{}"], "becos catalog: --options: lacks the key 'annotations' (given keys: []). Fix: "),
-    (["remesh", "--options", "{}", "--shape", "{x", "--token", "v0"], "becos remesh: --shape: not valid JSON"),
-    (["ground-truth", "--options", '{"results": "RESULTS", "annotations": "x", "template_file": "t"}', "--setting",
-      "full_full", "--chunk", "0"], "becos ground-truth: RESULTS/catalog.csv: not found (an input of this stage). "
-                                    "Fix: run the stages before `becos ground-truth`"),
-], ids=["not_json", "not_an_object", "missing_key", "bad_shape", "missing_input"])
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (
+            ["catalog", "--options", "{bad"],
+            "becos catalog: --options: not valid JSON (Expecting property name enclosed "
+            "in double quotes at line 1 column 2: '{bad'). Fix: pass the JSON",
+        ),
+        (
+            ["catalog", "--options", "[1, 2]"],
+            "becos catalog: --options: a JSON object {...} is needed, not a JSON list",
+        ),
+        (
+            ["catalog", "--options", "{}"],
+            "becos catalog: --options: lacks the key 'annotations' (given keys: []). Fix: ",
+        ),
+        (["remesh", "--options", "{}", "--shape", "{x", "--token", "v0"], "becos remesh: --shape: not valid JSON"),
+        (
+            [
+                "ground-truth",
+                "--options",
+                '{"results": "RESULTS", "annotations": "x", "template_file": "t"}',
+                "--setting",
+                "full_full",
+                "--chunk",
+                "0",
+            ],
+            "becos ground-truth: RESULTS/catalog.csv: not found (an input of this stage). "
+            "Fix: run the stages before `becos ground-truth`",
+        ),
+    ],
+    ids=["not_json", "not_an_object", "missing_key", "bad_shape", "missing_input"],
+)
 def test_bad_options_of_a_stage_command_are_one_line_errors(argv, message, tmp_path, capsys):
     from becos.cli import main
 
@@ -91,8 +121,9 @@ def _wolves(tmp_path: Path, tosca_dir: Path, edit) -> tuple[Path, str]:
         (folder / f"{name}.off").symlink_to(tosca_dir / f"{name}.off")
     edit(folder)
     with pytest.raises(DatasetCheckError) as err:
-        check_datasets(["tosca"], tmp_path / "data", tosca_dir.parents[1],
-                       config_dir=small_registry(tmp_path, {"wolf": 3}))
+        check_datasets(
+            ["tosca"], tmp_path / "data", tosca_dir.parents[1], config_dir=small_registry(tmp_path, {"wolf": 3})
+        )
     return folder, str(err.value)
 
 
@@ -106,8 +137,10 @@ def _edit_wolf1(folder: Path, tosca_dir: Path, edit_lines) -> None:
 def test_a_stray_file_is_named_as_stray_not_blamed_on_the_registry(tosca_dir, tmp_path):
     folder, text = _wolves(tmp_path, tosca_dir, lambda f: shutil.copy(tosca_dir / "cat0.off", f / "teapot.off"))
     assert "1 problem(s)" in text
-    assert (f"{folder}: 1 file(s) there are not shapes of dataset 'tosca': teapot.off (their names match no class "
-            f"rule of the dataset registry ") in text
+    assert (
+        f"{folder}: 1 file(s) there are not shapes of dataset 'tosca': teapot.off (their names match no class "
+        f"rule of the dataset registry "
+    ) in text
     assert f"Fix: move them out of {folder} (stray files)" in text
 
 
@@ -115,9 +148,12 @@ def test_a_dangling_symlink_is_named_as_such(tosca_dir, tmp_path):
     def edit(folder):
         (folder / "wolf2.off").unlink()
         (folder / "wolf2.off").symlink_to(tmp_path / "gone" / "wolf2.off")
+
     folder, text = _wolves(tmp_path, tosca_dir, edit)
-    assert (f"{folder / 'wolf2.off'}: is a symbolic link to {tmp_path / 'gone' / 'wolf2.off'}, which does not exist "
-            f"(a dangling link). Fix: point the link at the real file") in text
+    assert (
+        f"{folder / 'wolf2.off'}: is a symbolic link to {tmp_path / 'gone' / 'wolf2.off'}, which does not exist "
+        f"(a dangling link). Fix: point the link at the real file"
+    ) in text
 
 
 def test_a_quad_face_is_named_not_called_truncated(tosca_dir, tmp_path):
@@ -126,6 +162,7 @@ def test_a_quad_face_is_named_not_called_truncated(tosca_dir, tmp_path):
     def quad(lines):
         a, b, c, d = lines[-1].split()
         lines[-1] = f"4 {b} {c} {d} 7"
+
     folder, text = _wolves(tmp_path, tosca_dir, lambda f: _edit_wolf1(f, tosca_dir, quad))
     expected = f"{folder / 'wolf1.off'}: face line 8684 (line 13030 of the file: b'4 "
     assert expected in text and "has 4 corners, not 3; becos needs triangle meshes" in text
@@ -139,12 +176,16 @@ def test_a_vertex_line_with_two_coordinates_is_named_with_its_line(tosca_dir, tm
 
     def two(lines):
         lines[2 + 100] = " ".join(lines[2 + 100].split()[:2])
+
     folder, text = _wolves(tmp_path, tosca_dir, lambda f: _edit_wolf1(f, tosca_dir, two))
     assert f"{folder / 'wolf1.off'}: vertex line 101 (line 103 of the file: " in text
     assert "holds 2 values instead of x y z" in text
-    with pytest.raises(InputFileError, match=r"vertex line 101 \(line 103 of the file: .*\) holds 2 values instead "
-                                             r"of x y z\. Fix: re-export or re-download"):
-        read_mesh(folder / "wolf1.off")                                  # what the remesh job reads
+    with pytest.raises(
+        InputFileError,
+        match=r"vertex line 101 \(line 103 of the file: .*\) holds 2 values instead "
+        r"of x y z\. Fix: re-export or re-download",
+    ):
+        read_mesh(folder / "wolf1.off")  # what the remesh job reads
 
 
 def test_a_flattened_mesh_is_refused(tosca_dir, tmp_path):
@@ -155,12 +196,16 @@ def test_a_flattened_mesh_is_refused(tosca_dir, tmp_path):
     wolf = read_mesh(tosca_dir / "wolf1.off")
     flat = wolf.vertices.copy()
     flat[:, 2] = 0.0
-    folder, text = _wolves(tmp_path, tosca_dir, lambda f: (f / "wolf1.off").unlink() or write_off(f / "wolf1.off", flat,
-                                                                                                   wolf.faces))
+    folder, text = _wolves(
+        tmp_path, tosca_dir, lambda f: (f / "wolf1.off").unlink() or write_off(f / "wolf1.off", flat, wolf.faces)
+    )
     assert f"{folder / 'wolf1.off'}: all its 4344 vertices lie in one plane (thickness 0 of its largest extent)" in text
-    with pytest.raises(InputFileError, match=r"all its 4344 vertices lie in one plane .*\. Fix: use the dataset's "
-                                             r"original 3-D mesh"):
-        read_mesh(folder / "wolf1.off")                                  # the remesh job and `check --full-parse`
+    with pytest.raises(
+        InputFileError,
+        match=r"all its 4344 vertices lie in one plane .*\. Fix: use the dataset's "
+        r"original 3-D mesh",
+    ):
+        read_mesh(folder / "wolf1.off")  # the remesh job and `check --full-parse`
 
 
 def test_a_non_manifold_vertex_is_refused(tosca_dir, tmp_path):
@@ -174,8 +219,11 @@ def test_a_non_manifold_vertex_is_refused(tosca_dir, tmp_path):
     assert non_manifold_vertices(wolf.faces, wolf.n_vertices).size == 0
     assert non_manifold_vertices(faces, wolf.n_vertices).tolist() == [a]
     welded = type(wolf)(wolf.vertices, faces)
-    with pytest.raises(InputFileError, match=r"wolf1.off: 1 vertices are non-manifold \(their faces form several fans "
-                                             r"that touch only at the vertex, e.g. vertex 100 of the file\)") as err:
+    with pytest.raises(
+        InputFileError,
+        match=r"wolf1.off: 1 vertices are non-manifold \(their faces form several fans "
+        r"that touch only at the vertex, e.g. vertex 100 of the file\)",
+    ) as err:
         surface_for_remeshing(welded, source=tosca_dir / "wolf1.off")
     assert "Repair non Manifold Vertices" in err.value.fix
     with pytest.raises(InputFileError, match="1 vertices are non-manifold"):
@@ -208,9 +256,25 @@ def test_a_results_path_with_a_space_is_quoted_in_the_jobs(becos_code, tmp_path)
 
     repo = Path(__file__).resolve().parents[1]
     workdir = write_config_file(tmp_path / "run", tosca_config(becos_code, results="my results"))
-    dry = subprocess.run([sys.executable, "-m", "snakemake", "-s", str(repo / "Snakefile"), "-d", str(workdir),
-                          "--configfile", str(workdir / "config.yaml"), "-n", "-p", "--cores", "1"],
-                         capture_output=True, text=True)
+    dry = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "snakemake",
+            "-s",
+            str(repo / "Snakefile"),
+            "-d",
+            str(workdir),
+            "--configfile",
+            str(workdir / "config.yaml"),
+            "-n",
+            "-p",
+            "--cores",
+            "1",
+        ],
+        capture_output=True,
+        text=True,
+    )
     assert dry.returncode == 0, dry.stderr[-3000:]
     assert "--out 'my results/checks/datasets.json'" in dry.stdout, dry.stdout[-3000:]
     assert "--out 'my results/config.json'" in dry.stdout
@@ -227,11 +291,14 @@ def _in_a_full_filesystem(tmp_path: Path, script: str) -> subprocess.CompletedPr
     mount.mkdir()
     runner = tmp_path / "full.py"
     runner.write_text(f"FULL = {str(mount)!r}\n" + script)
-    shell = (f"mount -t tmpfs -o size=64k none {mount} && head -c 1000000 /dev/zero > {mount}/filler 2>/dev/null; "
-             f"exec {sys.executable} {runner}")
+    shell = (
+        f"mount -t tmpfs -o size=64k none {mount} && head -c 1000000 /dev/zero > {mount}/filler 2>/dev/null; "
+        f"exec {sys.executable} {runner}"
+    )
     env = dict(os.environ, PYTHONPATH=str(Path(__file__).resolve().parents[1]))
-    result = subprocess.run(["unshare", "--user", "--map-root-user", "--mount", "sh", "-c", shell],
-                            capture_output=True, text=True, env=env)
+    result = subprocess.run(
+        ["unshare", "--user", "--map-root-user", "--mount", "sh", "-c", shell], capture_output=True, text=True, env=env
+    )
     if "mount:" in result.stderr or "unshare:" in result.stderr:
         pytest.skip(f"cannot mount a private tmpfs here: {result.stderr.strip()[:200]}")
     return result
@@ -255,8 +322,9 @@ sys.exit(main(["write-config", "--options", '{"data_dir": "d", "annotations": "a
     mount = tmp_path / "tiny"
     assert f"LIBRARY {mount}/gt.npz: cannot be written: No space left on device (" in result.stdout, result
     assert result.returncode == 2, result.stderr
-    assert result.stderr.startswith(f"becos write-config: {mount}/config.json: cannot be written: No space left on "
-                                    f"device ("), result.stderr
+    assert result.stderr.startswith(
+        f"becos write-config: {mount}/config.json: cannot be written: No space left on device ("
+    ), result.stderr
     assert "Fix: free disk space, or set `results` to a folder on a larger disk, and run again" in result.stderr
     assert "Traceback" not in result.stderr
 
@@ -267,13 +335,26 @@ def test_an_ascii_ply_header_announcing_fewer_faces_than_the_file_holds(tosca_di
     from becos.mesh import read_mesh
 
     wolf = read_mesh(tosca_dir / "wolf0.off")
-    header = ["ply", "format ascii 1.0", f"element vertex {wolf.n_vertices}", "property float x", "property float y",
-              "property float z", f"element face {wolf.n_faces - 1}", "property list uchar int vertex_indices",
-              "end_header"]
-    body = [f"{x} {y} {z}" for x, y, z in wolf.vertices.tolist()] + [f"3 {a} {b} {c}" for a, b, c in wolf.faces.tolist()]
+    header = [
+        "ply",
+        "format ascii 1.0",
+        f"element vertex {wolf.n_vertices}",
+        "property float x",
+        "property float y",
+        "property float z",
+        f"element face {wolf.n_faces - 1}",
+        "property list uchar int vertex_indices",
+        "end_header",
+    ]
+    body = [f"{x} {y} {z}" for x, y, z in wolf.vertices.tolist()] + [
+        f"3 {a} {b} {c}" for a, b, c in wolf.faces.tolist()
+    ]
     path = tmp_path / "wolf0.ply"
     path.write_text("\n".join(header + body) + "\n")
-    with pytest.raises(InputFileError, match=rf"the PLY header announces 4344 vertices and 8683 faces but 13028 data "
-                                             rf"lines follow, 1 more than announced") as err:
+    with pytest.raises(
+        InputFileError,
+        match=r"the PLY header announces 4344 vertices and 8683 faces but 13028 data "
+        r"lines follow, 1 more than announced",
+    ) as err:
         check_mesh_file(path)
     assert err.value.path == path and "correct the header's counts" in err.value.fix

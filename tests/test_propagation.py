@@ -11,8 +11,17 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
-from becos.propagation import (LABEL_NAMES, NO_LABEL, agreement, labels_for_instance, labels_for_partial,
-                               labels_through_remesh, nearest_annotated, propagate_labels, propagator)
+from becos.propagation import (
+    LABEL_NAMES,
+    NO_LABEL,
+    agreement,
+    labels_for_instance,
+    labels_for_partial,
+    labels_through_remesh,
+    nearest_annotated,
+    propagate_labels,
+    propagator,
+)
 
 
 @pytest.fixture(scope="module")
@@ -49,7 +58,7 @@ def test_label_values_mean_left_on_plus_x(annotations, prepared):
     assert LABEL_NAMES[1] == "left" and LABEL_NAMES[0] == "right" and LABEL_NAMES[NO_LABEL] == "none"
     horse = prepared("horse0").mesh.vertices
     head = horse[:, 1] > np.quantile(horse[:, 1], 0.97)
-    assert horse[head, 2].mean() > 0.5                     # the head is at +z: the horse faces +z
+    assert horse[head, 2].mean() > 0.5  # the head is at +z: the horse faces +z
     for name in ("horse0", "centaur0"):
         v = prepared(name).mesh.vertices
         labels = annotations.chirality_labels("tosca", name)
@@ -58,9 +67,15 @@ def test_label_values_mean_left_on_plus_x(annotations, prepared):
 
 
 def test_nearest_annotated_template_by_hops_then_csv_order(tosca_network, tosca_entries):
-    expected = {"cat0": ("tosca_horse", 2), "dog3": ("tosca_horse", 1), "wolf1": ("tosca_horse", 2),
-                "horse5": ("tosca_horse", 0), "centaur2": ("tosca_centaur", 0), "michael4": ("faust", 1),
-                "victoria0": ("faust", 1)}
+    expected = {
+        "cat0": ("tosca_horse", 2),
+        "dog3": ("tosca_horse", 1),
+        "wolf1": ("tosca_horse", 2),
+        "horse5": ("tosca_horse", 0),
+        "centaur2": ("tosca_centaur", 0),
+        "michael4": ("faust", 1),
+        "victoria0": ("faust", 1),
+    }
     for name, (key, hops) in expected.items():
         source, n = nearest_annotated(tosca_network, tosca_entries[name])
         assert (source.key, n) == (key, hops), name
@@ -80,8 +95,12 @@ def test_nearest_annotated_template_by_hops_then_csv_order(tosca_network, tosca_
 
 
 def test_identity_path_gives_the_file_labels(tosca_network, tosca_entries, annotations, remeshed, prepared):
-    for name, template in (("horse0", "horse0"), ("horse5", "horse0"), ("centaur0", "centaur0"),
-                           ("centaur3", "centaur0")):
+    for name, template in (
+        ("horse0", "horse0"),
+        ("horse5", "horse0"),
+        ("centaur0", "centaur0"),
+        ("centaur3", "centaur0"),
+    ):
         labels = propagate_labels(tosca_network, tosca_entries[name])
         assert labels.dtype == np.int8
         np.testing.assert_array_equal(labels, annotations.chirality_labels("tosca", template))
@@ -94,8 +113,7 @@ def test_identity_path_gives_the_file_labels(tosca_network, tosca_entries, annot
     dominant = to_original.weights.max(axis=1) >= 0.6
     assert dominant.sum() > 0.3 * len(labels)
     corner = to_original.to_vertex_indices(prepared("horse5").mesh.faces)
-    np.testing.assert_array_equal(labels[dominant],
-                                  annotations.chirality_labels("tosca", "horse0")[corner[dominant]])
+    np.testing.assert_array_equal(labels[dominant], annotations.chirality_labels("tosca", "horse0")[corner[dominant]])
 
 
 @pytest.mark.parametrize("name", ["cat0", "cat5"])
@@ -108,7 +126,7 @@ def test_cat_legs_carry_the_side_they_stand_on(tosca_network, tosca_entries, pre
     legs = (y < y.min() + 0.25 * np.ptp(y)) & (np.abs(v[:, 0]) > 0.05 * np.ptp(v[:, 0]))
     assert legs.sum() > 5000
     assert ((labels[legs] == 1) == (v[legs, 0] > 0)).mean() >= 0.99
-    assert (labels[legs & (v[:, 0] > 0)] == 1).mean() >= 0.99     # left legs: the template's left label
+    assert (labels[legs & (v[:, 0] > 0)] == 1).mean() >= 0.99  # left legs: the template's left label
 
 
 def test_centaur_torso_has_no_counterpart_on_a_four_legged_template(tosca_network, tosca_entries, prepared, remeshed):
@@ -118,7 +136,7 @@ def test_centaur_torso_has_no_counterpart_on_a_four_legged_template(tosca_networ
     assert (own != NO_LABEL).all()
     via_horse = propagate_labels(tosca_network, tosca_entries["centaur1"], annotated="tosca_horse")
     v = prepared("centaur1").mesh.vertices
-    assert (via_horse == NO_LABEL).sum() == 9936        # the edge file's -1 rows (centaur0_bottom -> horse0)
+    assert (via_horse == NO_LABEL).sum() == 9936  # the edge file's -1 rows (centaur0_bottom -> horse0)
     assert (via_horse[v[:, 1] > 0.2] == NO_LABEL).all()  # torso, arms, head
     assert (via_horse[v[:, 1] < -0.3] != NO_LABEL).all()  # legs
     kept = via_horse != NO_LABEL
@@ -127,12 +145,14 @@ def test_centaur_torso_has_no_counterpart_on_a_four_legged_template(tosca_networ
     via_horse_r = propagate_labels(tosca_network, tosca_entries["centaur1"], remesh=r, annotated="tosca_horse")
     carried = labels_through_remesh(via_horse, r, prepared("centaur1").mesh.faces)
     assert ((via_horse_r == NO_LABEL) == (carried == NO_LABEL)).mean() >= 0.98
-    assert 0.2 < (via_horse_r == NO_LABEL).mean() < 0.6   # by area, not by the original's vertex density
+    assert 0.2 < (via_horse_r == NO_LABEL).mean() < 0.6  # by area, not by the original's vertex density
     assert (via_horse_r[r.mesh.vertices[:, 1] > 0.2] == NO_LABEL).all()
 
 
 @pytest.mark.parametrize("name", ["cat0", "horse5", "centaur1", "wolf1"])
-def test_remeshed_labels_agree_with_original_carried_through_the_remesh(tosca_network, tosca_entries, prepared, remeshed, name):
+def test_remeshed_labels_agree_with_original_carried_through_the_remesh(
+    tosca_network, tosca_entries, prepared, remeshed, name
+):
     """Must-show: direct propagation to the remesh (A) vs propagation to the original triangulation
     carried through ``to_original`` (B) agree on >= 98 % of the vertices labelled in either."""
     r = remeshed(name)

@@ -3,23 +3,40 @@
 from __future__ import annotations
 
 import pickle
-from pathlib import Path
 from collections import Counter
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
+from test_sampling import template_rows, tosca_entries
 
 from becos.catalog import catalog_table
 from becos.errors import ConfigError, InputFileError
-from becos.published import (SHAPE_FIELDS, import_published, load_cameras, load_published, published_shapes,
-                             rotation_to_xyz_degrees, save_cameras, write_published_pickle, y_rotation)
+from becos.published import (
+    SHAPE_FIELDS,
+    import_published,
+    load_cameras,
+    load_published,
+    published_shapes,
+    rotation_to_xyz_degrees,
+    save_cameras,
+    write_published_pickle,
+    y_rotation,
+)
 from becos.sampling import MANIFEST_COLUMNS, read_manifest, sample_pairs, write_manifest
-from test_sampling import tosca_entries, template_rows
 
 SETTINGS = ("full_full", "partial_partial")
-EXPECTED_SHAPES = {"faust": 100, "scape": 71, "kids": 32, "tosca": 76, "smal": 49, "shrec20": 11,
-                   "dt4d_animal": 1948, "dt4d_human": 246}
+EXPECTED_SHAPES = {
+    "faust": 100,
+    "scape": 71,
+    "kids": 32,
+    "tosca": 76,
+    "smal": 49,
+    "shrec20": 11,
+    "dt4d_animal": 1948,
+    "dt4d_human": 246,
+}
 
 
 @pytest.fixture(scope="module")
@@ -75,24 +92,29 @@ def test_import_counts_and_shapes(imported, pickles, setting):
 def test_tosca_subset(imported, pickles, tmp_path):
     raw = load_published(pickles["full_full"])
     sub = import_published(pickles["full_full"], datasets={"tosca"})
-    want = {s: sum(1 for x, y in pairs if x["org_dataset"] == y["org_dataset"] == "tosca")
-            for s, pairs in zip(("train", "test", "val"), raw)}
+    want = {
+        s: sum(1 for x, y in pairs if x["org_dataset"] == y["org_dataset"] == "tosca")
+        for s, pairs in zip(("train", "test", "val"), raw)
+    }
     assert sub.report["n_pairs"] == want
     assert set(sub.manifest["x_dataset"]) | set(sub.manifest["y_dataset"]) == {"tosca"}
     full = imported["full_full"].manifest
-    assert set(sub.manifest["pair_id"]) <= set(full["pair_id"])   # same ids as in the whole import
+    assert set(sub.manifest["pair_id"]) <= set(full["pair_id"])  # same ids as in the whole import
     total = {s: n for s, n in zip(("train", "test", "val"), (10185, 142, 137))}
     assert {s: want[s] + sub.report["dropped_missing_dataset"].get(s, 0) for s in total} == total
-    write_manifest(sub.manifest, tmp_path / "tosca.csv")       # extras survive the CSV form
+    write_manifest(sub.manifest, tmp_path / "tosca.csv")  # extras survive the CSV form
     pd.testing.assert_frame_equal(read_manifest(tmp_path / "tosca.csv"), sub.manifest)
-    print(f"\npublished F2F pairs with both shapes from TOSCA: {want}; "
-          f"TOSCA shapes used by them: {len(published_shapes(sub.manifest))}")
+    print(
+        f"\npublished F2F pairs with both shapes from TOSCA: {want}; "
+        f"TOSCA shapes used by them: {len(published_shapes(sub.manifest))}"
+    )
 
 
 def test_restricted_unpickler_refuses_other_globals(tmp_path):
     class Evil:
         def __reduce__(self):
             import os
+
             return (os.getcwd, ())
 
     bad = tmp_path / "pairings_original_full_full.pkl"
@@ -116,7 +138,7 @@ def test_round_trip_manifest_pickle_manifest(becos_code, tosca_catalog, tmp_path
     path = tmp_path / "pairs.pkl"
     write_published_pickle(m, path, tosca_catalog, template_rows=rows, cameras=cams)
     data = path.read_bytes()
-    assert b"numpy._core" not in data and b"numpy.core" not in data   # loadable by numpy 1.x and 2.x
+    assert b"numpy._core" not in data and b"numpy.core" not in data  # loadable by numpy 1.x and 2.x
     raw = load_published(path)
     assert [len(s) for s in raw] == [int((m["split"] == s).sum()) for s in ("train", "test", "val")]
     x, y = raw[0][0]
@@ -126,7 +148,7 @@ def test_round_trip_manifest_pickle_manifest(becos_code, tosca_catalog, tmp_path
     assert ("cam_pos" in y) == (setting != "full_full")
     cls = "".join(c for c in y["name"] if c.isalpha())
     assert y["partial_full_template"] == rows[f"tosca_{cls}"]["partial_full_template"]
-    back = import_published(path)      # setting read from the pickle's becos metadata
+    back = import_published(path)  # setting read from the pickle's becos metadata
     pd.testing.assert_frame_equal(back.manifest[list(MANIFEST_COLUMNS)], m)
     if cams is not None:
         assert back.cameras.keys() == cams.keys()
@@ -158,10 +180,24 @@ def test_rotation_helpers():
 def _manifest_of(records) -> pd.DataFrame:
     from becos.sampling import sort_manifest
 
-    rows = [{"pair_id": r.pair_id, "setting": r.meta["setting"], "split": r.meta["split"], "category": "four-legged",
-             "copy": 0, "x_dataset": r.meta["x"]["dataset"], "x_name": r.meta["x"]["name"],
-             "y_dataset": r.meta["y"]["dataset"], "y_name": r.meta["y"]["name"], "seed": int(r.meta["seed"]),
-             "x_variant": 0, "y_variant": 0, "chunk": 0} for r in records]
+    rows = [
+        {
+            "pair_id": r.pair_id,
+            "setting": r.meta["setting"],
+            "split": r.meta["split"],
+            "category": "four-legged",
+            "copy": 0,
+            "x_dataset": r.meta["x"]["dataset"],
+            "x_name": r.meta["x"]["name"],
+            "y_dataset": r.meta["y"]["dataset"],
+            "y_name": r.meta["y"]["name"],
+            "seed": int(r.meta["seed"]),
+            "x_variant": 0,
+            "y_variant": 0,
+            "chunk": 0,
+        }
+        for r in records
+    ]
     return sort_manifest(pd.DataFrame(rows, columns=list(MANIFEST_COLUMNS)))
 
 
@@ -174,8 +210,9 @@ def reference_shape_path(file_path: str, data_dir: str) -> str:
 
 
 @pytest.mark.parametrize("setting", ["full_full", "partial_full", "partial_partial"])
-def test_store_pickle_round_trip(setting, pair_record_files, store_of, becos_code, tosca_catalog, tmp_path,
-                                 monkeypatch):
+def test_store_pickle_round_trip(
+    setting, pair_record_files, store_of, becos_code, tosca_catalog, tmp_path, monkeypatch
+):
     from becos.cameras import draw_camera_pair
     from becos.published import N_CAMERAS, store_pair_facts
     from becos.record import PairRecord
@@ -187,9 +224,15 @@ def test_store_pickle_round_trip(setting, pair_record_files, store_of, becos_cod
     bench = open_benchmark(store_of(records, setting))
     facts = store_pair_facts(bench)
     path = tmp_path / f"pairings_{setting}.pkl"
-    write_published_pickle(_manifest_of(records), path, tosca_catalog, random_rotations=facts["random_rotations"],
-                           cameras=facts["cameras"], pair_face_targets=facts["face_targets"],
-                           data_root=becos_code / "data")
+    write_published_pickle(
+        _manifest_of(records),
+        path,
+        tosca_catalog,
+        random_rotations=facts["random_rotations"],
+        cameras=facts["cameras"],
+        pair_face_targets=facts["face_targets"],
+        data_root=becos_code / "data",
+    )
     back = import_published(path)
     m = back.manifest.set_index("pair_id")
     assert sorted(m.index) == sorted(r.pair_id for r in records)
@@ -197,7 +240,7 @@ def test_store_pickle_round_trip(setting, pair_record_files, store_of, becos_cod
         row = m.loc[r.pair_id]
         for s in ("x", "y"):
             rot = row[[f"{s}_random_rot_{i}" for i in range(9)]].to_numpy(float).reshape(3, 3)
-            assert np.array_equal(rot, r[f"{s}_random_rotation"])   # the rotation the record applied
+            assert np.array_equal(rot, r[f"{s}_random_rotation"])  # the rotation the record applied
             full_faces = len(r[f"{s}_full_faces"]) or len(r[f"{s}_faces"])
             want = 18765 if (s, r is records[1]) == ("x", True) else full_faces
             assert row[f"{s}_face_target"] == want
@@ -208,7 +251,7 @@ def test_store_pickle_round_trip(setting, pair_record_files, store_of, becos_cod
         assert cams.shape == (2, N_CAMERAS, 3)
         for k, s in enumerate(("x", "y")):
             if setting == "partial_full" and s == "x":
-                assert np.isnan(cams[k]).all()   # the full template has no camera
+                assert np.isnan(cams[k]).all()  # the full template has no camera
                 continue
             camera = r[f"{s}_camera"]
             assert (cams[k] == cams[k, 0]).all() and np.linalg.norm(cams[k, 0]) == pytest.approx(1.0)
@@ -217,11 +260,14 @@ def test_store_pickle_round_trip(setting, pair_record_files, store_of, becos_cod
             np.testing.assert_allclose(cams[k, 0] * np.linalg.norm(along), along, atol=1e-12)
         if setting == "partial_partial":  # ... and it is the try the scanner accepted, redrawn from its seed
             o = r.meta["options"]
-            drawn = draw_camera_pair(rng_for(r.meta["seed"], r.pair_id, "cameras", r.meta["try_index"]),
-                                     o["cam_pos_regime"], o["up_axis"], o["camera_distance"])
+            drawn = draw_camera_pair(
+                rng_for(r.meta["seed"], r.pair_id, "cameras", r.meta["try_index"]),
+                o["cam_pos_regime"],
+                o["up_axis"],
+                o["camera_distance"],
+            )
             for k in (0, 1):
-                np.testing.assert_allclose(cams[k, 0], drawn[k].position / np.linalg.norm(drawn[k].position),
-                                           atol=1e-9)
+                np.testing.assert_allclose(cams[k, 0], drawn[k].position / np.linalg.norm(drawn[k].position), atol=1e-9)
 
     # file_path as the reference writes it; its path logic finds the meshes under another data_dir
     raw = load_published(path)
@@ -232,8 +278,11 @@ def test_store_pickle_round_trip(setting, pair_record_files, store_of, becos_cod
     (elsewhere / "tosca-off").symlink_to(becos_code / "data" / "tosca-off", target_is_directory=True)
     for s in shapes:
         found = Path(reference_shape_path(s["file_path"], str(elsewhere)))
-        assert found.is_file() and found.read_bytes() == (becos_code / "data" / "tosca-off" / f"{s['name']}.off").read_bytes()
-    monkeypatch.chdir(becos_code)   # default data_dir "data": relative to the reference checkout
+        assert (
+            found.is_file()
+            and found.read_bytes() == (becos_code / "data" / "tosca-off" / f"{s['name']}.off").read_bytes()
+        )
+    monkeypatch.chdir(becos_code)  # default data_dir "data": relative to the reference checkout
     assert all(Path(reference_shape_path(s["file_path"], "data")).is_file() for s in shapes)
     # a catalog file outside the data root cannot be written as data/...
     with pytest.raises(ConfigError, match="outside the data root"):

@@ -19,8 +19,13 @@ import pytest
 
 from becos.errors import ConfigError, InputFileError
 from becos.mesh import TriMesh
-from becos.reference_remesh import (open3d_rotation, reference_output, reference_pose, reference_remesh,
-                                    undo_reference_output)
+from becos.reference_remesh import (
+    open3d_rotation,
+    reference_output,
+    reference_pose,
+    reference_remesh,
+    undo_reference_output,
+)
 from becos.workflow import resolve_config
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
@@ -41,8 +46,10 @@ def test_remesher_defaults_to_reference_only_under_original_settings():
     assert resolve_config(BASE)["remesher"] == "becos"
     assert resolve_config({**BASE, "original_settings": True, "setting": "full_full"})["remesher"] == "reference"
     # the user's choice wins either way
-    assert resolve_config({**BASE, "original_settings": True, "setting": "full_full",
-                           "remesher": "becos"})["remesher"] == "becos"
+    assert (
+        resolve_config({**BASE, "original_settings": True, "setting": "full_full", "remesher": "becos"})["remesher"]
+        == "becos"
+    )
     assert resolve_config({**BASE, "remesher": "reference"})["remesher"] == "reference"
     with pytest.raises(ConfigError, match="remesher"):
         resolve_config({**BASE, "remesher": "pymeshlab"})
@@ -99,8 +106,9 @@ def test_published_rotations_equal_the_oracle_partial_partial_ones(published, be
         assert oracle.rotation_identical(row, ix, iy), f"{split}/{index}"
 
 
-def test_reference_remesh_is_the_reference_bit_for_bit_and_its_maps_give_its_correspondences(becos_code, tosca_dir,
-                                                                                             published):
+def test_reference_remesh_is_the_reference_bit_for_bit_and_its_maps_give_its_correspondences(
+    becos_code, tosca_dir, published
+):
     """centaur3 / centaur1 (train 477): the reference's own chain on our remesh of the file gives its
     vertices to a few ulps, and its rounded vertex maps composed give its saved correspondences."""
     from becos.datasets import DatasetSpec
@@ -116,8 +124,10 @@ def test_reference_remesh_is_the_reference_bit_for_bit_and_its_maps_give_its_cor
         assert np.array_equal(ref.mesh.faces, faces)
         align = (info["align_rotation"], info["align_translation"]) if side == "y" else (None, None)
         posed = reference_pose(ref.mesh.vertices, spec.scale, open3d_rotation(spec.rotation_deg))
-        assert np.abs(reference_output(posed, info["surface_area"], info["random_rotation"], *align)
-                      - vertices).max() < 1e-14
+        assert (
+            np.abs(reference_output(posed, info["surface_area"], info["random_rotation"], *align) - vertices).max()
+            < 1e-14
+        )
         assert np.abs(undo_reference_output(vertices, info["random_rotation"], *align) - posed).max() < 1e-14
         refs.append(ref)
     x, y = refs
@@ -125,10 +135,13 @@ def test_reference_remesh_is_the_reference_bit_for_bit_and_its_maps_give_its_cor
     assert np.array_equal(x.source_to_remeshed[y.remeshed_to_source], np.load(folder / "corres_10.npy"))
 
 
-@pytest.mark.parametrize("faces, message", [
-    ([[0, 1, 2], [2, 1, 0]], "repeat another face's vertices"),       # crashes fast-simplification
-    ([[0, 0, 1], [0, 1, 2], [0, 2, 4]], "name a vertex twice"),       # aborts fast-simplification
-])
+@pytest.mark.parametrize(
+    "faces, message",
+    [
+        ([[0, 1, 2], [2, 1, 0]], "repeat another face's vertices"),  # crashes fast-simplification
+        ([[0, 0, 1], [0, 1, 2], [0, 2, 4]], "name a vertex twice"),  # aborts fast-simplification
+    ],
+)
 def test_inputs_that_crash_the_decimator_are_named_errors(faces, message):
     vertices = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1]], dtype=float)
     with pytest.raises(InputFileError, match=message) as info:
@@ -151,8 +164,13 @@ def test_views_from_the_published_cameras_keep_the_oracle_partials(published, be
     triangle rows differ while the kept full faces do not. A 5000² cast from X's published camera
     gives the shipped file's triangle set up to grazing rays."""
     from becos.datasets import DatasetSpec
-    from becos.reference_views import (cast_pinhole, full_faces_covering, pair_view_files, read_triangle_ids,
-                                       reference_component)
+    from becos.reference_views import (
+        cast_pinhole,
+        full_faces_covering,
+        pair_view_files,
+        read_triangle_ids,
+        reference_component,
+    )
 
     folder = becos_code / "reference_oracle" / "partial_partial" / "train" / "384"
     row = oracle.manifest_row(published["manifests"]["partial_partial"], "train", 384)
@@ -191,9 +209,13 @@ def test_published_p2p_keeps_the_try_and_the_faces_the_reference_kept(published,
     """train 384 (horse7 / wolf1) with becos's own casting frames and exact ground truth: the reference
     rule keeps try 0 as the oracle did, with the oracle's kept faces; its overlaps are within 1 % of
     the oracle's (it rounds the ground truth at every hop); becos's exact rule is reported beside."""
-    got = oracle.compare_published_try(becos_code, published, stage,
-                                       oracle.manifest_row(published["manifests"]["partial_partial"], "train", 384),
-                                       becos_code / "reference_oracle" / "partial_partial" / "train" / "384")
+    got = oracle.compare_published_try(
+        becos_code,
+        published,
+        stage,
+        oracle.manifest_row(published["manifests"]["partial_partial"], "train", 384),
+        becos_code / "reference_oracle" / "partial_partial" / "train" / "384",
+    )
     assert (got["try"], got["camera_try"], got["accepted"]) == (got["oracle_try"], got["oracle_camera_try"], True)
     assert got["same_kept_faces"] and got["sources"] == ["file"]
     assert np.allclose(got["reference_rule_overlaps"], got["oracle_overlaps"], atol=0.01)
@@ -239,7 +261,10 @@ def test_store_metadata_says_which_parts_follow_the_published_lists():
     assert store_metadata(original, "full_full")["follows_published_lists"]["views"] is None
     ours = store_metadata({**original, "remesher": "becos"}, "full_full")["follows_published_lists"]
     assert ours["remesh"] is False and ours["face_targets"] is True
-    assert store_metadata({**original, "remesher": "becos"}, "partial_partial")["follows_published_lists"]["views"] is False
+    assert (
+        store_metadata({**original, "remesher": "becos"}, "partial_partial")["follows_published_lists"]["views"]
+        is False
+    )
     sampled = store_metadata(resolve_config(BASE), "full_full")["follows_published_lists"]
     assert not any(sampled[k] for k in ("pairs", "rotations", "face_targets", "remesh"))
 
@@ -261,8 +286,18 @@ def test_pairs_stage_builds_published_p2p_pairs_from_the_published_views(publish
     options = pair_options(config, "partial_partial")
     views = _published_views(config, row, options)
     assert views is not None
-    record = build_pair(x, y, gt["xy"], gt["yx"], pair_id=row["pair_id"], seed=int(row["seed"]), split="train",
-                        options=options, rotations=_published_rotations(row), published_views=views)
+    record = build_pair(
+        x,
+        y,
+        gt["xy"],
+        gt["yx"],
+        pair_id=row["pair_id"],
+        seed=int(row["seed"]),
+        split="train",
+        options=options,
+        rotations=_published_rotations(row),
+        published_views=views,
+    )
     sides = [oracle.oracle_side(folder, i) for i in (0, 1)]
     for s, (name, _, o_faces, info), r in zip("xy", sides, remeshed):
         expected, _ = full_faces_covering(r.mesh.faces, r.mesh.n_vertices, info["partial2full"][o_faces])

@@ -36,6 +36,7 @@ def diag(mesh: TriMesh) -> float:
 def tosca(tosca_dir, mesh_cache):
     def load(name: str) -> TriMesh:
         return mesh_cache.load(tosca_dir / f"{name}.off")
+
     return load
 
 
@@ -52,6 +53,7 @@ def remeshes(tosca):
             r, stats = remesh_with_stats(original, target)
             store[key] = (original, r, stats)
         return store[key]
+
     return get
 
 
@@ -68,9 +70,9 @@ def test_remesh_counts_topology_and_maps(remeshes, name):
     orig_facts = mesh_checks(original)
     assert facts["components"] == 1
     assert facts["non_manifold_edges"] == 0
-    assert facts["misoriented_edges"] == 0            # every interior edge used once in each direction
+    assert facts["misoriented_edges"] == 0  # every interior edge used once in each direction
     assert facts["unreferenced_vertices"] == 0
-    assert facts["euler_characteristic"] == orig_facts["euler_characteristic"]   # topology preserved
+    assert facts["euler_characteristic"] == orig_facts["euler_characteristic"]  # topology preserved
     assert stats["snap_flipped_faces"] == 0
 
     d = diag(original)
@@ -80,7 +82,7 @@ def test_remesh_counts_topology_and_maps(remeshes, name):
     image = points_on_surface(original, r.to_original.face, r.to_original.weights)
     gap = np.linalg.norm(image - r.mesh.vertices, axis=1)
     assert np.allclose(gap, r.to_original.distance, atol=1e-9 * d)
-    unsnapped = r.to_original.distance > 0       # corners of faces a snap would fold: left in place
+    unsnapped = r.to_original.distance > 0  # corners of faces a snap would fold: left in place
     assert unsnapped.sum() == stats["unsnapped_vertices"] and unsnapped.mean() <= 0.002
     assert gap.max() <= 5e-3 * d
     # before the snap the Loop-subdivided, decimated vertices were already close to the surface
@@ -106,13 +108,14 @@ def test_remesh_counts_topology_and_maps(remeshes, name):
 
 def test_orientation_follows_the_input(remeshes):
     """A closed remesh keeps the input's outward orientation (positive signed volume like horse0's)."""
+
     def signed_volume(m: TriMesh) -> float:
         t = m.vertices[m.faces]
         return float(np.einsum("ij,ij->i", t[:, 0], np.cross(t[:, 1], t[:, 2])).sum() / 6.0)
 
     original, r, _ = remeshes("horse5")
-    assert mesh_checks(original)["misoriented_edges"] > 0          # the input is inconsistently wound
-    reference = signed_volume(remeshes("horse0")[0])                  # consistently wound pose
+    assert mesh_checks(original)["misoriented_edges"] > 0  # the input is inconsistently wound
+    reference = signed_volume(remeshes("horse0")[0])  # consistently wound pose
     assert np.sign(signed_volume(r.mesh)) == np.sign(reference)
     assert abs(signed_volume(r.mesh)) == pytest.approx(abs(reference), rel=0.02)
 
@@ -131,8 +134,9 @@ def test_inconsistent_winding_maps_refer_to_faces_as_given(tosca):
     gap = np.linalg.norm(image - r.mesh.vertices, axis=1)
     assert np.allclose(gap, r.to_original.distance, atol=1e-9 * diag(original))
     repaired = TriMesh(original.vertices, original.faces[:, ::-1])
-    moved = np.linalg.norm(points_on_surface(repaired, r.to_original.face, r.to_original.weights)
-                           - r.mesh.vertices, axis=1)
+    moved = np.linalg.norm(
+        points_on_surface(repaired, r.to_original.face, r.to_original.weights) - r.mesh.vertices, axis=1
+    )
     assert (moved > 1e-6 * diag(original)).mean() > 0.5
 
 
@@ -168,21 +172,24 @@ def test_without_jitter_variants_copy_each_other(tosca):
 def test_deterministic_byte_identical(tosca, remeshes):
     original, first, _ = remeshes("horse5")
     again = remesh(TriMesh(original.vertices.copy(), original.faces.copy()), first.target_vertices)
-    for x, y in [(first.mesh.vertices, again.mesh.vertices), (first.mesh.faces, again.mesh.faces),
-                 (first.to_original.face, again.to_original.face),
-                 (first.to_original.weights, again.to_original.weights),
-                 (first.from_original.face, again.from_original.face),
-                 (first.from_original.weights, again.from_original.weights),
-                 (first.from_original.distance, again.from_original.distance)]:
+    for x, y in [
+        (first.mesh.vertices, again.mesh.vertices),
+        (first.mesh.faces, again.mesh.faces),
+        (first.to_original.face, again.to_original.face),
+        (first.to_original.weights, again.to_original.weights),
+        (first.from_original.face, again.from_original.face),
+        (first.from_original.weights, again.from_original.weights),
+        (first.from_original.distance, again.from_original.distance),
+    ]:
         assert x.dtype == y.dtype and x.tobytes() == y.tobytes()
 
 
 def test_face_target_mode(tosca):
-    original = tosca("horse0")            # closed: every collapse removes two faces
+    original = tosca("horse0")  # closed: every collapse removes two faces
     r = remesh(original, target_faces=18500)
     assert r.target_faces == 18500 and r.target_vertices is None
     assert r.mesh.n_faces in (18499, 18500)
-    assert r.mesh.n_vertices == r.mesh.n_faces // 2 + 2          # closed genus-0 surface: F = 2V - 4
+    assert r.mesh.n_vertices == r.mesh.n_faces // 2 + 2  # closed genus-0 surface: F = 2V - 4
     assert mesh_checks(r.mesh)["components"] == 1
 
 
@@ -199,7 +206,7 @@ def test_bad_targets_raise(tosca):
 def test_variant_targets_reproducible_and_uniform():
     draws = np.array([variant_target_vertices(SEED, "tosca", f"shape{i}", k) for i in range(300) for k in range(4)])
     assert draws.min() >= 9000 and draws.max() <= 10000
-    assert draws.min() < 9100 and draws.max() > 9900          # spans the range
+    assert draws.min() < 9100 and draws.max() > 9900  # spans the range
     assert len(np.unique(draws)) > 500
     assert variant_target_vertices(SEED, "tosca", "cat0", 2) == variant_target_vertices(SEED, "tosca", "cat0", 2)
     assert variant_target_vertices(SEED, "tosca", "cat0", 2, low=5, high=5) == 5
@@ -222,7 +229,7 @@ def test_save_load_and_ply(remeshes, tmp_path):
     assert back.target_vertices == r.target_vertices and back.target_faces is None
     # the wall time is not stored (the same input gives the same bytes); older files carried it
     assert np.isnan(back.seconds) or back.seconds == r.seconds
-    assert [p.name for p in path.parent.iterdir()] == ["wolf0.npz"]        # no temporary files left
+    assert [p.name for p in path.parent.iterdir()] == ["wolf0.npz"]  # no temporary files left
 
     ply = tmp_path / "wolf0.ply"
     write_ply(ply, r.mesh)
@@ -251,8 +258,14 @@ def test_coincidence_detector_finds_vertices_on_vertices(tosca):
 
     original = tosca("wolf0")
     picks = np.array([5, 17, 400])
-    fake = Remeshed(original, SurfaceMap.from_vertex_indices(np.r_[picks, -1], original.faces),
-                    SurfaceMap.identity(original.faces, original.n_vertices), None, None, 0.0)
+    fake = Remeshed(
+        original,
+        SurfaceMap.from_vertex_indices(np.r_[picks, -1], original.faces),
+        SurfaceMap.identity(original.faces, original.n_vertices),
+        None,
+        None,
+        0.0,
+    )
     found = coincident_original_vertices(fake, original.faces)
     assert found.tolist() == [5, 17, 400, -1]
     assert shared_vertex_share(fake, original.faces, fake, original.faces) == 0.75

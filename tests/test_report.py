@@ -13,9 +13,19 @@ import pytest
 from matplotlib.image import imread
 
 from becos.record import PairRecord
-from becos.report import (CAPTIONS, NO_MATCH_GREY, common_vertices, configure_parser, overlap_histogram,
-                          position_colours, render_pair, run_cli, select_render_ids, table_from_records,
-                          write_report)
+from becos.report import (
+    CAPTIONS,
+    NO_MATCH_GREY,
+    common_vertices,
+    configure_parser,
+    overlap_histogram,
+    position_colours,
+    render_pair,
+    run_cli,
+    select_render_ids,
+    table_from_records,
+    write_report,
+)
 
 REPO = Path(__file__).resolve().parents[1]
 SETTINGS = ("full_full", "partial_full", "partial_partial")
@@ -92,8 +102,10 @@ def test_render_of_a_10k_vertex_pair(records, tmp_path):
     start = time.perf_counter()
     render_pair(record, tmp_path / "pair.png")
     seconds = time.perf_counter() - start
-    print(f"render of {len(record['x_vertices'])} + {len(record['y_vertices'])} vertices, {n_faces} faces: "
-          f"{seconds:.2f} s")  # speed: printed, not asserted
+    print(
+        f"render of {len(record['x_vertices'])} + {len(record['y_vertices'])} vertices, {n_faces} faces: "
+        f"{seconds:.2f} s"
+    )  # speed: printed, not asserted
     assert (tmp_path / "pair.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
@@ -215,8 +227,7 @@ def test_captions_exist_and_are_valid_rst():
         text = (folder / name).read_text(encoding="utf-8")
         assert "{{" not in text and "{%" not in text  # Snakemake renders captions with Jinja2
         # halt_level 2: any docutils warning is an error
-        body = publish_parts(text, writer="html", settings_overrides={"halt_level": 2,
-                                                                            "report_level": 5})["body"]
+        body = publish_parts(text, writer="html", settings_overrides={"halt_level": 2, "report_level": 5})["body"]
         assert len(body) > 100, name
 
 
@@ -236,8 +247,9 @@ def test_cli_on_a_store(pair_record_files, tmp_path, capsys):
     import becos.store as store
     from becos.cli import main
 
-    path = store.write_store(pair_record_files["partial_partial"], tmp_path / "p2p.zarr",
-                             setting="partial_partial", progress=False)
+    path = store.write_store(
+        pair_record_files["partial_partial"], tmp_path / "p2p.zarr", setting="partial_partial", progress=False
+    )
     assert main(["report", str(path), str(tmp_path / "out"), "--renders", "1"]) == 0
     printed = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     assert printed["n_pairs"] == 2 and printed["renders"] == 1 and printed["overlap_directions"] == 4

@@ -40,15 +40,18 @@ def test_retries_ask_for_more_and_chunk_time_grows_with_pairs():
     mem, runtime = table.mem_mb("pairs"), table.runtime("pairs", n_pairs=lambda w: 200)
     assert mem(Wildcards, attempt=1) == 700 and mem(Wildcards, attempt=2) == 1400
     assert runtime(Wildcards, attempt=1) == 20 and runtime(Wildcards, attempt=3) == 60  # 200 x 6 s = 20 min
-    assert table.runtime("pairs", n_pairs=lambda w: 3)(Wildcards) == 5                 # never below the table's
+    assert table.runtime("pairs", n_pairs=lambda w: 3)(Wildcards) == 5  # never below the table's
     assert table.mem_mb("unlisted")(Wildcards) == DEFAULT["mem_mb"]
 
 
-@pytest.mark.parametrize("text, problem", [
-    ("rules:\n  remesh: {mem_mb: -3, runtime: 5}\n", "mem_mb must be a positive number"),
-    ("remesh: 3\n", "KeyError"),
-    ("rules: [\n", "YAMLError|ScannerError|ParserError"),
-])
+@pytest.mark.parametrize(
+    "text, problem",
+    [
+        ("rules:\n  remesh: {mem_mb: -3, runtime: 5}\n", "mem_mb must be a positive number"),
+        ("remesh: 3\n", "KeyError"),
+        ("rules: [\n", "YAMLError|ScannerError|ParserError"),
+    ],
+)
 def test_a_broken_table_is_an_error_naming_it(tmp_path, text, problem):
     path = tmp_path / "resources.yaml"
     path.write_text(text)

@@ -25,7 +25,6 @@ from pathlib import Path
 
 import psutil
 import pytest
-
 from test_workflow import SNAKEMAKE, snakemake, write_config
 from tiny_tosca import SETTINGS, fingerprint_differences, results_fingerprint
 
@@ -33,9 +32,15 @@ SHAPES = ["tosca/cat0", "tosca/cat1", "tosca/dog0", "tosca/dog1", "tosca/wolf0",
 
 
 def small_config(workdir: Path, becos_code: Path) -> Path:
-    return write_config(workdir, becos_code, shapes=SHAPES, combinations="four-legged",
-                        caps={"train": 4, "val": 1, "test": 1}, n_chunks=2,
-                        exports={"released": False, "published_pickle": False, "report": False})
+    return write_config(
+        workdir,
+        becos_code,
+        shapes=SHAPES,
+        combinations="four-legged",
+        caps={"train": 4, "val": 1, "test": 1},
+        n_chunks=2,
+        exports={"released": False, "published_pickle": False, "report": False},
+    )
 
 
 def leftovers(workdir: Path) -> list[str]:
@@ -66,8 +71,13 @@ def run_until(workdir: Path, cores: str, marker, *extra: str, timeout: float = 6
     Returns (killed, processes killed); killed is False when the run ended before the marker."""
     cmd = [*SNAKEMAKE, "-d", str(workdir), "--configfile", str(workdir / "config.yaml"), "--cores", cores, *extra]
     with open(workdir / f"run-{time.monotonic_ns()}.out", "w") as out:
-        process = subprocess.Popen(cmd, stdout=out, stderr=subprocess.STDOUT, start_new_session=True,
-                                   env=dict(os.environ, PYTHONUNBUFFERED="1"))
+        process = subprocess.Popen(
+            cmd,
+            stdout=out,
+            stderr=subprocess.STDOUT,
+            start_new_session=True,
+            env=dict(os.environ, PYTHONUNBUFFERED="1"),
+        )
         deadline = time.monotonic() + timeout
         while process.poll() is None and time.monotonic() < deadline:
             if marker(workdir):
@@ -105,13 +115,15 @@ def test_a_killed_write_leaves_a_temporary_file_the_next_writer_removes(tmp_path
 
     from becos.atomic import remove_stale_temporaries
 
-    script = ("import os, signal, sys, numpy as np\n"
-              "from becos import atomic\n"
-              "def killed(path, **arrays):\n"
-              "    open(path, 'wb').write(b'half a file')\n"
-              "    os.kill(os.getpid(), signal.SIGKILL)\n"
-              "atomic.np.savez = killed\n"
-              "atomic.save_npz(sys.argv[1], x=np.zeros(3))\n")
+    script = (
+        "import os, signal, sys, numpy as np\n"
+        "from becos import atomic\n"
+        "def killed(path, **arrays):\n"
+        "    open(path, 'wb').write(b'half a file')\n"
+        "    os.kill(os.getpid(), signal.SIGKILL)\n"
+        "atomic.np.savez = killed\n"
+        "atomic.save_npz(sys.argv[1], x=np.zeros(3))\n"
+    )
     for name in ("mine.npz", "mine.npz", "other.npz"):
         run = subprocess.run([sys.executable, "-c", script, str(tmp_path / name)])
         assert run.returncode == -signal.SIGKILL
@@ -139,8 +151,10 @@ def test_cores_1_and_cores_2_give_identical_results(reference_run, becos_code, t
     assert len(manifests) == 3 and sum("/arrays/" in k for k in reference) > 3
     differ = fingerprint_differences(reference, fingerprint)
     assert not differ, differ[:20]
-    print(f"\n--cores 1 vs --cores 2: {len(reference)} files and store records compared, all identical "
-          f"({len(manifests)} manifests byte-identical)")
+    print(
+        f"\n--cores 1 vs --cores 2: {len(reference)} files and store records compared, all identical "
+        f"({len(manifests)} manifests byte-identical)"
+    )
 
 
 def test_store_metadata_names_the_library_versions_and_the_config_hash(reference_run):
@@ -174,8 +188,10 @@ def test_killed_runs_resume_to_the_uninterrupted_result(reference_run, becos_cod
     differ = fingerprint_differences(reference, fingerprint)
     assert not differ, differ[:20]
     assert not leftovers(workdir)  # each job removes the temporary files a killed run of it left
-    print(f"\nkill -9 and resume: {'; '.join(report)}; final results identical to the uninterrupted run "
-          f"({len(reference)} files and store records); no temporary file left by the kills")
+    print(
+        f"\nkill -9 and resume: {'; '.join(report)}; final results identical to the uninterrupted run "
+        f"({len(reference)} files and store records); no temporary file left by the kills"
+    )
 
 
 def test_a_second_run_on_the_same_results_is_refused(becos_code, tmp_path):
@@ -206,8 +222,10 @@ def test_a_second_run_on_the_same_results_is_refused(becos_code, tmp_path):
         assert set(before) <= set(after), "the refused runs removed the first run's outputs"
         assert first.poll() is None, "the first run stopped while the second ones were refused"
         refusal = next(line for line in advised_text.splitlines() if "cannot be locked" in line)
-        print(f"\nsecond run refused: {next(line for line in text.splitlines() if 'locked' in line or 'ncomplete' in line)}"
-              f"; with --rerun-incomplete: {refusal}")
+        print(
+            f"\nsecond run refused: {next(line for line in text.splitlines() if 'locked' in line or 'ncomplete' in line)}"
+            f"; with --rerun-incomplete: {refusal}"
+        )
     finally:
         kill_tree(first)
         out.close()

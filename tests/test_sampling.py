@@ -15,15 +15,31 @@ import pandas as pd
 import pytest
 
 from becos.catalog import catalog_table, natural_key, read_catalog, write_catalog
-from becos.sampling import (MANIFEST_COLUMNS, N_BUCKETS, appearance_counts, appearance_summary, assign_chunks,
-                            chunk_jobs, pair_id_of, partner_score, read_manifest, sample_pairs, shape_key,
-                            write_manifest)
+from becos.sampling import (
+    MANIFEST_COLUMNS,
+    N_BUCKETS,
+    appearance_counts,
+    appearance_summary,
+    assign_chunks,
+    chunk_jobs,
+    pair_id_of,
+    partner_score,
+    read_manifest,
+    sample_pairs,
+    shape_key,
+    write_manifest,
+)
 from becos.seeding import stable_hash
 
 TOSCA_CLASSES = {  # class -> (category, split), config/tosca.yaml
-    "michael": ("human", "train"), "david": ("human", "val"), "victoria": ("human", "test"),
-    "horse": ("four-legged", "train"), "wolf": ("four-legged", "train"), "dog": ("four-legged", "val"),
-    "cat": ("four-legged", "test"), "centaur": ("centaur", "train"),
+    "michael": ("human", "train"),
+    "david": ("human", "val"),
+    "victoria": ("human", "test"),
+    "horse": ("four-legged", "train"),
+    "wolf": ("four-legged", "train"),
+    "dog": ("four-legged", "val"),
+    "cat": ("four-legged", "test"),
+    "centaur": ("centaur", "train"),
 }
 RX90 = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
 
@@ -93,8 +109,13 @@ def test_catalog_order_columns_and_round_trip(entries, catalog, tmp_path):
     pd.testing.assert_frame_equal(catalog_table(shuffled), catalog)
     row = catalog[catalog["name"] == "horse0"].iloc[0]
     np.testing.assert_array_equal(row[[f"frame_rotation_{i}" for i in range(9)]].to_numpy(float), RX90.ravel())
-    assert (row["category"], row["split"], row["class"], row["template_key"], row["usage"]) == \
-        ("four-legged", "train", "horse", "tosca_horse", 70)
+    assert (row["category"], row["split"], row["class"], row["template_key"], row["usage"]) == (
+        "four-legged",
+        "train",
+        "horse",
+        "tosca_horse",
+        70,
+    )
     p1, p2 = tmp_path / "a.csv", tmp_path / "b.csv"
     write_catalog(catalog, p1)
     back = read_catalog(p1)
@@ -114,9 +135,9 @@ def test_pool_rules(catalog, manifest_all):
     xc = np.array([cat[shape_key(d, n)] for d, n in zip(m["x_dataset"], m["x_name"])])
     yc = np.array([cat[shape_key(d, n)] for d, n in zip(m["y_dataset"], m["y_name"])])
     centaur = (xc == "centaur") | (yc == "centaur")
-    assert (xc[~centaur] == yc[~centaur]).all()          # no cross-category pair without a centaur
+    assert (xc[~centaur] == yc[~centaur]).all()  # no cross-category pair without a centaur
     assert (m["category"].to_numpy()[~centaur] == xc[~centaur]).all()
-    assert set(m.loc[centaur, "split"]) == {"train"}     # centaur pairs in train only
+    assert set(m.loc[centaur, "split"]) == {"train"}  # centaur pairs in train only
     assert centaur.sum() > 0
     # a centaur is only a partner of another centaur
     assert not ((yc == "centaur") & (xc != "centaur")).any()
@@ -153,9 +174,11 @@ def test_anchor_counts_exact(catalog, usage_scale):
     row = summary.iloc[0]
     assert row["as_x_min"] == row["as_x_max"] == u
     assert row["total_min"] >= u and row["total_max"] > row["total_mean"] > u
-    print(f"\nusage_scale={usage_scale}: pairs {m.attrs['report']['n_pairs']}; train appearances per shape "
-          f"min {row['total_min']} median {row['total_median']} mean {row['total_mean']:.1f} "
-          f"max {row['total_max']}")
+    print(
+        f"\nusage_scale={usage_scale}: pairs {m.attrs['report']['n_pairs']}; train appearances per shape "
+        f"min {row['total_min']} median {row['total_median']} mean {row['total_mean']:.1f} "
+        f"max {row['total_max']}"
+    )
 
 
 def test_partner_is_rendezvous_argmin(catalog, manifest_all):
@@ -218,10 +241,11 @@ def test_growth_enabling_other_pools_and_centaurs(catalog):
     full = sample_pairs(catalog, "full_full", seed=42, combinations="all")
     a, b = _by_anchor(four), _by_anchor(full)
     common = a.index.intersection(b.index)
-    assert len(common) == len(a)                       # every four-legged anchor copy still exists
+    assert len(common) == len(a)  # every four-legged anchor copy still exists
     changed = (a.loc[common, "pair_id"] != b.loc[common, "pair_id"]).mean()
-    print(f"\nfour-legged -> all: {len(a)} four-legged pairs, share changed {changed:.4f}; "
-          f"pairs added {len(b) - len(a)}")
+    print(
+        f"\nfour-legged -> all: {len(a)} four-legged pairs, share changed {changed:.4f}; pairs added {len(b) - len(a)}"
+    )
     assert changed <= 0.10
     human = sample_pairs(catalog, "full_full", seed=42, combinations="human")
     human_c = sample_pairs(catalog, "full_full", seed=42, combinations="human_centaur")
@@ -229,26 +253,33 @@ def test_growth_enabling_other_pools_and_centaurs(catalog):
 
 
 def test_growth_new_dataset_changes_about_new_share(entries, catalog):
-    zoo = [Entry("zoo", f"beast{i}", f"/nowhere/beast{i}.off", "four-legged", "beast", "zoo", "train",
-                 1.0, np.eye(3), 40) for i in range(10)]
+    zoo = [
+        Entry("zoo", f"beast{i}", f"/nowhere/beast{i}.off", "four-legged", "beast", "zoo", "train", 1.0, np.eye(3), 40)
+        for i in range(10)
+    ]
     grown = catalog_table(entries + zoo)
     old = sample_pairs(catalog, "partial_partial", seed=42, combinations="all")
     new = sample_pairs(grown, "partial_partial", seed=42, combinations="all")
     a, b = _by_anchor(old), _by_anchor(new)
     assert a.index.isin(b.index).all()
-    old_fl = a[(a["category"] == "four-legged") & (a["split"] == "train")
-               & ~a.index.get_level_values("x_name").str.startswith("centaur")]
+    old_fl = a[
+        (a["category"] == "four-legged")
+        & (a["split"] == "train")
+        & ~a.index.get_level_values("x_name").str.startswith("centaur")
+    ]
     changed = old_fl["pair_id"] != b.loc[old_fl.index, "pair_id"]
     # each horse/wolf anchor had 10 candidates (11 train four-legged minus itself); 10 are added
     expected = 10 / (10 + 10)
-    print(f"\nadding 10 four-legged shapes to 11: share of existing four-legged anchors changed "
-          f"{changed.mean():.3f} (expected ~{expected:.3f}); new pairs now {len(b) - len(a)}")
+    print(
+        f"\nadding 10 four-legged shapes to 11: share of existing four-legged anchors changed "
+        f"{changed.mean():.3f} (expected ~{expected:.3f}); new pairs now {len(b) - len(a)}"
+    )
     assert abs(changed.mean() - expected) < 0.08
-    assert set(b.loc[old_fl.index[changed], "y_dataset"]) == {"zoo"}   # changes only towards new shapes
+    assert set(b.loc[old_fl.index[changed], "y_dataset"]) == {"zoo"}  # changes only towards new shapes
     unchanged = old_fl.index[~changed]
     pd.testing.assert_frame_equal(a.loc[unchanged], b.loc[unchanged])
     other = a[a["category"] == "human"]
-    assert (other["pair_id"] == b.loc[other.index, "pair_id"]).all()   # other pool untouched
+    assert (other["pair_id"] == b.loc[other.index, "pair_id"]).all()  # other pool untouched
     assert (new[new["x_dataset"] == "zoo"].groupby("x_name").size() == 40).all()
 
 
@@ -259,10 +290,8 @@ def test_caps_keep_smallest_rank_and_are_stable(entries, catalog):
     assert c5.attrs["report"]["n_pairs"] == {"train": 300, "val": 5, "test": len(base[base["split"] == "test"])}
     assert set(c5["pair_id"]) <= set(c8["pair_id"]) <= set(base["pair_id"])
     assert c5.attrs["report"]["skipped"]["cap:train"] == (base["split"] == "train").sum() - 300
-    zoo = [Entry("zoo", f"beast{i}", "-", "four-legged", "beast", "zoo", "train", 1.0, np.eye(3), 4)
-           for i in range(3)]
-    grown = sample_pairs(catalog_table(entries + zoo), "full_full", seed=42, combinations="all",
-                         caps={"train": 300})
+    zoo = [Entry("zoo", f"beast{i}", "-", "four-legged", "beast", "zoo", "train", 1.0, np.eye(3), 4) for i in range(3)]
+    grown = sample_pairs(catalog_table(entries + zoo), "full_full", seed=42, combinations="all", caps={"train": 300})
     kept = _by_anchor(c5[c5["split"] == "train"]).index
     still = kept.isin(_by_anchor(grown).index).mean()
     print(f"\ncap 300 train: share of capped anchor copies kept after adding 12 zoo anchors {still:.3f}")
@@ -275,8 +304,10 @@ def test_caps_keep_smallest_rank_and_are_stable(entries, catalog):
 def test_partial_full_with_demo_table(becos_code, catalog):
     rows = template_rows(becos_code / "config" / "templates_tosca_demo.csv")
     m = sample_pairs(catalog, "partial_full", seed=42, combinations="all", template_rows=rows)
-    expected_x = {n: r["partial_full_template"] for n, r in
-                  ((n, rows[k]) for n, k in zip(catalog["name"], catalog["template_key"]))}
+    expected_x = {
+        n: r["partial_full_template"]
+        for n, r in ((n, rows[k]) for n, k in zip(catalog["name"], catalog["template_key"]))
+    }
     assert (m["x_name"] == m["y_name"].map(expected_x)).all()
     assert (m["x_name"] != m["y_name"]).all()
     cats = dict(zip(catalog["name"], catalog["category"]))
@@ -297,15 +328,27 @@ def test_partial_full_all_table_skips_missing_datasets(becos_code, catalog):
     humans = catalog[catalog["category"] == "human"]
     n_humans = sum(70 if s == "train" else 1 for s in humans["split"])
     assert skipped["p2f_template_dataset_unavailable:faust"] == n_humans
-    assert "p2f_template_dataset_unavailable:dt4d_animal" in skipped    # dog and cat
+    assert "p2f_template_dataset_unavailable:dt4d_animal" in skipped  # dog and cat
     assert set(m["y_name"].str.extract(r"([a-z]+)")[0]) == {"horse", "wolf", "centaur"}
     assert m.attrs["report"]["n_pairs"]["train"] == len(m)
 
 
 def test_val_centaur_is_reported_not_paired(entries):
-    moved = [Entry(e.dataset, e.name, e.path, e.category, e.shape_class, e.template_key,
-                   "val" if e.name == "centaur5" else e.split, e.scale, e.frame_rotation, e.usage)
-             for e in entries]
+    moved = [
+        Entry(
+            e.dataset,
+            e.name,
+            e.path,
+            e.category,
+            e.shape_class,
+            e.template_key,
+            "val" if e.name == "centaur5" else e.split,
+            e.scale,
+            e.frame_rotation,
+            e.usage,
+        )
+        for e in entries
+    ]
     m = sample_pairs(catalog_table(moved), "full_full", seed=42, combinations="all")
     assert m.attrs["report"]["skipped"]["centaur_not_train"] == 1
     assert not (m["x_name"] == "centaur5").any() and not (m["y_name"] == "centaur5").any()
@@ -317,13 +360,30 @@ def test_val_centaur_is_reported_not_paired(entries):
 def test_benchmark_size_pair_counts():
     """~2,500 shapes with the published datasets' usage counts (time printed; speed is measured by
     benchmarks/workflow.py, never asserted in a test)."""
-    spec = [("faust", "human", 40, 100), ("scape", "human", 40, 71), ("kids", "human", 50, 32),
-            ("dt4d_human", "human", 10, 248), ("tosca", "human", 70, 39), ("dt4d_animal", "four-legged", 4, 1950),
-            ("smal", "four-legged", 60, 49), ("shrec20", "four-legged", 80, 11), ("toscaq", "four-legged", 70, 31),
-            ("toscac", "centaur", 70, 6)]
-    rows = [dict(dataset=ds, name=f"{ds}{i}", category=c, template_key=ds, usage=u,
-                 split="train" if c == "centaur" or i % 10 < 8 else ("val" if i % 10 == 8 else "test"))
-            for ds, c, u, n in spec for i in range(n)]
+    spec = [
+        ("faust", "human", 40, 100),
+        ("scape", "human", 40, 71),
+        ("kids", "human", 50, 32),
+        ("dt4d_human", "human", 10, 248),
+        ("tosca", "human", 70, 39),
+        ("dt4d_animal", "four-legged", 4, 1950),
+        ("smal", "four-legged", 60, 49),
+        ("shrec20", "four-legged", 80, 11),
+        ("toscaq", "four-legged", 70, 31),
+        ("toscac", "centaur", 70, 6),
+    ]
+    rows = [
+        dict(
+            dataset=ds,
+            name=f"{ds}{i}",
+            category=c,
+            template_key=ds,
+            usage=u,
+            split="train" if c == "centaur" or i % 10 < 8 else ("val" if i % 10 == 8 else "test"),
+        )
+        for ds, c, u, n in spec
+        for i in range(n)
+    ]
     cat = pd.DataFrame(rows)
     t0 = time.perf_counter()
     m = sample_pairs(cat, "partial_partial", seed=42, combinations="all")
@@ -359,11 +419,11 @@ def test_partial_full_with_annotation_source(becos_code, catalog, table):
     import becos.annotations as annotations
 
     source = annotations.AnnotationSource(becos_code, template_table=table)
-    plain = sample_pairs(catalog, "partial_full", seed=42, combinations="all",
-                         template_rows=template_rows(becos_code / "config" / table))
+    plain = sample_pairs(
+        catalog, "partial_full", seed=42, combinations="all", template_rows=template_rows(becos_code / "config" / table)
+    )
     via_source = sample_pairs(catalog, "partial_full", seed=42, combinations="all", template_rows=source)
-    via_dict = sample_pairs(catalog, "partial_full", seed=42, combinations="all",
-                            template_rows=source.template_rows())
+    via_dict = sample_pairs(catalog, "partial_full", seed=42, combinations="all", template_rows=source.template_rows())
     assert len(plain) > 0
     pd.testing.assert_frame_equal(via_source, plain)
     pd.testing.assert_frame_equal(via_dict, plain)
@@ -378,18 +438,25 @@ def test_partial_full_with_annotation_source(becos_code, catalog, table):
 def test_chunk_jobs_follow_the_pair_count_and_growth_moves_no_pair_needlessly():
     """Chunk jobs hold pairs_per_chunk to twice as many pairs, at most n_chunks; growth that keeps the
     job count moves no pair, a doubling splits every job in two (issue 18)."""
-    assert [chunk_jobs(n, n_chunks=64, pairs_per_chunk=100) for n in (0, 1, 150, 199, 200, 1334, 10029)] == \
-        [1, 1, 1, 1, 2, 8, 64]
+    assert [chunk_jobs(n, n_chunks=64, pairs_per_chunk=100) for n in (0, 1, 150, 199, 200, 1334, 10029)] == [
+        1,
+        1,
+        1,
+        1,
+        2,
+        8,
+        64,
+    ]
     assert chunk_jobs(10**6, n_chunks=100, pairs_per_chunk=100) == 100  # capped by n_chunks
     ids = [pair_id_of("full_full", f"d/x{i}", f"d/y{i}", 0) for i in range(1700)]
     small = assign_chunks(ids[:1000], n_chunks=64, pairs_per_chunk=100)
     grown = assign_chunks(ids[:1500], n_chunks=64, pairs_per_chunk=100)
     doubled = assign_chunks(ids, n_chunks=64, pairs_per_chunk=100)
     assert small.max() == grown.max() == 7 and doubled.max() == 15
-    assert np.array_equal(grown[:1000], small)                  # 8 jobs still: no existing pair moves
-    assert np.array_equal(doubled[:1000] // 2, small)           # 16 jobs: job k splits into 2k, 2k + 1
+    assert np.array_equal(grown[:1000], small)  # 8 jobs still: no existing pair moves
+    assert np.array_equal(doubled[:1000] // 2, small)  # 16 jobs: job k splits into 2k, 2k + 1
     sizes = np.bincount(small)
-    assert sizes.min() > 80 and sizes.max() < 170, sizes       # contiguous bucket ranges: balanced jobs
+    assert sizes.min() > 80 and sizes.max() < 170, sizes  # contiguous bucket ranges: balanced jobs
     buckets = np.array([stable_hash(p) % N_BUCKETS for p in ids[:1000]])
     ranges = [(buckets[small == k].min(), buckets[small == k].max()) for k in range(8)]
     assert all(hi < next_lo for (_, hi), (next_lo, _) in zip(ranges, ranges[1:]))  # contiguous bucket ranges

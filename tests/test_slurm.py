@@ -30,7 +30,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 from tiny_tosca import fingerprint_differences, results_fingerprint, tiny_tosca_config, write_config_file
 
 REPO = Path(__file__).resolve().parents[1]
@@ -76,10 +75,17 @@ def slurm_cluster():
 
 def _env(harness) -> dict[str, str]:
     """This process's environment without SLURM job/client variables, plus the cluster's and the profile's."""
-    env = {k: v for k, v in os.environ.items()
-           if not k.startswith(("SLURM_", "SBATCH_", "SRUN_")) and k != "SNAKEMAKE_PROFILE"}
-    env.update(harness.env(), BECOS_SLURM_ACCOUNT=harness.account, BECOS_SLURM_PARTITION=harness.partition,
-               PYTHONUNBUFFERED="1")
+    env = {
+        k: v
+        for k, v in os.environ.items()
+        if not k.startswith(("SLURM_", "SBATCH_", "SRUN_")) and k != "SNAKEMAKE_PROFILE"
+    }
+    env.update(
+        harness.env(),
+        BECOS_SLURM_ACCOUNT=harness.account,
+        BECOS_SLURM_PARTITION=harness.partition,
+        PYTHONUNBUFFERED="1",
+    )
     return env
 
 
@@ -87,18 +93,31 @@ def _snakemake(workdir: Path, args: list[str], env: dict[str, str]) -> tuple[flo
     """Run Snakemake in ``workdir`` (its working directory, as on a login node); returns (seconds, output)."""
     start = time.perf_counter()
     try:
-        result = subprocess.run([*SNAKEMAKE, "-d", str(workdir), "--configfile", str(workdir / "config.yaml"), *args],
-                                cwd=workdir, env=env, capture_output=True, text=True, timeout=RUN_TIMEOUT_S)
+        result = subprocess.run(
+            [*SNAKEMAKE, "-d", str(workdir), "--configfile", str(workdir / "config.yaml"), *args],
+            cwd=workdir,
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=RUN_TIMEOUT_S,
+        )
     except subprocess.TimeoutExpired as e:
-        raise AssertionError(f"snakemake {' '.join(args)} did not finish in {RUN_TIMEOUT_S} s:\n"
-                             f"{(e.stdout or '')[-4000:]}\n{(e.stderr or '')[-4000:]}") from None
+        raise AssertionError(
+            f"snakemake {' '.join(args)} did not finish in {RUN_TIMEOUT_S} s:\n"
+            f"{(e.stdout or '')[-4000:]}\n{(e.stderr or '')[-4000:]}"
+        ) from None
     seconds = time.perf_counter() - start
     output = result.stdout + result.stderr
     if result.returncode != 0:
-        logs = "\n".join(f"--- {p}\n{p.read_text(errors='replace')[-3000:]}" for p in sorted(workdir.rglob("*.log"))
-                         if "Error" in p.read_text(errors="replace"))
-        raise AssertionError(f"snakemake {' '.join(args)} failed (exit {result.returncode}) in {workdir}:\n"
-                             f"{output[-8000:]}\n{logs[-8000:]}")
+        logs = "\n".join(
+            f"--- {p}\n{p.read_text(errors='replace')[-3000:]}"
+            for p in sorted(workdir.rglob("*.log"))
+            if "Error" in p.read_text(errors="replace")
+        )
+        raise AssertionError(
+            f"snakemake {' '.join(args)} failed (exit {result.returncode}) in {workdir}:\n"
+            f"{output[-8000:]}\n{logs[-8000:]}"
+        )
     return seconds, output
 
 
@@ -125,17 +144,27 @@ def test_workflow_on_slurm_equals_local_run(slurm_cluster, becos_code, tmp_path_
     # 3. every job Snakemake submitted is a COMPLETED SLURM job of this run, with its rule in the comment
     run_id = re.search(r"SLURM run ID: (\S+)", out).group(1)
     submitted = dict(re.findall(r"Job (\d+) has been submitted with SLURM jobid (\d+)", out))
-    listing = harness.sacct(fmt="JobID,JobName%45,Comment%55,State,ExitCode,Elapsed,MaxRSS", all_steps=True,
-                            extra=("--name", run_id))
+    listing = harness.sacct(
+        fmt="JobID,JobName%45,Comment%55,State,ExitCode,Elapsed,MaxRSS", all_steps=True, extra=("--name", run_id)
+    )
     print(f"\n$ sinfo\n{harness.run('sinfo').stdout}\n$ sacct --name {run_id} (every step)\n{listing}")
     jobs = {j["JobID"]: j for j in harness.jobs() if j["JobName"] == run_id}
     assert submitted and set(submitted.values()) == set(jobs), (sorted(submitted.values()), sorted(jobs))
-    bad = {i: (j["State"], j["ExitCode"]) for i, j in jobs.items() if (j["State"], j["ExitCode"]) != ("COMPLETED", "0:0")}
+    bad = {
+        i: (j["State"], j["ExitCode"]) for i, j in jobs.items() if (j["State"], j["ExitCode"]) != ("COMPLETED", "0:0")
+    }
     assert not bad, f"SLURM jobs not COMPLETED 0:0: {bad}\n{listing}"
     rules = {re.match(r"rule_([a-z_]+?)(_wildcards_.*)?$", j["Comment"]).group(1) for j in jobs.values()}
     assert {"remesh", "ground_truth", "pairs", "zarr_store", "validate_store"} <= rules, rules
-    local_rules = {"all", "resolved_config", "check_datasets", "catalog", "manifest", "store_metadata",
-                   "published_pairings"}
+    local_rules = {
+        "all",
+        "resolved_config",
+        "check_datasets",
+        "catalog",
+        "manifest",
+        "store_metadata",
+        "published_pairings",
+    }
     print(f"{len(jobs)} SLURM jobs, all COMPLETED 0:0; rules on SLURM: {sorted(rules)}")
     assert not rules & local_rules, rules & local_rules
 
@@ -144,16 +173,23 @@ def test_workflow_on_slurm_equals_local_run(slurm_cluster, becos_code, tmp_path_
     differ = fingerprint_differences(expected, got)
     assert not differ, f"SLURM run differs from the local run in {differ}"
     n_arrays = sum("/arrays/" in k for k in expected)
-    n_files = sum("/" not in k or k.split("/")[1] in ("manifest.csv", "ground_truth", "pairs") or
-                  k.startswith("remeshed/") for k in expected)
-    print(f"identical: {len(expected)} sha256 digests ({n_files} result files: catalog, manifests, remeshes, "
-          f"ground truth, pair files; {n_arrays} store arrays, offsets, metas, tables, metadata)")
+    n_files = sum(
+        "/" not in k or k.split("/")[1] in ("manifest.csv", "ground_truth", "pairs") or k.startswith("remeshed/")
+        for k in expected
+    )
+    print(
+        f"identical: {len(expected)} sha256 digests ({n_files} result files: catalog, manifests, remeshes, "
+        f"ground truth, pair files; {n_arrays} store arrays, offsets, metas, tables, metadata)"
+    )
 
     # 5. the cluster-generic profile (its SLURM example) submits a remesh job; same file as the local run
     generic = write_config_file(tmp_path_factory.mktemp("slurm-generic"), config)
     target = "results/remeshed/tosca/cat0/v0.npz"
-    generic_s, out = _snakemake(generic, ["--profile", str(REPO / "profiles" / "cluster-generic"),
-                                          "--seconds-between-status-checks", "2", target], env)
+    generic_s, out = _snakemake(
+        generic,
+        ["--profile", str(REPO / "profiles" / "cluster-generic"), "--seconds-between-status-checks", "2", target],
+        env,
+    )
     job = re.search(r"Submitted job \d+ with external jobid '(\d+)'", out)
     assert job, out[-3000:]
     state = harness.run("sacct", "-j", job.group(1), "-X", "-n", "-P", "-o", "JobName,State,ExitCode").stdout.strip()
@@ -162,5 +198,7 @@ def test_workflow_on_slurm_equals_local_run(slurm_cluster, becos_code, tmp_path_
         assert set(a.files) == set(b.files)
         for key in a.files:
             assert np.array_equal(a[key], b[key]), key
-    print(f"cluster-generic profile: {target} as SLURM job {job.group(1)} ({state}) in {generic_s:.1f} s, "
-          "equal to the local run's")
+    print(
+        f"cluster-generic profile: {target} as SLURM job {job.group(1)} ({state}) in {generic_s:.1f} s, "
+        "equal to the local run's"
+    )

@@ -23,7 +23,7 @@ from becos.cli import main as becos_main
 from becos.errors import InputFileError
 from becos.store import read_record_index
 
-SHAPES = ["tosca/wolf0", "tosca/wolf1", "tosca/horse0", "tosca/horse5"]   # train classes; path wolf0-dog0-horse0
+SHAPES = ["tosca/wolf0", "tosca/wolf1", "tosca/horse0", "tosca/horse5"]  # train classes; path wolf0-dog0-horse0
 EDGE = "tosca_dog0_tosca_wolf0_corres.txt"
 
 
@@ -38,9 +38,17 @@ def built(becos_code, tmp_path_factory):
         (ann / p.name).symlink_to(p)
     (ann / "precomputed_corr_templates").unlink()
     shutil.copytree(becos_code / "precomputed_corr_templates", ann / "precomputed_corr_templates")
-    config = bw.resolve_config(tosca_config(becos_code, annotations=str(ann), shapes=SHAPES, setting="full_full",
-                                            n_chunks=1, caps={"train": 6, "val": 1, "test": 1},
-                                            results=str(work / "results")))
+    config = bw.resolve_config(
+        tosca_config(
+            becos_code,
+            annotations=str(ann),
+            shapes=SHAPES,
+            setting="full_full",
+            n_chunks=1,
+            caps={"train": 6, "val": 1, "test": 1},
+            results=str(work / "results"),
+        )
+    )
     layout = bw.Layout.of(config)
     bw.write_catalog_stage(config, layout.catalog)
     bw.write_manifest_stage(config, "full_full", layout.catalog, layout.manifest("full_full"))
@@ -49,7 +57,9 @@ def built(becos_code, tmp_path_factory):
     for dataset, name, token in plan.remesh_jobs:
         bw.remesh_stage(config, rows[(dataset, name)], token, layout.remeshed(dataset, name, token))
     bw.ground_truth_stage(config, "full_full", 0, layout.ground_truth_index("full_full", 0))
-    bw.pairs_stage(config, "full_full", 0, layout.ground_truth_index("full_full", 0), layout.pairs_index("full_full", 0))
+    bw.pairs_stage(
+        config, "full_full", 0, layout.ground_truth_index("full_full", 0), layout.pairs_index("full_full", 0)
+    )
     return work, config
 
 
@@ -72,7 +82,7 @@ def test_an_edited_then_restored_edge_file_recomputes_the_ground_truth_that_read
 
     original = edge.read_text()
     lines = original.splitlines()
-    for i in range(0, len(lines), 7):                                 # a plausible edit: weights rotated
+    for i in range(0, len(lines), 7):  # a plausible edit: weights rotated
         f, a, b, c = lines[i].split()
         lines[i] = f"{f} {c} {a} {b}"
     edge.write_text("\n".join(lines) + "\n")
@@ -80,21 +90,21 @@ def test_an_edited_then_restored_edge_file_recomputes_the_ground_truth_that_read
     counts = bw.ground_truth_stage(config, "full_full", 0, layout.ground_truth_index("full_full", 0))
     edited, _ = _ground_truth(config)
     assert counts["computed"] == len(crossing), (counts, capsys.readouterr().err)
-    assert {p for p in before if edited[p] != before[p]} == crossing   # the pairs across wolf and horse changed
+    assert {p for p in before if edited[p] != before[p]} == crossing  # the pairs across wolf and horse changed
 
-    edge.write_text(original)                                        # restored: recomputed, as before
+    edge.write_text(original)  # restored: recomputed, as before
     counts = bw.ground_truth_stage(config, "full_full", 0, layout.ground_truth_index("full_full", 0))
     restored, _ = _ground_truth(config)
     assert counts["computed"] == len(crossing)
     assert restored == before
-    assert str(edge) in plan.chunk_edge_files("full_full", 0)        # a declared input of the ground_truth rule
+    assert str(edge) in plan.chunk_edge_files("full_full", 0)  # a declared input of the ground_truth rule
 
 
 def test_a_hand_edited_pair_record_is_rebuilt_and_refused_by_the_store_writer(built, capsys, tmp_path):
     work, config = built
     layout = bw.Layout.of(config)
     gt_index, pairs_index = layout.ground_truth_index("full_full", 0), layout.pairs_index("full_full", 0)
-    bw.pairs_stage(config, "full_full", 0, gt_index, pairs_index)     # up to date after the other test
+    bw.pairs_stage(config, "full_full", 0, gt_index, pairs_index)  # up to date after the other test
     entry = json.loads(pairs_index.read_text())["pairs"][0]
     path = Path(entry["path"])
     original = path.read_bytes()
@@ -102,18 +112,18 @@ def test_a_hand_edited_pair_record_is_rebuilt_and_refused_by_the_store_writer(bu
     def edit_by_hand():
         with np.load(path) as data:
             arrays = {k: data[k] for k in data.files}
-        arrays["corr_01"] = np.roll(arrays["corr_01"], 1)              # meta (and its input key) unchanged
+        arrays["corr_01"] = np.roll(arrays["corr_01"], 1)  # meta (and its input key) unchanged
         np.savez(path, **arrays)
 
     edit_by_hand()
     capsys.readouterr()
-    counts = bw.pairs_stage(config, "full_full", 0, gt_index, pairs_index)   # what --forcerun pairs runs
+    counts = bw.pairs_stage(config, "full_full", 0, gt_index, pairs_index)  # what --forcerun pairs runs
     err = capsys.readouterr().err
     assert counts["computed"] == 1, err
     assert f"{path}: its content no longer matches the digest becos recorded when writing it" in err
     assert path.read_bytes() == original
 
-    edit_by_hand()                                                     # edited after the job: the store refuses
+    edit_by_hand()  # edited after the job: the store refuses
     with pytest.raises(InputFileError, match=r"is not the file the pairs job wrote: its digest is") as exc:
         read_record_index(pairs_index)
     assert exc.value.path == path and "snakemake --forcerun pairs" in exc.value.fix

@@ -13,7 +13,7 @@ from becos.errors import InputFileError
 from becos.record import SCHEMA_VERSION, PairRecord
 from becos.store import count_files, expand_inputs, open_benchmark, write_store
 
-MAX_FILES = 150   # ~2 files per array (zarr.json + one shard) + groups, whatever the pair count
+MAX_FILES = 150  # ~2 files per array (zarr.json + one shard) + groups, whatever the pair count
 
 
 def assert_same_record(got: PairRecord, want: PairRecord) -> None:
@@ -30,11 +30,15 @@ def assert_same_record(got: PairRecord, want: PairRecord) -> None:
 def stores(pair_record_files, tmp_path_factory):
     """{setting: store path} written from the fixture records (train and test pair each)."""
     folder = tmp_path_factory.mktemp("stores")
-    metadata = {"config_hash": "0123abcd", "config": {"seed": 42, "datasets": ["tosca"]},
-                "datasets": {"tosca": {"licence": "free for research use"}}}
-    return {setting: write_store(paths, folder / f"{setting}.zarr", setting=setting, metadata=metadata,
-                                 progress=False)
-            for setting, paths in pair_record_files.items()}
+    metadata = {
+        "config_hash": "0123abcd",
+        "config": {"seed": 42, "datasets": ["tosca"]},
+        "datasets": {"tosca": {"licence": "free for research use"}},
+    }
+    return {
+        setting: write_store(paths, folder / f"{setting}.zarr", setting=setting, metadata=metadata, progress=False)
+        for setting, paths in pair_record_files.items()
+    }
 
 
 def test_round_trip_is_exact(stores, pair_record_files):
@@ -61,7 +65,7 @@ def test_round_trip_is_exact(stores, pair_record_files):
 
 def test_blocks_split_pairs_but_keep_records_exact(stores, pair_record_files):
     bench = open_benchmark(stores["partial_partial"])
-    blocks = list(bench.blocks(max_bytes=1))            # one pair per block
+    blocks = list(bench.blocks(max_bytes=1))  # one pair per block
     assert [(b.start, b.stop) for b in blocks] == [(0, 1), (1, 2)]
     by_id = {r.pair_id: r for r in map(PairRecord.load, pair_record_files["partial_partial"])}
     for block in blocks:
@@ -76,13 +80,31 @@ def test_layout_table_and_metadata(stores, pair_record_files):
     records = {r.pair_id: r for r in map(PairRecord.load, pair_record_files["partial_full"])}
     assert bench.layout["x_vertices"] == bench.layout["corr_01"] == "x_vertex"
     assert bench.layout["y_faces"] == bench.layout["y_full_face_ids"] == "y_face"
-    assert bench.layout["y_random_rotation"] is None            # stacked (N, 3, 3)
+    assert bench.layout["y_random_rotation"] is None  # stacked (N, 3, 3)
     assert bench.array("y_random_rotation").shape == (2, 3, 3)
     assert bench.array("x_vertices").shape[0] == sum(len(r["x_vertices"]) for r in records.values())
     table = bench.table
-    assert list(table.columns) == ["index", "pair_id", "split", "category", "seed", "x_dataset", "x_name", "x_class",
-                                   "x_category", "y_dataset", "y_name", "y_class", "y_category", "x_n_vertices",
-                                   "y_n_vertices", "x_overlap", "y_overlap", "n_tries", "accepted"]
+    assert list(table.columns) == [
+        "index",
+        "pair_id",
+        "split",
+        "category",
+        "seed",
+        "x_dataset",
+        "x_name",
+        "x_class",
+        "x_category",
+        "y_dataset",
+        "y_name",
+        "y_class",
+        "y_category",
+        "x_n_vertices",
+        "y_n_vertices",
+        "x_overlap",
+        "y_overlap",
+        "n_tries",
+        "accepted",
+    ]
     for row in table.itertuples():
         record = records[row.pair_id]
         assert row.index == row.Index
@@ -103,7 +125,7 @@ def test_layout_table_and_metadata(stores, pair_record_files):
 def test_few_files(stores):
     for path in stores.values():
         n = count_files(path)
-        assert 40 < n <= MAX_FILES, n     # one zarr.json per array at least; never one file per pair and key
+        assert 40 < n <= MAX_FILES, n  # one zarr.json per array at least; never one file per pair and key
 
 
 def test_cli_reads_chunk_index_and_replaces_store(pair_record_files, tmp_path, monkeypatch, capsys):
@@ -111,13 +133,21 @@ def test_cli_reads_chunk_index_and_replaces_store(pair_record_files, tmp_path, m
     paths = pair_record_files["partial_partial"]
     (tmp_path / "records").mkdir()
     entries = []
-    for p in paths:        # the workflow writes paths relative to the working directory
+    for p in paths:  # the workflow writes paths relative to the working directory
         os.symlink(p, tmp_path / "records" / p.name)
         entries.append({"pair_id": p.stem, "path": f"records/{p.name}", "computed": True})
     (tmp_path / "chunk_0000.json").write_text(json.dumps({"setting": "partial_partial", "chunk": 0, "pairs": entries}))
     (tmp_path / "meta.json").write_text(json.dumps({"config_hash": "feed", "setting": "partial_partial"}))
-    args = ["export-zarr", "--setting", "partial_partial", "--out", "out/bench.zarr", "--metadata", "meta.json",
-            "chunk_0000.json"]
+    args = [
+        "export-zarr",
+        "--setting",
+        "partial_partial",
+        "--out",
+        "out/bench.zarr",
+        "--metadata",
+        "meta.json",
+        "chunk_0000.json",
+    ]
     assert main(args) == 0
     first = json.loads(capsys.readouterr().out)
     assert first["n_pairs"] == 2 and first["n_files"] <= MAX_FILES
@@ -127,9 +157,10 @@ def test_cli_reads_chunk_index_and_replaces_store(pair_record_files, tmp_path, m
     bench = open_benchmark(tmp_path / "out" / "bench.zarr")
     assert list(bench.table["pair_id"]) == [paths[0].stem]
     assert bench.metadata["config_hash"] == "feed"
-    assert sorted(os.listdir(tmp_path / "out")) == ["bench.zarr"]        # no temporary folders left
-    assert expand_inputs(["chunk_0000.json"]) == [p.relative_to(tmp_path) for p in
-                                                  [tmp_path / "records" / q.name for q in paths]]
+    assert sorted(os.listdir(tmp_path / "out")) == ["bench.zarr"]  # no temporary folders left
+    assert expand_inputs(["chunk_0000.json"]) == [
+        p.relative_to(tmp_path) for p in [tmp_path / "records" / q.name for q in paths]
+    ]
 
 
 def test_bad_inputs_name_the_file(pair_record_files, tmp_path, capsys):
@@ -162,8 +193,9 @@ def test_compressed_and_fortran_records_round_trip(pair_record_files, tmp_path):
     plain = PairRecord.load(pair_record_files["partial_full"][1])
     plain.arrays["x_faces"] = np.asfortranarray(plain["x_faces"])
     plain.save(tmp_path / "fortran.npz")
-    path = write_store([compressed, tmp_path / "fortran.npz"], tmp_path / "s.zarr", setting="partial_full",
-                       progress=False)
+    path = write_store(
+        [compressed, tmp_path / "fortran.npz"], tmp_path / "s.zarr", setting="partial_full", progress=False
+    )
     bench = open_benchmark(path)
     assert_same_record(bench.record(record.pair_id), record)
     assert_same_record(bench.record(plain.pair_id), plain)
@@ -178,8 +210,6 @@ def test_a_killed_writes_folder_is_removed_but_not_a_sibling_stores(pair_record_
     write_store(pair_record_files["full_full"], tmp_path / "s.zarr", setting="full_full", progress=False)
     assert not killed.exists() and sibling.exists()
     assert sorted(p.name for p in tmp_path.iterdir()) == [sibling.name, "s.zarr"]
-
-
 
 
 def _read_in_child(view, queue) -> None:
@@ -213,7 +243,7 @@ def test_training_view_in_worker_processes(stores, pair_record_files, method):
     context = multiprocessing.get_context(method)
     with context.Pool(2) as pool:
         got = pool.starmap(operator.getitem, [(view, i) for i in (0, 1, 0, 1)])
-    if method == "fork":      # the child inherits the parent's open store itself (not pickled)
+    if method == "fork":  # the child inherits the parent's open store itself (not pickled)
         queue = context.Queue()
         child = context.Process(target=_read_in_child, args=(view, queue))
         child.start()
@@ -232,7 +262,7 @@ def test_record_files_hold_int32_indices_and_no_identity_maps(pair_record_files,
     on disk and int64 again after loading; values, dtypes and shapes round-trip exactly."""
     from becos.record import IDENTITY_MEMBER, RECORD_SCHEMA, encode_arrays
 
-    record = PairRecord.load(pair_record_files["partial_full"][0])         # X full, Y partial
+    record = PairRecord.load(pair_record_files["partial_full"][0])  # X full, Y partial
     path = tmp_path / "r.npz"
     record.save(path)
     with np.load(path) as data:
@@ -243,7 +273,7 @@ def test_record_files_hold_int32_indices_and_no_identity_maps(pair_record_files,
     assert on_disk["y_partial_to_full"].dtype == np.int32 and on_disk["corr_10"].dtype == np.int32
     assert on_disk["y_vertices"].dtype == np.float64 and on_disk["x_annotation"].dtype == np.int8
     assert assert_same_record(PairRecord.load(path), record) is None
-    wide = dict(record.arrays, corr_01=record["corr_01"] + (1 << 40))    # does not fit int32: kept int64
+    wide = dict(record.arrays, corr_01=record["corr_01"] + (1 << 40))  # does not fit int32: kept int64
     assert encode_arrays(wide)[0]["corr_01"].dtype == np.int64
     # the one schema table drives the store layout and the validator's expectations
     from becos.store import SCHEMA_GROUPS
@@ -270,13 +300,16 @@ def test_direct_reads_equal_zarr_reads_and_damage_is_named(stores, pair_record_f
     assert bench.record(1).arrays["x_faces"].dtype == np.int64
     import becos.store
 
-    monkeypatch.setattr(becos.store, "CHUNK_BYTES", 4096)       # many chunks over several shards per array
+    monkeypatch.setattr(becos.store, "CHUNK_BYTES", 4096)  # many chunks over several shards per array
     monkeypatch.setattr(becos.store, "SHARD_BYTES", 32768)
-    small = open_benchmark(write_store(pair_record_files["partial_partial"], tmp_path / "small.zarr",
-                                       setting="partial_partial", progress=False))
+    small = open_benchmark(
+        write_store(
+            pair_record_files["partial_partial"], tmp_path / "small.zarr", setting="partial_partial", progress=False
+        )
+    )
     assert len(list((tmp_path / "small.zarr" / "arrays" / "x_vertices").glob("c.*"))) > 2
     whole = small.read_block(0, 2)
-    for i, got in enumerate(small.records()):                 # whole chunks decoded in place
+    for i, got in enumerate(small.records()):  # whole chunks decoded in place
         assert_same_record(got, whole.record(i))
         assert_same_record(small.record(i), whole.record(i))
     damaged = tmp_path / "damaged.zarr"

@@ -47,8 +47,8 @@ def test_missing_rule_dominant_vertex_decides_and_weights_renormalise():
     f0 = 0  # face (0, 1, 7)
     first = SurfaceMap(np.array([f0, f0]), np.array([[0.6, 0.3, 0.1], [0.2, 0.5, 0.3]]))
     out = compose(first, mesh.faces, second, mesh)
-    assert out.face[0] == -1                    # dominant corner (vertex 0) has no image
-    assert out.face[1] >= 0                     # dominant corner has one: renormalise over 1 and 7
+    assert out.face[0] == -1  # dominant corner (vertex 0) has no image
+    assert out.face[1] >= 0  # dominant corner has one: renormalise over 1 and 7
     expected = (0.5 * mesh.vertices[1] + 0.3 * mesh.vertices[7]) / 0.8
     assert np.allclose(out.positions(mesh)[1], expected, atol=1e-12)
 
@@ -57,7 +57,7 @@ def test_projection_onto_curved_target_records_distance():
     source = grid()
     target = grid(z=0.0)
     bent = target.vertices.copy()
-    bent[:, 2] = 0.05 * (bent[:, 0] - 2.5) ** 2           # a parabolic sheet
+    bent[:, 2] = 0.05 * (bent[:, 0] - 2.5) ** 2  # a parabolic sheet
     target = target.with_vertices(bent)
     # each source vertex -> the target vertex two columns over: combinations leave the surface
     idx = np.arange(36).reshape(6, 6)
@@ -68,8 +68,8 @@ def test_projection_onto_curved_target_records_distance():
     locator = SurfaceLocator(target)
     p = out.positions(target)
     _, _, d = locator.closest(p)
-    assert np.abs(d).max() < 1e-9                        # the result lies on the target
-    assert np.nanmax(out.distance) > 0                   # and some points had to be projected
+    assert np.abs(d).max() < 1e-9  # the result lies on the target
+    assert np.nanmax(out.distance) > 0  # and some points had to be projected
 
 
 def test_compose_path_skips_identity_hops_and_keeps_winding(tosca_dir, mesh_cache):
@@ -81,7 +81,7 @@ def test_compose_path_skips_identity_hops_and_keeps_winding(tosca_dir, mesh_cach
     rng = np.random.default_rng(1)
     face = np.flatnonzero(differ)[:500]
     w = rng.dirichlet(np.ones(3), len(face))
-    first = SurfaceMap(face, w)                          # points on michael0, in michael0's face order
-    out = compose_path([first, None], [m0.faces], m3)    # michael0 -> michael3 is an identity hop
+    first = SurfaceMap(face, w)  # points on michael0, in michael0's face order
+    out = compose_path([first, None], [m0.faces], m3)  # michael0 -> michael3 is an identity hop
     truth = np.einsum("nk,nkd->nd", w, m3.vertices[m0.faces[face]])
     assert np.abs(out.positions(m3) - truth).max() < 1e-9

@@ -19,7 +19,7 @@ import sys
 import time
 from collections import Counter
 from dataclasses import dataclass
-from functools import lru_cache
+from functools import cache
 from pathlib import Path
 
 import networkx as nx
@@ -30,8 +30,16 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
 from becos.errors import ConfigError
-from becos.synthetic import (CHIRALITY_TEMPLATES, CLASSES, DATASETS, REGISTRY_POSES, TREE_EDGES, body_part_labels,
-                             build_class, generate_collection)
+from becos.synthetic import (
+    CHIRALITY_TEMPLATES,
+    CLASSES,
+    DATASETS,
+    REGISTRY_POSES,
+    TREE_EDGES,
+    body_part_labels,
+    build_class,
+    generate_collection,
+)
 from becos.synthetic.bodies import semantic_part
 
 REPO = Path(__file__).resolve().parents[1]
@@ -51,7 +59,7 @@ def read_off(path: Path) -> tuple[np.ndarray, np.ndarray]:
         nv, nf, _ = map(int, fh.readline().split())
     table = pd.read_csv(path, sep=" ", header=None, skiprows=2, names=range(4), engine="c")
     vertices = table.iloc[:nv, :3].to_numpy(np.float64)
-    faces = table.iloc[nv:nv + nf].to_numpy(np.float64)
+    faces = table.iloc[nv : nv + nf].to_numpy(np.float64)
     assert (faces[:, 0] == 3).all()
     return vertices, faces[:, 1:].astype(np.int64)
 
@@ -63,15 +71,18 @@ def read_corres(path: Path) -> tuple[np.ndarray, np.ndarray]:
 
 
 def file_hashes(root: Path) -> dict[str, str]:
-    return {p.relative_to(root).as_posix(): hashlib.sha256(p.read_bytes()).hexdigest()
-            for p in sorted(root.rglob("*")) if p.is_file()}
+    return {
+        p.relative_to(root).as_posix(): hashlib.sha256(p.read_bytes()).hexdigest()
+        for p in sorted(root.rglob("*"))
+        if p.is_file()
+    }
 
 
 @dataclass
 class Collection:
-    root: Path                      # generated in this process
-    seconds: float                  # its generation time (while the second run shares the cores)
-    second_root: Path               # generated in a fresh process through the CLI
+    root: Path  # generated in this process
+    seconds: float  # its generation time (while the second run shares the cores)
+    second_root: Path  # generated in a fresh process through the CLI
     second: subprocess.Popen
 
     def wait_second(self) -> tuple[int, str, str]:
@@ -95,9 +106,14 @@ def synthetic_collection(tmp_path_factory) -> Collection:
     second_root = base / "again"
     # another hash seed; one BLAS thread (the two runs share the cores; threads only thrash here)
     env = dict(os.environ, PYTHONHASHSEED="123", OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1", MKL_NUM_THREADS="1")
-    second = subprocess.Popen([sys.executable, "-m", "becos", "synthetic", str(second_root), "--seed", str(SEED),
-                               "--poses", str(POSES)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                              env=env, cwd=REPO)
+    second = subprocess.Popen(
+        [sys.executable, "-m", "becos", "synthetic", str(second_root), "--seed", str(SEED), "--poses", str(POSES)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+        cwd=REPO,
+    )
     try:
         start = time.perf_counter()
         with one_blas_thread():
@@ -106,7 +122,7 @@ def synthetic_collection(tmp_path_factory) -> Collection:
         print(f"\nsynthetic collection generated in {seconds:.1f} s (a second run in parallel)")
         yield Collection(root, seconds, second_root, second)
     finally:
-        if second.poll() is None:       # only the process this fixture started
+        if second.poll() is None:  # only the process this fixture started
             second.kill()
             second.communicate()
 
@@ -121,6 +137,7 @@ def shape_path(root: Path, dataset: str, name: str) -> Path:
 
 
 # --- files and determinism ---------------------------------------------------------------------
+
 
 def test_layout_counts_and_generation_time(synthetic_collection):
     collection = synthetic_collection.root
@@ -149,14 +166,14 @@ def test_byte_identical_across_two_runs(synthetic_collection):
     assert returncode == 0, err
     second = synthetic_collection.second_root
     assert Path(out.strip()) == second.resolve()
-    print("\n" + err.strip())                              # the CLI reports its generation time
+    print("\n" + err.strip())  # the CLI reports its generation time
     assert re.search(r"in \d+\.\d s", err)
     first_hashes, second_hashes = file_hashes(synthetic_collection.root), file_hashes(second)
     n_files = len(CLASSES) * POSES + 3 + 2 * len(TREE_EDGES) + len(CLASSES) + len(CHIRALITY_TEMPLATES) + 1
     assert len(first_hashes) == n_files
     assert first_hashes == second_hashes
     print(f"{len(first_hashes)} files, sha256 identical across the two runs")
-    assert not list(second.parent.glob(".again.tmp-*"))   # the temporary folder was renamed into place
+    assert not list(second.parent.glob(".again.tmp-*"))  # the temporary folder was renamed into place
 
 
 def test_refuses_to_overwrite_foreign_folder(tmp_path):
@@ -172,6 +189,7 @@ def test_refuses_to_overwrite_foreign_folder(tmp_path):
 
 # --- meshes ------------------------------------------------------------------------------------
 
+
 def mesh_topology(n_vertices: int, faces: np.ndarray) -> dict:
     """Closedness, orientation, manifoldness and components of a triangle mesh (vectorised; edges
     encoded as int64 keys ``i * n + j``)."""
@@ -180,8 +198,9 @@ def mesh_topology(n_vertices: int, faces: np.ndarray) -> dict:
     undirected = np.sort(directed, axis=1)
     _, edge_count = np.unique(undirected[:, 0] * n + undirected[:, 1], return_counts=True)
     _, directed_count = np.unique(directed[:, 0] * n + directed[:, 1], return_counts=True)
-    adjacency = sp.coo_matrix((np.ones(len(directed)), (directed[:, 0], directed[:, 1])),
-                              shape=(n_vertices, n_vertices))
+    adjacency = sp.coo_matrix(
+        (np.ones(len(directed)), (directed[:, 0], directed[:, 1])), shape=(n_vertices, n_vertices)
+    )
     n_components = connected_components(adjacency, directed=False)[0]
     # vertex manifoldness: around each vertex the link edges (b, c) of its faces (v, b, c) form ONE cycle
     corners = np.concatenate([faces, faces[:, [1, 2, 0]], faces[:, [2, 0, 1]]]).astype(np.int64)  # (v, b, c)
@@ -241,35 +260,41 @@ def test_meshes_closed_manifold_upright_one_triangulation_per_class(collection):
                 if template is None:
                     assert entry.name == spec.template
                     template = mesh
-                    reference = prepare_shape(entry).mesh                  # parsed by becos.mesh.read_mesh
+                    reference = prepare_shape(entry).mesh  # parsed by becos.mesh.read_mesh
                     assert np.array_equal(reference.faces, mesh.faces)
                     assert np.allclose(reference.vertices, mesh.vertices, atol=1e-9)
                     topo = mesh_topology(mesh.n_vertices, mesh.faces)
-                    assert topo == {"edges_in_two_faces": True, "oriented": True, "components": 1,
-                                    "vertex_manifold": True, "euler": 2}, (name, topo)
+                    assert topo == {
+                        "edges_in_two_faces": True,
+                        "oriented": True,
+                        "components": 1,
+                        "vertex_manifold": True,
+                        "euler": 2,
+                    }, (name, topo)
                     counts[name] = mesh.n_vertices
                     assert 5000 <= mesh.n_vertices <= 30000
-                else:                                                   # a different, articulated pose
+                else:  # a different, articulated pose
                     assert np.abs(mesh.vertices - template.vertices).max() > 0.05, entry.name
-                assert np.array_equal(mesh.faces, template.faces)        # one triangulation per class
+                assert np.array_equal(mesh.faces, template.faces)  # one triangulation per class
                 assert len(labels) == mesh.n_vertices
                 v = mesh.vertices
-                assert signed_volume(v, mesh.faces) > 0                  # outward normals
+                assert signed_volume(v, mesh.faces) > 0  # outward normals
                 y = v[:, 1]
                 assert y[head].mean() > y[feet].mean() + 0.3, entry.name  # upright, +y up, metres
-                assert y[feet].min() - y.min() < 0.05, entry.name         # standing on its feet
+                assert y[feet].min() - y.min() < 0.05, entry.name  # standing on its feet
                 if spec.category == "human":
                     assert np.ptp(y) > 1.2 and np.ptp(y) > 1.5 * np.ptp(v[:, 2]), entry.name
-                else:                                                     # four-legged bodies face +z
+                else:  # four-legged bodies face +z
                     front = np.char.startswith(part.astype(str), "q_f")
                     hind = np.char.startswith(part.astype(str), "q_h")
                     assert v[front, 2].mean() > v[hind, 2].mean() + 0.05, entry.name
     print("\ntemplate vertex counts:", counts)
     by_dataset = {ds: [counts[c.name] for c in CLASSES if c.dataset == ds] for ds in DATASETS}
-    assert max(by_dataset["synthy"]) < min(by_dataset["synthz"])   # different triangulation densities
+    assert max(by_dataset["synthy"]) < min(by_dataset["synthz"])  # different triangulation densities
 
 
 # --- the annotation folder ---------------------------------------------------------------------
+
 
 def test_network_is_a_tree_with_one_file_per_directed_edge(collection):
     root = collection / "annotations"
@@ -324,7 +349,7 @@ def test_chirality_labels_are_left_plus_x(collection):
         right_parts = np.char.endswith(part.astype(str), "_r")
         assert values[left_parts].mean() > 0.97 and values[right_parts].mean() < 0.03
         centre_x = common[:, 0].mean()
-        assert common[values == 1, 0].min() >= centre_x - 1e-3       # label 1 = +x side
+        assert common[values == 1, 0].min() >= centre_x - 1e-3  # label 1 = +x side
 
 
 @pytest.fixture(scope="session")
@@ -350,13 +375,13 @@ def expected_missing(source, target, segment: np.ndarray, region: np.ndarray) ->
     if source.name in TAILED and target.name not in TAILED:
         missing |= np.char.find(region.astype(str), "tail") >= 0
     kinds = (source.category, target.category)
-    if kinds == ("centaur", "four-legged"):               # the human upper body
+    if kinds == ("centaur", "four-legged"):  # the human upper body
         missing |= np.char.startswith(segment.astype(str), "b_")
-    elif kinds == ("four-legged", "centaur"):             # the animal's neck and head
+    elif kinds == ("four-legged", "centaur"):  # the animal's neck and head
         missing |= region == "q_head"
-    elif kinds == ("centaur", "human"):                   # the horse body (barrel, legs, tail)
+    elif kinds == ("centaur", "human"):  # the horse body (barrel, legs, tail)
         missing |= np.char.startswith(segment.astype(str), "q_")
-    elif kinds == ("human", "centaur"):                   # the human pelvis and legs
+    elif kinds == ("human", "centaur"):  # the human pelvis and legs
         missing |= (segment == "b_pelvis") | np.isin(region, ["b_leg_l", "b_leg_r"])
     return missing
 
@@ -371,17 +396,19 @@ def test_missing_parts_are_exactly_the_marked_rows(collection, edge_data):
         segment = np.array(names_a)[la]
         region = np.array([semantic_part(n) for n in names_a])[la]
         _, fb = read_off(shape_path(collection, sb.dataset, sb.template))
-        assert len(face) == len(la)                                 # one row per source vertex
+        assert len(face) == len(la)  # one row per source vertex
         assert face.max() < len(fb) and face.min() >= -1
         expected = expected_missing(sa, sb, segment, region)
         assert np.array_equal(face == -1, expected), (sa.node, sb.node, int((face == -1).sum()), int(expected.sum()))
         zero_rows = (weights == 0).all(axis=1)
-        assert np.array_equal(zero_rows, face == -1), (sa.node, sb.node)   # -1 rows are "-1 0 0 0", no others
+        assert np.array_equal(zero_rows, face == -1), (sa.node, sb.node)  # -1 rows are "-1 0 0 0", no others
         matched = weights[face >= 0]
         assert (matched >= 0).all() and np.allclose(matched.sum(axis=1), 1.0, atol=5e-6)
         n_missing[(sa.name, sb.name)] = (int(expected.sum()), sorted({str(r) for r in region[expected]}))
-    print("\nrows marked -1 per edge (count, semantic parts):",
-          {f"{a}->{b}": v for (a, b), v in n_missing.items() if v[0]})
+    print(
+        "\nrows marked -1 per edge (count, semantic parts):",
+        {f"{a}->{b}": v for (a, b), v in n_missing.items() if v[0]},
+    )
     # semantic missing parts exist where the construction says so, and only there
     assert n_missing[("brute", "alba")][1] == ["b_horn_l", "b_horn_r"] and n_missing[("alba", "brute")][0] == 0
     assert n_missing[("dario", "elin")][1] == ["b_tail"] and n_missing[("elin", "dario")][0] == 0
@@ -389,8 +416,14 @@ def test_missing_parts_are_exactly_the_marked_rows(collection, edge_data):
     assert n_missing[("ram", "pony")][1] == ["q_horn_l", "q_horn_r"]
     assert n_missing[("centaur", "pony")][1] == ["b_arm_l", "b_arm_r", "b_head", "b_torso"]
     assert n_missing[("pony", "centaur")][1] == ["q_head"]
-    assert set(n_missing[("centaur", "elin")][1]) == {"q_torso", "q_frontleg_l", "q_frontleg_r", "q_hindleg_l",
-                                                      "q_hindleg_r", "q_tail"}
+    assert set(n_missing[("centaur", "elin")][1]) == {
+        "q_torso",
+        "q_frontleg_l",
+        "q_frontleg_r",
+        "q_hindleg_l",
+        "q_hindleg_r",
+        "q_tail",
+    }
     assert n_missing[("elin", "centaur")][1] == ["b_leg_l", "b_leg_r", "b_torso"]
     same_features = [("alba", "cyra"), ("alba", "elin"), ("hound", "lynx"), ("lynx", "pony")]
     assert all(n_missing[e][0] == 0 and n_missing[e[::-1]][0] == 0 for e in same_features)
@@ -406,7 +439,7 @@ def test_correspondences_land_on_the_same_body_part(edge_data):
     for sa, sb, face, weights in edge_data:
         la, names_a = body_part_labels(sa.dataset, sa.name)
         lb, names_b = body_part_labels(sb.dataset, sb.name)
-        model_b = build_class(sb.dataset, sb.name)                    # the template mesh of b, in metres
+        model_b = build_class(sb.dataset, sb.name)  # the template mesh of b, in metres
         fb = model_b.mesh.faces
         ok = face >= 0
         dominant = fb[face[ok], weights[ok].argmax(axis=1)]
@@ -429,17 +462,20 @@ def test_correspondences_land_on_the_same_body_part(edge_data):
     share = {k: totals[k] / totals["matched"] for k in ("region", "segment", "point")}
     left_front = totals["left_front_ok"] / totals["left_front"]
     print(f"\nbody-part agreement per directed edge (%): {dict(rows)}")
-    print(f"body-part agreement over all {2 * len(TREE_EDGES)} directed edges, {totals['matched']} matched "
-          f"vertices: {100 * share['region']:.2f} % same body part (dominant vertex; image point itself: "
-          f"{100 * share['point']:.2f} %), {100 * share['segment']:.2f} % same bone segment, "
-          f"left front leg -> left front leg {100 * left_front:.2f} %")
-    assert share["region"] >= 0.99              # issue 5: >= 99 %
+    print(
+        f"body-part agreement over all {2 * len(TREE_EDGES)} directed edges, {totals['matched']} matched "
+        f"vertices: {100 * share['region']:.2f} % same body part (dominant vertex; image point itself: "
+        f"{100 * share['point']:.2f} %), {100 * share['segment']:.2f} % same bone segment, "
+        f"left front leg -> left front leg {100 * left_front:.2f} %"
+    )
+    assert share["region"] >= 0.99  # issue 5: >= 99 %
     assert share["point"] >= 0.995
     assert share["segment"] >= 0.98
     assert left_front >= 0.99
 
 
 # --- readers of other modules ------------------------------------------------------------------
+
 
 @pytest.fixture(scope="session")
 def annotation_source(collection, tmp_path_factory):
@@ -458,7 +494,7 @@ def entries(collection, annotation_source):
 def test_dataset_registry_lists_the_collection_with_class_held_out_splits(entries):
     from becos.datasets import DatasetSpec, frame_rotation_matrix
 
-    assert POSES == REGISTRY_POSES              # the YAMLs' expected_count assumes the default poses
+    assert POSES == REGISTRY_POSES  # the YAMLs' expected_count assumes the default poses
     splits_of_class: dict[tuple[str, str], set] = {}
     per_category: dict[str, set] = {}
     for name, ds in DATASETS.items():
@@ -474,11 +510,14 @@ def test_dataset_registry_lists_the_collection_with_class_held_out_splits(entrie
             per_category.setdefault(e.category, set()).add(e.split)
         # within a dataset and category, each split holds its own classes
         for category in ("human", "four-legged"):
-            split_sets = [{e.shape_class for e in listed if e.category == category and e.split == s}
-                          for s in ("train", "val", "test")]
-            assert all(split_sets) and not (split_sets[0] & split_sets[1] or split_sets[0] & split_sets[2]
-                                            or split_sets[1] & split_sets[2]), (name, category, split_sets)
-    assert all(len(s) == 1 for s in splits_of_class.values())      # a class is never split across splits
+            split_sets = [
+                {e.shape_class for e in listed if e.category == category and e.split == s}
+                for s in ("train", "val", "test")
+            ]
+            assert all(split_sets) and not (
+                split_sets[0] & split_sets[1] or split_sets[0] & split_sets[2] or split_sets[1] & split_sets[2]
+            ), (name, category, split_sets)
+    assert all(len(s) == 1 for s in splits_of_class.values())  # a class is never split across splits
     assert per_category["human"] == per_category["four-legged"] == {"train", "val", "test"}
     assert per_category["centaur"] == {"train"}
     print("\nsplits:", {f"{d}/{c}": sorted(s)[0] for (d, c), s in sorted(splits_of_class.items())})
@@ -501,7 +540,8 @@ def test_annotation_source_resolves_every_edge(collection, annotation_source):
     path = source.path("synthy_alba0", "synthy_goat0")
     assert "synthz_centaur0" in path
     assert len(source.chirality_labels("synthz", "centaur0")) == len(
-        read_off(shape_path(collection, "synthz", "centaur0"))[0])
+        read_off(shape_path(collection, "synthz", "centaur0"))[0]
+    )
     assert not (collection / "annotations" / ".becos-cache").exists()
 
 
@@ -512,7 +552,7 @@ def test_network_ground_truth_across_datasets(collection, annotation_source, ent
     from becos.mesh import read_mesh
     from becos.network import ShapeNetwork
 
-    @lru_cache(maxsize=None)
+    @cache
     def meshes(dataset, name):
         path = shape_path(collection, dataset, name)
         return read_mesh(path) if dataset in DATASETS and path.is_file() else None
@@ -520,9 +560,11 @@ def test_network_ground_truth_across_datasets(collection, annotation_source, ent
     network = ShapeNetwork(annotation_source, meshes)
     shapes = {(e.dataset, e.name): e for listed in entries.values() for e in listed}
     results = {}
-    for (dx, x), (dy, y) in ((("synthz", "centaur1"), ("synthy", "hound2")),
-                             (("synthz", "lynx1"), ("synthy", "hound2")),
-                             (("synthy", "hound3"), ("synthz", "centaur2"))):
+    for (dx, x), (dy, y) in (
+        (("synthz", "centaur1"), ("synthy", "hound2")),
+        (("synthz", "lynx1"), ("synthy", "hound2")),
+        (("synthy", "hound3"), ("synthz", "centaur2")),
+    ):
         gt = network.ground_truth(shapes[(dx, x)], shapes[(dy, y)])
         lx, names_x = body_part_labels(dx, x.rstrip("0123456789"))
         ly, names_y = body_part_labels(dy, y.rstrip("0123456789"))
@@ -536,7 +578,7 @@ def test_network_ground_truth_across_datasets(collection, annotation_source, ent
         if x.startswith("centaur"):
             upper = np.char.startswith(np.array(names_x)[lx].astype(str), "b_")
             assert np.array_equal(~gt.matched, upper)
-        elif y.startswith("centaur"):   # X's neck and head, up to rounding where the hops meet
+        elif y.startswith("centaur"):  # X's neck and head, up to rounding where the hops meet
             head = region_x == "q_head"
             assert (~gt.matched[head]).mean() > 0.98 and head[~gt.matched].mean() > 0.98
         else:

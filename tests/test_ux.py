@@ -15,7 +15,6 @@ import time
 from pathlib import Path
 
 import pytest
-import yaml
 from tiny_tosca import tosca_config, write_config_file
 
 from becos.errors import ConfigError
@@ -24,13 +23,18 @@ from becos.workflow import check_config_files, resolve_config
 
 REPO = Path(__file__).resolve().parents[1]
 SNAKEMAKE = [sys.executable, "-m", "snakemake", "-s", str(REPO / "Snakefile")]
-NOT_SEEN = ("Traceback", "ConfigError in file", "WorkflowError in file", "Failed validating", "File \"")
+NOT_SEEN = ("Traceback", "ConfigError in file", "WorkflowError in file", "Failed validating", 'File "')
 
 
 def run_snakemake(cwd: Path, *args: str, env: dict | None = None) -> subprocess.CompletedProcess:
     """Snakemake from ``cwd`` (pipes: not a terminal, so plain output)."""
-    return subprocess.run([*SNAKEMAKE, *args], cwd=cwd, capture_output=True, text=True,
-                          env=dict(os.environ, PYTHONUNBUFFERED="1", **(env or {})))
+    return subprocess.run(
+        [*SNAKEMAKE, *args],
+        cwd=cwd,
+        capture_output=True,
+        text=True,
+        env=dict(os.environ, PYTHONUNBUFFERED="1", **(env or {})),
+    )
 
 
 def run_in_terminal(cwd: Path, *args: str, env: dict | None = None, timeout: float = 120) -> tuple[int, str]:
@@ -93,13 +97,15 @@ def test_a_bad_config_prints_one_line_per_problem_and_no_traceback(becos_code, t
     schema passes), one with `results` naming a file: every problem is one `becos config:` line."""
     schema_bad = {"min_overlapp": 0.2, "n_cam_pos": "ten", "cam_pos_regime": "hi", "caps": {"train": -1}, "n_chunks": 0}
     cross_bad = {"min_overlap": 0.8, "max_overlap": 0.2, "datasets": ["tosca", "toska"], "results": "taken"}
-    for name, override, keys in (("schema", schema_bad, ["min_overlapp", "n_cam_pos", "cam_pos_regime", "caps.train",
-                                                         "n_chunks"]),
-                                 ("cross", cross_bad, ["min_overlap", "datasets", "results"])):
+    for name, override, keys in (
+        ("schema", schema_bad, ["min_overlapp", "n_cam_pos", "cam_pos_regime", "caps.train", "n_chunks"]),
+        ("cross", cross_bad, ["min_overlap", "datasets", "results"]),
+    ):
         workdir = write_config_file(tmp_path / name, tosca_config(becos_code, **override))
         (workdir / "taken").write_text("a file where the results folder should go\n")
-        result = run_snakemake(tmp_path, "-d", str(workdir), "--configfile", str(workdir / "config.yaml"),
-                               "--cores", "1")
+        result = run_snakemake(
+            tmp_path, "-d", str(workdir), "--configfile", str(workdir / "config.yaml"), "--cores", "1"
+        )
         text = result.stdout + result.stderr
         assert result.returncode != 0
         lines = problem_lines(text)
@@ -124,16 +130,19 @@ def test_config_file_faults_are_one_line_naming_the_file(tmp_path):
     assert result.returncode != 0
     assert problem_lines(result.stderr) == [problem_lines(result.stderr)[0]]
     assert "nothere.yaml: config file not found" in result.stderr and "Traceback" not in result.stderr
-    assert check_config_files(["--cores", "1", "--configfile", str(bad), "x.yaml", "--config", "a=1"])[1] \
-        .startswith("x.yaml: config file not found")
+    assert check_config_files(["--cores", "1", "--configfile", str(bad), "x.yaml", "--config", "a=1"])[1].startswith(
+        "x.yaml: config file not found"
+    )
     assert check_config_files(["--configfile", str(REPO / "config" / "tosca.yaml")]) == []
 
 
 # --- failed jobs ------------------------------------------------------------------------------------
 def test_error_lines_of_a_job_log():
-    check = ("check: tosca: 76 shapes in /data/tosca-off\n"
-             "becos check: the dataset check found 2 problem(s) (data_dir /data):\n"
-             "  1. /data/tosca-off/cat0.off: truncated. Fix: re-download\n  2. /data/x: y. Fix: z\n\n")
+    check = (
+        "check: tosca: 76 shapes in /data/tosca-off\n"
+        "becos check: the dataset check found 2 problem(s) (data_dir /data):\n"
+        "  1. /data/tosca-off/cat0.off: truncated. Fix: re-download\n  2. /data/x: y. Fix: z\n\n"
+    )
     assert error_lines(check) == check.splitlines()[1:4]
     report = "becos report: 6 pairs in s.zarr, rendering 2\nbecos report: s.zarr: no pairs. Fix: rebuild\n"
     assert error_lines(report) == report.splitlines()  # the trailing lines of the command
@@ -154,8 +163,16 @@ def test_a_failed_job_shows_its_becos_error_line_on_the_console(becos_code, tmp_
     (tosca / "cat0.off").unlink()
     (tosca / "cat0.off").write_bytes((becos_code / "data" / "tosca-off" / "cat0.off").read_bytes()[:5000])
     workdir = write_config_file(tmp_path / "run", tosca_config(becos_code, data_dir=str(tmp_path / "data")))
-    result = run_snakemake(tmp_path, "-d", str(workdir), "--configfile", str(workdir / "config.yaml"),
-                           "--cores", "1", "results/checks/datasets.json")
+    result = run_snakemake(
+        tmp_path,
+        "-d",
+        str(workdir),
+        "--configfile",
+        str(workdir / "config.yaml"),
+        "--cores",
+        "1",
+        "results/checks/datasets.json",
+    )
     assert result.returncode != 0
     log = (workdir / "logs" / "check_datasets.log").read_text()
     becos_lines = [line for line in log.splitlines() if line.startswith("becos check: ")]
@@ -181,8 +198,7 @@ def test_wrong_mesh_content_stops_the_run_before_any_remesh(becos_code, tmp_path
     (tosca / "wolf2.off").symlink_to(becos_code / "data" / "tosca-off" / "dog0.off")
     config = tosca_config(becos_code, data_dir=str(tmp_path / "data"), shapes=["tosca/wolf*", "tosca/dog*"])
     workdir = write_config_file(tmp_path / "run", config)
-    result = run_snakemake(tmp_path, "-d", str(workdir), "--configfile", str(workdir / "config.yaml"),
-                           "--cores", "1")
+    result = run_snakemake(tmp_path, "-d", str(workdir), "--configfile", str(workdir / "config.yaml"), "--cores", "1")
     assert result.returncode != 0
     console = result.stderr.split("becos: job check_datasets failed")[-1]
     assert f"{tosca / 'wolf1.off'}: all its 3 vertices lie in one plane" in console, console[-3000:]
@@ -193,13 +209,15 @@ def test_wrong_mesh_content_stops_the_run_before_any_remesh(becos_code, tmp_path
 def test_failure_report_names_rule_log_and_error(tmp_path):
     log = tmp_path / "remesh.log"
     log.write_text("remesh tosca/cat0 v0\nbecos remesh: /d/cat0.off: 3 vertices. Fix: re-download it\n")
-    text = failure_report([("remesh", "dataset=tosca, name=cat0", [str(log)]),
-                           ("catalog", "", [str(tmp_path / "never.log")])])
+    text = failure_report(
+        [("remesh", "dataset=tosca, name=cat0", [str(log)]), ("catalog", "", [str(tmp_path / "never.log")])]
+    )
     assert text.splitlines() == [
         f"becos: job remesh (dataset=tosca, name=cat0) failed (log: {log}):",
         "becos remesh: /d/cat0.off: 3 vertices. Fix: re-download it",
         f"becos: job catalog failed (log: {tmp_path / 'never.log'}):",
-        f"(no log: {tmp_path / 'never.log'} was not written)"]
+        f"(no log: {tmp_path / 'never.log'} was not written)",
+    ]
     assert failure_report([]) == ""
 
 
@@ -215,7 +233,8 @@ def test_a_terminal_shows_the_progress_panel_and_plain_output_stays_available(tm
     assert "steps (100%) done" not in screen
 
     (workdir / "results" / "config.json").unlink()
-    code, screen = run_in_terminal(tmp_path, "-d", str(workdir), "--cores", "1", "results/config.json",
-                                   env={"BECOS_PROGRESS": "plain"})
+    code, screen = run_in_terminal(
+        tmp_path, "-d", str(workdir), "--cores", "1", "results/config.json", env={"BECOS_PROGRESS": "plain"}
+    )
     assert code == 0, screen[-3000:]
     assert "Workflow Progress" not in screen and "1 of 1 steps (100%) done" in screen, screen[-3000:]

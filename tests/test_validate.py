@@ -7,8 +7,8 @@ from __future__ import annotations
 
 import json
 import shutil
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 import pytest
@@ -19,9 +19,32 @@ from becos.record import PairRecord
 from becos.store import TABLE_COLUMNS, open_benchmark, table_row, write_pairs, write_store
 from becos.validate import validate, validate_store
 
-CHECKS = ("checksum", "schema", "metadata", "meta", "table", "pair_id", "index_range", "unmatched", "weights", "corr_face",
-          "overlap", "index_maps", "full_shape", "setting", "face_map", "vertex_map", "connectivity", "rotation",
-          "alignment", "camera", "scalars", "finite", "split_classes", "centaur")
+CHECKS = (
+    "checksum",
+    "schema",
+    "metadata",
+    "meta",
+    "table",
+    "pair_id",
+    "index_range",
+    "unmatched",
+    "weights",
+    "corr_face",
+    "overlap",
+    "index_maps",
+    "full_shape",
+    "setting",
+    "face_map",
+    "vertex_map",
+    "connectivity",
+    "rotation",
+    "alignment",
+    "camera",
+    "scalars",
+    "finite",
+    "split_classes",
+    "centaur",
+)
 """Every check in becos.validate's docstring table (``store`` is tested by test_damaged_store_is_reported)."""
 
 
@@ -78,8 +101,10 @@ def _rewrite_pairs(store, edit_metas=None, edit_rows=None):
     if edit_metas is not None:
         edit_metas(metas)
     t = bench.table
-    rows = [table_row(i, m, t["x_n_vertices"][i], t["y_n_vertices"][i], t["x_overlap"][i], t["y_overlap"][i])
-            for i, m in enumerate(metas)]
+    rows = [
+        table_row(i, m, t["x_n_vertices"][i], t["y_n_vertices"][i], t["x_overlap"][i], t["y_overlap"][i])
+        for i, m in enumerate(metas)
+    ]
     if edit_rows is not None:
         edit_rows(rows)
     write_pairs(zarr.open_group(str(store), mode="r+"), metas, rows)
@@ -132,6 +157,7 @@ def c_meta(store, bench):
 def c_table(store, bench):
     def edit(rows):
         rows[1][_col("x_n_vertices")] += 1
+
     _rewrite_pairs(store, edit_rows=edit)
     return 1
 
@@ -139,12 +165,13 @@ def c_table(store, bench):
 def c_pair_id(store, bench):
     def edit(metas):
         metas[1]["pair_id"] = metas[0]["pair_id"]
+
     _rewrite_pairs(store, edit)
     return 0
 
 
 def c_index_range(store, bench):
-    row = _rows(bench, "corr_01", 1)[0] + 5                       # pair 1, X vertex 5
+    row = _rows(bench, "corr_01", 1)[0] + 5  # pair 1, X vertex 5
     _array(store, "corr_01")[row] = bench.table["y_n_vertices"][1] + 7
     return 1
 
@@ -152,7 +179,7 @@ def c_index_range(store, bench):
 def c_unmatched(store, bench):
     a, b = _rows(bench, "y_overlap_mask", 0)
     mask = np.asarray(bench.array("y_overlap_mask")[a:b])
-    _array(store, "corr_10")[a + int(np.flatnonzero(mask)[3])] = -1   # a matched Y vertex of pair 0
+    _array(store, "corr_10")[a + int(np.flatnonzero(mask)[3])] = -1  # a matched Y vertex of pair 0
     return 0
 
 
@@ -168,7 +195,7 @@ def _matched_row(bench, pair, side="x"):
 def c_weights(store, bench):
     row = _matched_row(bench, 1)
     weights = _array(store, "corr_01_weights")
-    weights[row] = weights[row] * 0.9                              # same largest corner, sum 0.9
+    weights[row] = weights[row] * 0.9  # same largest corner, sum 0.9
     return 1
 
 
@@ -177,15 +204,16 @@ def c_corr_face(store, bench):
     face = int(bench.array("corr_01_face")[row])
     corners = np.asarray(bench.array("y_faces")[_rows(bench, "y_faces", 1)[0] + face])
     weights = np.asarray(bench.array("corr_01_weights")[row])
-    _array(store, "corr_01")[row] = corners[np.argsort(weights)[1]]   # a corner, not the largest-weight one
+    _array(store, "corr_01")[row] = corners[np.argsort(weights)[1]]  # a corner, not the largest-weight one
     return 1
 
 
 def c_overlap(store, bench):
-    _array(store, "x_overlap")[1] = 0.95                           # mask mean 0.69, accepted range [0.1, 0.9]
+    _array(store, "x_overlap")[1] = 0.95  # mask mean 0.69, accepted range [0.1, 0.9]
 
     def edit(rows):
-        rows[1][_col("x_overlap")] = 0.95                          # the table agrees with the array
+        rows[1][_col("x_overlap")] = 0.95  # the table agrees with the array
+
     _rewrite_pairs(store, edit_rows=edit)
     return 1
 
@@ -193,13 +221,13 @@ def c_overlap(store, bench):
 def c_index_maps(store, bench):
     a, b = _rows(bench, "x_full_to_partial", 1)
     ftp = np.asarray(bench.array("x_full_to_partial")[a:b])
-    _array(store, "x_full_to_partial")[a + int(np.flatnonzero(ftp < 0)[0])] = 0   # a dropped vertex "kept"
+    _array(store, "x_full_to_partial")[a + int(np.flatnonzero(ftp < 0)[0])] = 0  # a dropped vertex "kept"
     return 1
 
 
 def c_full_shape(store, bench):
     a, _ = _rows(bench, "y_full_face_ids", 1)
-    _array(store, "y_full_face_ids")[a + 3] = 4                    # full shape: face 3 must come from face 3
+    _array(store, "y_full_face_ids")[a + 3] = 4  # full shape: face 3 must come from face 3
     return 1
 
 
@@ -249,13 +277,13 @@ def c_rotation(store, bench):
 
 
 def c_alignment(store, bench):
-    quarter_turn = np.array([[0.0, 0.0, -1.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0]])    # a rotation, det +1
+    quarter_turn = np.array([[0.0, 0.0, -1.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0]])  # a rotation, det +1
     _array(store, "x_align_rotation")[0] = quarter_turn
     return 0
 
 
 def c_camera(store, bench):
-    _array(store, "x_camera")[1] = np.eye(3)                       # a camera for a full_full shape
+    _array(store, "x_camera")[1] = np.eye(3)  # a camera for a full_full shape
     return 1
 
 
@@ -288,15 +316,19 @@ def c_centaur(store, bench):
 class Corruption:
     check: str
     setting: str
-    corrupt: Callable          # (store, bench) -> row of the example pair, or None (store-level)
-    message: str               # expected in the check's problem
+    corrupt: Callable  # (store, bench) -> row of the example pair, or None (store-level)
+    message: str  # expected in the check's problem
     n_pairs: int = 1
 
 
 CORRUPTIONS = (
-    Corruption("checksum", "full_full", c_checksum,
-               "checksum: arrays/y_annotation content differs from the sha256 recorded when the store was written; "
-               "chunk files absent (Zarr reads them as zeros): c.0"),
+    Corruption(
+        "checksum",
+        "full_full",
+        c_checksum,
+        "checksum: arrays/y_annotation content differs from the sha256 recorded when the store was written; "
+        "chunk files absent (Zarr reads them as zeros): c.0",
+    ),
     Corruption("schema", "full_full", c_schema, "schema: x_annotation has dtype int32, expected int8"),
     Corruption("metadata", "full_full", c_metadata, "metadata: n_pairs says 3 but the table has 2 rows"),
     Corruption("meta", "partial_partial", c_meta, "meta: meta setting differs from the store's (partial_partial)"),
@@ -304,31 +336,59 @@ CORRUPTIONS = (
     Corruption("pair_id", "partial_partial", c_pair_id, "pair_id: duplicate pair id"),
     Corruption("index_range", "partial_partial", c_index_range, "index_range: corr_01 outside [-1, V_y)"),
     Corruption("unmatched", "partial_partial", c_unmatched, "unmatched: corr_10 >= 0 differs from y_overlap_mask"),
-    Corruption("weights", "partial_partial", c_weights,
-               "weights: corr_01_weights negative, non-finite or not summing to 1"),
-    Corruption("corr_face", "partial_partial", c_corr_face,
-               "corr_face: corr_01 is not the largest-weight corner of corr_01_face"),
+    Corruption(
+        "weights", "partial_partial", c_weights, "weights: corr_01_weights negative, non-finite or not summing to 1"
+    ),
+    Corruption(
+        "corr_face",
+        "partial_partial",
+        c_corr_face,
+        "corr_face: corr_01 is not the largest-weight corner of corr_01_face",
+    ),
     Corruption("overlap", "partial_partial", c_overlap, "overlap: x_overlap differs from the mean of x_overlap_mask"),
-    Corruption("index_maps", "partial_partial", c_index_maps,
-               "index_maps: x_full_to_partial keeps a different number of vertices than V_x"),
-    Corruption("full_shape", "full_full", c_full_shape,
-               "full_shape: full y shape does not keep every face and vertex (identity maps)"),
+    Corruption(
+        "index_maps",
+        "partial_partial",
+        c_index_maps,
+        "index_maps: x_full_to_partial keeps a different number of vertices than V_x",
+    ),
+    Corruption(
+        "full_shape",
+        "full_full",
+        c_full_shape,
+        "full_shape: full y shape does not keep every face and vertex (identity maps)",
+    ),
     Corruption("setting", "partial_full", c_setting, "setting: y is partial in a full_full store", n_pairs=2),
-    Corruption("face_map", "partial_partial", c_face_map,
-               "face_map: y_partial_to_full[y_faces] != y_full_faces[y_full_face_ids]"),
-    Corruption("vertex_map", "partial_partial", c_vertex_map,
-               "vertex_map: y_vertices != y_full_vertices[y_partial_to_full]"),
-    Corruption("connectivity", "partial_partial", c_connectivity,
-               "connectivity: partial x shape has vertices on no face"),
+    Corruption(
+        "face_map",
+        "partial_partial",
+        c_face_map,
+        "face_map: y_partial_to_full[y_faces] != y_full_faces[y_full_face_ids]",
+    ),
+    Corruption(
+        "vertex_map", "partial_partial", c_vertex_map, "vertex_map: y_vertices != y_full_vertices[y_partial_to_full]"
+    ),
+    Corruption(
+        "connectivity", "partial_partial", c_connectivity, "connectivity: partial x shape has vertices on no face"
+    ),
     Corruption("rotation", "partial_partial", c_rotation, "rotation: y_random_rotation not orthonormal with det +1"),
-    Corruption("alignment", "partial_partial", c_alignment,
-               "alignment: x_align_rotation / x_align_translation not the identity"),
+    Corruption(
+        "alignment",
+        "partial_partial",
+        c_alignment,
+        "alignment: x_align_rotation / x_align_translation not the identity",
+    ),
     Corruption("camera", "full_full", c_camera, "camera: x_camera not NaN though a full_full store keeps x full"),
-    Corruption("scalars", "partial_partial", c_scalars,
-               "scalars: x_full_area / x_full_sqrt_area / x_dataset_scale inconsistent"),
+    Corruption(
+        "scalars",
+        "partial_partial",
+        c_scalars,
+        "scalars: x_full_area / x_full_sqrt_area / x_dataset_scale inconsistent",
+    ),
     Corruption("finite", "full_full", c_finite, "finite: x_vertices not finite"),
-    Corruption("split_classes", "full_full", c_split_classes, "split_classes: class tosca/cat in splits train+test",
-               n_pairs=2),
+    Corruption(
+        "split_classes", "full_full", c_split_classes, "split_classes: class tosca/cat in splits train+test", n_pairs=2
+    ),
     Corruption("centaur", "full_full", c_centaur, "centaur: centaur shape outside train"),
 )
 
@@ -382,7 +442,7 @@ def test_class_in_train_and_test(pair_record_files, tmp_path):
 
 def test_reflection_is_not_a_rotation(p2p_copy):
     rotation = _array(p2p_copy, "x_frame_rotation")
-    rotation[0] = rotation[0] @ np.diag([1.0, 1.0, -1.0])      # orthonormal, det -1
+    rotation[0] = rotation[0] @ np.diag([1.0, 1.0, -1.0])  # orthonormal, det -1
     _reseal(p2p_copy)
     problems = validate_store(p2p_copy)
     assert len(problems) == 1 and problems[0].startswith("rotation: x_frame_rotation not orthonormal"), problems
@@ -398,7 +458,7 @@ def test_partial_split_into_two_components(p2p_copy):
     _reseal(p2p_copy)
     problems = validate_store(p2p_copy)
     assert any(p.startswith("connectivity: partial x shape is not one edge-connected component") for p in problems)
-    assert any(p.startswith("face_map:") for p in problems)   # the face no longer matches its full face
+    assert any(p.startswith("face_map:") for p in problems)  # the face no longer matches its full face
 
 
 def test_partial_to_full_not_increasing(p2p_copy):
@@ -418,17 +478,20 @@ def test_pairs_out_of_store_order(clean_stores, tmp_path):
 
     def swap(metas):
         metas[0]["pair_id"], metas[1]["pair_id"] = second, first
+
     _rewrite_pairs(store, swap)
     problems = validate_store(store)
-    assert problems == [f"table: 1 row(s) out of store order (split train, val, test, then pair_id), first at row 1: "
-                        f"{first} (test) after {second} (test)"], problems
+    assert problems == [
+        f"table: 1 row(s) out of store order (split train, val, test, then pair_id), first at row 1: "
+        f"{first} (test) after {second} (test)"
+    ], problems
 
 
 def test_decreasing_offsets_name_the_pair(clean_stores, tmp_path):
     store = tmp_path / "ff.zarr"
     shutil.copytree(clean_stores["full_full"], store)
     offsets = zarr.open_array(str(store / "offsets" / "x_face"), mode="r+")
-    offsets[1] = offsets[2] + 5                                   # pair 0 too long, pair 1 negative
+    offsets[1] = offsets[2] + 5  # pair 0 too long, pair 1 negative
     problems = validate_store(store)
     pair_1 = open_benchmark(store).table["pair_id"][1]
     assert f"schema: offsets 'x_face' decrease (negative row count) in 1 pair(s), e.g. {pair_1}" in problems
@@ -483,7 +546,7 @@ def test_damaged_store_is_reported(kind, clean_stores, tmp_path, capsys):
     problems = validate_store(store)
     assert len(problems) == 1 and problems[0].startswith(f"store: {store}: "), problems
     assert DAMAGES[kind] in problems[0] and "Fix:" in problems[0], problems[0]
-    if kind == "truncated chunk":                                 # the pairs in the damaged chunk
+    if kind == "truncated chunk":  # the pairs in the damaged chunk
         assert " in 2 pair(s), e.g. ff00000000000000, ff00000000000001" in problems[0]
     capsys.readouterr()
     assert main(["validate", str(store)]) == 1

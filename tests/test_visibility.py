@@ -11,8 +11,7 @@ from becos.cameras import camera_from_angles, draw_camera, normalise_to_unit_box
 from becos.geometry import face_areas
 from becos.mesh import TriMesh
 from becos.seeding import rng_for
-from becos.visibility import (SAMPLE_BARYCENTRICS, VisibilityScene, face_adjacency, largest_component,
-                              visible_faces)
+from becos.visibility import SAMPLE_BARYCENTRICS, VisibilityScene, face_adjacency, largest_component, visible_faces
 
 
 def _remeshed_unit_box(tosca_dir, mesh_cache, name: str) -> TriMesh:
@@ -30,8 +29,9 @@ def _remeshed_unit_box(tosca_dir, mesh_cache, name: str) -> TriMesh:
 
         ms = pymeshlab.MeshSet()
         ms.add_mesh(pymeshlab.Mesh(m.vertices, m.faces))
-        ms.meshing_decimation_quadric_edge_collapse(targetfacenum=20_000, preservenormal=True,
-                                                    preservetopology=True, optimalplacement=False)
+        ms.meshing_decimation_quadric_edge_collapse(
+            targetfacenum=20_000, preservenormal=True, preservetopology=True, optimalplacement=False
+        )
         m = TriMesh(ms.current_mesh().vertex_matrix(), ms.current_mesh().face_matrix())
     return TriMesh(normalise_to_unit_box(m.vertices)[0], m.faces)
 
@@ -64,7 +64,7 @@ def test_largest_component_by_area(horse):
     import networkx as nx
 
     rng = np.random.default_rng(1)
-    mask = rng.random(horse.n_faces) < 0.55          # near the percolation threshold: many pieces
+    mask = rng.random(horse.n_faces) < 0.55  # near the percolation threshold: many pieces
     kept = largest_component(horse, mask)
     g = nx.Graph()
     g.add_nodes_from(np.flatnonzero(mask).tolist())
@@ -94,7 +94,7 @@ def test_agrees_with_dense_pixel_cast(michael, horse):
         ratios.append((t2 - t1) / (t1 - t0))
         assert ours.sum() > 0.1 * mesh.n_faces
     assert min(scores) >= 0.97, scores
-    assert np.median(ratios) >= 5, ratios          # loose here (noisy CI machines); the benchmark reports it
+    assert np.median(ratios) >= 5, ratios  # loose here (noisy CI machines); the benchmark reports it
 
 
 def test_more_samples_never_see_less(horse):
@@ -113,9 +113,8 @@ def test_front_and_back_views_see_different_sides(michael):
     scene = VisibilityScene(michael)
     front, back = (scene.scan(camera_from_angles(a, 0.0)) for a in (0.0, np.pi))
     assert _jaccard(front, back) < 0.1
-    normals = np.cross(*(michael.vertices[michael.faces[:, k]] - michael.vertices[michael.faces[:, 0]]
-                         for k in (1, 2)))
-    area_normal = normals[front].sum(axis=0)          # area-weighted mean normal of the kept faces
+    normals = np.cross(*(michael.vertices[michael.faces[:, k]] - michael.vertices[michael.faces[:, 0]] for k in (1, 2)))
+    area_normal = normals[front].sum(axis=0)  # area-weighted mean normal of the kept faces
     cam = camera_from_angles(0.0, 0.0)
     toward = cam.position / np.linalg.norm(cam.position)
     # either winding convention: the kept patch is turned towards (or, reversed, away from) the eye
@@ -141,5 +140,5 @@ def test_frustum_limits_what_is_seen(horse):
     # the face crosses the frustum): in both cases some corner or sample lies within a slightly wider cone
     wider = type(wide)(wide.position, wide.target, wide.up, fov_deg=24.0)
     near = wider.in_frustum(np.concatenate([samples, tri.reshape(-1, 3)]).reshape(-1, 3))
-    per_face = np.concatenate([near[: len(samples)].reshape(-1, 4), near[len(samples):].reshape(-1, 3)], axis=1)
+    per_face = np.concatenate([near[: len(samples)].reshape(-1, 4), near[len(samples) :].reshape(-1, 3)], axis=1)
     assert per_face.any(axis=1).all()

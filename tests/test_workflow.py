@@ -26,12 +26,21 @@ SETTINGS = ("full_full", "partial_full", "partial_partial")
 
 def snakemake(workdir: Path, *args: str, check: bool = True) -> subprocess.CompletedProcess:
     env = dict(os.environ, PYTHONUNBUFFERED="1")
-    result = subprocess.run([*SNAKEMAKE, "-d", str(workdir), "--configfile", str(workdir / "config.yaml"), *args],
-                            capture_output=True, text=True, env=env)
+    result = subprocess.run(
+        [*SNAKEMAKE, "-d", str(workdir), "--configfile", str(workdir / "config.yaml"), *args],
+        capture_output=True,
+        text=True,
+        env=env,
+    )
     if check and result.returncode != 0:
-        logs = "\n".join(f"--- {p}\n{p.read_text()[-3000:]}" for p in sorted((workdir / "logs").rglob("*.log"))
-                         if "Error" in p.read_text() or "Traceback" in p.read_text())
-        raise AssertionError(f"snakemake {' '.join(args)} failed:\n{result.stdout[-4000:]}\n{result.stderr[-6000:]}\n{logs}")
+        logs = "\n".join(
+            f"--- {p}\n{p.read_text()[-3000:]}"
+            for p in sorted((workdir / "logs").rglob("*.log"))
+            if "Error" in p.read_text() or "Traceback" in p.read_text()
+        )
+        raise AssertionError(
+            f"snakemake {' '.join(args)} failed:\n{result.stdout[-4000:]}\n{result.stderr[-6000:]}\n{logs}"
+        )
     return result
 
 
@@ -72,8 +81,10 @@ def test_every_setting_is_built_and_validated(tiny_tosca_run):
         assert names <= {s.split("/")[1] for s in TINY_SHAPES}
         assert (base / "released").is_dir() and (base / f"pairings_{setting}.pkl").is_file()
         assert (base / "report").is_dir()
-        print(f"\n{setting}: {len(bench)} pairs {bench.table['split'].value_counts().to_dict()}, "
-              f"validation: valid={validation['valid']}, problems={validation['n_problems']}")
+        print(
+            f"\n{setting}: {len(bench)} pairs {bench.table['split'].value_counts().to_dict()}, "
+            f"validation: valid={validation['valid']}, problems={validation['n_problems']}"
+        )
 
 
 def test_store_round_trips_the_pair_records(tiny_tosca_run):
@@ -104,7 +115,7 @@ def test_an_edit_to_a_report_key_reruns_the_reports_not_the_stores(tiny_tosca_ru
     assert planned.get("report") == 3, planned
     assert not {"store_metadata", "zarr_store", "validate_store", "released_layout"} & set(planned), planned
     planned = jobs_planned(snakemake(tiny_tosca_run, "-n", "--config", "min_overlap=0.15").stdout)
-    assert planned.get("store_metadata") == 3 and planned.get("pairs", 0) >= 1, planned   # a key a store records
+    assert planned.get("store_metadata") == 3 and planned.get("pairs", 0) >= 1, planned  # a key a store records
 
 
 def test_snakemake_report_packs_each_settings_report_with_its_caption(tiny_tosca_run, tmp_path):
@@ -118,8 +129,8 @@ def test_snakemake_report_packs_each_settings_report_with_its_caption(tiny_tosca
     # one packed copy of the report folder per setting (Snakemake names them by a hash)
     assert sum(n.endswith("/index.html") and "/data/raw/" in n for n in names) == len(SETTINGS), names[:20]
     assert any(n.endswith(".png") and "/renders/" in n for n in names)
-    assert "BeCoS benchmark generator" in text                              # workflow/report/workflow.rst
-    assert "Sample pairs with their ground truth" in text                   # workflow/report/index.rst
+    assert "BeCoS benchmark generator" in text  # workflow/report/workflow.rst
+    assert "Sample pairs with their ground truth" in text  # workflow/report/index.rst
 
 
 def test_a_deleted_remesh_output_is_rebuilt(tiny_tosca_run):
@@ -135,7 +146,7 @@ def test_a_deleted_remesh_output_is_rebuilt(tiny_tosca_run):
         assert jobs_planned(dry).get("remesh") == 1, dry[-3000:]
         assert str(ply.relative_to(tiny_tosca_run)) in dry
     finally:
-        shutil.move(kept, ply)                                          # the other tests read the finished run
+        shutil.move(kept, ply)  # the other tests read the finished run
     after = snakemake(tiny_tosca_run, "-n")
     assert "Nothing to be done" in after.stdout + after.stderr
 
@@ -197,15 +208,25 @@ def test_visit_order_releases_each_shape_after_its_last_pair():
     from becos.workflow import pair_shape_keys, visit_order
 
     names = ["cat0", "cat1", "dog0", "dog1", "horse0"]
-    rows = [{"pair_id": f"p{i:02d}", "x_dataset": "tosca", "x_name": names[i % 5], "x_variant": i % 2,
-             "y_dataset": "tosca", "y_name": names[(3 * i + 1) % 5], "y_variant": 0} for i in range(20)]
+    rows = [
+        {
+            "pair_id": f"p{i:02d}",
+            "x_dataset": "tosca",
+            "x_name": names[i % 5],
+            "x_variant": i % 2,
+            "y_dataset": "tosca",
+            "y_name": names[(3 * i + 1) % 5],
+            "y_variant": 0,
+        }
+        for i in range(20)
+    ]
     ordered, released = visit_order(rows, remesh=True)
     assert sorted(r["pair_id"] for r in ordered) == [r["pair_id"] for r in rows]
     flat = [key for keys in released for key in keys]
     used = {key for row in rows for key in pair_shape_keys(row, True)}
-    assert sorted(flat) == sorted(used)                    # each shape released once
+    assert sorted(flat) == sorted(used)  # each shape released once
     for i, keys in enumerate(released):
-        later = {key for row in ordered[i + 1:] for key in pair_shape_keys(row, True)}
+        later = {key for row in ordered[i + 1 :] for key in pair_shape_keys(row, True)}
         assert set(keys) <= set(pair_shape_keys(ordered[i], True)) and not set(keys) & later
 
 
@@ -236,19 +257,39 @@ def test_chunk_files_do_not_depend_on_the_shapes_a_job_keeps(tiny_tosca_run, tmp
             for kind, ix in (("ground_truth", gt_index), ("pairs", pairs_index)):
                 for entry in json.loads(ix.read_text())["pairs"]:
                     name = Path(entry["path"]).name
-                    assert (results / setting / kind / name).read_bytes() == (source / setting / kind / name).read_bytes()
+                    assert (results / setting / kind / name).read_bytes() == (
+                        source / setting / kind / name
+                    ).read_bytes()
                 original = json.loads((source / setting / kind / ix.name).read_text())["pairs"]
-                assert [{k: v for k, v in e.items() if k != "path"} for e in json.loads(ix.read_text())["pairs"]] == \
-                    [{k: v for k, v in e.items() if k != "path"} for e in original]
+                assert [{k: v for k, v in e.items() if k != "path"} for e in json.loads(ix.read_text())["pairs"]] == [
+                    {k: v for k, v in e.items() if k != "path"} for e in original
+                ]
 
 
 def test_incremental_rebuild(becos_code, tmp_path):
     """Four-legged only, then humans and centaurs; then only min_overlap changes."""
-    shapes = ["tosca/cat0", "tosca/cat1", "tosca/dog0", "tosca/dog1", "tosca/horse0", "tosca/horse5", "tosca/wolf0",
-              "tosca/wolf1", "tosca/michael0", "tosca/michael1", "tosca/david0", "tosca/david1", "tosca/centaur0",
-              "tosca/centaur1"]
-    common = dict(shapes=shapes, setting="partial_partial", usage_scale=0.05,
-                  exports={"released": False, "published_pickle": False, "report": False})
+    shapes = [
+        "tosca/cat0",
+        "tosca/cat1",
+        "tosca/dog0",
+        "tosca/dog1",
+        "tosca/horse0",
+        "tosca/horse5",
+        "tosca/wolf0",
+        "tosca/wolf1",
+        "tosca/michael0",
+        "tosca/michael1",
+        "tosca/david0",
+        "tosca/david1",
+        "tosca/centaur0",
+        "tosca/centaur1",
+    ]
+    common = dict(
+        shapes=shapes,
+        setting="partial_partial",
+        usage_scale=0.05,
+        exports={"released": False, "published_pickle": False, "report": False},
+    )
     workdir = write_config(tmp_path / "run", becos_code, combinations="four-legged", **common)
     snakemake(workdir, "--cores", "2")
     pairs_dir = workdir / "results" / "partial_partial" / "pairs"
@@ -265,8 +306,10 @@ def test_incremental_rebuild(becos_code, tmp_path):
     changed = [n for n in before if after.get(n) != before[n]]
     assert len(after) > len(before)
     assert len(changed) <= 0.1 * len(before), changed
-    print(f"\nincremental: {len(before)} pairs -> {len(after)}; existing pair files changed: {len(changed)}; "
-          f"remesh jobs planned: {sorted(planned_remesh)} (already remeshed: {sorted(remeshed_before)})")
+    print(
+        f"\nincremental: {len(before)} pairs -> {len(after)}; existing pair files changed: {len(changed)}; "
+        f"remesh jobs planned: {sorted(planned_remesh)} (already remeshed: {sorted(remeshed_before)})"
+    )
 
     write_config(workdir, becos_code, combinations="all", min_overlap=0.15, **common)
     planned = jobs_planned(snakemake(workdir, "-n", "--cores", "2").stdout)
@@ -292,9 +335,19 @@ def test_incremental_rebuild(becos_code, tmp_path):
 def test_original_settings_plan_uses_the_published_pairs(becos_code, tmp_path):
     from becos import workflow as bw
 
-    config = bw.resolve_config(yaml.safe_load(write_config(
-        tmp_path, becos_code, original_settings=True, setting="partial_partial",
-        caps={"train": 3, "val": 1, "test": 1}).joinpath("config.yaml").read_text()))
+    config = bw.resolve_config(
+        yaml.safe_load(
+            write_config(
+                tmp_path,
+                becos_code,
+                original_settings=True,
+                setting="partial_partial",
+                caps={"train": 3, "val": 1, "test": 1},
+            )
+            .joinpath("config.yaml")
+            .read_text()
+        )
+    )
     config["results"] = str(tmp_path / "results")
     plan = bw.Plan.build(config)
     manifest = plan.manifests["partial_partial"]

@@ -75,9 +75,14 @@ def results_fingerprint(workdir: Path, settings=SETTINGS) -> dict[str, str]:
     out = {}
     for path in sorted(results.rglob("*")):
         rel = path.relative_to(results)
-        if path.is_file() and ".zarr" not in str(rel) and path.suffix in (".csv", ".npz", ".json", ".ply") \
-                and not path.name.startswith(".") and path.name not in ("config.json", "validation.json") \
-                and "report" not in rel.parts:
+        if (
+            path.is_file()
+            and ".zarr" not in str(rel)
+            and path.suffix in (".csv", ".npz", ".json", ".ply")
+            and not path.name.startswith(".")
+            and path.name not in ("config.json", "validation.json")
+            and "report" not in rel.parts
+        ):
             out[str(rel)] = _sha(path.read_bytes())
     for setting in settings:
         bench = open_benchmark(results / setting / "benchmark.zarr")

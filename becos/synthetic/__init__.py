@@ -28,17 +28,43 @@ import sys
 from pathlib import Path
 
 from becos.synthetic.bodies import CLASSES, ClassSpec, class_spec, semantic_part
-from becos.synthetic.collection import (CHIRALITY_TEMPLATES, DATASETS, MANIFEST, TREE_EDGES, ClassModel,
-                                        SyntheticDataset, body_part_labels, build_class, edge_edits,
-                                        generate_collection, template_correspondence)
+from becos.synthetic.collection import (
+    CHIRALITY_TEMPLATES,
+    DATASETS,
+    MANIFEST,
+    TREE_EDGES,
+    ClassModel,
+    SyntheticDataset,
+    body_part_labels,
+    build_class,
+    edge_edits,
+    generate_collection,
+    template_correspondence,
+)
 
 REGISTRY_POSES = 4
 """Poses per class that the registry YAMLs (config/datasets/synthy.yaml, synthz.yaml) count on."""
 
 __all__ = [
-    "CLASSES", "CHIRALITY_TEMPLATES", "DATASETS", "MANIFEST", "REGISTRY_POSES", "TREE_EDGES", "ClassModel", "ClassSpec",
-    "SyntheticDataset", "body_part_labels", "build_class", "class_spec", "configure_parser", "edge_edits",
-    "generate_collection", "main", "run_cli", "semantic_part", "template_correspondence",
+    "CLASSES",
+    "CHIRALITY_TEMPLATES",
+    "DATASETS",
+    "MANIFEST",
+    "REGISTRY_POSES",
+    "TREE_EDGES",
+    "ClassModel",
+    "ClassSpec",
+    "SyntheticDataset",
+    "body_part_labels",
+    "build_class",
+    "class_spec",
+    "configure_parser",
+    "edge_edits",
+    "generate_collection",
+    "main",
+    "run_cli",
+    "semantic_part",
+    "template_correspondence",
 ]
 
 
@@ -46,10 +72,15 @@ def configure_parser(parser: argparse.ArgumentParser) -> argparse.ArgumentParser
     """Add the ``synthetic`` sub-command's arguments to ``parser`` (for ``becos synthetic``)."""
     parser.add_argument("out_dir", type=Path, help="folder to write (replaced if it holds a previous collection)")
     parser.add_argument("--seed", type=int, default=0, help="pose seed (default 0)")
-    parser.add_argument("--poses", type=int, default=REGISTRY_POSES, dest="poses_per_class",
-                        help=f"shapes per class, 1-20 (default {REGISTRY_POSES}; 13 classes). The dataset registry "
-                             f"(config/datasets/synthy.yaml, synthz.yaml: expected_count, expected_per_class) "
-                             f"expects {REGISTRY_POSES}")
+    parser.add_argument(
+        "--poses",
+        type=int,
+        default=REGISTRY_POSES,
+        dest="poses_per_class",
+        help=f"shapes per class, 1-20 (default {REGISTRY_POSES}; 13 classes). The dataset registry "
+        f"(config/datasets/synthy.yaml, synthz.yaml: expected_count, expected_per_class) "
+        f"expects {REGISTRY_POSES}",
+    )
     return parser
 
 
@@ -60,11 +91,17 @@ def run_cli(args: argparse.Namespace) -> int:
     start = time.perf_counter()
     out = generate_collection(args.out_dir, seed=args.seed, poses_per_class=args.poses_per_class)
     if args.poses_per_class != REGISTRY_POSES:
-        print(f"becos synthetic: warning: {args.poses_per_class} poses per class, but config/datasets/synthy.yaml and "
-              f"synthz.yaml expect {REGISTRY_POSES} (expected_count, expected_per_class); update them before listing "
-              f"the shapes", file=sys.stderr)
-    print(f"synthetic collection: {len(CLASSES)} classes x {args.poses_per_class} poses in "
-          f"{time.perf_counter() - start:.1f} s", file=sys.stderr)
+        print(
+            f"becos synthetic: warning: {args.poses_per_class} poses per class, but config/datasets/synthy.yaml and "
+            f"synthz.yaml expect {REGISTRY_POSES} (expected_count, expected_per_class); update them before listing "
+            f"the shapes",
+            file=sys.stderr,
+        )
+    print(
+        f"synthetic collection: {len(CLASSES)} classes x {args.poses_per_class} poses in "
+        f"{time.perf_counter() - start:.1f} s",
+        file=sys.stderr,
+    )
     print(out)
     return 0
 

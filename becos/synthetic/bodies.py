@@ -61,14 +61,16 @@ class Part:
 
 def mirror(part: Part) -> Part:
     """The right-side copy (x -> -x) of a left part (name ``*_l`` -> ``*_r``, parent likewise)."""
+
     def flip(p):
         return (-p[0], p[1], p[2])
 
     def rename(n):
         return n[:-2] + "_r" if n is not None and n.endswith("_l") else n
 
-    return Part(rename(part.name), rename(part.parent), flip(part.a), flip(part.b), part.ra, part.rb,
-                part.sx, part.sy, part.k)
+    return Part(
+        rename(part.name), rename(part.parent), flip(part.a), flip(part.b), part.ra, part.rb, part.sx, part.sy, part.k
+    )
 
 
 def _with_mirrors(parts: list[Part]) -> list[Part]:
@@ -81,6 +83,7 @@ def _with_mirrors(parts: list[Part]) -> list[Part]:
 
 
 # --- body plans --------------------------------------------------------------------------------
+
 
 def _upper_body(waist: np.ndarray, s: float, g: float, head: float, horns: bool, parent: str | None) -> list[Part]:
     """Biped upper body (chest, neck, head, arms, optional horns) above the waist point (metres).
@@ -99,23 +102,52 @@ def _upper_body(waist: np.ndarray, s: float, g: float, head: float, horns: bool,
     parts = [
         Part("b_chest", parent, P(0, 1.04, 0), P(0, 1.28, 0), 0.135 * r, 0.16 * r, 1.0, 0.62, 0.07 * s),
         Part("b_neck", "b_chest", P(0, 1.38, 0), P(0, 1.56, 0.01), 0.052 * r, 0.048 * r, k=0.03 * s),
-        Part("b_head", "b_neck", tuple(head_base), tuple(head_base + np.array([0, 0.07, 0.005]) * hs),
-             0.09 * hs, 0.085 * hs, 0.9, 1.05, 0.025 * s),
+        Part(
+            "b_head",
+            "b_neck",
+            tuple(head_base),
+            tuple(head_base + np.array([0, 0.07, 0.005]) * hs),
+            0.09 * hs,
+            0.085 * hs,
+            0.9,
+            1.05,
+            0.025 * s,
+        ),
         Part("b_upperarm_l", "b_chest", P(0.20, 1.34, 0), P(0.26, 1.08, -0.01), 0.052 * r, 0.042 * r, k=0.04 * s),
-        Part("b_forearm_l", "b_upperarm_l", P(0.26, 1.08, -0.01), P(0.29, 0.86, 0.02), 0.041 * r, 0.032 * r,
-             k=0.02 * s),
-        Part("b_hand_l", "b_forearm_l", P(0.29, 0.86, 0.02), P(0.30, 0.74, 0.03), 0.032 * r, 0.028 * r, 0.75,
-             1.0, 0.015 * s),
+        Part(
+            "b_forearm_l", "b_upperarm_l", P(0.26, 1.08, -0.01), P(0.29, 0.86, 0.02), 0.041 * r, 0.032 * r, k=0.02 * s
+        ),
+        Part(
+            "b_hand_l",
+            "b_forearm_l",
+            P(0.29, 0.86, 0.02),
+            P(0.30, 0.74, 0.03),
+            0.032 * r,
+            0.028 * r,
+            0.75,
+            1.0,
+            0.015 * s,
+        ),
     ]
     if horns:
         base = head_base + np.array([0.05, 0.10, 0.025]) * hs
-        parts.append(Part("b_horn_l", "b_head", tuple(base), tuple(base + np.array([0.06, 0.13, 0.03]) * hs),
-                          0.032 * hs, 0.02 * hs, k=0.015 * s))
+        parts.append(
+            Part(
+                "b_horn_l",
+                "b_head",
+                tuple(base),
+                tuple(base + np.array([0.06, 0.13, 0.03]) * hs),
+                0.032 * hs,
+                0.02 * hs,
+                k=0.015 * s,
+            )
+        )
     return parts
 
 
-def humanoid(height: float = 1.75, girth: float = 1.0, head: float = 1.0, horns: bool = False,
-             tail: bool = False) -> list[Part]:
+def humanoid(
+    height: float = 1.75, girth: float = 1.0, head: float = 1.0, horns: bool = False, tail: bool = False
+) -> list[Part]:
     """A humanoid standing upright (feet at y ~ 0, facing +z, arms hanging slightly apart), metres."""
     s, g = height / 1.75, girth
     r = s * g
@@ -128,17 +160,33 @@ def humanoid(height: float = 1.75, girth: float = 1.0, head: float = 1.0, horns:
     parts += [
         Part("b_thigh_l", "b_pelvis", P(0.10, 0.88, 0), P(0.11, 0.50, 0), 0.085 * r, 0.055 * r, k=0.05 * s),
         Part("b_shin_l", "b_thigh_l", P(0.11, 0.50, 0), P(0.11, 0.10, -0.02), 0.055 * r, 0.04 * r, k=0.02 * s),
-        Part("b_foot_l", "b_shin_l", P(0.11, 0.07, -0.03), P(0.115, 0.045, 0.15), 0.045 * r, 0.035 * r, 1.0, 0.7,
-             0.02 * s),
+        Part(
+            "b_foot_l",
+            "b_shin_l",
+            P(0.11, 0.07, -0.03),
+            P(0.115, 0.045, 0.15),
+            0.045 * r,
+            0.035 * r,
+            1.0,
+            0.7,
+            0.02 * s,
+        ),
     ]
     if tail:
-        parts.append(Part("b_tail", "b_pelvis", P(0, 0.92, -0.10), P(0, 0.62, -0.42), 0.045 * r, 0.025 * r,
-                          k=0.03 * s))
+        parts.append(Part("b_tail", "b_pelvis", P(0, 0.92, -0.10), P(0, 0.62, -0.42), 0.045 * r, 0.025 * r, k=0.03 * s))
     return _with_mirrors(parts)
 
 
-def _quadruped_parts(size: float, legs: float, girth: float, neck: float, length: float, horns: bool,
-                     tail: str | None, head_and_neck: bool = True) -> list[Part]:
+def _quadruped_parts(
+    size: float,
+    legs: float,
+    girth: float,
+    neck: float,
+    length: float,
+    horns: bool,
+    tail: str | None,
+    head_and_neck: bool = True,
+) -> list[Part]:
     s, g = size, girth
     r = s * g
 
@@ -163,30 +211,77 @@ def _quadruped_parts(size: float, legs: float, girth: float, neck: float, length
             tip = base + np.array([0.055, 0.13, -0.08]) * s
             parts.append(Part("q_horn_l", "q_head", tuple(base), tuple(tip), 0.03 * s, 0.02 * s, k=0.015 * s))
     parts += [
-        Part("q_fupper_l", "q_barrel", P(0.09, 0.50, 0.28, True), P(0.10, 0.30, 0.30, True), 0.055 * r, 0.042 * r,
-             k=0.05 * s),
-        Part("q_flower_l", "q_fupper_l", P(0.10, 0.30, 0.30, True), P(0.10, 0.08, 0.29, True), 0.038 * r,
-             0.03 * r, k=0.02 * s),
-        Part("q_ffoot_l", "q_flower_l", P(0.10, 0.06, 0.29, True), P(0.10, 0.04, 0.34, True), 0.033 * r, 0.03 * r,
-             k=0.015 * s),
-        Part("q_hupper_l", "q_barrel", P(0.09, 0.50, -0.35, True), P(0.10, 0.30, -0.40, True), 0.07 * r, 0.045 * r,
-             k=0.05 * s),
-        Part("q_hlower_l", "q_hupper_l", P(0.10, 0.30, -0.40, True), P(0.10, 0.08, -0.36, True), 0.04 * r,
-             0.03 * r, k=0.02 * s),
-        Part("q_hfoot_l", "q_hlower_l", P(0.10, 0.06, -0.36, True), P(0.10, 0.04, -0.31, True), 0.033 * r,
-             0.03 * r, k=0.015 * s),
+        Part(
+            "q_fupper_l",
+            "q_barrel",
+            P(0.09, 0.50, 0.28, True),
+            P(0.10, 0.30, 0.30, True),
+            0.055 * r,
+            0.042 * r,
+            k=0.05 * s,
+        ),
+        Part(
+            "q_flower_l",
+            "q_fupper_l",
+            P(0.10, 0.30, 0.30, True),
+            P(0.10, 0.08, 0.29, True),
+            0.038 * r,
+            0.03 * r,
+            k=0.02 * s,
+        ),
+        Part(
+            "q_ffoot_l",
+            "q_flower_l",
+            P(0.10, 0.06, 0.29, True),
+            P(0.10, 0.04, 0.34, True),
+            0.033 * r,
+            0.03 * r,
+            k=0.015 * s,
+        ),
+        Part(
+            "q_hupper_l",
+            "q_barrel",
+            P(0.09, 0.50, -0.35, True),
+            P(0.10, 0.30, -0.40, True),
+            0.07 * r,
+            0.045 * r,
+            k=0.05 * s,
+        ),
+        Part(
+            "q_hlower_l",
+            "q_hupper_l",
+            P(0.10, 0.30, -0.40, True),
+            P(0.10, 0.08, -0.36, True),
+            0.04 * r,
+            0.03 * r,
+            k=0.02 * s,
+        ),
+        Part(
+            "q_hfoot_l",
+            "q_hlower_l",
+            P(0.10, 0.06, -0.36, True),
+            P(0.10, 0.04, -0.31, True),
+            0.033 * r,
+            0.03 * r,
+            k=0.015 * s,
+        ),
     ]
     if tail == "long":
-        parts.append(Part("q_tail", "q_barrel", P(0, 0.60, -0.45), P(0, 0.42, -0.74), 0.04 * r, 0.022 * r,
-                          k=0.03 * s))
+        parts.append(Part("q_tail", "q_barrel", P(0, 0.60, -0.45), P(0, 0.42, -0.74), 0.04 * r, 0.022 * r, k=0.03 * s))
     elif tail == "short":
-        parts.append(Part("q_tail", "q_barrel", P(0, 0.60, -0.45), P(0, 0.56, -0.58), 0.04 * r, 0.028 * r,
-                          k=0.03 * s))
+        parts.append(Part("q_tail", "q_barrel", P(0, 0.60, -0.45), P(0, 0.56, -0.58), 0.04 * r, 0.028 * r, k=0.03 * s))
     return parts
 
 
-def quadruped(size: float = 1.0, legs: float = 1.0, girth: float = 1.0, neck: float = 1.0, length: float = 1.0,
-              horns: bool = False, tail: str | None = "long") -> list[Part]:
+def quadruped(
+    size: float = 1.0,
+    legs: float = 1.0,
+    girth: float = 1.0,
+    neck: float = 1.0,
+    length: float = 1.0,
+    horns: bool = False,
+    tail: str | None = "long",
+) -> list[Part]:
     """A four-legged animal standing on its feet (y ~ 0), facing +z, metres.
 
     ``size`` scales everything, ``legs`` the leg length, ``girth`` radii and lateral offsets,
@@ -195,8 +290,15 @@ def quadruped(size: float = 1.0, legs: float = 1.0, girth: float = 1.0, neck: fl
     return _with_mirrors(_quadruped_parts(size, legs, girth, neck, length, horns, tail))
 
 
-def centaur(size: float = 1.2, legs: float = 1.1, girth: float = 1.0, length: float = 1.0,
-            height: float = 1.75, upper_girth: float = 1.0, tail: str | None = "long") -> list[Part]:
+def centaur(
+    size: float = 1.2,
+    legs: float = 1.1,
+    girth: float = 1.0,
+    length: float = 1.0,
+    height: float = 1.75,
+    upper_girth: float = 1.0,
+    tail: str | None = "long",
+) -> list[Part]:
     """A composite class: a quadruped lower body (no neck/head) with a biped upper body on its front."""
     lower = _quadruped_parts(size, legs, girth, 1.0, length, False, tail, head_and_neck=False)
     barrel = lower[0]
@@ -207,6 +309,7 @@ def centaur(size: float = 1.2, legs: float = 1.1, girth: float = 1.0, length: fl
 
 
 # --- the class catalogue -----------------------------------------------------------------------
+
 
 @dataclass(frozen=True)
 class ClassSpec:
@@ -271,6 +374,7 @@ def class_spec(dataset: str, name: str) -> ClassSpec:
 
 # --- vectorised geometry of a body -------------------------------------------------------------
 
+
 @dataclass(frozen=True, eq=False)
 class Body:
     """Array form of a list of parts (P parts), for vectorised evaluation.
@@ -299,7 +403,7 @@ class Body:
     edge_k: np.ndarray = field(default=None)
 
     @classmethod
-    def from_parts(cls, parts) -> "Body":
+    def from_parts(cls, parts) -> Body:
         names = tuple(p.name for p in parts)
         index = {n: i for i, n in enumerate(names)}
         parents = np.array([index[p.parent] if p.parent is not None else -1 for p in parts], dtype=np.int64)
@@ -318,9 +422,23 @@ class Body:
         child = np.flatnonzero(parents >= 0)
         edges = np.stack([child, parents[child]], axis=1)
         k = np.array([p.k for p in parts], float)
-        return cls(names, parents, a, b, axis, e1, e2, length, np.array([p.ra for p in parts], float),
-                   np.array([p.rb for p in parts], float), np.array([p.sx for p in parts], float),
-                   np.array([p.sy for p in parts], float), k, edges, k[child])
+        return cls(
+            names,
+            parents,
+            a,
+            b,
+            axis,
+            e1,
+            e2,
+            length,
+            np.array([p.ra for p in parts], float),
+            np.array([p.rb for p in parts], float),
+            np.array([p.sx for p in parts], float),
+            np.array([p.sy for p in parts], float),
+            k,
+            edges,
+            k[child],
+        )
 
     @property
     def n_parts(self) -> int:
@@ -370,16 +488,18 @@ class Body:
             e = blended.argmin(axis=1)
             f = blended[rows, e]
             h = np.clip(0.5 + 0.5 * (fb[rows, e] - fa[rows, e]) / self.edge_k[e], 0.0, 1.0)
-            parts, mix = self.edges[e], np.stack([h, 1.0 - h], axis=1)   # d smin / d(a, b) = (h, 1 - h)
+            parts, mix = self.edges[e], np.stack([h, 1.0 - h], axis=1)  # d smin / d(a, b) = (h, 1 - h)
         grad = np.zeros((n, 3))
         for j in range(parts.shape[1]):
             p = parts[:, j]
             clamped = (t[rows, p] <= 0.0) | (t[rows, p] >= 1.0)
             nr = norm[rows, p]
-            g = ((s1[rows, p] / nr / self.sx[p])[:, None] * self.e1[p]
-                 + (s2[rows, p] / nr / self.sy[p])[:, None] * self.e2[p]
-                 + np.where(clamped, s3[rows, p] / nr, -(self.rb[p] - self.ra[p]) / self.length[p])[:, None]
-                 * self.axis[p])
+            g = (
+                (s1[rows, p] / nr / self.sx[p])[:, None] * self.e1[p]
+                + (s2[rows, p] / nr / self.sy[p])[:, None] * self.e2[p]
+                + np.where(clamped, s3[rows, p] / nr, -(self.rb[p] - self.ra[p]) / self.length[p])[:, None]
+                * self.axis[p]
+            )
             grad += (mix[:, j] * scale[p])[:, None] * g
         return f, grad
 
@@ -592,12 +712,28 @@ def pose_vertices(body: Body, rest_vertices: np.ndarray, weights: np.ndarray, ro
 
 
 _SEGMENT_TO_REGION = {
-    "b_pelvis": "b_torso", "b_chest": "b_torso", "b_neck": "b_head", "b_head": "b_head",
-    "b_upperarm": "b_arm", "b_forearm": "b_arm", "b_hand": "b_arm",
-    "b_thigh": "b_leg", "b_shin": "b_leg", "b_foot": "b_leg", "b_tail": "b_tail", "b_horn": "b_horn",
-    "q_barrel": "q_torso", "q_neck": "q_head", "q_head": "q_head",
-    "q_fupper": "q_frontleg", "q_flower": "q_frontleg", "q_ffoot": "q_frontleg",
-    "q_hupper": "q_hindleg", "q_hlower": "q_hindleg", "q_hfoot": "q_hindleg", "q_tail": "q_tail",
+    "b_pelvis": "b_torso",
+    "b_chest": "b_torso",
+    "b_neck": "b_head",
+    "b_head": "b_head",
+    "b_upperarm": "b_arm",
+    "b_forearm": "b_arm",
+    "b_hand": "b_arm",
+    "b_thigh": "b_leg",
+    "b_shin": "b_leg",
+    "b_foot": "b_leg",
+    "b_tail": "b_tail",
+    "b_horn": "b_horn",
+    "q_barrel": "q_torso",
+    "q_neck": "q_head",
+    "q_head": "q_head",
+    "q_fupper": "q_frontleg",
+    "q_flower": "q_frontleg",
+    "q_ffoot": "q_frontleg",
+    "q_hupper": "q_hindleg",
+    "q_hlower": "q_hindleg",
+    "q_hfoot": "q_hindleg",
+    "q_tail": "q_tail",
     "q_horn": "q_horn",
 }
 

@@ -54,7 +54,7 @@ import os
 import shutil
 import tempfile
 from dataclasses import dataclass
-from functools import lru_cache
+from functools import cache
 from pathlib import Path
 
 import numpy as np
@@ -62,8 +62,18 @@ import numpy as np
 from becos.errors import ConfigError
 from becos.geometry import barycentric_coordinates
 from becos.mesh import TriMesh
-from becos.synthetic.bodies import (CHART_BINS, CLASSES, PART_GROUPS, Body, ClassSpec, chart_profile, class_spec,
-                                    draw_pose, pose_vertices, skinning_weights)
+from becos.synthetic.bodies import (
+    CHART_BINS,
+    CLASSES,
+    PART_GROUPS,
+    Body,
+    ClassSpec,
+    chart_profile,
+    class_spec,
+    draw_pose,
+    pose_vertices,
+    skinning_weights,
+)
 from becos.synthetic.meshing import mesh_body
 
 MANIFEST = "synthetic.json"
@@ -118,21 +128,44 @@ def rotation_xyz(degrees) -> np.ndarray:
 
 DATASETS: dict[str, SyntheticDataset] = {
     "synthy": SyntheticDataset(
-        "synthy", "synthy-off", 1.0, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 7000,
-        {"human": {"train": ["alba"], "val": ["brute"], "test": ["cyra"]},
-         "four-legged": {"train": ["hound"], "val": ["goat"], "test": ["tapir"]}}),
+        "synthy",
+        "synthy-off",
+        1.0,
+        (0.0, 0.0, 0.0),
+        (0.0, 0.0, 0.0),
+        7000,
+        {
+            "human": {"train": ["alba"], "val": ["brute"], "test": ["cyra"]},
+            "four-legged": {"train": ["hound"], "val": ["goat"], "test": ["tapir"]},
+        },
+    ),
     "synthz": SyntheticDataset(
-        "synthz", "synthz-off", 0.01, (90.0, 0.0, 0.0), (40.0, -25.0, 10.0), 14000,
-        {"human": {"train": ["elin"], "val": ["dario"], "test": ["faun"]},
-         "four-legged": {"train": ["pony"], "val": ["lynx"], "test": ["ram"]}}),
+        "synthz",
+        "synthz-off",
+        0.01,
+        (90.0, 0.0, 0.0),
+        (40.0, -25.0, 10.0),
+        14000,
+        {
+            "human": {"train": ["elin"], "val": ["dario"], "test": ["faun"]},
+            "four-legged": {"train": ["pony"], "val": ["lynx"], "test": ["ram"]},
+        },
+    ),
 }
 
 TREE_EDGES: tuple[tuple[str, str], ...] = (
-    ("synthy_alba0", "synthy_brute0"), ("synthy_alba0", "synthy_cyra0"), ("synthy_alba0", "synthz_elin0"),
-    ("synthz_elin0", "synthz_dario0"), ("synthz_elin0", "synthz_faun0"),
-    ("synthy_hound0", "synthy_goat0"), ("synthy_hound0", "synthy_tapir0"), ("synthy_hound0", "synthz_lynx0"),
-    ("synthz_lynx0", "synthz_pony0"), ("synthz_pony0", "synthz_ram0"),
-    ("synthz_centaur0", "synthz_elin0"), ("synthz_centaur0", "synthz_pony0"),
+    ("synthy_alba0", "synthy_brute0"),
+    ("synthy_alba0", "synthy_cyra0"),
+    ("synthy_alba0", "synthz_elin0"),
+    ("synthz_elin0", "synthz_dario0"),
+    ("synthz_elin0", "synthz_faun0"),
+    ("synthy_hound0", "synthy_goat0"),
+    ("synthy_hound0", "synthy_tapir0"),
+    ("synthy_hound0", "synthz_lynx0"),
+    ("synthz_lynx0", "synthz_pony0"),
+    ("synthz_pony0", "synthz_ram0"),
+    ("synthz_centaur0", "synthz_elin0"),
+    ("synthz_centaur0", "synthz_pony0"),
 )
 """The template network: undirected edges of a tree over all class templates (humanoids and
 four-legged classes are connected only through the centaur, as in BeCoS)."""
@@ -159,6 +192,7 @@ SKINNING_SIGMA = 0.012
 
 
 # --- classes -----------------------------------------------------------------------------------
+
 
 @dataclass(frozen=True, eq=False)
 class ClassModel:
@@ -206,7 +240,7 @@ class ClassModel:
         return pose_vertices(self.body, self.mesh.vertices, self.weights, rotations)
 
 
-@lru_cache(maxsize=None)
+@cache
 def build_class(dataset: str, name: str) -> ClassModel:
     """Build (and cache in-process) the template of a class: mesh, part labels, skinning weights.
 
@@ -225,14 +259,15 @@ def build_class(dataset: str, name: str) -> ClassModel:
     for p in range(body.n_parts):  # ~25 parts
         faces = mesh.faces[face_labels == p]
         if len(faces) == 0:
-            raise ValueError(f"part {body.names[p]} of {spec.node} has no faces (buried inside its neighbours); "
-                             f"the class definition must make every part visible")
+            raise ValueError(
+                f"part {body.names[p]} of {spec.node} has no faces (buried inside its neighbours); "
+                f"the class definition must make every part visible"
+            )
         extents[p] = body.chart_extent(mesh.vertices[np.unique(faces)], p)
         mine = crossings[crossing_part == p]
         if len(mine):
             extents[p, 0] = chart_profile(body.chart(mine, p))
-    return ClassModel(spec, body, mesh, labels, face_labels, weights, extents, part_values, crossings,
-                      crossing_part)
+    return ClassModel(spec, body, mesh, labels, face_labels, weights, extents, part_values, crossings, crossing_part)
 
 
 def _parent_boundary_points(body: Body, mesh: TriMesh, labels: np.ndarray, values: np.ndarray):
@@ -244,12 +279,12 @@ def _parent_boundary_points(body: Body, mesh: TriMesh, labels: np.ndarray, value
     F = mesh.faces
     pairs = np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), axis=1).astype(np.int64)
     n = np.int64(mesh.n_vertices)
-    keys = np.unique(pairs[:, 0] * n + pairs[:, 1])         # each undirected edge once, sorted
+    keys = np.unique(pairs[:, 0] * n + pairs[:, 1])  # each undirected edge once, sorted
     edges = np.stack([keys // n, keys % n], axis=1)
     la, lb = labels[edges[:, 0]], labels[edges[:, 1]]
     parents = body.parents
-    a_child = parents[la] == lb          # end 0 is the child
-    b_child = parents[lb] == la          # end 1 is the child
+    a_child = parents[la] == lb  # end 0 is the child
+    b_child = parents[lb] == la  # end 1 is the child
     keep = a_child | b_child
     edges, la, lb, a_child = edges[keep], la[keep], lb[keep], a_child[keep]
     child = np.where(a_child, la, lb)
@@ -275,12 +310,14 @@ def body_part_labels(dataset: str, name: str) -> tuple[np.ndarray, tuple[str, ..
 
 # --- correspondences ---------------------------------------------------------------------------
 
+
 def edge_edits(a: ClassSpec, b: ClassSpec) -> tuple[str, str]:
     """File-name suffixes naming the edited templates of an edge (as the reference names them).
 
     A side whose parts are partly absent on the other side gets ``_top`` (centaur <-> humanoid),
     ``_bottom`` (centaur <-> four-legged) or ``_no_<group>`` for optional part groups (horns, tail).
     """
+
     def suffix(x: ClassSpec, y: ClassSpec) -> str:
         cats = {x.category, y.category}
         if cats == {"centaur", "human"}:
@@ -344,14 +381,14 @@ class _Soup:
         return self.region[hit], weights, np.sqrt(np.maximum(sq, 0.0))
 
 
-@lru_cache(maxsize=None)
+@cache
 def _part_soup(b: ClassModel, part: int) -> _Soup:
     """b's faces of ``part`` in that part's normalised capsule chart."""
     region = b.region(part)
     return _Soup(region, b.chart(b.mesh.vertices[b.mesh.faces[region]].reshape(-1, 3), part))
 
 
-@lru_cache(maxsize=None)
+@cache
 def _band_soup(b: ClassModel, child: int, labels: tuple[int, ...]) -> _Soup:
     """b's faces in the junction band of ``child`` (some corner with |zeta| < 1.5) whose corners all
     carry one of ``labels``, in the band chart (:func:`junction_chart`)."""
@@ -359,8 +396,7 @@ def _band_soup(b: ClassModel, child: int, labels: tuple[int, ...]) -> _Soup:
     zeta = junction_coordinate(b, child, faces.ravel()).reshape(-1, 3)
     keep = np.isin(b.labels[faces], labels).all(axis=1) & (np.abs(zeta).min(axis=1) < 1.5)
     region = np.flatnonzero(keep)
-    return _Soup(region, junction_chart(b, child, b.mesh.vertices[faces[region]].reshape(-1, 3),
-                                        zeta[region].ravel()))
+    return _Soup(region, junction_chart(b, child, b.mesh.vertices[faces[region]].reshape(-1, 3), zeta[region].ravel()))
 
 
 def _junction_soup(b: ClassModel, child: int) -> _Soup:
@@ -368,8 +404,9 @@ def _junction_soup(b: ClassModel, child: int) -> _Soup:
     return _band_soup(b, int(child), (int(child), int(b.body.parents[child])))
 
 
-def _spread_over_collars(b: ClassModel, part: int, holes: list, face: np.ndarray, weights: np.ndarray,
-                         residual: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _spread_over_collars(
+    b: ClassModel, part: int, holes: list, face: np.ndarray, weights: np.ndarray, residual: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Re-map the images that fall into the collar of one of b's extra parts ``holes`` (children of
     ``part`` that class A lacks) or into the patch that part covers.
 
@@ -383,8 +420,9 @@ def _spread_over_collars(b: ClassModel, part: int, holes: list, face: np.ndarray
     onto its rim. Returns the updated (face, weights, distance)."""
     faces = b.mesh.faces
     corners = faces[face]
-    zeta = np.stack([(junction_coordinate(b, h, corners.ravel()).reshape(-1, 3) * weights).sum(axis=1)
-                     for h in holes], axis=1)
+    zeta = np.stack(
+        [(junction_coordinate(b, h, corners.ravel()).reshape(-1, 3) * weights).sum(axis=1) for h in holes], axis=1
+    )
     nearest = zeta.argmax(axis=1)
     depth = zeta[np.arange(len(face)), nearest]
     face, weights, residual = face.copy(), weights.copy(), residual.copy()
@@ -475,12 +513,16 @@ def template_correspondence(a: ClassModel, b: ClassModel) -> tuple[np.ndarray, n
 
 # --- writing -----------------------------------------------------------------------------------
 
+
 def format_off(vertices: np.ndarray, faces: np.ndarray) -> str:
     """OFF text: header, ``nV nF 0``, vertices with 6 decimals, faces ``3 i j k``."""
     v = np.asarray(vertices, dtype=np.float64) + 0.0  # +0.0 turns -0.0 into 0.0
     f = np.asarray(faces, dtype=np.int64)
-    return (f"OFF\n{len(v)} {len(f)} 0\n" + ("%.6f %.6f %.6f\n" * len(v)) % tuple(v.ravel())
-            + ("3 %d %d %d\n" * len(f)) % tuple(f.ravel()))
+    return (
+        f"OFF\n{len(v)} {len(f)} 0\n"
+        + ("%.6f %.6f %.6f\n" * len(v)) % tuple(v.ravel())
+        + ("3 %d %d %d\n" * len(f)) % tuple(f.ravel())
+    )
 
 
 def format_corres(face: np.ndarray, weights: np.ndarray) -> str:
@@ -534,8 +576,9 @@ def _write_annotations(root: Path, models: dict[str, ClassModel]) -> None:
             a, b = models[src], models[dst]
             sa, sb = edge_edits(a.spec, b.spec)
             face, weights, _ = template_correspondence(a, b)
-            _write(root / "precomputed_corr_templates" / f"{src}{sa}_{dst}{sb}_corres.txt",
-                   format_corres(face, weights))
+            _write(
+                root / "precomputed_corr_templates" / f"{src}{sa}_{dst}{sb}_corres.txt", format_corres(face, weights)
+            )
 
 
 def _sha256(path: Path) -> str:
@@ -577,8 +620,10 @@ def generate_collection(out_dir: str | Path, seed: int = 0, poses_per_class: int
     if not (isinstance(poses_per_class, (int, np.integer)) and 1 <= poses_per_class <= 20):
         raise ConfigError(f"synthetic collection: poses_per_class must be an integer in 1..20, got {poses_per_class!r}")
     if out_dir.exists() and (not out_dir.is_dir() or (any(out_dir.iterdir()) and not _is_collection(out_dir))):
-        raise ConfigError(f"{out_dir} exists and is not a synthetic collection (no {MANIFEST}); refusing to "
-                          f"overwrite it. Fix: choose an empty or new folder")
+        raise ConfigError(
+            f"{out_dir} exists and is not a synthetic collection (no {MANIFEST}); refusing to "
+            f"overwrite it. Fix: choose an empty or new folder"
+        )
     out_dir.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(dir=out_dir.parent, prefix=f".{out_dir.name}.tmp-"))
     try:
@@ -596,10 +641,19 @@ def generate_collection(out_dir: str | Path, seed: int = 0, poses_per_class: int
             "format_version": FORMAT_VERSION,
             "seed": int(seed),
             "poses_per_class": int(poses_per_class),
-            "datasets": {n: {"folder_name": d.folder_name, "scale": d.scale, "rot": list(d.rot)}
-                         for n, d in DATASETS.items()},
-            "classes": [{"dataset": s.dataset, "name": s.name, "category": s.category, "template": s.template,
-                         "n_vertices": models[s.node].mesh.n_vertices} for s in CLASSES],
+            "datasets": {
+                n: {"folder_name": d.folder_name, "scale": d.scale, "rot": list(d.rot)} for n, d in DATASETS.items()
+            },
+            "classes": [
+                {
+                    "dataset": s.dataset,
+                    "name": s.name,
+                    "category": s.category,
+                    "template": s.template,
+                    "n_vertices": models[s.node].mesh.n_vertices,
+                }
+                for s in CLASSES
+            ],
             "files": {p.relative_to(tmp).as_posix(): _sha256(p) for p in files},
         }
         _write(tmp / MANIFEST, json.dumps(manifest, indent=1, sort_keys=True) + "\n")

@@ -68,8 +68,9 @@ def marching_cubes(body: Body, h: float) -> TriMesh:
     import igl
 
     values, origin, (nx, ny, nz) = grid_field(body, h)
-    Z, Y, X = np.meshgrid(origin[2] + h * np.arange(nz), origin[1] + h * np.arange(ny),
-                          origin[0] + h * np.arange(nx), indexing="ij")
+    Z, Y, X = np.meshgrid(
+        origin[2] + h * np.arange(nz), origin[1] + h * np.arange(ny), origin[0] + h * np.arange(nx), indexing="ij"
+    )
     nodes = np.stack([X.ravel(), Y.ravel(), Z.ravel()], axis=1)
     V, F, _ = igl.marching_cubes(values, nodes, nx, ny, nz, 0.0)
     mesh = TriMesh(V, F)

@@ -26,7 +26,7 @@ def job_properties(jobscript: Path) -> dict:
     """The ``# properties = {...}`` line Snakemake writes into every jobscript."""
     for line in jobscript.read_text().splitlines()[:5]:
         if line.startswith("# properties = "):
-            return json.loads(line[len("# properties = "):])
+            return json.loads(line[len("# properties = ") :])
     sys.exit(f"{jobscript}: no '# properties = ' line; is this a Snakemake jobscript?")
 
 
@@ -34,8 +34,13 @@ def command(props: dict, jobscript: Path, log: Path) -> list[str]:
     """The ``sbatch`` call for one job."""
     res = props.get("resources", {})
     name = props.get("groupid") if props.get("type") == "group" else props.get("rule", "job")
-    cmd = ["sbatch", "--parsable", f"--job-name=becos-{name}", f"--cpus-per-task={props.get('threads', 1)}",
-           f"--output={log}"]
+    cmd = [
+        "sbatch",
+        "--parsable",
+        f"--job-name=becos-{name}",
+        f"--cpus-per-task={props.get('threads', 1)}",
+        f"--output={log}",
+    ]
     if res.get("mem_mb"):
         cmd.append(f"--mem={int(res['mem_mb'])}")
     if res.get("runtime"):

@@ -2,14 +2,14 @@
 
 
 rule resolved_config:
-    conda:
-        "../envs/becos.yaml"
     output:
         LAYOUT.config,
-    params:
-        config=json.dumps(config, sort_keys=True),
     log:
         "logs/resolved_config.log",
+    conda:
+        "../envs/becos.yaml"
+    params:
+        config=json.dumps(config, sort_keys=True),
     shell:
         "becos write-config --options {params.config:q} --out {output:q} > {log:q} 2>&1"
 
@@ -17,18 +17,18 @@ rule resolved_config:
 if config["synthetic"]["enabled"]:
 
     rule synthetic_collection:
-        conda:
-            "../envs/becos.yaml"
         output:
             directory(config["synthetic"]["out"]),
-        params:
-            seed=config["synthetic"]["seed"],
-            poses=config["synthetic"]["poses"],
+        log:
+            "logs/synthetic_collection.log",
+        conda:
+            "../envs/becos.yaml"
         resources:
             mem_mb=RESOURCES.mem_mb("synthetic_collection"),
             runtime=RESOURCES.runtime("synthetic_collection"),
-        log:
-            "logs/synthetic_collection.log",
+        params:
+            seed=config["synthetic"]["seed"],
+            poses=config["synthetic"]["poses"],
         shell:
             "becos synthetic {output:q} --seed {params.seed} --poses {params.poses} > {log:q} 2>&1"
 
@@ -36,15 +36,15 @@ if config["synthetic"]["enabled"]:
 if config["annotations_archive"]:
 
     rule fetch_annotations:
-        conda:
-            "../envs/becos.yaml"
         output:
             directory(config["annotations"]),
+        log:
+            "logs/fetch_annotations.log",
+        conda:
+            "../envs/becos.yaml"
         params:
             url=config["annotations_archive"]["url"],
             sha256=config["annotations_archive"]["sha256"],
-        log:
-            "logs/fetch_annotations.log",
         shell:
             "becos fetch-annotations --url {params.url:q} --sha256 {params.sha256} --dest {output:q} > {log:q} 2>&1"
 
@@ -59,24 +59,24 @@ DT4D_JOBS = {(job.kind, job.cls): job for job in bdt4d.preparation_plan(config)}
 if DT4D_JOBS:
 
     rule prepare_dt4d:
-        conda:
-            "../envs/becos.yaml"
         input:
             anime=lambda w: DT4D_JOBS[(w.kind, w.cls)].anime,
             info=lambda w: ancient(DT4D_JOBS[(w.kind, w.cls)].info),
         output:
             update(str(Path(config["data_dir"]) / "dt4d_{kind}" / "{cls}" / bdt4d.STAMP_NAME)),
+        log:
+            "logs/prepare_dt4d/{kind}/{cls}.log",
         wildcard_constraints:
             kind="animals|humanoids",
             cls="[^/]+",
-        params:
-            data_dir=config["data_dir"],
-            listing=lambda w: DT4D_JOBS[(w.kind, w.cls)].listing,
+        conda:
+            "../envs/becos.yaml"
         resources:
             mem_mb=RESOURCES.mem_mb("prepare_dt4d"),
             runtime=RESOURCES.runtime("prepare_dt4d"),
-        log:
-            "logs/prepare_dt4d/{kind}/{cls}.log",
+        params:
+            data_dir=config["data_dir"],
+            listing=lambda w: DT4D_JOBS[(w.kind, w.cls)].listing,
         shell:
             "becos prepare-dt4d --data-dir {params.data_dir:q} --info {input.info:q} --kind {wildcards.kind}"
             " --classes {wildcards.cls:q} > {log:q} 2>&1"
@@ -90,40 +90,40 @@ if config["download"]:
         download_dataset,
 
     rule download_dataset:
-        conda:
-            "../envs/becos.yaml"
         output:
             str(LAYOUT.downloaded("{dataset}")),
+        log:
+            "logs/download/{dataset}.log",
         wildcard_constraints:
             dataset="|".join(config["download"]),
-        params:
-            data_dir=config["data_dir"],
-            url=lambda wildcards: archive_url(wildcards.dataset, config["download_urls"]),
+        conda:
+            "../envs/becos.yaml"
         resources:
             mem_mb=RESOURCES.mem_mb("download_dataset"),
             runtime=RESOURCES.runtime("download_dataset"),
-        log:
-            "logs/download/{dataset}.log",
+        params:
+            data_dir=config["data_dir"],
+            url=lambda wildcards: archive_url(wildcards.dataset, config["download_urls"]),
         shell:
             "becos download-dataset {wildcards.dataset} --data-dir {params.data_dir:q} --url {params.url:q}"
             " --out {output:q} > {log:q} 2>&1"
 
 
 checkpoint check_datasets:
-    conda:
-        "../envs/becos.yaml"
     input:
         generated_inputs,
     output:
         LAYOUT.checks,
+    log:
+        "logs/check_datasets.log",
+    conda:
+        "../envs/becos.yaml"
     params:
         datasets=" ".join(config["datasets"]),
         data_dir=config["data_dir"],
         annotations=config["annotations"],
         template_file=config["template_file"],
         geometry="" if config["check_geometry"] else "--no-geometry-check",
-    log:
-        "logs/check_datasets.log",
     shell:
         "becos check --datasets {params.datasets} --data-dir {params.data_dir:q}"
         " --annotations {params.annotations:q} --template-table {params.template_file:q} {params.geometry}"
@@ -131,15 +131,15 @@ checkpoint check_datasets:
 
 
 rule catalog:
-    conda:
-        "../envs/becos.yaml"
     input:
         LAYOUT.checks,
     output:
         LAYOUT.catalog,
-    params:
-        options=bw.job_options(config, "catalog"),
     log:
         "logs/catalog.log",
+    conda:
+        "../envs/becos.yaml"
+    params:
+        options=bw.job_options(config, "catalog"),
     shell:
         "becos catalog --options {params.options:q} --out {output:q} > {log:q} 2>&1"

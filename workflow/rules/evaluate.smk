@@ -2,29 +2,27 @@
 
 
 rule baseline:
-    conda:
-        "../envs/becos.yaml"
     input:
         store=f"{RESULTS}/{{setting}}/benchmark.zarr",
         validation=f"{RESULTS}/{{setting}}/validation.json",
     output:
         directory(f"{RESULTS}/{{setting}}/predictions/{{baseline}}"),
-    params:
-        split=config["evaluation"]["split"],
+    log:
+        "logs/baseline/{setting}/{baseline}.log",
     wildcard_constraints:
         baseline="nn|zoomout",
+    conda:
+        "../envs/becos.yaml"
     resources:
         mem_mb=RESOURCES.mem_mb("baseline"),
         runtime=RESOURCES.runtime("baseline", n_pairs=setting_pairs),
-    log:
-        "logs/baseline/{setting}/{baseline}.log",
+    params:
+        split=config["evaluation"]["split"],
     shell:
         "becos baseline {wildcards.baseline} {input.store:q} --out {output:q} --split {params.split} > {log:q} 2>&1"
 
 
 rule evaluate:
-    conda:
-        "../envs/becos.yaml"
     input:
         store=f"{RESULTS}/{{setting}}/benchmark.zarr",
         predictions=expand(f"{RESULTS}/{{{{setting}}}}/predictions/{{baseline}}", baseline=BASELINES),
@@ -32,15 +30,17 @@ rule evaluate:
         summary=report(f"{RESULTS}/{{setting}}/evaluation/summary.csv", category="Evaluation"),
         plot=report(f"{RESULTS}/{{setting}}/evaluation/pck.png", category="Evaluation"),
         per_pair=f"{RESULTS}/{{setting}}/evaluation/per_pair.csv",
+    log:
+        "logs/evaluate/{setting}.log",
+    conda:
+        "../envs/becos.yaml"
+    resources:
+        mem_mb=RESOURCES.mem_mb("evaluate"),
+        runtime=RESOURCES.runtime("evaluate", n_pairs=setting_pairs),
     params:
         out=lambda w: f"{RESULTS}/{w.setting}/evaluation",
         split=config["evaluation"]["split"],
         geodesics=config["evaluation"]["geodesics"],
-    resources:
-        mem_mb=RESOURCES.mem_mb("evaluate"),
-        runtime=RESOURCES.runtime("evaluate", n_pairs=setting_pairs),
-    log:
-        "logs/evaluate/{setting}.log",
     shell:
         "becos evaluate {input.store:q} {input.predictions:q} --out {params.out:q} --split {params.split}"
         " --geodesics {params.geodesics} > {log:q} 2>&1"

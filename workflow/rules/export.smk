@@ -7,86 +7,86 @@ STORE_BLIND_KEYS = ("setting", "n_renders", "store_vis", "exports", "evaluation"
 
 
 rule store_metadata:
-    conda:
-        "../envs/becos.yaml"
     output:
         f"{RESULTS}/{{setting}}/metadata.json",
+    log:
+        "logs/store_metadata/{setting}.log",
+    conda:
+        "../envs/becos.yaml"
     params:
         # the rerun trigger: every key but STORE_BLIND_KEYS
         store_keys=json.dumps({k: v for k, v in config.items() if k not in STORE_BLIND_KEYS}, sort_keys=True),
         # what the metadata records: the whole config. A param computed from the output is "derived", and
         # Snakemake leaves derived params out of its params trigger
         config=lambda wildcards, output: json.dumps(config, sort_keys=True),
-    log:
-        "logs/store_metadata/{setting}.log",
     shell:
         "becos metadata --options {params.config:q} --setting {wildcards.setting} --out {output:q} > {log:q} 2>&1"
 
 
 rule zarr_store:
-    conda:
-        "../envs/becos.yaml"
     input:
         pairs=lambda w: chunk_files(w.setting, "pairs"),
         metadata=f"{RESULTS}/{{setting}}/metadata.json",
     output:
         directory(f"{RESULTS}/{{setting}}/benchmark.zarr"),
+    log:
+        "logs/zarr_store/{setting}.log",
+    conda:
+        "../envs/becos.yaml"
     resources:
         mem_mb=RESOURCES.mem_mb("zarr_store"),
         runtime=RESOURCES.runtime("zarr_store", n_pairs=setting_pairs),
-    log:
-        "logs/zarr_store/{setting}.log",
     shell:
         "becos export-zarr --setting {wildcards.setting} --out {output:q} --metadata {input.metadata:q}"
         " {input.pairs:q} > {log:q} 2>&1"
 
 
 rule validate_store:
-    conda:
-        "../envs/becos.yaml"
     input:
         f"{RESULTS}/{{setting}}/benchmark.zarr",
     output:
         f"{RESULTS}/{{setting}}/validation.json",
+    log:
+        "logs/validate_store/{setting}.log",
+    conda:
+        "../envs/becos.yaml"
     resources:
         mem_mb=RESOURCES.mem_mb("validate_store"),
         runtime=RESOURCES.runtime("validate_store", n_pairs=setting_pairs),
-    log:
-        "logs/validate_store/{setting}.log",
     shell:
         "becos validate {input:q} --json {output:q} > {log:q} 2>&1"
 
 
 rule released_layout:
-    conda:
-        "../envs/becos.yaml"
     input:
         store=f"{RESULTS}/{{setting}}/benchmark.zarr",
         validation=f"{RESULTS}/{{setting}}/validation.json",
     output:
         directory(f"{RESULTS}/{{setting}}/released"),
+    log:
+        "logs/released_layout/{setting}.log",
+    conda:
+        "../envs/becos.yaml"
     resources:
         mem_mb=RESOURCES.mem_mb("released_layout"),
         runtime=RESOURCES.runtime("released_layout", n_pairs=setting_pairs),
-    log:
-        "logs/released_layout/{setting}.log",
     shell:
         "becos export-released {input.store:q} {output:q} > {log:q} 2>&1"
 
 
 rule psmal_layout:
-    conda:
-        "../envs/becos.yaml"
     input:
         store=f"{RESULTS}/{{setting}}/benchmark.zarr",
         validation=f"{RESULTS}/{{setting}}/validation.json",
     output:
         directory(f"{RESULTS}/{{setting}}/psmal"),
+    log:
+        "logs/psmal_layout/{setting}.log",
+    conda:
+        "../envs/becos.yaml"
     resources:
         mem_mb=RESOURCES.mem_mb("psmal_layout"),
         runtime=RESOURCES.runtime("psmal_layout", n_pairs=setting_pairs),
-    log:
-        "logs/psmal_layout/{setting}.log",
     shell:
         "becos export-psmal {input.store:q} {output:q} > {log:q} 2>&1"
 
@@ -100,84 +100,82 @@ GEODESIC_SPLITS = " ".join(["--splits", *EXPORTS["geodesic_splits"]]) if EXPORTS
 # shared by pairs and settings is solved once; GEODESIC_PARTS jobs solve its meshes; one job per setting
 # writes the loaders' layouts from their rows (the rows are temporary).
 rule geodesic_plan:
-    conda:
-        "../envs/becos.yaml"
     input:
         stores=expand(f"{RESULTS}/{{setting}}/benchmark.zarr", setting=SETTINGS),
         validations=expand(f"{RESULTS}/{{setting}}/validation.json", setting=SETTINGS),
     output:
         temp(directory(f"{RESULTS}/geodesics/plan")),
-    params:
-        splits=GEODESIC_SPLITS,
-        parts=GEODESIC_PARTS,
+    log:
+        "logs/geodesics/plan.log",
+    conda:
+        "../envs/becos.yaml"
     resources:
         mem_mb=RESOURCES.mem_mb("geodesic_plan"),
         runtime=RESOURCES.runtime("geodesic_plan"),
-    log:
-        "logs/geodesics/plan.log",
+    params:
+        splits=GEODESIC_SPLITS,
+        parts=GEODESIC_PARTS,
     shell:
         "becos geodesic-plan {input.stores:q} --out {output:q} --parts {params.parts} {params.splits} > {log:q} 2>&1"
 
 
 rule geodesic_rows:
-    conda:
-        "../envs/becos.yaml"
     input:
         f"{RESULTS}/geodesics/plan",
     output:
         temp(directory(f"{RESULTS}/geodesics/rows/part_{{part}}")),
+    log:
+        "logs/geodesics/rows_{part}.log",
+    conda:
+        "../envs/becos.yaml"
     resources:
         mem_mb=RESOURCES.mem_mb("geodesic_rows"),
         runtime=RESOURCES.runtime("geodesic_rows"),
-    log:
-        "logs/geodesics/rows_{part}.log",
     shell:
         "becos geodesic-rows {input:q}/part_{wildcards.part}.npz {output:q} > {log:q} 2>&1"
 
 
 rule geodesics:
-    conda:
-        "../envs/becos.yaml"
     input:
         store=f"{RESULTS}/{{setting}}/benchmark.zarr",
         validation=f"{RESULTS}/{{setting}}/validation.json",
         rows=expand(f"{RESULTS}/geodesics/rows/part_{{part}}", part=range(GEODESIC_PARTS)),
     output:
         directory(f"{RESULTS}/{{setting}}/geodesics"),
-    params:
-        splits=GEODESIC_SPLITS,
-        layouts=" ".join(EXPORTS["geodesic_layouts"]),
+    log:
+        "logs/geodesics/{setting}.log",
+    conda:
+        "../envs/becos.yaml"
     resources:
         mem_mb=RESOURCES.mem_mb("geodesics"),
         runtime=RESOURCES.runtime("geodesics", n_pairs=setting_pairs),
-    log:
-        "logs/geodesics/{setting}.log",
+    params:
+        splits=GEODESIC_SPLITS,
+        layouts=" ".join(EXPORTS["geodesic_layouts"]),
     shell:
         "becos export-geodesics {input.store:q} {output:q} {params.splits} --layouts {params.layouts}"
         " --rows {input.rows:q} > {log:q} 2>&1"
 
 
 rule published_pairings:
-    conda:
-        "../envs/becos.yaml"
     input:
         manifest=f"{RESULTS}/{{setting}}/manifest.csv",
         catalog=LAYOUT.catalog,
         store=f"{RESULTS}/{{setting}}/benchmark.zarr",
     output:
         f"{RESULTS}/{{setting}}/pairings_{{setting}}.pkl",
-    params:
-        options=bw.job_options(config, "export"),
     log:
         "logs/published_pairings/{setting}.log",
+    conda:
+        "../envs/becos.yaml"
+    params:
+        options=bw.job_options(config, "export"),
     shell:
         "becos export-pairings --options {params.options:q} --setting {wildcards.setting} --store {input.store:q}"
         " --out {output:q} > {log:q} 2>&1"
 
 
 rule report:
-    conda:
-        "../envs/becos.yaml"
     input:
         store=f"{RESULTS}/{{setting}}/benchmark.zarr",
         validation=f"{RESULTS}/{{setting}}/validation.json",
@@ -189,12 +187,14 @@ rule report:
             category="Benchmark report",
             labels={"setting": "{setting}"},
         ),
-    params:
-        renders=config["n_renders"] if config["store_vis"] else 0,
+    log:
+        "logs/report/{setting}.log",
+    conda:
+        "../envs/becos.yaml"
     resources:
         mem_mb=RESOURCES.mem_mb("report"),
         runtime=RESOURCES.runtime("report", n_pairs=setting_pairs),
-    log:
-        "logs/report/{setting}.log",
+    params:
+        renders=config["n_renders"] if config["store_vis"] else 0,
     shell:
         "becos report {input.store:q} {output:q} --renders {params.renders} > {log:q} 2>&1"
