@@ -6,8 +6,6 @@ Barycentric weights are always in face-column order: a point in face ``f`` with 
 
 from __future__ import annotations
 
-import hashlib
-
 import numpy as np
 
 from becos.mesh import TriMesh
@@ -168,7 +166,6 @@ class SurfaceLocator:
         self._normals = None
         self._centroids = None
         self._rings: dict[int, VertexRings] = {}
-        self._last_plain = None
         edges = mesh.vertices[self._faces] - mesh.vertices[np.roll(self._faces, 1, axis=1)]
         self.max_detour = float(np.linalg.norm(edges, axis=2).mean())
 
@@ -177,12 +174,6 @@ class SurfaceLocator:
         if rings not in self._rings:
             self._rings[rings] = VertexRings(self.mesh.faces, self.mesh.n_vertices, rings)
         return self._rings[rings]
-
-    @property
-    def searches_every_face(self) -> bool:
-        """No face row is left out of the search (then :attr:`face_normals` is
-        :func:`oriented_face_normals` of the mesh)."""
-        return self._rows is None
 
     def _row(self, index: np.ndarray) -> np.ndarray:
         """Rows of ``mesh.faces`` of indices into the searched faces."""
@@ -205,12 +196,8 @@ class SurfaceLocator:
         return self._normals
 
     def _plain(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        # the last query's answer is kept: a remesh asks for the same points with and without normals
-        key = (points.shape, hashlib.sha1(points.tobytes()).digest())
-        if self._last_plain is None or self._last_plain[0] != key:
-            _, face, closest = self._tree.squared_distance(self.mesh.vertices, self._faces, points)
-            self._last_plain = (key, self._row(np.asarray(face, dtype=np.int64)), np.asarray(closest))
-        return self._last_plain[1].copy(), self._last_plain[2].copy()
+        sq_dist, face, closest = self._tree.squared_distance(self.mesh.vertices, self._faces, points)
+        return self._row(np.asarray(face, dtype=np.int64)), np.asarray(closest)
 
     def _compatible(self, points: np.ndarray, normals: np.ndarray, min_cos: float, k: int):
         """Closest point among the k nearest-centroid faces with a compatible normal; face -1 if none."""

@@ -16,24 +16,19 @@ both:
 1. the copy is re-oriented coherently (pymeshlab ``meshing_re_orient_faces_coherently``;
    TOSCA michael0/david0/horse5/6/centaur3/4 have inconsistently wound faces). The input's vertex
    order and face rows are never touched: both maps are computed against the input as given.
-2. seeded jitter: every interior vertex of the copy moves to a random point of one of its own
-   incident triangles, at most :data:`DEFAULT_JITTER` of the way to the triangle's other corners;
-   every boundary vertex moves along one of its boundary edges (the boundary curve is kept).
+2. seeded jitter: every non-boundary vertex of the copy moves to a random point of one of its own
+   incident triangles, at most :data:`DEFAULT_JITTER` of the way to the triangle's other corners.
    Each vertex therefore stays exactly ON the original surface; only the triangulation between them
    is perturbed (by less than the local edge length), which changes the quadric errors and the
    collapse order. The seed is derived from the mesh content and the target, so the same input and
    target give byte-identical output, and different targets (the remesh variants of one shape) or
    different poses of one class give unrelated samplings.
-3. an input with at least ``DIRECT_DECIMATION_FACTOR`` (1.5) × the face target faces (TOSCA: every
-   shape but wolf) goes to step 4's decimation as it is: a third or more of its vertices are
-   collapsed away and the others are jittered, so no sample is shared, and the decimation's cost grows
-   with its input (a Loop subdivision first would quadruple it: 5 CPU-s per TOSCA human before, of
-   which 2.6 s in the decimation). A smaller input gets ONE Loop subdivision with threshold 0 (every
-   edge split; every old vertex moved by the Loop smoothing) first, so that the decimation has
-   samples to choose from.
-4. quadric edge-collapse decimation (pymeshlab) with optimal placement and topology preservation to
-   the target; the vertex target is reached by continuing the decimation (each interior collapse
-   removes one vertex and two faces).
+3. a large input (more than ``PRE_DECIMATION_FACTOR`` × the face target faces) is first decimated to
+   that size — a speed measure: the final remesh is as good, in 40 % of the time on TOSCA humans.
+4. ONE Loop subdivision with threshold 0 (every edge split; every old vertex moved by the Loop
+   smoothing), then quadric edge-collapse decimation with optimal placement and topology
+   preservation to the target; the vertex target is reached by continuing the decimation
+   (each interior collapse removes one vertex and two faces).
 5. only the largest connected component (by area) is kept if decimation left specks (a warning is
    logged and the count is recorded), unreferenced vertices are dropped.
 6. the remesh is oriented like the majority of the input (area-weighted vote of face normals against
@@ -92,11 +87,8 @@ log = logging.getLogger(__name__)
 DEFAULT_JITTER = 0.3
 """Largest fraction of the way towards the other two corners of an incident triangle a vertex moves."""
 
-DIRECT_DECIMATION_FACTOR = 1.5
-"""Inputs with at least this × the face target faces are decimated directly: at least a third of their
-vertices are collapsed away and the rest are jittered, so no sample is shared (measured by
-``benchmarks/remesh.py``), and decimating the input itself keeps thin parts better than decimating a
-Loop-smoothed copy. Smaller inputs are subdivided once first (at most 6 × the face target faces)."""
+PRE_DECIMATION_FACTOR = 2.0
+"""Inputs with more faces than this × the face target are decimated to that size before subdividing."""
 
 VERTEX_TARGET_RANGE = (9000, 10000)
 """The paper's vertex-count rule: a remesh has a count drawn uniformly in this range (inclusive)."""
@@ -198,11 +190,10 @@ def _largest_component(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndar
 
 
 def _jitter_on_surface(vertices: np.ndarray, faces: np.ndarray, amount: float, rng: np.random.Generator) -> np.ndarray:
-    """Move each vertex to a random point of the surface near it.
+    """Move each non-boundary vertex to a random point of one of its incident triangles.
 
-    Interior vertex p of a randomly chosen incident face (p, q, r) goes to p + a (q - p) + b (r - p)
-    with a, b ~ U(0, amount / 2): a point of that triangle, hence of the surface. Boundary vertex p
-    goes to p + a (q - p) along a randomly chosen boundary edge (p, q): the boundary curve is kept.
+    Vertex p of a randomly chosen incident face (p, q, r) goes to p + a (q - p) + b (r - p) with
+    a, b ~ U(0, amount / 2): a point of that triangle, hence of the surface. Boundary vertices stay.
     Returns new (V, 3) positions.
     """
     n = len(vertices)
@@ -210,11 +201,7 @@ def _jitter_on_surface(vertices: np.ndarray, faces: np.ndarray, amount: float, r
     slot_order = np.argsort(rng.random(len(flat)), kind="stable")
     incident_slot = np.full(n, -1, dtype=np.int64)
     incident_slot[flat[slot_order]] = slot_order  # last write wins: a random incident slot
-    edges, counts = undirected_edges(faces)
-    boundary_edges = edges[counts == 1]
-    on_boundary = np.zeros(n, dtype=bool)
-    on_boundary[boundary_edges.ravel()] = True
-    move = (incident_slot >= 0) & ~on_boundary
+    move = (incident_slot >= 0) & ~boundary_vertices(faces, n)
     idx = np.flatnonzero(move)
     slot = incident_slot[idx]
     face, corner = slot // 3, slot % 3
@@ -224,14 +211,6 @@ def _jitter_on_surface(vertices: np.ndarray, faces: np.ndarray, amount: float, r
     out = vertices.copy()
     p = vertices[idx]
     out[idx] = p + ab[:, :1] * (vertices[q] - p) + ab[:, 1:] * (vertices[r] - p)
-    if len(boundary_edges):
-        ends = np.concatenate([boundary_edges, boundary_edges[:, ::-1]])  # (p, q) both ways
-        ends = ends[np.argsort(rng.random(len(ends)), kind="stable")]
-        other = np.full(n, -1, dtype=np.int64)
-        other[ends[:, 0]] = ends[:, 1]  # last write wins: a random boundary edge
-        b_idx = np.flatnonzero(on_boundary)
-        a = rng.random(n)[b_idx, None] * (amount / 2.0)
-        out[b_idx] = vertices[b_idx] + a * (vertices[other[b_idx]] - vertices[b_idx])
     return out
 
 
@@ -242,27 +221,17 @@ def _vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     return vertex_normals(TriMesh(vertices, faces))
 
 
-def _original_vertex_normals(mesh: TriMesh, face_normals: np.ndarray | None = None) -> np.ndarray:
-    """(V, 3) vertex normals of the input after orienting its faces consistently (on a copy).
-
-    ``face_normals``: :func:`becos.geometry.oriented_face_normals` of ``mesh`` when already computed."""
+def _original_vertex_normals(mesh: TriMesh) -> np.ndarray:
+    """(V, 3) vertex normals of the input after orienting its faces consistently (on a copy)."""
     from becos.geometry import oriented_face_normals
 
-    if face_normals is None:
-        face_normals = oriented_face_normals(mesh)
-    # bincount adds in index order, as np.add.at does (the same sums), ~10x faster
-    index = mesh.faces.ravel()
-    normals = np.stack(
-        [np.bincount(index, weights=np.repeat(face_normals[:, k], 3), minlength=mesh.n_vertices) for k in range(3)],
-        axis=1,
-    )
+    normals = np.zeros((mesh.n_vertices, 3))
+    np.add.at(normals, mesh.faces.ravel(), np.repeat(oriented_face_normals(mesh), 3, axis=0))
     length = np.linalg.norm(normals, axis=1, keepdims=True)
     return np.divide(normals, length, out=np.zeros_like(normals), where=length > 0)
 
 
-def _from_original(
-    surface: TriMesh, remeshed: TriMesh, face: np.ndarray, weights: np.ndarray, face_normals: np.ndarray | None = None
-):
+def _from_original(surface: TriMesh, remeshed: TriMesh, face: np.ndarray, weights: np.ndarray):
     """Each vertex of ``surface`` (the original's repaired copy) -> its point on ``remeshed``.
 
     ``face``, ``weights``: the remeshed vertices' points on ``surface`` (rows of ``surface.faces``).
@@ -272,8 +241,7 @@ def _from_original(
     :data:`FROM_ORIGINAL_RINGS` rings of one of those (:meth:`SurfaceLocator.closest_near`): all of
     them lie on the vertex's own part, and together they reach across thin parts (a tail, an ear)
     whose few long remeshed faces one of them alone may miss. Returns face, weights, distance and
-    ``unresolved`` (no such face: the normal-aware closest point is kept). ``face_normals``: the
-    surface's oriented face normals, if already computed.
+    ``unresolved`` (no such face: the normal-aware closest point is kept).
     """
     import scipy.sparse as sp
 
@@ -300,9 +268,7 @@ def _from_original(
         ok = near.near(rows[:, None, None], remeshed.faces[cand]).any(axis=2)
         return ok | (~reached[rows])[:, None]
 
-    return SurfaceLocator(remeshed).closest_near(
-        surface.vertices, accept, _original_vertex_normals(surface, face_normals)
-    )
+    return SurfaceLocator(remeshed).closest_near(surface.vertices, accept, _original_vertex_normals(surface))
 
 
 SNAP_ROUNDS = 4
@@ -410,20 +376,6 @@ def _snap_onto_own_part(
     return face, weights, dist, int(moved.sum()), int(unresolved.sum())
 
 
-class _CpuSteps:
-    """CPU seconds (``time.process_time``: this process, all threads) per pipeline step, into
-    ``stats["cpu_seconds"]`` in call order."""
-
-    def __init__(self, stats: dict):
-        self.seconds = stats.setdefault("cpu_seconds", {})
-        self._last = time.process_time()
-
-    def lap(self, step: str) -> None:
-        now = time.process_time()
-        self.seconds[step] = self.seconds.get(step, 0.0) + now - self._last
-        self._last = now
-
-
 def _content_key(mesh: TriMesh) -> str:
     h = hashlib.sha1()
     h.update(mesh.vertices.tobytes())
@@ -460,18 +412,16 @@ def _decimate(ms, target_faces: int) -> None:
     ms.meshing_decimation_quadric_edge_collapse(targetfacenum=int(max(target_faces, 4)), **_DECIMATION)
 
 
-def _to_vertex_target(start, target_vertices: int, stats: dict) -> tuple[np.ndarray, np.ndarray]:
-    """Decimate the mesh of the pymeshlab MeshSet ``start`` until it has ``target_vertices`` vertices
-    (one component). ``start`` is used by the first attempt; a retry starts from a copy of its mesh."""
-    # Euler: V - E + F = chi and 2E = 3F + B  =>  F = 2 (V - chi) - B. Topology preservation keeps chi,
-    # so asking for 2 (V - chi) + 2 faces stops at V or above (B >= 0): exactly at V on a closed
-    # surface, else the continuation (cheap: the mesh is already small) removes the rest.
-    start_arrays = _arrays(start)
-    chi = len(start_arrays[0]) - len(undirected_edges(start_arrays[1])[0]) + len(start_arrays[1])
-    first_faces = 2 * (target_vertices - chi) + 2
+def _to_vertex_target(
+    sub_v: np.ndarray, sub_f: np.ndarray, target_vertices: int, stats: dict
+) -> tuple[np.ndarray, np.ndarray]:
+    """Decimate the subdivided mesh until it has ``target_vertices`` vertices (one component)."""
+    # Euler: V - E + F = chi and 2E = 3F + B  =>  F = 2 (V - chi) - B. Start a little above, so that
+    # the continuation (cheap: the mesh is already small) only ever removes vertices.
+    first_faces = 2 * target_vertices + 16
     best = None
     for attempt in range(6):  # noqa: B007 (read after the loop)
-        ms = start if attempt == 0 else _meshset(*start_arrays)
+        ms = _meshset(sub_v, sub_f)
         _decimate(ms, first_faces)
         for _ in range(40):
             m = ms.current_mesh()
@@ -516,8 +466,7 @@ def remesh_with_stats(
     ``snap_moved_off_other_part`` / ``snap_off_part_unresolved`` (step 6's re-snap onto a vertex's own
     part), ``from_original_unresolved`` (original vertices with no remeshed face near them along the
     surface; their normal-aware closest point is kept),
-    ``input_repair``: the counts of :class:`becos.mesh.MeshRepair` for step 0, ``cpu_seconds``: CPU
-    seconds of this process by step: repair, orient, jitter, subdivide, decimate, snap, from_original).
+    ``input_repair``: the counts of :class:`becos.mesh.MeshRepair` for step 0).
 
     ``jitter`` (fraction, see :data:`DEFAULT_JITTER`; 0 disables it) and ``seed`` (default: derived
     from the mesh content and the target) control step 2 of the pipeline. ``source`` (the mesh's
@@ -532,12 +481,10 @@ def remesh_with_stats(
         raise ValueError(f"remesh target must be at least 4, got {target}")
     t0 = time.perf_counter()
     stats: dict = {"dropped_faces": 0, "attempts": 1}
-    cpu = _CpuSteps(stats)
     face_goal = int(target_faces) if target_faces is not None else 2 * int(target_vertices)
 
     # 0. the surface to remesh: a repaired copy (the input itself when clean)
     surface, repair = surface_for_remeshing(mesh, source=source)
-    cpu.lap("repair")
     stats["input_repair"] = repair.counts()
     where = str(source) if source is not None else f"remesh input ({mesh.n_vertices} vertices, {mesh.n_faces} faces)"
     if repair.changed or repair.zero_area_faces:
@@ -547,7 +494,7 @@ def remesh_with_stats(
     import pymeshlab
 
     try:
-        v, f = _remesh_surface(mesh, surface, target_vertices, target_faces, face_goal, jitter, seed, stats, t0, cpu)
+        v, f = _remesh_surface(mesh, surface, target_vertices, target_faces, face_goal, jitter, seed, stats, t0)
     except pymeshlab.PyMeshLabException as exc:
         message = " ".join(str(exc).split())
         raise InputFileError(
@@ -593,7 +540,6 @@ def remesh_with_stats(
         snapped[back] = v[back]
     stats["snap_flipped_faces"] = int(flipped.sum())
     stats["unsnapped_vertices"] = int(kept.sum())
-    cpu.lap("snap")
     remeshed = TriMesh(snapped, f)
     # snapped vertices ARE their image (distance 0); unsnapped ones keep their projection distance.
     # Faces are rows of the input as given (the copy keeps each kept row's columns).
@@ -602,17 +548,13 @@ def remesh_with_stats(
     # lands only in a remeshed face whose corners sit (by ``to_original``) within a few edge rings of
     # it on the original: never on a part that merely touches it in space (a hand on a hip, the two
     # sheets of a foot's arch), where distance and normals cannot tell the parts apart.
-    # The snap's locator already oriented the surface's face normals (the same ones when no face row
-    # was left out of its search).
-    known = locator.face_normals if locator.searches_every_face else None
-    rf, rw, rd, unresolved = _from_original(surface, remeshed, face, weights, known)
+    rf, rw, rd, unresolved = _from_original(surface, remeshed, face, weights)
     stats["from_original_unresolved"] = int(unresolved.sum())
     of = np.full(mesh.n_vertices, -1, dtype=np.int64)
     ow = np.zeros((mesh.n_vertices, 3))
     od = np.full(mesh.n_vertices, np.nan)
     of[repair.vertex_index], ow[repair.vertex_index], od[repair.vertex_index] = rf, rw, rd
     from_original = SurfaceMap(of, ow, od)
-    cpu.lap("from_original")
     seconds = time.perf_counter() - t0
     stats["seconds"] = seconds
     result = Remeshed(
@@ -636,7 +578,6 @@ def _remesh_surface(
     seed: int | None,
     stats: dict,
     t0: float,
-    cpu: _CpuSteps,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Steps 1-5 on the repaired copy ``surface``: (V_r, 3) vertices and (F_r, 3) faces of the remesh
     before the snap (diagnostics go into ``stats``). The jitter seed is derived from the INPUT
@@ -645,24 +586,22 @@ def _remesh_surface(
     ms = _meshset(surface.vertices, surface.faces)
     ms.meshing_re_orient_faces_coherently()
     v, f = _arrays(ms)
-    cpu.lap("orient")
     # 2. seeded jitter on the surface
     if seed is None:
         seed = stable_hash("remesh-jitter", _content_key(mesh), target_vertices, target_faces)
     if jitter > 0:
         v = _jitter_on_surface(v, f, float(jitter), rng_for(seed, "jitter"))
-    cpu.lap("jitter")
-    # 3.-4. large inputs are decimated directly; smaller ones get one Loop subdivision first
-    ms = _meshset(v, f)
-    if len(f) < DIRECT_DECIMATION_FACTOR * face_goal:
-        import pymeshlab
+    # 3.-4. pre-decimation of large inputs, one Loop subdivision
+    import pymeshlab
 
-        ms.meshing_surface_subdivision_loop(iterations=1, threshold=pymeshlab.PercentageValue(0))
+    ms = _meshset(v, f)
+    if len(f) > PRE_DECIMATION_FACTOR * face_goal:
+        _decimate(ms, int(PRE_DECIMATION_FACTOR * face_goal))
+    ms.meshing_surface_subdivision_loop(iterations=1, threshold=pymeshlab.PercentageValue(0))
     stats["seconds_prepare"] = time.perf_counter() - t0
-    cpu.lap("subdivide")
     # decimation to the target
     if target_vertices is not None:
-        v, f = _to_vertex_target(ms, int(target_vertices), stats)
+        v, f = _to_vertex_target(*_arrays(ms), int(target_vertices), stats)
     else:
         _decimate(ms, int(target_faces))
         v, f = _arrays(ms)
@@ -672,7 +611,6 @@ def _remesh_surface(
         log.warning(
             "remesh: decimation left %d faces in small components; kept the largest component", stats["dropped_faces"]
         )
-    cpu.lap("decimate")
     return v, f
 
 
