@@ -62,9 +62,8 @@ def tosca_network(annotations, tosca_dir, mesh_cache):
     return ShapeNetwork(annotations, meshes)
 
 
-@pytest.fixture(scope="session")
-def tosca_pair_inputs(tosca_entries, tosca_network, mesh_cache):
-    """Remeshed cat0 (9,200 vertices) and cat3 (9,800) with network ground truth both ways.
+def remeshed_cat_pair(entries, network, mesh_cache, targets: tuple[int, int]):
+    """TOSCA cat0 and cat3 remeshed to ``targets`` vertices, with network ground truth both ways.
 
     Returns ``(x, y, gt_xy, gt_yx)``: two :class:`becos.pairs.ShapeInstance` and two
     :class:`becos.surface_map.SurfaceMap`.
@@ -73,9 +72,8 @@ def tosca_pair_inputs(tosca_entries, tosca_network, mesh_cache):
     from becos.pairs import ShapeInstance
     from becos.remesh import remesh
 
-    entries, network = tosca_entries, tosca_network
     shapes, remeshes = {}, {}
-    for name, target in (("cat0", 9200), ("cat3", 9800)):
+    for name, target in zip(("cat0", "cat3"), targets):
         entry = entries[name]
         prepared = prepare_shape(entry, mesh_cache)
         remeshes[name] = remesh(prepared.mesh, target_vertices=target)
@@ -94,6 +92,18 @@ def tosca_pair_inputs(tosca_entries, tosca_network, mesh_cache):
     gt_xy = network.ground_truth(x, y, x_remesh=remeshes["cat0"], y_remesh=remeshes["cat3"])
     gt_yx = network.ground_truth(y, x, x_remesh=remeshes["cat3"], y_remesh=remeshes["cat0"])
     return shapes["cat0"], shapes["cat3"], gt_xy, gt_yx
+
+
+@pytest.fixture(scope="session")
+def cat_pair(tosca_entries, tosca_network, mesh_cache):
+    """:func:`remeshed_cat_pair` on the session's TOSCA entries: call it with the two vertex targets."""
+    return lambda targets: remeshed_cat_pair(tosca_entries, tosca_network, mesh_cache, targets)
+
+
+@pytest.fixture(scope="session")
+def tosca_pair_inputs(cat_pair):
+    """Remeshed cat0 (9,200 vertices) and cat3 (9,800): :func:`remeshed_cat_pair`."""
+    return cat_pair((9200, 9800))
 
 
 @pytest.fixture(scope="session")

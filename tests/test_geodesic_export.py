@@ -20,32 +20,9 @@ SETTINGS = ("full_full", "partial_full", "partial_partial")
 
 
 @pytest.fixture(scope="module")
-def small_tosca(tosca_entries, tosca_network, mesh_cache):
+def small_tosca(cat_pair):
     """TOSCA cat0 and cat3 remeshed to ~1,500 vertices, with network ground truth both ways."""
-    from becos.datasets import prepare_shape
-    from becos.pairs import ShapeInstance
-    from becos.remesh import remesh
-
-    shapes, remeshes = {}, {}
-    for name, target in (("cat0", 1500), ("cat3", 1400)):
-        entry = tosca_entries[name]
-        prepared = prepare_shape(entry, mesh_cache)
-        remeshes[name] = remesh(prepared.mesh, target_vertices=target)
-        shapes[name] = ShapeInstance(
-            entry.dataset,
-            entry.name,
-            entry.category,
-            entry.shape_class,
-            remeshes[name].mesh,
-            entry.scale,
-            entry.frame_rotation,
-            prepared.centre,
-            0,
-        )
-    x, y = tosca_entries["cat0"], tosca_entries["cat3"]
-    gt_xy = tosca_network.ground_truth(x, y, x_remesh=remeshes["cat0"], y_remesh=remeshes["cat3"])
-    gt_yx = tosca_network.ground_truth(y, x, x_remesh=remeshes["cat3"], y_remesh=remeshes["cat0"])
-    return shapes["cat0"], shapes["cat3"], gt_xy, gt_yx
+    return cat_pair((1500, 1400))
 
 
 @pytest.fixture(scope="module")
