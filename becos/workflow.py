@@ -94,6 +94,7 @@ STAGE_KEYS: dict[str, tuple[str, ...]] = {
         "annotations",
         "template_file",
         "original_settings",
+        "remesh",
         "remesher",
     ),
 }

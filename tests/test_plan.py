@@ -68,6 +68,15 @@ def test_job_options_are_the_stage_keys_results_and_version(config):
         ({"camera_distance": 2.0}, {("pairs", "partial_partial"), ("pairs", "partial_full")}),
         ({"one_axis_rotation": False}, {("pairs", s) for s in SETTINGS}),
         ({"seed": 7}, {("remesh", None), *(("manifest", s) for s in SETTINGS)}),
+        # the pairs stage reads the original meshes instead of remesh files (it used to look for v0.npz)
+        (
+            {"remesh": False},
+            {
+                ("remesh", None),
+                ("ground_truth", None),
+                *((stage, s) for s in SETTINGS for stage in ("manifest", "pairs")),
+            },
+        ),
         ({"n_renders": 1}, set()),
         ({"store_vis": False}, set()),
         ({"exports": {"psmal": True}}, set()),
