@@ -539,7 +539,11 @@ def build_catalog(config: dict, annotations=None) -> pd.DataFrame:
 
         entries = [e for e in entries if any(fnmatchcase(f"{e.dataset}/{e.name}", p) for p in patterns)]
         if not entries:
-            raise ConfigError(f"shapes: no shape of datasets {config['datasets']} matches {patterns}")
+            raise ConfigError(
+                f"shapes: no shape of datasets {config['datasets']} matches {patterns}. Fix: give "
+                "<dataset>/<name> patterns of shapes in those datasets (globs allowed, e.g. tosca/cat*), "
+                "or add their dataset to `datasets`"
+            )
     return catalog_table(entries)
 
 

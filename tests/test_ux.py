@@ -115,6 +115,22 @@ def test_a_bad_config_prints_one_line_per_problem_and_no_traceback(becos_code, t
         assert not (workdir / "results").exists() and not (workdir / "logs").exists()
 
 
+def test_a_plan_error_after_the_dataset_check_is_one_line(tmp_path):
+    """`shapes` matching no shape is found when the plan is built, after the dataset check: inside the
+    run (the check job just finished) and on the next run (the check is done). Both print the one
+    `becos plan:` line with its fix, not Snakemake's InputFunctionException and traceback.
+    The default configuration's small synthetic collection keeps the check short."""
+    workdir = tmp_path / "run"
+    line = "becos plan: shapes: no shape of datasets ['synthy', 'synthz'] matches ['synthy/nothing']. Fix: "
+    for run in ("check runs", "check done"):
+        result = run_snakemake(tmp_path, "-d", str(workdir), "--cores", "2", "--config", "shapes=[synthy/nothing]")
+        assert result.returncode != 0, run
+        assert line in result.stderr, (run, result.stderr[-3000:])
+        assert not any(marker in result.stderr for marker in (*NOT_SEEN, "InputFunctionException")), run
+    assert (workdir / "results" / "checks" / "datasets.json").exists()
+    assert not (workdir / ".snakemake" / "locks").exists() or not any((workdir / ".snakemake" / "locks").iterdir())
+
+
 def test_config_file_faults_are_one_line_naming_the_file(tmp_path):
     """A YAML syntax error names file, line and column; a missing --configfile is one line (the default
     workflow profile reads the files before Snakemake does)."""

@@ -11,6 +11,7 @@ from becos import dt4d as bdt4d
 from becos import progress_panel
 from becos import workflow as bw
 from becos.download import archive_url
+from becos.errors import BecosError
 from becos.resources import RuleResources
 
 SETTINGS = bw.settings_of(config)
@@ -46,7 +47,13 @@ def plan():
     """The catalog, manifests and job lists; known once the dataset check has run."""
     checkpoints.check_datasets.get()
     if "plan" not in _plans:
-        _plans["plan"] = bw.Plan.build(config)
+        try:
+            _plans["plan"] = bw.Plan.build(config)
+        except BecosError as error:
+            # one line, as the CLI prints it, instead of Snakemake's InputFunctionException and traceback;
+            # printed here because a running scheduler reports SystemExit only as a termination
+            print(f"becos plan: {error}", file=sys.stderr, flush=True)
+            raise SystemExit(1) from None
     return _plans["plan"]
 
 
