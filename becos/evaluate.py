@@ -87,6 +87,7 @@ from becos.metrics import (
     summarise,
 )
 from becos.record import PairRecord
+from becos.settings import SETTINGS
 from becos.surface_map import SurfaceMap
 
 DIRECTIONS = {"yx": ("y", "x", "corr_10"), "xy": ("x", "y", "corr_01")}
@@ -395,7 +396,7 @@ def evaluate_record(
     a = record.arrays
     n = {s: len(a[f"{s}_vertices"]) for s in ("x", "y")}
     p2p = all(len(a[f"{s}_full_to_partial"]) != n[s] or (a[f"{s}_full_to_partial"] < 0).any() for s in ("x", "y"))
-    if record.meta.get("setting") in ("full_full", "partial_full", "partial_partial"):
+    if record.meta.get("setting") in SETTINGS:
         p2p = record.meta["setting"] == "partial_partial"
 
     methods = list(predictions)
