@@ -147,3 +147,24 @@ def store_of(tmp_path):
         return write_store(paths, tmp_path / f"{setting}.zarr", setting=setting, progress=False)
 
     return build
+
+
+@pytest.fixture(scope="session")
+def tiny_tosca_run(becos_code, tmp_path_factory) -> Path:
+    """A finished ``--cores 2`` run of the tiny TOSCA configuration (``.test/config/config.yaml``): all three
+    settings, every export. Read by ``test_workflow.py``; the reference of ``test_resume.py`` and
+    ``test_slurm.py``, which build the same configuration other ways."""
+    from test_workflow import snakemake
+    from tiny_tosca import tiny_tosca_config, write_config_file
+
+    workdir = write_config_file(tmp_path_factory.mktemp("tiny-tosca"), tiny_tosca_config(becos_code))
+    snakemake(workdir, "--cores", "2")
+    return workdir
+
+
+def pytest_collection_modifyitems(items):
+    """Every test that reads ``tiny_tosca_run`` runs in one pytest-xdist worker (``--dist loadgroup`` in
+    pyproject.toml), so the session fixture's Snakemake run is made once, not once per worker."""
+    for item in items:
+        if "tiny_tosca_run" in getattr(item, "fixturenames", ()):
+            item.add_marker(pytest.mark.xdist_group("tiny_tosca_run"))

@@ -1,9 +1,9 @@
 """Interrupted, concurrent and repeated runs of the workflow (real Snakemake on TOSCA meshes).
 
-One small configuration (six four-legged TOSCA shapes, all three settings, at most 6 pairs each) is
-built three ways and compared with :func:`tiny_tosca.results_fingerprint`:
+The tiny TOSCA configuration (8 shapes, all three settings, at most 6 pairs each) is built three ways
+and compared with :func:`tiny_tosca.results_fingerprint`:
 
-- ``--cores 2`` without interruption (the reference);
+- ``--cores 2`` without interruption (the reference: conftest's ``tiny_tosca_run``);
 - ``--cores 1`` without interruption: same manifests byte for byte, same arrays;
 - ``--cores 2`` killed with SIGKILL (the whole process tree: Snakemake and its jobs, as a crash or a
   cluster pre-emption would) while remeshing, while building pair records and while writing the Zarr
@@ -25,22 +25,13 @@ from pathlib import Path
 
 import psutil
 import pytest
-from test_workflow import SNAKEMAKE, snakemake, write_config
-from tiny_tosca import SETTINGS, fingerprint_differences, results_fingerprint
-
-SHAPES = ["tosca/cat0", "tosca/cat1", "tosca/dog0", "tosca/dog1", "tosca/wolf0", "tosca/wolf1"]
+from test_workflow import SNAKEMAKE, snakemake
+from tiny_tosca import SETTINGS, fingerprint_differences, results_fingerprint, tiny_tosca_config, write_config_file
 
 
 def small_config(workdir: Path, becos_code: Path) -> Path:
-    return write_config(
-        workdir,
-        becos_code,
-        shapes=SHAPES,
-        combinations="four-legged",
-        caps={"train": 4, "val": 1, "test": 1},
-        n_chunks=2,
-        exports={"released": False, "published_pickle": False, "report": False},
-    )
+    """``workdir`` with the tiny TOSCA configuration: the one conftest's ``tiny_tosca_run`` ran."""
+    return write_config_file(workdir, tiny_tosca_config(becos_code))
 
 
 def leftovers(workdir: Path) -> list[str]:
@@ -136,10 +127,9 @@ def test_a_killed_write_leaves_a_temporary_file_the_next_writer_removes(tmp_path
 
 
 @pytest.fixture(scope="module")
-def reference_run(becos_code, tmp_path_factory) -> tuple[Path, dict]:
-    workdir = small_config(tmp_path_factory.mktemp("uninterrupted"), becos_code)
-    snakemake(workdir, "--cores", "2")
-    return workdir, results_fingerprint(workdir)
+def reference_run(tiny_tosca_run) -> tuple[Path, dict]:
+    """The uninterrupted ``--cores 2`` run and its fingerprint."""
+    return tiny_tosca_run, results_fingerprint(tiny_tosca_run)
 
 
 def test_cores_1_and_cores_2_give_identical_results(reference_run, becos_code, tmp_path):

@@ -2,8 +2,9 @@
 
 ``cluster/slurm_harness.py`` installs (apt-get, when missing) and starts munged, MariaDB, slurmdbd,
 slurmctld and slurmd on localhost with all state in a temporary folder. The tiny TOSCA configuration
-of ``tests/test_workflow.py`` (``tests/tiny_tosca.py``, with ``n_chunks: 2``) then runs twice:
-locally (``--cores 2``) and with ``--profile profiles/slurm``; manifests, catalog and every array,
+of ``tests/test_workflow.py`` (``tests/tiny_tosca.py``; one chunk job per setting and stage) then runs
+with ``--profile profiles/slurm`` and is compared with the local ``--cores 2`` run (conftest's
+``tiny_tosca_run``, which the workflow tests share); manifests, catalog and every array,
 offset table, pair meta and table of the three Zarr stores must hash equal, and every SLURM job of
 the run must be COMPLETED in ``sacct``. ``profiles/cluster-generic`` submits one remesh job to the same cluster.
 
@@ -37,9 +38,6 @@ SNAKEMAKE = [sys.executable, "-m", "snakemake", "-s", str(REPO / "Snakefile")]
 # test-only speed-ups (a real cluster keeps the plugin's defaults: first check after 40 s, then every 10 s+)
 FAST_STATUS = ["--slurm-init-seconds-before-status-checks", "2", "--seconds-between-status-checks", "2"]
 RUN_TIMEOUT_S = 1800
-# 2 chunks instead of 64 for the 6 pairs per setting: 12 chunk jobs instead of 34 (each SLURM job costs
-# about 9 s of Snakemake start-up here), the sizing advice of docs/cluster.md for tiny runs
-N_CHUNKS = 2
 
 
 def _load_harness():
@@ -121,7 +119,7 @@ def _snakemake(workdir: Path, args: list[str], env: dict[str, str]) -> tuple[flo
     return seconds, output
 
 
-def test_workflow_on_slurm_equals_local_run(slurm_cluster, becos_code, tmp_path_factory):
+def test_workflow_on_slurm_equals_local_run(slurm_cluster, tiny_tosca_run, becos_code, tmp_path_factory):
     harness = slurm_cluster
     env = _env(harness)
     print(f"\ncluster: install {harness.timings['install_s']:.1f} s, start {harness.timings['start_s']:.1f} s")
@@ -133,13 +131,11 @@ def test_workflow_on_slurm_equals_local_run(slurm_cluster, becos_code, tmp_path_
     smoke = [j for j in harness.jobs() if j["JobName"] == "hostname"]
     assert smoke and smoke[0]["State"] == "COMPLETED", harness.sacct()
 
-    # 2. the same configuration locally and through the SLURM profile, in separate working directories
-    config = tiny_tosca_config(becos_code, n_chunks=N_CHUNKS)
-    local = write_config_file(tmp_path_factory.mktemp("slurm-local"), config)
-    remote = write_config_file(tmp_path_factory.mktemp("slurm-remote"), config)
-    local_s, _ = _snakemake(local, ["--cores", "2"], env)
+    # 2. the configuration of the local run (tiny_tosca_run) through the SLURM profile, in its own working directory
+    local = tiny_tosca_run
+    remote = write_config_file(tmp_path_factory.mktemp("slurm-remote"), tiny_tosca_config(becos_code))
     slurm_s, out = _snakemake(remote, ["--profile", str(REPO / "profiles" / "slurm"), *FAST_STATUS], env)
-    print(f"tiny TOSCA run: local (--cores 2) {local_s:.1f} s, SLURM profile {slurm_s:.1f} s")
+    print(f"tiny TOSCA run through the SLURM profile: {slurm_s:.1f} s")
 
     # 3. every job Snakemake submitted is a COMPLETED SLURM job of this run, with its rule in the comment
     run_id = re.search(r"SLURM run ID: (\S+)", out).group(1)
@@ -183,7 +179,7 @@ def test_workflow_on_slurm_equals_local_run(slurm_cluster, becos_code, tmp_path_
     )
 
     # 5. the cluster-generic profile (its SLURM example) submits a remesh job; same file as the local run
-    generic = write_config_file(tmp_path_factory.mktemp("slurm-generic"), config)
+    generic = write_config_file(tmp_path_factory.mktemp("slurm-generic"), tiny_tosca_config(becos_code))
     target = "results/remeshed/tosca/cat0/v0.npz"
     generic_s, out = _snakemake(
         generic,

@@ -1,6 +1,6 @@
 """The Snakemake workflow end to end on a tiny TOSCA configuration (real Snakemake, real data).
 
-The session fixture ``tiny_tosca_run`` builds all three settings once (8 TOSCA shapes, at most 6
+The session fixture ``tiny_tosca_run`` (conftest.py) builds all three settings once (8 TOSCA shapes, at most 6
 pairs per setting) and every test here reads its results. The incremental-rebuild test makes its own
 run (four-legged first, then humans and centaurs).
 """
@@ -15,9 +15,8 @@ import sys
 from pathlib import Path
 
 import numpy as np
-import pytest
 import yaml
-from tiny_tosca import TINY_SHAPES, tiny_tosca_config, tosca_config, write_config_file
+from tiny_tosca import TINY_SHAPES, tosca_config, write_config_file
 
 REPO = Path(__file__).resolve().parents[1]
 SNAKEMAKE = [sys.executable, "-m", "snakemake", "-s", str(REPO / "Snakefile")]
@@ -57,13 +56,6 @@ def jobs_planned(dry_run_output: str) -> dict[str, int]:
         if m and m.group(1) != "total":
             counts[m.group(1)] = int(m.group(2))
     return counts
-
-
-@pytest.fixture(scope="session")
-def tiny_tosca_run(becos_code, tmp_path_factory) -> Path:
-    workdir = write_config_file(tmp_path_factory.mktemp("tiny-tosca"), tiny_tosca_config(becos_code))
-    snakemake(workdir, "--cores", "2")
-    return workdir
 
 
 def test_every_setting_is_built_and_validated(tiny_tosca_run):
