@@ -218,13 +218,14 @@ def _jitter_on_surface(vertices: np.ndarray, faces: np.ndarray, amount: float, r
 class RemeshInput:
     """The per-shape part of a remesh: what every remesh variant of one input mesh reuses.
 
-    Built once per shape (:func:`remesh_variants`), each part on first use: the repaired copy
-    ``surface`` (step 0) and its ``repair``, the coherently oriented copy step 1 gives the jitter
-    (``oriented``: (V_s, 3) float64 vertices, (F_s, 3) int64 faces), the closest-point ``locator`` of
-    ``surface`` (step 6), its edge graph for geodesic Voronoi cells (:meth:`cells`), its unique
-    undirected edges, vertex adjacency and consistently oriented vertex normals (step 7). Every part
-    is a deterministic function of the input, so a variant remeshed with it is byte-identical to
-    one remeshed alone. ``source`` (the mesh's file) is named in the repair warning and errors.
+    Built once per shape (pass it as ``shape`` to :func:`remesh_with_stats` for each variant), each
+    part on first use: the repaired copy ``surface`` (step 0) and its ``repair``, the coherently
+    oriented copy step 1 gives the jitter (``oriented``: (V_s, 3) float64 vertices, (F_s, 3) int64
+    faces), the closest-point ``locator`` of ``surface`` (step 6), its edge graph for geodesic
+    Voronoi cells (:meth:`cells`; built once instead of once per query), its unique undirected
+    edges, vertex adjacency and consistently oriented vertex normals (step 7). Every part is a
+    deterministic function of the input, so a variant remeshed with it is byte-identical to one
+    remeshed alone. ``source`` (the mesh's file) is named in the repair warning and errors.
     """
 
     def __init__(self, mesh: TriMesh, source: str | Path | None = None):
