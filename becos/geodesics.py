@@ -45,9 +45,9 @@ def edge_graph(mesh: TriMesh) -> sp.csr_matrix:
     Zero-length edges (duplicate vertex positions) are given a tiny positive length so that csgraph
     does not read them as "no edge".
     """
-    faces = mesh.faces
-    edges = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
-    edges = np.unique(np.sort(edges, axis=1), axis=0)
+    from becos.mesh import undirected_edges
+
+    edges = undirected_edges(mesh.faces)[0].astype(mesh.faces.dtype)  # np.unique(axis=0)'s rows, ~10x faster
     length = np.linalg.norm(mesh.vertices[edges[:, 0]] - mesh.vertices[edges[:, 1]], axis=1)
     length = np.maximum(length, 1e-300)
     n = mesh.n_vertices

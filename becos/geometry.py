@@ -175,6 +175,12 @@ class SurfaceLocator:
             self._rings[rings] = VertexRings(self.mesh.faces, self.mesh.n_vertices, rings)
         return self._rings[rings]
 
+    @property
+    def searches_every_face(self) -> bool:
+        """No face row is left out of the search (then :attr:`face_normals` is
+        :func:`oriented_face_normals` of the mesh)."""
+        return self._rows is None
+
     def _row(self, index: np.ndarray) -> np.ndarray:
         """Rows of ``mesh.faces`` of indices into the searched faces."""
         return index if self._rows is None else self._rows[index]
@@ -312,9 +318,15 @@ class SparsePairs:
     Stored as the sorted keys ``a * C + b``; :meth:`near` looks up broadcast index arrays at once."""
 
     def __init__(self, matrix):
-        coo = matrix.tocoo()
+        import scipy.sparse as sp
+
+        csr = sp.csr_matrix(matrix)
+        if not csr.has_canonical_format:  # sorted column indices, no duplicates: the keys come out sorted
+            csr = csr.copy()
+            csr.sum_duplicates()
         self.n_columns = int(matrix.shape[1])
-        self._keys = np.unique(coo.row.astype(np.int64) * self.n_columns + coo.col)
+        rows = np.repeat(np.arange(csr.shape[0], dtype=np.int64), np.diff(csr.indptr))
+        self._keys = rows * self.n_columns + csr.indices  # sorted and unique, without a sort
 
     def near(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
         """Bool array (``a`` and ``b`` broadcast): (a, b) is a non-zero of the matrix."""
@@ -354,13 +366,14 @@ class VertexRings(SparsePairs):
         super().__init__(self.matrix)
 
 
-def nearest_along_surface(mesh: TriMesh, sources: np.ndarray) -> np.ndarray:
+def nearest_along_surface(mesh: TriMesh, sources: np.ndarray, graph=None) -> np.ndarray:
     """(V,) int64 index into ``sources`` of the source vertex nearest to each vertex ALONG the surface.
 
     Shortest paths on the mesh's edge graph from all sources at once (one multi-source Dijkstra,
     :func:`scipy.sparse.csgraph.dijkstra` with ``min_only``): a geodesic Voronoi partition, so a
     vertex is never given a source on another part that merely touches it in space. -1 for vertices
-    no source reaches (other components).
+    no source reaches (other components). ``graph``: the mesh's :func:`becos.geodesics.edge_graph`, if
+    already built (a caller with many queries on one mesh builds it once).
     """
     from scipy.sparse.csgraph import dijkstra
 
@@ -368,7 +381,8 @@ def nearest_along_surface(mesh: TriMesh, sources: np.ndarray) -> np.ndarray:
 
     sources = np.asarray(sources, dtype=np.int64)
     unique, first = np.unique(sources, return_index=True)
-    _, _, owner = dijkstra(edge_graph(mesh), directed=False, indices=unique, min_only=True, return_predecessors=True)
+    graph = edge_graph(mesh) if graph is None else graph
+    _, _, owner = dijkstra(graph, directed=False, indices=unique, min_only=True, return_predecessors=True)
     owner = np.asarray(owner, dtype=np.int64)
     lookup = np.full(mesh.n_vertices, -1, dtype=np.int64)
     lookup[unique] = first

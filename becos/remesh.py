@@ -66,6 +66,7 @@ Units and frames: the remesh is in the input's units and frame; nothing is scale
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import logging
 import time
@@ -214,6 +215,82 @@ def _jitter_on_surface(vertices: np.ndarray, faces: np.ndarray, amount: float, r
     return out
 
 
+class RemeshInput:
+    """The per-shape part of a remesh: what every remesh variant of one input mesh reuses.
+
+    Built once per shape (pass it as ``shape`` to :func:`remesh_with_stats` for each variant), each
+    part on first use: the repaired copy ``surface`` (step 0) and its ``repair``, the coherently
+    oriented copy step 1 gives the jitter (``oriented``: (V_s, 3) float64 vertices, (F_s, 3) int64
+    faces), the closest-point ``locator`` of ``surface`` (step 6), its edge graph for geodesic
+    Voronoi cells (:meth:`cells`; built once instead of once per query), its unique undirected
+    edges, vertex adjacency and consistently oriented vertex normals (step 7). Every part is a
+    deterministic function of the input, so a variant remeshed with it is byte-identical to one
+    remeshed alone. ``source`` (the mesh's file) is named in the repair warning and errors.
+    """
+
+    def __init__(self, mesh: TriMesh, source: str | Path | None = None):
+        self.mesh = mesh
+        self.source = source
+        self.where = (
+            str(source) if source is not None else f"remesh input ({mesh.n_vertices} vertices, {mesh.n_faces} faces)"
+        )
+        self.surface, self.repair = surface_for_remeshing(mesh, source=source)
+        if self.repair.changed or self.repair.zero_area_faces:
+            log.warning("%s: %s", self.where, self.repair.summary())
+        elif self.repair.misoriented_edges:
+            log.info("%s: %s", self.where, self.repair.summary())
+
+    @functools.cached_property
+    def content_key(self) -> str:
+        """Digest of the INPUT mesh's arrays (as before the repair): part of the jitter seed."""
+        return _content_key(self.mesh)
+
+    @functools.cached_property
+    def oriented(self) -> tuple[np.ndarray, np.ndarray]:
+        """Step 1: the repaired copy re-oriented coherently by pymeshlab (arrays; do not modify)."""
+        ms = _meshset(self.surface.vertices, self.surface.faces)
+        ms.meshing_re_orient_faces_coherently()
+        return _arrays(ms)
+
+    @functools.cached_property
+    def locator(self) -> SurfaceLocator:
+        """Closest points on ``surface`` (the snap, step 6)."""
+        return SurfaceLocator(self.surface)
+
+    @functools.cached_property
+    def edge_graph(self):
+        """:func:`becos.geodesics.edge_graph` of ``surface``."""
+        from becos.geodesics import edge_graph
+
+        return edge_graph(self.surface)
+
+    def cells(self, anchor: np.ndarray) -> np.ndarray:
+        """(V_s,) int64: for each vertex of ``surface``, the index into ``anchor`` (surface vertices) of
+        the anchor nearest to it ALONG the surface (geodesic Voronoi cells; the first of equal anchors)."""
+        from becos.geometry import nearest_along_surface
+
+        return nearest_along_surface(self.surface, anchor, self.edge_graph)
+
+    @functools.cached_property
+    def surface_edges(self) -> np.ndarray:
+        """(E, 2) int64 unique undirected edges of ``surface``."""
+        return undirected_edges(self.surface.faces)[0]
+
+    @functools.cached_property
+    def adjacency(self) -> tuple[np.ndarray, np.ndarray]:
+        """Rows and columns of the non-zeros of ``surface``'s vertex adjacency (with the diagonal)."""
+        from becos.geometry import vertex_adjacency
+
+        return vertex_adjacency(self.surface.faces, self.surface.n_vertices).nonzero()
+
+    @functools.cached_property
+    def vertex_normals(self) -> np.ndarray:
+        """(V_s, 3) unit vertex normals of ``surface`` with its faces oriented consistently."""
+        locator = self.locator
+        known = locator.face_normals if locator.searches_every_face else None
+        return _original_vertex_normals(self.surface, known)
+
+
 def _vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """(V, 3) area-weighted unit vertex normals of a consistently oriented mesh."""
     from becos.geometry import vertex_normals
@@ -221,17 +298,21 @@ def _vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     return vertex_normals(TriMesh(vertices, faces))
 
 
-def _original_vertex_normals(mesh: TriMesh) -> np.ndarray:
-    """(V, 3) vertex normals of the input after orienting its faces consistently (on a copy)."""
+def _original_vertex_normals(mesh: TriMesh, face_normals: np.ndarray | None = None) -> np.ndarray:
+    """(V, 3) vertex normals of the input after orienting its faces consistently (on a copy).
+
+    ``face_normals``: :func:`becos.geometry.oriented_face_normals` of ``mesh``, if already computed."""
     from becos.geometry import oriented_face_normals
 
+    if face_normals is None:
+        face_normals = oriented_face_normals(mesh)
     normals = np.zeros((mesh.n_vertices, 3))
-    np.add.at(normals, mesh.faces.ravel(), np.repeat(oriented_face_normals(mesh), 3, axis=0))
+    np.add.at(normals, mesh.faces.ravel(), np.repeat(face_normals, 3, axis=0))
     length = np.linalg.norm(normals, axis=1, keepdims=True)
     return np.divide(normals, length, out=np.zeros_like(normals), where=length > 0)
 
 
-def _from_original(surface: TriMesh, remeshed: TriMesh, face: np.ndarray, weights: np.ndarray):
+def _from_original(shape: RemeshInput, remeshed: TriMesh, face: np.ndarray, weights: np.ndarray):
     """Each vertex of ``surface`` (the original's repaired copy) -> its point on ``remeshed``.
 
     ``face``, ``weights``: the remeshed vertices' points on ``surface`` (rows of ``surface.faces``).
@@ -241,21 +322,18 @@ def _from_original(surface: TriMesh, remeshed: TriMesh, face: np.ndarray, weight
     :data:`FROM_ORIGINAL_RINGS` rings of one of those (:meth:`SurfaceLocator.closest_near`): all of
     them lie on the vertex's own part, and together they reach across thin parts (a tail, an ear)
     whose few long remeshed faces one of them alone may miss. Returns face, weights, distance and
-    ``unresolved`` (no such face: the normal-aware closest point is kept).
+    ``unresolved`` (no such face: the normal-aware closest point is kept). ``shape``: the original's
+    per-shape part (``shape.surface``: its repaired copy).
     """
     import scipy.sparse as sp
 
-    from becos.geometry import (
-        SparsePairs,
-        VertexRings,
-        nearest_along_surface,
-        vertex_adjacency,
-    )
+    from becos.geometry import SparsePairs, VertexRings
 
+    surface = shape.surface
     anchor = surface.faces[face, np.asarray(weights).argmax(axis=1)]  # (V_r,) surface vertex
-    owner = nearest_along_surface(surface, anchor)  # (V_s,) remeshed vertex
+    owner = shape.cells(anchor)  # (V_s,) remeshed vertex
     reached = owner >= 0
-    rows, cols = vertex_adjacency(surface.faces, surface.n_vertices).nonzero()
+    rows, cols = shape.adjacency
     keep = reached[cols]
     owners = sp.csr_matrix(
         (np.ones(int(keep.sum()), dtype=np.float32), (rows[keep], owner[cols[keep]])),
@@ -268,24 +346,14 @@ def _from_original(surface: TriMesh, remeshed: TriMesh, face: np.ndarray, weight
         ok = near.near(rows[:, None, None], remeshed.faces[cand]).any(axis=2)
         return ok | (~reached[rows])[:, None]
 
-    return SurfaceLocator(remeshed).closest_near(surface.vertices, accept, _original_vertex_normals(surface))
+    return SurfaceLocator(remeshed).closest_near(surface.vertices, accept, shape.vertex_normals)
 
 
 SNAP_ROUNDS = 4
 """Rounds of :func:`_snap_onto_own_part` (each settles the vertices with settled neighbours)."""
 
 
-def _cells(surface: TriMesh, anchor: np.ndarray) -> np.ndarray:
-    """(V_s,) int64: for each vertex of ``surface``, the index into ``anchor`` (surface vertices) of the
-    anchor nearest to it ALONG the surface (geodesic Voronoi cells; the first of equal anchors)."""
-    from becos.geometry import nearest_along_surface
-
-    return nearest_along_surface(surface, anchor)
-
-
-def _off_part(
-    surface: TriMesh, surface_edges: np.ndarray, remesh_edges: np.ndarray, n: int, anchor: np.ndarray
-) -> np.ndarray:
+def _off_part(shape: RemeshInput, remesh_edges: np.ndarray, n: int, anchor: np.ndarray) -> np.ndarray:
     """(n,) bool: the remeshed vertex sits on another part of ``surface`` than most of its neighbours.
 
     ``anchor`` (n,): each remeshed vertex's snapped point as a surface vertex (its largest weight).
@@ -295,8 +363,9 @@ def _off_part(
     """
     import scipy.sparse as sp
 
-    owner = _cells(surface, anchor)
+    owner = shape.cells(anchor)
     cell = owner[anchor]  # (n,) the cell a remeshed vertex is in
+    surface_edges = shape.surface_edges
     a, b = owner[surface_edges[:, 0]], owner[surface_edges[:, 1]]
     reached = (a >= 0) & (b >= 0)  # all, on a connected surface
     a, b = a[reached], b[reached]
@@ -316,8 +385,7 @@ def _off_part(
 
 
 def _snap_onto_own_part(
-    surface: TriMesh,
-    locator: SurfaceLocator,
+    shape: RemeshInput,
     v: np.ndarray,
     f: np.ndarray,
     face: np.ndarray,
@@ -341,8 +409,8 @@ def _snap_onto_own_part(
     """
     from becos.geometry import VertexRings
 
+    surface, locator = shape.surface, shape.locator
     n = len(v)
-    surface_edges, _ = undirected_edges(surface.faces)
     remesh_edges, _ = undirected_edges(f)
     face, weights, dist = face.copy(), weights.copy(), dist.copy()
     moved = np.zeros(n, dtype=bool)
@@ -350,11 +418,11 @@ def _snap_onto_own_part(
     rings = {}
     for _ in range(SNAP_ROUNDS):
         anchor = surface.faces[face, weights.argmax(axis=1)]
-        off = _off_part(surface, surface_edges, remesh_edges, n, anchor)
+        off = _off_part(shape, remesh_edges, n, anchor)
         if not off.any():
             break
         settled = np.flatnonzero(~off)
-        cells = _cells(surface, anchor[settled])
+        cells = shape.cells(anchor[settled])
         owner = np.where(cells >= 0, settled[np.maximum(cells, 0)], -1)  # (V_s,) a settled remeshed vertex
         todo = np.flatnonzero(off)
         for ring in (1, 2):
@@ -374,6 +442,20 @@ def _snap_onto_own_part(
         unresolved[:] = False
         unresolved[todo] = True
     return face, weights, dist, int(moved.sum()), int(unresolved.sum())
+
+
+class _CpuSteps:
+    """CPU seconds (``time.process_time``: this process, all threads) per pipeline step, into
+    ``stats["cpu_seconds"]`` in call order."""
+
+    def __init__(self, stats: dict):
+        self.seconds = stats.setdefault("cpu_seconds", {})
+        self._last = time.process_time()
+
+    def lap(self, step: str) -> None:
+        now = time.process_time()
+        self.seconds[step] = self.seconds.get(step, 0.0) + now - self._last
+        self._last = now
 
 
 def _content_key(mesh: TriMesh) -> str:
@@ -459,6 +541,7 @@ def remesh_with_stats(
     jitter: float = DEFAULT_JITTER,
     seed: int | None = None,
     source: str | Path | None = None,
+    shape: RemeshInput | None = None,
 ) -> tuple[Remeshed, dict]:
     """:func:`remesh`, also returning a dict of diagnostics (stage times in s, snap distances in input
     units, dropped faces, decimation attempts, ``vertices_off_target`` (0 when the vertex target is
@@ -466,11 +549,14 @@ def remesh_with_stats(
     ``snap_moved_off_other_part`` / ``snap_off_part_unresolved`` (step 6's re-snap onto a vertex's own
     part), ``from_original_unresolved`` (original vertices with no remeshed face near them along the
     surface; their normal-aware closest point is kept),
-    ``input_repair``: the counts of :class:`becos.mesh.MeshRepair` for step 0).
+    ``input_repair``: the counts of :class:`becos.mesh.MeshRepair` for step 0, ``cpu_seconds``: CPU
+    seconds of this process by step: ``shape`` (the per-shape part, when built here), ``jitter``,
+    ``subdivide``, ``decimate``, ``snap``, ``from_original``).
 
     ``jitter`` (fraction, see :data:`DEFAULT_JITTER`; 0 disables it) and ``seed`` (default: derived
     from the mesh content and the target) control step 2 of the pipeline. ``source`` (the mesh's
-    file) is named in the repair warning and in errors."""
+    file) is named in the repair warning and in errors. ``shape``: the per-shape part of ``mesh``
+    (:class:`RemeshInput`) when the caller remeshes several variants of it (built here if None)."""
     if (target_vertices is None) == (target_faces is None):
         raise ValueError(
             "remesh needs exactly one of target_vertices (the paper's rule, e.g. 9000-10000) "
@@ -479,26 +565,28 @@ def remesh_with_stats(
     target = target_vertices if target_vertices is not None else target_faces
     if int(target) < 4:
         raise ValueError(f"remesh target must be at least 4, got {target}")
+    if shape is not None and shape.mesh is not mesh:
+        raise ValueError("remesh_with_stats: `shape` is the per-shape part of another mesh")
     t0 = time.perf_counter()
     stats: dict = {"dropped_faces": 0, "attempts": 1}
+    cpu = _CpuSteps(stats)
     face_goal = int(target_faces) if target_faces is not None else 2 * int(target_vertices)
-
-    # 0. the surface to remesh: a repaired copy (the input itself when clean)
-    surface, repair = surface_for_remeshing(mesh, source=source)
-    stats["input_repair"] = repair.counts()
-    where = str(source) if source is not None else f"remesh input ({mesh.n_vertices} vertices, {mesh.n_faces} faces)"
-    if repair.changed or repair.zero_area_faces:
-        log.warning("%s: %s", where, repair.summary())
-    elif repair.misoriented_edges:
-        log.info("%s: %s", where, repair.summary())
+    if shape is None:
+        # 0. the surface to remesh: a repaired copy (the input itself when clean)
+        shape = RemeshInput(mesh, source=source)
     import pymeshlab
 
     try:
-        v, f = _remesh_surface(mesh, surface, target_vertices, target_faces, face_goal, jitter, seed, stats, t0)
+        if "oriented" not in shape.__dict__:
+            shape.oriented  # noqa: B018 (1. built on first use; timed as the shape's part)
+            cpu.lap("shape")
+        surface, repair = shape.surface, shape.repair
+        stats["input_repair"] = repair.counts()
+        v, f = _remesh_surface(shape, target_vertices, target_faces, face_goal, jitter, seed, stats, t0, cpu)
     except pymeshlab.PyMeshLabException as exc:
         message = " ".join(str(exc).split())
         raise InputFileError(
-            Path(where),
+            Path(shape.where),
             f"the remesher (pymeshlab) failed on this surface: {message}",
             "repair the mesh (e.g. MeshLab: Filters > Cleaning and Repairing) or leave the shape out",
         ) from None
@@ -506,7 +594,7 @@ def remesh_with_stats(
 
     # 6. orientation vote and snap onto the original surface (its repaired copy: same geometry,
     # no degenerate or duplicate faces; face and vertex indices are translated back below)
-    locator = SurfaceLocator(surface)
+    locator = shape.locator
     face, weights, dist = locator.closest(v)
     tri = v[f]
     normals = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])  # length = 2 × area
@@ -521,7 +609,7 @@ def remesh_with_stats(
     # closest point can sit on the other part; their normals are opposite there
     face, weights, dist = locator.closest(v, _vertex_normals(v, f))
     # ... and keep each vertex on its own part: normals do not separate parts that meet at an angle
-    face, weights, dist, moved, unresolved = _snap_onto_own_part(surface, locator, v, f, face, weights, dist)
+    face, weights, dist, moved, unresolved = _snap_onto_own_part(shape, v, f, face, weights, dist)
     stats["snap_moved_off_other_part"], stats["snap_off_part_unresolved"] = moved, unresolved
     stats["snap_distance_mean"] = float(dist.mean())
     stats["snap_distance_max"] = float(dist.max())
@@ -540,6 +628,7 @@ def remesh_with_stats(
         snapped[back] = v[back]
     stats["snap_flipped_faces"] = int(flipped.sum())
     stats["unsnapped_vertices"] = int(kept.sum())
+    cpu.lap("snap")
     remeshed = TriMesh(snapped, f)
     # snapped vertices ARE their image (distance 0); unsnapped ones keep their projection distance.
     # Faces are rows of the input as given (the copy keeps each kept row's columns).
@@ -548,13 +637,14 @@ def remesh_with_stats(
     # lands only in a remeshed face whose corners sit (by ``to_original``) within a few edge rings of
     # it on the original: never on a part that merely touches it in space (a hand on a hip, the two
     # sheets of a foot's arch), where distance and normals cannot tell the parts apart.
-    rf, rw, rd, unresolved = _from_original(surface, remeshed, face, weights)
+    rf, rw, rd, unresolved = _from_original(shape, remeshed, face, weights)
     stats["from_original_unresolved"] = int(unresolved.sum())
     of = np.full(mesh.n_vertices, -1, dtype=np.int64)
     ow = np.zeros((mesh.n_vertices, 3))
     od = np.full(mesh.n_vertices, np.nan)
     of[repair.vertex_index], ow[repair.vertex_index], od[repair.vertex_index] = rf, rw, rd
     from_original = SurfaceMap(of, ow, od)
+    cpu.lap("from_original")
     seconds = time.perf_counter() - t0
     stats["seconds"] = seconds
     result = Remeshed(
@@ -569,8 +659,7 @@ def remesh_with_stats(
 
 
 def _remesh_surface(
-    mesh: TriMesh,
-    surface: TriMesh,
+    shape: RemeshInput,
     target_vertices: int | None,
     target_faces: int | None,
     face_goal: int,
@@ -578,19 +667,18 @@ def _remesh_surface(
     seed: int | None,
     stats: dict,
     t0: float,
+    cpu: _CpuSteps,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Steps 1-5 on the repaired copy ``surface``: (V_r, 3) vertices and (F_r, 3) faces of the remesh
+    """Steps 2-5 on ``shape``'s oriented copy: (V_r, 3) vertices and (F_r, 3) faces of the remesh
     before the snap (diagnostics go into ``stats``). The jitter seed is derived from the INPUT
-    ``mesh`` (as before the repair step); ``t0`` is the start time of the whole remesh."""
-    # 1. oriented copy
-    ms = _meshset(surface.vertices, surface.faces)
-    ms.meshing_re_orient_faces_coherently()
-    v, f = _arrays(ms)
+    mesh (as before the repair step); ``t0`` is the start time of the whole remesh."""
+    v, f = shape.oriented
     # 2. seeded jitter on the surface
     if seed is None:
-        seed = stable_hash("remesh-jitter", _content_key(mesh), target_vertices, target_faces)
+        seed = stable_hash("remesh-jitter", shape.content_key, target_vertices, target_faces)
     if jitter > 0:
         v = _jitter_on_surface(v, f, float(jitter), rng_for(seed, "jitter"))
+    cpu.lap("jitter")
     # 3.-4. pre-decimation of large inputs, one Loop subdivision
     import pymeshlab
 
@@ -599,6 +687,7 @@ def _remesh_surface(
         _decimate(ms, int(PRE_DECIMATION_FACTOR * face_goal))
     ms.meshing_surface_subdivision_loop(iterations=1, threshold=pymeshlab.PercentageValue(0))
     stats["seconds_prepare"] = time.perf_counter() - t0
+    cpu.lap("subdivide")
     # decimation to the target
     if target_vertices is not None:
         v, f = _to_vertex_target(*_arrays(ms), int(target_vertices), stats)
@@ -611,6 +700,7 @@ def _remesh_surface(
         log.warning(
             "remesh: decimation left %d faces in small components; kept the largest component", stats["dropped_faces"]
         )
+    cpu.lap("decimate")
     return v, f
 
 

@@ -2,6 +2,25 @@
 
 Run: ``python benchmarks/remesh.py [--sample]`` (JSON on stdout). ``--sample`` runs one shape per
 class only. All distances are relative to the input's bounding-box diagonal.
+
+``--steps`` measures instead the CPU seconds per shape variant of the real remesh JOB (``becos
+remesh``, one process per variant, as Snakemake runs it, on one core), by step: ``startup``
+(interpreter, imports, config), ``load`` (parsing the mesh file; the first variant of a shape
+parses it, later ones read the job cache), ``prepare`` (common frame), the remesh's own steps
+(``stats["cpu_seconds"]`` of :func:`becos.remesh.remesh_with_stats`: shape (repair and
+orientation), jitter, subdivide (pre-decimation + Loop), decimate, snap, from_original), ``save`` (npz + PLY) and ``other`` (the rest of the
+process's CPU: exit, ...). ``total`` is the process's own CPU (user + system, from ``wait4``).
+Per tree it prints the median and max of every step over the variants, and the guarantees checked on
+the written files (with this checkout's code): exact vertex targets, one component, no
+non-manifold or misoriented edge, Euler characteristic kept, ``to_original`` exact (snapped vertices
+at distance 0 from their image), ``from_original`` complete, shared original vertices between the
+two variants of a shape and between poses of a class (0 expected), and the triangle quality per
+shape (longest edge / median edge, 99.9th percentile edge / median, smallest angle, faces with an
+angle under 10 degrees). ``--before PATH`` runs another
+checkout's code (e.g. ``git archive main | tar -x -C /tmp/before``) on the same variants,
+interleaved, so the ratio is measured in one run on a loaded machine::
+
+    python benchmarks/remesh.py --steps [--before PATH] [--shapes cat0,michael0] [--variants 2]
 """
 
 from __future__ import annotations
@@ -151,6 +170,269 @@ def remesh_benchmark(names: list[str] | None = None, variant_shapes: list[str] |
     return {"summary": summary, "shapes": rows, "same_class": same_class, "variants": variants}
 
 
+STEP_SAMPLE = [
+    "michael0",
+    "michael5",
+    "michael11",
+    "victoria0",
+    "victoria7",
+    "david0",
+    "cat0",
+    "cat5",
+    "dog0",
+    "horse5",
+    "centaur3",
+    "wolf0",
+]
+"""The ``--steps`` shapes: TOSCA's classes in about their proportions (humans are half of its 76)."""
+
+STEPS = (
+    "startup",
+    "load",
+    "prepare",
+    "shape",
+    "jitter",
+    "subdivide",
+    "decimate",
+    "snap",
+    "from_original",
+    "save",
+    "other",
+    "total",
+)
+
+
+def _run_job(tree: Path, config: dict, row: dict, token: str, out: Path) -> str:
+    """One ``becos remesh`` process with ``tree`` first on the path (one thread); its log."""
+    import os
+
+    from becos.workflow import job_options
+
+    cmd = [
+        sys.executable,
+        "-m",
+        "becos.cli",
+        "remesh",
+        "--options",
+        job_options(config, "remesh"),
+        "--shape",
+        json.dumps(row, sort_keys=True),
+        "--token",
+        token,
+        "--out",
+        str(out),
+        "--ply",
+        str(out.with_suffix(".ply")),
+    ]
+    env = {**os.environ, "PYTHONPATH": str(tree), "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
+    # cwd: ``python -m`` puts the working directory first on the path, before PYTHONPATH
+    proc = subprocess.run(cmd, env=env, cwd=tree, capture_output=True, text=True, check=False)
+    if proc.returncode:
+        raise SystemExit(f"becos remesh {row['name']} {token} ({tree}) failed:\n{proc.stderr[-3000:]}")
+    return proc.stderr
+
+
+def _job_cpu(tree: Path, config: dict, row: dict, token: str, out: Path) -> dict:
+    import resource
+
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    stderr = _run_job(tree, config, row, token, out)
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    total = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    line = [ln for ln in stderr.splitlines() if ln.startswith("remesh cpu seconds: ")]
+    # a tree whose job logs no steps (before they were logged) is measured by its total alone
+    steps = json.loads(line[-1].split(": ", 1)[1]) if line else {"job_start": 0.0}
+    steps["startup"] = steps.pop("job_start")
+    steps["other"] = total - sum(steps.values())
+    steps["total"] = total
+    return steps
+
+
+def _triangle_quality(mesh) -> dict:
+    """Longest and 99.9th-percentile edge over the median edge, smallest angle (degrees), faces with
+    an angle under 10 degrees."""
+    from becos.mesh import undirected_edges
+
+    v, f = mesh.vertices, mesh.faces
+    e, _ = undirected_edges(f)
+    length = np.linalg.norm(v[e[:, 0]] - v[e[:, 1]], axis=1)
+    tri = v[f]
+    smallest = np.full(len(f), 180.0)
+    for k in range(3):
+        a, b = tri[:, (k + 1) % 3] - tri[:, k], tri[:, (k + 2) % 3] - tri[:, k]
+        cos = (a * b).sum(axis=1) / np.maximum(np.linalg.norm(a, axis=1) * np.linalg.norm(b, axis=1), 1e-300)
+        smallest = np.minimum(smallest, np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))))
+    median = float(np.median(length))
+    return {
+        "edge_max_over_median": round(float(length.max()) / median, 3),
+        "edge_p999_over_median": round(float(np.percentile(length, 99.9)) / median, 3),
+        "min_angle_deg": round(float(smallest.min()), 3),
+        "faces_under_10_deg": int((smallest < 10).sum()),
+    }
+
+
+def _guarantees(original, r, target: int) -> dict:
+    from becos.remesh import mesh_checks
+
+    facts = mesh_checks(r.mesh)
+    d = float(np.linalg.norm(np.ptp(original.vertices, axis=0)))
+    unsnapped = r.to_original.distance > 0
+    return {
+        "exact_vertex_target": r.mesh.n_vertices == target,
+        "single_component": facts["components"] == 1,
+        "manifold_oriented": facts["non_manifold_edges"] == 0 and facts["misoriented_edges"] == 0,
+        "euler_kept": facts["euler_characteristic"] == mesh_checks(original)["euler_characteristic"],
+        "to_original_complete": bool(r.to_original.matched.all()),
+        "unsnapped_vertices": int(unsnapped.sum()),
+        "to_original_distance_max_rel": float(r.to_original.distance.max()) / d,
+        "from_original_complete": bool(r.from_original.matched.all()),
+        "from_original_distance_mean_rel": float(r.from_original.distance.mean()) / d,
+        "from_original_distance_max_rel": float(r.from_original.distance.max()) / d,
+        **_triangle_quality(r.mesh),
+    }
+
+
+def step_benchmark(trees: dict[str, Path], names: list[str], variants: int, workdir: Path) -> dict:
+    """The ``--steps`` figures (module docstring) for each code tree, jobs interleaved over trees."""
+    import tempfile
+
+    from becos.remesh import intrinsic_coincidence, load_remeshed, shared_vertex_share
+    from becos.workflow import ShapeStore, build_catalog, remesh_target, resolve_config
+
+    becos_code = _tosca_dir().parents[1]
+    work = Path(tempfile.mkdtemp(prefix="remesh-steps-", dir=workdir))
+    configs = {
+        label: resolve_config(
+            {
+                "synthetic": {"enabled": False},
+                "data_dir": str(becos_code / "data"),
+                "annotations": str(becos_code),
+                "datasets": ["tosca"],
+                "template_file": "templates_tosca_demo.csv",
+                "remesh_variants": variants,
+                "store_vis": False,
+                "results": str(work / label / "results"),
+            }
+        )
+        for label in trees
+    }
+    catalog = build_catalog(next(iter(configs.values())))
+    rows = {r["name"]: r for r in catalog.to_dict("records")}
+    unknown = sorted(set(names) - set(rows))
+    if unknown:
+        raise SystemExit(f"not TOSCA shapes: {unknown}")
+    jobs: dict[str, list[dict]] = {label: [] for label in trees}
+    guarantees: dict[str, dict] = {label: {} for label in trees}
+    files: dict[str, dict] = {label: {} for label in trees}
+    # the job remeshes the PREPARED mesh (common frame, dataset scale): the guarantees compare with it
+    # (with its own mesh cache: the jobs' caches stay empty, so each shape's first variant parses its file)
+    config = {**configs[next(iter(trees))], "results": str(work / "prepared" / "results")}
+    prepared = {name: ShapeStore(config, [rows[name]]).prepared("tosca", name).mesh for name in names}
+    for name in names:
+        original = prepared[name]
+        for v in range(variants):
+            token = f"v{v}"
+            for label, tree in trees.items():
+                config = configs[label]
+                out = work / label / f"{name}_{token}.npz"
+                steps = _job_cpu(tree, config, rows[name], token, out)
+                jobs[label].append({"variant": f"{name}/{token}", **{k: round(steps.get(k, 0.0), 3) for k in STEPS}})
+                r = load_remeshed(out)
+                target = remesh_target(config, "tosca", name, token)["target_vertices"]
+                guarantees[label][f"{name}/{token}"] = _guarantees(original, r, target)
+                files[label][(name, v)] = r
+                print(f"{label} {name} {token}: {steps['total']:.2f} CPU-s", file=sys.stderr, flush=True)
+    out: dict = {"shapes": names, "variants_per_shape": variants, "cpu_seconds_per_variant": {}, "guarantees": {}}
+    for label in trees:
+        table = {k: np.array([j[k] for j in jobs[label]]) for k in STEPS}
+        remesh_only = table["total"] - table["startup"] - table["other"]
+        out["cpu_seconds_per_variant"][label] = {
+            "median": {k: round(float(np.median(x)), 3) for k, x in table.items()},
+            "max": {k: round(float(x.max()), 3) for k, x in table.items()},
+            "median_without_startup": round(float(np.median(remesh_only)), 3),
+            "jobs": jobs[label],
+        }
+        g = guarantees[label]
+        originals = prepared
+        fl = files[label]
+        variant_share = [
+            shared_vertex_share(fl[(n, 0)], originals[n].faces, fl[(n, 1)], originals[n].faces)
+            for n in names
+            if variants > 1
+        ]
+        variant_intrinsic = [
+            intrinsic_coincidence(fl[(n, 0)], originals[n].faces, fl[(n, 1)], originals[n])
+            for n in names
+            if variants > 1
+        ]
+        classes: dict[str, list[str]] = {}
+        for n in names:
+            classes.setdefault(re.sub(r"\d+$", "", n), []).append(n)
+        pose_pairs = [(a, b) for members in classes.values() for a in members[:1] for b in members[1:]]
+        pose_share = [
+            shared_vertex_share(fl[(a, 0)], originals[a].faces, fl[(b, 0)], originals[b].faces) for a, b in pose_pairs
+        ]
+        pose_intrinsic = [
+            max(
+                intrinsic_coincidence(fl[(a, 0)], originals[a].faces, fl[(b, 0)], originals[b]),
+                intrinsic_coincidence(fl[(b, 0)], originals[b].faces, fl[(a, 0)], originals[a]),
+            )
+            for a, b in pose_pairs
+        ]
+        out["guarantees"][label] = {
+            "all_exact_vertex_target": all(x["exact_vertex_target"] for x in g.values()),
+            "all_single_component": all(x["single_component"] for x in g.values()),
+            "all_manifold_oriented_euler_kept": all(x["manifold_oriented"] and x["euler_kept"] for x in g.values()),
+            "all_maps_complete_both_ways": all(
+                x["to_original_complete"] and x["from_original_complete"] for x in g.values()
+            ),
+            "unsnapped_vertices_max": max(x["unsnapped_vertices"] for x in g.values()),
+            "to_original_distance_max_rel": max(x["to_original_distance_max_rel"] for x in g.values()),
+            "from_original_distance_mean_rel_max": max(x["from_original_distance_mean_rel"] for x in g.values()),
+            "from_original_distance_max_rel_max": max(x["from_original_distance_max_rel"] for x in g.values()),
+            "variants_shared_original_vertex_max": max(variant_share, default=None),
+            "poses_shared_original_vertex_max": max(pose_share, default=None),
+            "variants_intrinsic_coincidence_max": max(variant_intrinsic, default=None),
+            "poses_intrinsic_coincidence_max": max(pose_intrinsic, default=None),
+            "triangle_quality": {
+                k: {
+                    q: g[k][q]
+                    for q in ("edge_max_over_median", "edge_p999_over_median", "min_angle_deg", "faces_under_10_deg")
+                }
+                for k in g
+            },
+        }
+    if len(trees) == 2:
+        a, b = list(trees)
+
+        def same(x, y) -> bool:
+            pairs = [(x.mesh.vertices, y.mesh.vertices), (x.mesh.faces, y.mesh.faces)]
+            for m, n in ((x.to_original, y.to_original), (x.from_original, y.from_original)):
+                pairs += [(m.face, n.face), (m.weights, n.weights), (m.distance, n.distance)]
+            return all(np.array_equal(p, q, equal_nan=True) for p, q in pairs)
+
+        out["variants_byte_identical"] = f"{sum(same(files[a][k], files[b][k]) for k in files[a])}/{len(files[a])}"
+        ma, mb = out["cpu_seconds_per_variant"][a]["median"], out["cpu_seconds_per_variant"][b]["median"]
+        out["median_total_ratio"] = {f"{b}/{a}": round(mb["total"] / ma["total"], 3)}
+    out["load_average"] = [round(x, 2) for x in __import__("os").getloadavg()]
+    return out
+
+
 if __name__ == "__main__":
-    sample = "--sample" in sys.argv[1:]
-    print(json.dumps(remesh_benchmark(SAMPLE if sample else None), indent=1))
+    import argparse
+
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--sample", action="store_true", help="one shape per class")
+    parser.add_argument("--steps", action="store_true", help="CPU seconds of the remesh job by step")
+    parser.add_argument("--before", type=Path, help="with --steps: another checkout to compare with")
+    parser.add_argument("--shapes", help="with --steps: comma-separated TOSCA names (default: STEP_SAMPLE)")
+    parser.add_argument("--variants", type=int, default=2, help="with --steps: variants per shape")
+    parser.add_argument("--workdir", type=Path, default=Path("/tmp"), help="with --steps: where jobs write")
+    args = parser.parse_args()
+    if args.steps:
+        trees = {"before": args.before.resolve()} if args.before else {}
+        trees["after"] = REPO
+        names = args.shapes.split(",") if args.shapes else STEP_SAMPLE
+        print(json.dumps(step_benchmark(trees, names, args.variants, args.workdir), indent=1))
+    else:
+        print(json.dumps(remesh_benchmark(SAMPLE if args.sample else None), indent=1))

@@ -30,3 +30,29 @@ def test_nearest_along_surface_never_crosses_a_contact():
     owner = nearest_along_surface(mesh, sources)
     assert (owner[:20] == 0).all() and (owner[20:] == 1).all()
     assert (nearest_along_surface(mesh, np.array([0]))[20:] == -1).all()
+
+
+def test_sparse_pairs_keys_are_the_sorted_unique_non_zeros():
+    """SparsePairs reads its keys off the canonical CSR (no sort): the same keys as np.unique of the
+    (row, column) pairs, for canonical products and for matrices with unsorted or repeated entries."""
+    import scipy.sparse as sp
+
+    from becos.geometry import SparsePairs
+
+    rng = np.random.default_rng(7)
+    rows, cols = rng.integers(0, 50, 400), rng.integers(0, 70, 400)  # repeats included
+    raw = sp.csr_matrix((np.ones(400, dtype=np.float32), (rows, cols)), shape=(50, 70))
+    unsorted = sp.csr_matrix((raw.data[::-1].copy(), raw.indices.copy(), raw.indptr.copy()), shape=raw.shape)
+    for row in range(50):  # reverse each row's columns: valid CSR, not canonical
+        s, e = unsorted.indptr[row], unsorted.indptr[row + 1]
+        unsorted.indices[s:e] = unsorted.indices[s:e][::-1]
+    unsorted.has_sorted_indices = False
+    duplicated = sp.csr_matrix((np.ones(800, dtype=np.float32), (np.r_[rows, rows], np.r_[cols, cols])), shape=(50, 70))
+    product = raw @ raw.T
+    for matrix in (raw, unsorted, duplicated, product, sp.coo_matrix(raw)):
+        coo = sp.coo_matrix(matrix)
+        expected = np.unique(coo.row.astype(np.int64) * matrix.shape[1] + coo.col)
+        pairs = SparsePairs(matrix)
+        assert np.array_equal(pairs._keys, expected)
+        a, b = rng.integers(0, matrix.shape[0], 300), rng.integers(0, matrix.shape[1], 300)
+        assert np.array_equal(pairs.near(a, b), np.isin(a.astype(np.int64) * matrix.shape[1] + b, expected))

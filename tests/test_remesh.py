@@ -10,6 +10,7 @@ from becos.geometry import SurfaceLocator, points_on_surface
 from becos.mesh import TriMesh
 from becos.remesh import (
     Remeshed,
+    RemeshInput,
     coincident_original_vertices,
     intrinsic_coincidence,
     load_remeshed,
@@ -182,6 +183,28 @@ def test_deterministic_byte_identical(tosca, remeshes):
         (first.from_original.distance, again.from_original.distance),
     ]:
         assert x.dtype == y.dtype and x.tobytes() == y.tobytes()
+
+
+def test_variants_sharing_the_per_shape_part_are_byte_identical(tosca, remeshes):
+    """Variants remeshed with one RemeshInput (repair, orientation, locator, edge graph built once)
+    are the bytes of variants remeshed alone; the part of another mesh is refused."""
+    original = tosca("wolf0")
+    shape = RemeshInput(original)
+    for variant in (0, 1):
+        _, alone, _ = remeshes("wolf0", variant)
+        shared, _ = remesh_with_stats(original, alone.target_vertices, shape=shape)
+        for x, y in [
+            (alone.mesh.vertices, shared.mesh.vertices),
+            (alone.mesh.faces, shared.mesh.faces),
+            (alone.to_original.face, shared.to_original.face),
+            (alone.to_original.weights, shared.to_original.weights),
+            (alone.from_original.face, shared.from_original.face),
+            (alone.from_original.weights, shared.from_original.weights),
+            (alone.from_original.distance, shared.from_original.distance),
+        ]:
+            assert x.dtype == y.dtype and x.tobytes() == y.tobytes()
+    with pytest.raises(ValueError, match="another mesh"):
+        remesh_with_stats(tosca("wolf1"), 9000, shape=shape)
 
 
 def test_face_target_mode(tosca):
