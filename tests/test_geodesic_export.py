@@ -268,3 +268,26 @@ def test_workflow_plans_one_geodesic_plan_parallel_rows_and_one_layout_job_per_s
     planned = jobs_planned(snakemake(workdir, "-n", "--cores", "2").stdout)
     assert planned.get("geodesic_plan") == 1 and planned.get("geodesic_rows") == WORKFLOW_PARTS > 1, planned
     assert planned.get("geodesics") == 3, planned
+
+
+def test_matrix_files_are_written_once_then_linked_or_copied_across_devices(tmp_path):
+    """save_npy writes atomically (no temporary left); link_or_copy links on one file system, and copies
+    where a link cannot be made (another device: /dev/shm's tmpfs)."""
+    import tempfile
+    from pathlib import Path
+
+    from becos.atomic import link_or_copy, save_npy
+
+    matrix = np.arange(12, dtype=np.float32).reshape(3, 4)
+    block = tmp_path / "block.npy"
+    assert save_npy(block, matrix) == block.stat().st_size and sorted(p.name for p in tmp_path.iterdir()) == [
+        "block.npy"
+    ]
+    assert link_or_copy(block, tmp_path / "a" / "0_x.npy") is True
+    assert (tmp_path / "a" / "0_x.npy").stat().st_ino == block.stat().st_ino and block.stat().st_nlink == 2
+    shm = Path("/dev/shm")
+    if not shm.is_dir() or shm.stat().st_dev == tmp_path.stat().st_dev:
+        pytest.skip("no second file system (/dev/shm) to copy across")
+    with tempfile.TemporaryDirectory(dir=shm) as other:
+        assert link_or_copy(block, Path(other) / "0_x.npy") is False
+        assert np.array_equal(np.load(Path(other) / "0_x.npy"), matrix) and block.stat().st_nlink == 2
