@@ -138,7 +138,7 @@ def write_costs(v: np.ndarray, f: np.ndarray, places: int, out: Path, shape: str
         np.sqrt(0.5 * np.linalg.norm(np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]), axis=1).sum())
     )
     rows = distance_rows(v, f, sources, "heat")
-    shape = _GeodesicShape("test", "p", 0, "tosca", shape, "0_x", "m", "k", sources, sqrt_area)
+    full = _GeodesicShape("test", "p", 0, "tosca", shape, "0_x", "m", "k", sources, sqrt_area)
 
     def synced(path: Path) -> None:
         with open(path, "rb+") as fh:
@@ -160,7 +160,7 @@ def write_costs(v: np.ndarray, f: np.ndarray, places: int, out: Path, shape: str
         def before_layouts():
             memmap = np.load(out / "rows.npy", mmap_mode="r")
             for k in range(places):
-                matrix = _shape_matrix(shape, sources, memmap)
+                matrix = _shape_matrix(full, sources, memmap)
                 np.save(out / f"before_{k}.npy", (matrix / np.float32(sqrt_area)).astype(np.float32, copy=False))
                 synced(out / f"before_{k}.npy")
 
