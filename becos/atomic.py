@@ -101,6 +101,33 @@ def save_npz(path: str | Path, compressed: bool = False, **arrays: np.ndarray) -
                     np.lib.format.write_array(fh, value, allow_pickle=False)
 
 
+def save_npy(path: str | Path, array: np.ndarray) -> int:
+    """``np.save`` to ``path``, atomically, as one large buffered write (numpy's ``tofile`` on the open
+    file for a contiguous array); returns the bytes written."""
+    array = np.ascontiguousarray(array)
+    with atomic_path(path, suffix=".tmp.npy") as tmp:
+        with open(tmp, "wb") as fh:
+            np.save(fh, array, allow_pickle=False)
+    return Path(path).stat().st_size
+
+
+def link_or_copy(source: str | Path, path: str | Path) -> bool:
+    """Make ``path`` a hard link of the file ``source`` (same bytes, no new disk space), atomically;
+    where the file system refuses (another device, no hard links, link limit) a copy instead. Returns
+    whether it linked. The two names then share one file: never write into either in place."""
+    with atomic_path(path, suffix=".tmp.link") as tmp:
+        tmp.unlink()
+        try:
+            os.link(source, tmp)
+            linked = True
+        except OSError as exc:
+            if exc.errno not in (errno.EXDEV, errno.EPERM, errno.EMLINK, errno.ENOTSUP, errno.EOPNOTSUPP):
+                raise
+            shutil.copyfile(source, tmp)
+            linked = False
+    return linked
+
+
 def write_bytes(path: str | Path, data: bytes) -> None:
     with atomic_path(path) as tmp:
         tmp.write_bytes(data)

@@ -895,17 +895,66 @@ def _dsmk_reads(setting: str, side: int) -> bool:
     return side == 0 or setting in ("partial_partial", "full_full")
 
 
-def _rows_for(
-    meshes: dict, needed: dict, rows_folders, method: str, jobs: int, work: Path, progress: bool
-) -> tuple[dict, dict]:
-    """``({key: sorted source vertices}, {key: (R, V) float32 rows})``: read from ``rows_folders``
-    (outputs of ``becos geodesic-rows``; they may hold more rows and meshes) or computed here."""
+def symmetric_block(rows: np.ndarray, sources: np.ndarray, sqrt_area: float) -> np.ndarray:
+    """(R, R) float32: the distances between the R ``sources`` of a mesh, from its (R, V) ``rows``
+    (row i from vertex ``sources[i]``), symmetrised (the mean of d(a, b) and d(b, a)), zero on the
+    diagonal and divided by ``sqrt_area``: the geo-lora matrix of a shape keeping exactly those vertices,
+    and, cut to ``[i][:, i]``, of any shape keeping a subset (the same float32 operations entry by entry
+    as :func:`_shape_matrix`, so the same bytes)."""
+    n = rows.shape[1]
+    whole = len(sources) == n and np.array_equal(sources, np.arange(n))
+    sub = np.asarray(rows if whole else rows[:, sources], dtype=np.float32)
+    sym = sub.T + sub
+    del sub
+    sym *= np.float32(0.5)
+    np.fill_diagonal(sym, 0.0)
+    sym /= np.float32(sqrt_area)
+    return sym
+
+
+def mesh_sqrt_areas(shapes: list[_GeodesicShape], known: Mapping | None = None) -> dict[str, float]:
+    """``{key: sqrt_area}`` of the full meshes of ``shapes`` (the one normaliser of each mesh's block:
+    its first shape's, or ``known``'s), checking that every shape of a mesh agrees to 1e-6."""
+    out = dict(known or {})
+    for sh in shapes:
+        scale = out.setdefault(sh.key, sh.sqrt_area)
+        if abs(sh.sqrt_area - scale) > 1e-6 * abs(scale):
+            raise ExportError(
+                f"shape {sh.name} (pair {sh.pair_id}): sqrt-area {sh.sqrt_area!r} differs from {scale!r} of "
+                f"the same full mesh {sh.key}. Fix: build every setting's store with the same config "
+                f"(area_normalised) and rerun `becos geodesic-plan`"
+            )
+    return {sh.key: out[sh.key] for sh in shapes}
+
+
+def _block_cut(path: Path, cut: np.ndarray, whole: bool) -> np.ndarray:
+    """(n, n) float32 in memory: the block file's rows and columns ``cut`` (all of it when ``whole``)."""
+    block = np.load(path, mmap_mode="r")
+    return np.array(block) if whole else block[np.ix_(cut, cut)]
+
+
+def _blocks_for(
+    shapes: list, meshes: dict, needed: dict, rows_folders, method: str, jobs: int, work: Path, progress: bool
+) -> dict[str, tuple[np.ndarray, Path, float]]:
+    """``{key: (sorted source vertices, (R, R) block file, sqrt_area)}`` (:func:`symmetric_block`):
+    read from ``rows_folders`` (outputs of ``becos geodesic-rows``; they may hold more meshes, and
+    rows other stores need) or computed here into ``work``."""
+    from becos.atomic import save_npy
+
     if rows_folders is None:
-        return needed, _compute_geodesic_rows(meshes, needed, method, jobs, work, progress)
+        scales = mesh_sqrt_areas(shapes)
+        rows = _compute_geodesic_rows(meshes, needed, method, jobs, work, progress)
+        out = {}
+        for key in list(rows):
+            path = work / f"{key}.block.npy"
+            save_npy(path, symmetric_block(rows.pop(key), needed[key], scales[key]))
+            (work / f"{key}.npy").unlink()
+            out[key] = (needed[key], path, scales[key])
+        return out
     from becos.geodesic_jobs import load_rows
 
     loaded = load_rows(rows_folders)
-    sources, rows = {}, {}
+    out = {}
     for key in meshes:
         if key not in loaded:
             raise ExportError(
@@ -913,15 +962,15 @@ def _rows_for(
                 f"the rows with this store and the same splits (`becos geodesic-plan`), then "
                 f"rerun `becos geodesic-rows`"
             )
-        have, matrix = loaded[key]
-        if matrix.shape[1] != len(meshes[key][0]) or not np.isin(needed[key], have).all():
+        have, path, scale = loaded[key]
+        if not np.isin(needed[key], have).all():
             raise ExportError(
-                f"geodesic rows of mesh {key}: {matrix.shape} for a mesh of {len(meshes[key][0])} "
-                f"vertices, missing some of the {len(needed[key])} rows this store needs. Fix: "
-                f"rerun `becos geodesic-plan` and `becos geodesic-rows` with this store"
+                f"geodesic rows of mesh {key}: {len(have)} rows, missing some of the {len(needed[key])} this "
+                f"store needs. Fix: rerun `becos geodesic-plan` and `becos geodesic-rows` with this store"
             )
-        sources[key], rows[key] = have, matrix
-    return sources, rows
+        out[key] = loaded[key]
+    mesh_sqrt_areas(shapes, {key: scale for key, (_, _, scale) in out.items()})  # the store agrees with them
+    return out
 
 
 def write_geodesic_matrices(
@@ -954,11 +1003,18 @@ def write_geodesic_matrices(
     - ``<out>/logs/config.yaml`` as the other exports.
 
     Each distinct full mesh is solved once for the union of the vertices its shapes keep, by ``jobs``
-    processes, or its rows are read from ``rows`` (folders written by ``becos geodesic-rows``);
+    processes, or its blocks are read from ``rows`` (folders written by ``becos geodesic-rows``);
     ``splits`` (e.g. ``["test"]``) limits the export to those splits. ``layouts``: which of
     :data:`GEODESIC_LAYOUTS` to write (``index.csv`` is always written).
+
+    Every matrix is written once: a geo-lora file equal to its mesh's block (:func:`symmetric_block`;
+    every full shape) is a hard link of the block file (a copy where the file system has no hard
+    links), so a full mesh shared by pairs, sides and settings costs its bytes once; other shapes' files
+    are cut from the block, in one buffered write each. A DeepShapeMatchingKit file is a zip holding the
+    shape's own vertices, so it is written whole for every shape it needs (its ``result``: the block cut
+    times the sqrt-area, equal to the unnormalised matrix to float32 round-off).
     """
-    from becos.atomic import save_npz
+    from becos.atomic import link_or_copy, save_npy, save_npz
 
     unknown = sorted(set(layouts) - set(GEODESIC_LAYOUTS))
     if unknown or not layouts:
@@ -969,25 +1025,33 @@ def write_geodesic_matrices(
         shapes, meshes, needed, numbers = _geodesic_plan(records, splits, keep_arrays=True)
         work = tmp / ".rows"
         work.mkdir()
-        sources, matrices = _rows_for(meshes, needed, rows, method, jobs, work, progress)
+        blocks = _blocks_for(shapes, meshes, needed, rows, method, jobs, work, progress)
         folder = tmp / GEODESIC_FOLDER
         folder.mkdir()
         table, written, dsmk_written = [], set(), set()
         for sh in shapes:
-            matrix = None
+            sources, path, scale = blocks[sh.key]
+            cut = np.searchsorted(sources, sh.p2f)
+            whole = len(cut) == len(sources) and np.array_equal(cut, np.arange(len(sources)))
+            matrix = None  # the shape's geo-lora matrix, when read
             if "geo-lora" in layouts and sh.stem not in written:  # one full mesh in several pairs: one file
                 written.add(sh.stem)
-                matrix = _shape_matrix(sh, sources[sh.key], matrices[sh.key])
-                np.save(folder / f"{sh.stem}.npy", (matrix / np.float32(sh.sqrt_area)).astype(np.float32, copy=False))
+                if whole:
+                    link_or_copy(path, folder / f"{sh.stem}.npy")
+                else:
+                    matrix = _block_cut(path, cut, whole)
+                    save_npy(folder / f"{sh.stem}.npy", matrix)
             dsmk_file = ""
             if "dsmk" in layouts and _dsmk_reads(sh.setting, sh.side):
                 dsmk_file = f"{DSMK_FOLDER}/{sh.split}/dist/{dsmk_cache_name(sh.vertices, sh.faces)}"
                 if dsmk_file not in dsmk_written:
                     dsmk_written.add(dsmk_file)
-                    if matrix is None:
-                        matrix = _shape_matrix(sh, sources[sh.key], matrices[sh.key])
+                    result = _block_cut(path, cut, whole) if matrix is None else matrix
+                    result *= np.float32(scale)  # DSMK divides by the info file's sqrt-area itself
                     (tmp / dsmk_file).parent.mkdir(parents=True, exist_ok=True)
-                    save_npz(tmp / dsmk_file, verts=sh.vertices.astype(np.float32), faces=sh.faces, result=matrix)
+                    save_npz(tmp / dsmk_file, verts=sh.vertices.astype(np.float32), faces=sh.faces, result=result)
+                    del result
+            del matrix
             table.append(
                 [
                     sh.split,
@@ -997,11 +1061,10 @@ def write_geodesic_matrices(
                     sh.stem,
                     sh.mesh_id,
                     len(sh.p2f),
-                    repr(sh.sqrt_area),
+                    repr(scale),
                     dsmk_file,
                 ]
             )
-        del matrices
         shutil.rmtree(work)
         _write_ids(
             folder / "index.csv",
@@ -1121,6 +1184,7 @@ def run_cli(args: argparse.Namespace) -> int:
                     "splits": args.splits,
                     "matrices": len(list((out / GEODESIC_FOLDER).glob("*.npy"))),
                     "bytes": sum(p.stat().st_size for p in (out / GEODESIC_FOLDER).glob("*.npy")),
+                    "linked": sum(p.stat().st_nlink > 1 for p in (out / GEODESIC_FOLDER).glob("*.npy")),
                     "dsmk_files": len({r["dsmk_file"] for r in rows if r["dsmk_file"]}),
                     "dsmk_bytes": sum(p.stat().st_size for p in out.glob(f"{DSMK_FOLDER}/*/dist/*.npz")),
                 }

@@ -8,13 +8,18 @@ The workflow's geodesics run in three steps (``workflow/rules/export.smk``):
    the chosen splits' shapes keep. Meshes are spread over N parts, largest first onto the least loaded
    part (cost ~ rows x vertices), and each part is written as ``PLAN/part_<k>.npz`` (per mesh:
    ``<key>|vertices`` (V, 3) float64, ``<key>|faces`` (F, 3) int64, ``<key>|sources`` (R,) int64
-   sorted), with ``PLAN/plan.json`` listing mesh, part, vertex and row counts.
-2. ``becos geodesic-rows PLAN/part_<k>.npz OUT`` (one job per part) writes ``OUT/<key>.npy``: (R, V)
-   float32 heat-method distances (:func:`becos.geodesics.distance_rows`) from each source, in the
-   mesh's units, and ``OUT/<key>.sources.npy``; ``OUT/timings.json`` gives the CPU seconds per mesh.
-3. ``becos export-geodesics STORE OUT --rows OUT_0 OUT_1 ...`` (one job per setting) cuts each shape's
-   matrix out of its full mesh's rows and writes the loaders' layouts (:func:`becos.export.
-   write_geodesic_matrices`).
+   sorted, ``<key>|sqrt_area`` () float64: the full mesh's sqrt-area in the records' units, 1 for
+   area-normalised records), with ``PLAN/plan.json`` listing mesh, part, vertex and row counts.
+2. ``becos geodesic-rows PLAN/part_<k>.npz OUT`` (one job per part) writes ``OUT/<key>.npy``: the
+   (R, R) float32 block between the sources of the symmetrised heat-method distances
+   (:func:`becos.geodesics.distance_rows`, :func:`becos.export.symmetric_block`) divided by the
+   sqrt-area: exactly the geo-lora matrix of a shape that keeps those R vertices (a full shape: R = V),
+   so the layouts hard-link it instead of writing it again. ``OUT/<key>.sources.npy`` lists the sources;
+   ``OUT/timings.json`` gives per mesh the sqrt-area, the CPU seconds of the solve and of the write.
+3. ``becos export-geodesics STORE OUT --rows OUT_0 OUT_1 ...`` (one job per setting) links each shape's
+   matrix to its mesh's block where they are the same, cuts it out of the block otherwise, and writes
+   the loaders' layouts (:func:`becos.export.write_geodesic_matrices`). The blocks are temporary: once
+   every setting is written, the links are the only names of those files.
 """
 
 from __future__ import annotations
@@ -61,15 +66,17 @@ def write_plan(stores: list[Path], out: Path, parts: int, splits=None) -> dict:
     """Write ``out/part_<k>.npz`` (k < ``parts``, some possibly empty) and ``out/plan.json`` for the
     stores' shapes of ``splits`` (None: every split). Returns the plan summary."""
     from becos.atomic import save_npz, write_text
-    from becos.export import _geodesic_plan
+    from becos.export import _geodesic_plan, mesh_sqrt_areas
     from becos.store import open_benchmark
 
-    meshes, needed = {}, {}
+    meshes, needed, scales = {}, {}, {}
     for store in stores:
-        _, store_meshes, store_needed, _ = _geodesic_plan(open_benchmark(store).records(), splits)
+        shapes, store_meshes, store_needed, _ = _geodesic_plan(open_benchmark(store).records(), splits)
         for key, mesh in store_meshes.items():
             meshes.setdefault(key, mesh)
             needed.setdefault(key, []).append(store_needed[key])
+        for key, scale in mesh_sqrt_areas(shapes, scales).items():
+            scales.setdefault(key, scale)
     needed = {key: np.unique(np.concatenate(v)) for key, v in needed.items()}
     assignment = plan_parts(meshes, needed, parts)
     out.mkdir(parents=True, exist_ok=True)
@@ -86,14 +93,19 @@ def write_plan(stores: list[Path], out: Path, parts: int, splits=None) -> dict:
             arrays[f"{key}{SEPARATOR}vertices"] = vertices
             arrays[f"{key}{SEPARATOR}faces"] = faces
             arrays[f"{key}{SEPARATOR}sources"] = needed[key]
+            arrays[f"{key}{SEPARATOR}sqrt_area"] = np.float64(scales[key])
             summary["meshes"][key] = {"part": k, "n_vertices": len(vertices), "n_rows": len(needed[key])}
         save_npz(out / f"part_{k}.npz", **arrays)
     write_text(out / "plan.json", json.dumps(summary, indent=1, sort_keys=True) + "\n")
     return summary
 
 
-def read_part(path: Path) -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]:
-    """``{key: (vertices, faces, sources)}`` of one part file."""
+PART_FIELDS = ("vertices", "faces", "sources", "sqrt_area")
+"""The arrays of one mesh in a part file."""
+
+
+def read_part(path: Path) -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray, float]]:
+    """``{key: (vertices, faces, sources, sqrt_area)}`` of one part file."""
     try:
         data = np.load(path)
     except (OSError, ValueError) as exc:
@@ -104,17 +116,19 @@ def read_part(path: Path) -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]
             key, _, field = name.rpartition(SEPARATOR)
             out.setdefault(key, {})[field] = data[name]
     for key, fields in out.items():
-        if set(fields) != {"vertices", "faces", "sources"}:
+        if set(fields) != set(PART_FIELDS):
             raise GeodesicJobError(
-                f"{path}: mesh {key} lacks {sorted({'vertices', 'faces', 'sources'} - set(fields))}."
-                f" Fix: rerun `becos geodesic-plan`"
+                f"{path}: mesh {key} lacks {sorted(set(PART_FIELDS) - set(fields))}. Fix: rerun `becos geodesic-plan`"
             )
-    return {key: (f["vertices"], f["faces"], f["sources"]) for key, f in out.items()}
+    return {key: (f["vertices"], f["faces"], f["sources"], float(f["sqrt_area"])) for key, f in out.items()}
 
 
 def solve_part(part: Path, out: Path, method: str = "heat", progress: bool = False) -> dict:
-    """Write the rows of every mesh of ``part`` into the folder ``out`` (built aside, renamed in).
-    Returns ``{key: {n_vertices, n_rows, cpu_s, bytes}}`` (also ``out/timings.json``)."""
+    """Write the normalised symmetric block of every mesh of ``part`` into the folder ``out`` (built
+    aside, renamed in). Returns ``{key: {n_vertices, n_rows, sqrt_area, cpu_s, write_s, bytes}}`` (also
+    ``out/timings.json``; ``write_s``: wall seconds of symmetrising and writing the block)."""
+    from becos.atomic import save_npy
+    from becos.export import symmetric_block
     from becos.geodesics import distance_rows
 
     meshes = read_part(part)
@@ -122,17 +136,23 @@ def solve_part(part: Path, out: Path, method: str = "heat", progress: bool = Fal
     tmp = Path(tempfile.mkdtemp(dir=out.parent, prefix=f".{out.name}.tmp-"))
     try:
         timings = {}
-        for key, (vertices, faces, sources) in meshes.items():
+        for key, (vertices, faces, sources, sqrt_area) in meshes.items():
             started = time.process_time()
             rows = distance_rows(vertices, faces, sources, method)
             cpu = time.process_time() - started
-            np.save(tmp / f"{key}.npy", rows)
-            np.save(tmp / f"{key}.sources.npy", sources)
+            started = time.monotonic()
+            block = symmetric_block(rows, sources, sqrt_area)
+            del rows
+            written = save_npy(tmp / f"{key}.npy", block)
+            del block
+            save_npy(tmp / f"{key}.sources.npy", sources)
             timings[key] = {
                 "n_vertices": len(vertices),
                 "n_rows": len(sources),
+                "sqrt_area": sqrt_area,
                 "cpu_s": round(cpu, 3),
-                "bytes": int(rows.nbytes),
+                "write_s": round(time.monotonic() - started, 3),
+                "bytes": written,
             }
             if progress:
                 print(json.dumps({key: timings[key]}), file=sys.stderr, flush=True)
@@ -145,24 +165,30 @@ def solve_part(part: Path, out: Path, method: str = "heat", progress: bool = Fal
     return timings
 
 
-def load_rows(folders) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-    """``{key: (sources (R,) int64 sorted, rows (R, V) float32 memmap)}`` of every mesh in ``folders``
-    (outputs of :func:`solve_part`)."""
+def load_rows(folders) -> dict[str, tuple[np.ndarray, Path, float]]:
+    """``{key: (sources (R,) int64 sorted, block file (R, R) float32, sqrt_area)}`` of every mesh in
+    ``folders`` (outputs of :func:`solve_part`)."""
     out = {}
     for folder in folders:
         folder = Path(folder)
         if not folder.is_dir():
             raise GeodesicJobError(f"{folder}: no geodesic rows folder. Fix: run `becos geodesic-rows` for it")
+        try:
+            timings = json.loads((folder / "timings.json").read_text(encoding="utf-8"))
+        except (OSError, ValueError) as exc:
+            raise GeodesicJobError(
+                f"{folder}/timings.json: unreadable ({exc}). Fix: rerun `becos geodesic-rows`"
+            ) from exc
         for path in sorted(folder.glob("*.sources.npy")):
             key = path.name[: -len(".sources.npy")]
-            rows = np.load(folder / f"{key}.npy", mmap_mode="r")
+            block = np.load(folder / f"{key}.npy", mmap_mode="r")
             sources = np.load(path)
-            if rows.shape[0] != len(sources):
+            if block.shape != (len(sources), len(sources)) or key not in timings:
                 raise GeodesicJobError(
-                    f"{folder / key}.npy: {rows.shape[0]} rows for {len(sources)} sources. "
+                    f"{folder / key}.npy: a {block.shape} block for {len(sources)} sources. "
                     f"Fix: rerun `becos geodesic-rows`"
                 )
-            out[key] = (sources, rows)
+            out[key] = (sources, folder / f"{key}.npy", float(timings[key]["sqrt_area"]))
     return out
 
 

@@ -1,6 +1,7 @@
 """Cost and accuracy of the geodesic-matrix export on one remeshed TOSCA shape: before/after in one run.
 
     PYTHONPATH=. python benchmarks/geodesics_speed.py [--shape cat0] [--vertices 10000] [--exact 20]
+    PYTHONPATH=. python benchmarks/geodesics_speed.py --writes 3 [--shape cat0] [--vertices 10000] [--out DIR]
 
 Remeshes ``<shape>`` of ``../shared`` TOSCA to ``--vertices`` (becos.remesh), then computes its whole
 (V, V) float32 matrix with
@@ -13,6 +14,15 @@ Remeshes ``<shape>`` of ``../shared`` TOSCA to ``--vertices`` (becos.remesh), th
 and prints CPU seconds (``time.process_time``, all threads), the matrix size, the relative difference
 after vs before (over off-diagonal entries farther than 3 mean edge lengths, where relative error is
 meaningful) and each method's error against libigl's exact geodesics from ``--exact`` random sources.
+
+``--writes K`` measures instead the cost of writing that matrix as a full shape's geo-lora file in K
+places (e.g. 3: both sides of full-to-full pairs and the full side of partial-to-full ones), wall and
+CPU seconds with every file flushed to disk (``fsync``), before/after in one run, in ``--out``:
+
+- before: the rows job saves the (V, V) rows; each of the K layout writes maps them, symmetrises,
+  divides by the sqrt-area and saves its own file (the former ``write_geodesic_matrices``);
+- after: the rows job symmetrises, divides and saves the block once (``symmetric_block``,
+  ``save_npy``); the K layout files are hard links of it (``link_or_copy``).
 """
 
 from __future__ import annotations
@@ -32,6 +42,8 @@ def main() -> None:
     parser.add_argument("--shape", default="cat0")
     parser.add_argument("--vertices", type=int, default=10000)
     parser.add_argument("--exact", type=int, default=20, help="random sources compared with exact geodesics")
+    parser.add_argument("--writes", type=int, default=0, help="measure writing the matrix in this many places")
+    parser.add_argument("--out", type=Path, default=Path("/tmp/becos-geodesics-writes"), help="folder for --writes")
     args = parser.parse_args()
 
     from becos.datasets import DatasetSpec, prepare_shape
@@ -53,6 +65,9 @@ def main() -> None:
     v, f = mesh.vertices, mesh.faces
     n = len(v)
     all_sources = np.arange(n)
+    if args.writes:
+        print(json.dumps(write_costs(v, f, args.writes, args.out, args.shape), indent=1))
+        return
 
     t0 = time.process_time()
     old_solver = GeodesicDistances(TriMesh(v, f), "heat", cache_bytes=0)
@@ -106,6 +121,81 @@ def main() -> None:
             indent=1,
         )
     )
+
+
+def write_costs(v: np.ndarray, f: np.ndarray, places: int, out: Path, shape: str) -> dict:
+    """Wall and CPU seconds of writing the (V, V) matrix of one full shape in ``places`` layout files,
+    the former way and today's (module docstring, ``--writes``), in one run. Deletes its files."""
+    import shutil
+
+    from becos.atomic import link_or_copy, save_npy
+    from becos.export import _GeodesicShape, _shape_matrix, symmetric_block
+    from becos.geodesics import distance_rows
+
+    n = len(v)
+    sources = np.arange(n)
+    sqrt_area = float(
+        np.sqrt(0.5 * np.linalg.norm(np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]), axis=1).sum())
+    )
+    rows = distance_rows(v, f, sources, "heat")
+    full = _GeodesicShape("test", "p", 0, "tosca", shape, "0_x", "m", "k", sources, sqrt_area)
+
+    def synced(path: Path) -> None:
+        with open(path, "rb+") as fh:
+            os.fsync(fh.fileno())
+
+    def timed(step) -> dict:
+        wall, cpu = time.monotonic(), time.process_time()
+        step()
+        return {"wall_s": round(time.monotonic() - wall, 2), "cpu_s": round(time.process_time() - cpu, 2)}
+
+    out.mkdir(parents=True, exist_ok=True)
+    result = {"shape": shape, "vertices": n, "places": places, "load_average_start": os.getloadavg()}
+    try:
+
+        def before_rows():
+            np.save(out / "rows.npy", rows)
+            synced(out / "rows.npy")
+
+        def before_layouts():
+            memmap = np.load(out / "rows.npy", mmap_mode="r")
+            for k in range(places):
+                matrix = _shape_matrix(full, sources, memmap)
+                np.save(out / f"before_{k}.npy", (matrix / np.float32(sqrt_area)).astype(np.float32, copy=False))
+                synced(out / f"before_{k}.npy")
+
+        def after_rows():
+            save_npy(out / "block.npy", symmetric_block(rows, sources, sqrt_area))
+            synced(out / "block.npy")
+
+        def after_layouts():
+            for k in range(places):
+                link_or_copy(out / "block.npy", out / f"after_{k}.npy")
+
+        before = {"rows_job": timed(before_rows), "layout_jobs": timed(before_layouts)}
+        same = np.array_equal(np.load(out / "before_0.npy"), symmetric_block(rows, sources, sqrt_area))
+        for p in out.glob("before_*.npy"):
+            p.unlink()
+        (out / "rows.npy").unlink()
+        after = {"rows_job": timed(after_rows), "layout_jobs": timed(after_layouts)}
+        same = same and np.array_equal(np.load(out / "after_0.npy"), np.load(out / "block.npy"))
+        for figures in (before, after):
+            figures["total"] = {k: round(sum(step[k] for step in figures.values()), 2) for k in ("wall_s", "cpu_s")}
+        result.update(
+            {
+                "bytes_on_disk": {"before": (1 + places) * rows.nbytes, "after": rows.nbytes},
+                "before": before,
+                "after": after,
+                "ratio_before_over_after": {
+                    k: round(before["total"][k] / max(after["total"][k], 1e-3), 1) for k in ("wall_s", "cpu_s")
+                },
+                "same_bytes": bool(same),
+                "load_average_end": os.getloadavg(),
+            }
+        )
+    finally:
+        shutil.rmtree(out, ignore_errors=True)
+    return result
 
 
 if __name__ == "__main__":

@@ -169,6 +169,7 @@ def test_plan_rows_and_layouts_read_by_the_loaders(small_records, store_of, tmp_
     capsys.readouterr()
     assert not list(rows[2].glob("*.npy"))  # the empty part
 
+    inodes = {}
     for setting, store in zip(SETTINGS, stores):
         recs = small_records[setting]
         out = tmp_path / f"geo-{setting}"
@@ -213,13 +214,23 @@ def test_plan_rows_and_layouts_read_by_the_loaders(small_records, store_of, tmp_
                         str(data_root / "dist"),
                     )
                     assert raw.dtype == np.float32 and raw.shape == d.shape
-                    assert np.array_equal(raw / sqrt_area, d)  # the same matrix in the record's units
+                    # the same matrix in the record's units (the block times the sqrt-area: float32 round-off)
+                    np.testing.assert_allclose(raw / sqrt_area, d, rtol=1e-6)
                     np.testing.assert_allclose(dsmk, d, rtol=1e-6, atol=1e-7)  # after its division: geo-lora's
                 else:
                     assert dsmk is None
             assert info0["mesh_id"].startswith("tosca/cat0")
         assert n_dsmk == (2 if setting == "partial_full" else 4)
         assert printed["matrices"] == len({r["stem"] for r in index})
+        # a full shape's matrix is its mesh's block, linked from the rows folder: written once for all
+        # settings, pairs and sides; a scan's is cut from it
+        for r in index:
+            path = out / "geodesic_dist_matrices" / f"{r['stem']}.npy"
+            full = not len(by_id[r["pair_id"]][f"{'xy'[int(r['side'])]}_full_vertices"])  # (0, 3): the shape is full
+            assert (path.stat().st_nlink > 1) == full, (setting, r)
+            if full:
+                inodes.setdefault(r["n_vertices"], set()).add(path.stat().st_ino)
+    assert printed["linked"] == 0 and sorted(map(len, inodes.values())) == [1, 1]  # one file per full mesh
     # one layout only
     assert (
         main(
@@ -257,3 +268,26 @@ def test_workflow_plans_one_geodesic_plan_parallel_rows_and_one_layout_job_per_s
     planned = jobs_planned(snakemake(workdir, "-n", "--cores", "2").stdout)
     assert planned.get("geodesic_plan") == 1 and planned.get("geodesic_rows") == WORKFLOW_PARTS > 1, planned
     assert planned.get("geodesics") == 3, planned
+
+
+def test_matrix_files_are_written_once_then_linked_or_copied_across_devices(tmp_path):
+    """save_npy writes atomically (no temporary left); link_or_copy links on one file system, and copies
+    where a link cannot be made (another device: /dev/shm's tmpfs)."""
+    import tempfile
+    from pathlib import Path
+
+    from becos.atomic import link_or_copy, save_npy
+
+    matrix = np.arange(12, dtype=np.float32).reshape(3, 4)
+    block = tmp_path / "block.npy"
+    assert save_npy(block, matrix) == block.stat().st_size and sorted(p.name for p in tmp_path.iterdir()) == [
+        "block.npy"
+    ]
+    assert link_or_copy(block, tmp_path / "a" / "0_x.npy") is True
+    assert (tmp_path / "a" / "0_x.npy").stat().st_ino == block.stat().st_ino and block.stat().st_nlink == 2
+    shm = Path("/dev/shm")
+    if not shm.is_dir() or shm.stat().st_dev == tmp_path.stat().st_dev:
+        pytest.skip("no second file system (/dev/shm) to copy across")
+    with tempfile.TemporaryDirectory(dir=shm) as other:
+        assert link_or_copy(block, Path(other) / "0_x.npy") is False
+        assert np.array_equal(np.load(Path(other) / "0_x.npy"), matrix) and block.stat().st_nlink == 2
