@@ -40,6 +40,7 @@ import numpy as np
 
 from becos.atomic import save_npz
 from becos.errors import BecosError, InputFileError
+from becos.registry import available_datasets
 from becos.settings import SPLITS
 from becos.surface_map import SurfaceMap
 
@@ -119,9 +120,7 @@ def dataset_of_key(key: str) -> str:
     Raises:
         BecosError: the name starts with no known dataset.
     """
-    from becos.datasets import available_datasets  # the registry may add datasets (e.g. the synthetic ones)
-
-    known = set(DATASETS) | set(available_datasets())
+    known = set(DATASETS) | set(available_datasets())  # the registry may add datasets (e.g. the synthetic ones)
     for ds in sorted(known, key=len, reverse=True):
         if key == ds or key.startswith(ds + "_"):
             return ds

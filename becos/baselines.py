@@ -35,7 +35,6 @@ shape's full sqrt-area (1 for area-normalised records). Cost on a ~9.5k-vertex p
 
 from __future__ import annotations
 
-import argparse
 import contextlib
 import json
 import sys
@@ -48,7 +47,7 @@ import scipy.sparse.linalg as sla
 from scipy.spatial import cKDTree
 
 from becos.atomic import write_text
-from becos.errors import BecosError, InputFileError
+from becos.errors import BecosError
 from becos.evaluate import Prediction, write_prediction
 from becos.record import PairRecord
 
@@ -432,31 +431,3 @@ def run_baseline(name: str, records, out: str | Path, options=None, progress: bo
     }
     write_text(out / "baseline.json", json.dumps(facts, indent=2, sort_keys=True) + "\n")
     return facts
-
-
-def configure_parser(parser: argparse.ArgumentParser) -> None:
-    parser.description = "Run a baseline matcher on a benchmark store; write per-pair .npy predictions."
-    parser.add_argument(
-        "name",
-        choices=sorted(BASELINES),
-        help="nn: nearest neighbour in 3D (a floor); zoomout: WKS functional map + ZoomOut",
-    )
-    parser.add_argument("store", type=Path, help="benchmark store (becos export-zarr)")
-    parser.add_argument("--out", type=Path, required=True, help="prediction folder to write")
-    parser.add_argument("--split", default="test", help="split to run on, or 'all' (default: test)")
-
-
-def run_cli(args: argparse.Namespace) -> int:
-    from becos.store import open_benchmark
-
-    benchmark = open_benchmark(args.store)
-    if args.split != "all" and args.split not in benchmark.splits():
-        raise InputFileError(
-            args.store,
-            f"has no split {args.split!r} (splits: {benchmark.splits()})",
-            "pass --split with one of them, or 'all'",
-        )
-    records = benchmark.records(None if args.split == "all" else args.split)
-    facts = run_baseline(args.name, records, args.out, progress=True)
-    print(json.dumps(facts))
-    return 0

@@ -11,7 +11,7 @@ to change (``data_dir``, ``datasets``, ``annotations``).
 ``http(s)://`` or ``file://``) with :mod:`becos.download` (resumable, SHA-256 checked, extracted
 safely), and moves it into place atomically; a second call with the same digest does nothing.
 
-Mesh check (default, cheap): the file is non-empty; for OFF and ASCII PLY the header's vertex and face
+Mesh check (default, cheap; :mod:`becos.formats` holds it, one module per file format): the file is non-empty; for OFF and ASCII PLY the header's vertex and face
 counts are compared with the number of non-blank data lines, and the last vertex line and the first and
 last face lines are parsed (3 coordinates; ``k i_1 .. i_k`` with ``k >= 3`` and indices in
 ``[0, V)``); for binary PLY the file size must hold the announced elements (faces counted as
@@ -48,7 +48,6 @@ Report layout (``check_datasets`` return value)::
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import re
@@ -72,50 +71,15 @@ from becos.download import (
     partial_path,
 )
 from becos.errors import BecosError, ConfigError, InputFileError
+from becos.formats import check_file
+from becos.formats.off import read_off
+from becos.formats.problems import TRUNCATED_FIX
 
 MAX_LISTED_MESHES = 20
 """At most this many bad mesh files are named per dataset in the error message (the report has all)."""
 
 MARKER_NAME = RECORD_NAME
 """File written into a fetched annotation folder: ``{"url", "sha256", "fetched_at"}``."""
-
-_WHITESPACE = np.array([9, 10, 11, 12, 13, 32], dtype=np.uint8)
-_PLY_SIZES = {
-    "char": 1,
-    "uchar": 1,
-    "int8": 1,
-    "uint8": 1,
-    "short": 2,
-    "ushort": 2,
-    "int16": 2,
-    "uint16": 2,
-    "int": 4,
-    "uint": 4,
-    "int32": 4,
-    "uint32": 4,
-    "float": 4,
-    "float32": 4,
-    "double": 8,
-    "float64": 8,
-}
-_PLY_DTYPES = {
-    "char": "i1",
-    "uchar": "u1",
-    "int8": "i1",
-    "uint8": "u1",
-    "short": "i2",
-    "ushort": "u2",
-    "int16": "i2",
-    "uint16": "u2",
-    "int": "i4",
-    "uint": "u4",
-    "int32": "i4",
-    "uint32": "u4",
-    "float": "f4",
-    "float32": "f4",
-    "double": "f8",
-    "float64": "f8",
-}
 
 
 class DatasetCheckError(ConfigError):
@@ -129,332 +93,9 @@ class DatasetCheckError(ConfigError):
 
 
 # --- mesh files ------------------------------------------------------------------------------------
-_NAN_FIX = "re-export or re-download the mesh; becos cannot guess the positions"
-_TRUNCATED_FIX = "re-download or re-extract the dataset (the file is truncated or corrupt)"
-
-
-class _MeshProblem(ValueError):
-    """A problem found by the cheap check whose fix is not 're-download a truncated file'."""
-
-    def __init__(self, message: str, fix: str):
-        super().__init__(message)
-        self.fix = fix
-
-
-_NON_FINITE = re.compile(rb"\b(?:nan|inf|infinity)\b", re.IGNORECASE)  # whole words: not "info" in a comment
-
-
-def _check_finite_text(data: bytes, start: int, end: int, first_line: int, line_starts: np.ndarray, what: str) -> None:
-    """Raise if ``data[start:end]`` (vertex lines) holds a NaN or infinite value (text formats)."""
-    hit = _NON_FINITE.search(data, start, end)
-    if hit is not None:
-        line = int(np.searchsorted(line_starts, hit.start(), side="right")) - 1
-        raise _MeshProblem(
-            f"{what} {line - first_line + 1} holds a NaN or infinite coordinate "
-            f"({_line_at(data, int(line_starts[line]))!r})",
-            _NAN_FIX,
-        )
-
-
-def _line_at(data: bytes, position: int) -> bytes:
-    """The (stripped, at most 80 bytes) text line of ``data`` holding byte ``position``."""
-    start = data.rfind(b"\n", 0, position) + 1
-    end = data.find(b"\n", position)
-    return data[start : end if end >= 0 else len(data)].strip()[:80]
-
-
-class _Lines:
-    """Non-blank, non-comment lines of a text buffer, located with numpy (no per-line Python loop)."""
-
-    def __init__(self, data: bytes, start: int = 0):
-        arr = np.frombuffer(data, dtype=np.uint8)
-        newlines = np.flatnonzero(arr == 10)
-        starts = np.concatenate(([start], newlines[newlines >= start] + 1))
-        ends = np.concatenate((newlines[newlines >= start], [len(arr)]))
-        content = np.concatenate(([0], np.cumsum(~np.isin(arr, _WHITESPACE), dtype=np.int64)))
-        keep = (content[ends] - content[starts]) > 0
-        first = np.where(starts < len(arr), arr[np.minimum(starts, len(arr) - 1)], 0) if len(arr) else starts
-        keep &= first != ord("#")
-        self.data = data
-        self.starts = starts[keep]
-        self.ends = ends[keep]
-        self._arr = arr
-
-    def __len__(self) -> int:
-        return len(self.starts)
-
-    def token_counts(self, lo: int, hi: int) -> np.ndarray:
-        """(hi - lo,) number of whitespace-separated tokens of lines ``lo..hi-1``."""
-        arr = self._arr[self.starts[lo] : self.ends[hi - 1]] if hi > lo else self._arr[:0]
-        solid = ~np.isin(arr, _WHITESPACE)
-        token_start = solid & np.concatenate(([True], ~solid[:-1])) if len(arr) else solid
-        cs = np.concatenate(([0], np.cumsum(token_start, dtype=np.int64)))
-        base = self.starts[lo]
-        return cs[self.ends[lo:hi] - base] - cs[self.starts[lo:hi] - base]
-
-    def first_token_is(self, lo: int, hi: int, word: bytes) -> np.ndarray:
-        """(hi - lo,) bool: the first token of lines ``lo..hi-1`` is ``word`` (a single byte, e.g. b"3")."""
-        arr = self._arr
-        starts = self.starts[lo:hi].copy()
-        # skip leading blanks (rare): advance each line start to its first non-blank byte
-        blank = np.isin(arr[np.minimum(starts, len(arr) - 1)], _WHITESPACE)
-        while blank.any():
-            starts[blank] += 1
-            blank = np.isin(arr[np.minimum(starts, len(arr) - 1)], _WHITESPACE)
-        after = np.minimum(starts + len(word), len(arr) - 1)
-        return (arr[starts] == word[0]) & ((starts + len(word) >= len(arr)) | np.isin(arr[after], _WHITESPACE))
-
-    def file_line(self, i: int) -> int:
-        """1-based line number in the file of data line ``i``."""
-        return self.data.count(b"\n", 0, int(self.starts[i])) + 1
-
-    def tokens(self, i: int) -> list[bytes]:
-        return self.data[self.starts[i] : self.ends[i]].split()
-
-
-def _parse_numbers(tokens: list[bytes], kind, what: str) -> list:
-    try:
-        return [kind(t) for t in tokens]
-    except ValueError:
-        raise ValueError(f"{what} {b' '.join(tokens)[:80]!r} is not numeric") from None
-
-
-def _check_vertex_line(lines: _Lines, i: int, what: str) -> None:
-    tokens = lines.tokens(i)
-    if len(tokens) < 3:
-        raise ValueError(f"{what} has {len(tokens)} values instead of x y z (truncated file)")
-    _parse_numbers(tokens[:3], float, what)
-
-
-def _check_face_tokens(tokens: list[bytes], n_vertices: int, what: str) -> None:
-    if not tokens:
-        raise ValueError(f"{what} is empty")
-    values = _parse_numbers(tokens, int, what) if all(b"." not in t for t in tokens) else None
-    if values is None:
-        raise ValueError(f"{what} {b' '.join(tokens)[:80]!r} holds non-integers")
-    k = values[0]
-    if k < 3 or len(values) < 1 + k:
-        raise ValueError(
-            f"{what} {b' '.join(tokens)[:80]!r} announces {k} corners but holds {len(values) - 1} (truncated file)"
-        )
-    idx = np.asarray(values[1 : 1 + k])
-    if idx.min() < 0 or idx.max() >= n_vertices:
-        raise ValueError(
-            f"{what} uses vertex {int(idx.max()) if idx.max() >= n_vertices else int(idx.min())} "
-            f"outside [0, {n_vertices})"
-        )
-
-
-def _check_text_body(lines: _Lines, first: int, n_vertices: int, n_faces: int, fmt: str, exact: bool = True) -> None:
-    """Lines ``first ..`` hold ``n_vertices`` vertex lines then ``n_faces`` face lines (and nothing else
-    when ``exact``: extra lines are an error, as readers drop them silently)."""
-    if n_vertices <= 0 or n_faces <= 0:
-        raise ValueError(f"the {fmt} header announces {n_vertices} vertices and {n_faces} faces (empty mesh)")
-    have = len(lines) - first
-    if have < n_vertices + n_faces:
-        raise ValueError(
-            f"the {fmt} header announces {n_vertices} vertices and {n_faces} faces but only {have} "
-            f"data lines follow (truncated file)"
-        )
-    if have > n_vertices + n_faces and exact:
-        raise _MeshProblem(
-            f"the {fmt} header announces {n_vertices} vertices and {n_faces} faces but {have} data "
-            f"lines follow, {have - n_vertices - n_faces} more than announced: a reader would silently "
-            f"ignore the last {have - n_vertices - n_faces} lines (after the vertex block there are "
-            f"{have - n_vertices} lines, not {n_faces})",
-            f"if the file is otherwise intact, correct the header's counts (e.g. {n_vertices} "
-            f"{have - n_vertices} for an OFF whose extra lines are faces); else re-download or "
-            f"re-extract it",
-        )
-    _check_vertex_line(lines, first, "the first vertex line")
-    _check_vertex_line(lines, first + n_vertices - 1, "the last vertex line")
-    short = np.flatnonzero(lines.token_counts(first, first + n_vertices) < 3)
-    if len(short):
-        i = first + int(short[0])
-        raise _MeshProblem(
-            f"vertex line {short[0] + 1} (line {lines.file_line(i)} of the file: "
-            f"{b' '.join(lines.tokens(i))[:80]!r}) holds {len(lines.tokens(i))} values instead of x y z"
-            + (f" ({len(short)} such lines)" if len(short) > 1 else ""),
-            "re-export or re-download the mesh; becos cannot guess the missing coordinate",
-        )
-    not_triangles = np.flatnonzero(~lines.first_token_is(first + n_vertices, first + n_vertices + n_faces, b"3"))
-    if len(not_triangles):
-        i = first + n_vertices + int(not_triangles[0])
-        tokens = lines.tokens(i)
-        raise _MeshProblem(
-            f"face line {not_triangles[0] + 1} (line {lines.file_line(i)} of the file: "
-            f"{b' '.join(tokens)[:80]!r}) has {tokens[0].decode(errors='replace')} corners, not 3"
-            + (f" ({len(not_triangles)} such faces)" if len(not_triangles) > 1 else "")
-            + "; becos needs triangle meshes",
-            "use the dataset's original triangle mesh (re-download it); a polygon mesh must be "
-            "triangulated, the same way for every shape of its class, e.g. MeshLab: Filters > "
-            "Polygonal and Quad Mesh > Turn into a Pure-Triangular mesh",
-        )
-    _check_finite_text(
-        lines.data,
-        int(lines.starts[first]),
-        int(lines.ends[first + n_vertices - 1]),
-        first,
-        lines.starts,
-        "vertex line",
-    )
-    _check_face_tokens(lines.tokens(first + n_vertices), n_vertices, "the first face line")
-    _check_face_tokens(lines.tokens(first + n_vertices + n_faces - 1), n_vertices, "the last face line")
-
-
-def _off_header(lines: _Lines) -> tuple[int, int, int]:
-    """(announced vertices, announced faces, index of the first data line) of an OFF file's lines."""
-    words: list[bytes] = []
-    header_end = -1
-    for i in range(min(len(lines), 4)):
-        words += lines.tokens(i)
-        if words and not words[0].upper().endswith(b"OFF"):
-            break
-        if len(words) >= 3:
-            header_end = i
-            break
-    if header_end < 0 or not words[0].upper().endswith(b"OFF"):
-        raise ValueError(f"does not start with an OFF header (first words {b' '.join(words[:4])[:60]!r})")
-    try:
-        n_vertices, n_faces = int(words[1]), int(words[2])
-    except ValueError:
-        raise ValueError(f"the OFF header {b' '.join(words[:4])!r} has no vertex and face counts") from None
-    return n_vertices, n_faces, header_end + 1
-
-
-def off_data_lines(data: bytes) -> tuple[int, int, int]:
-    """(announced vertices, announced faces, non-blank non-comment lines after the header) of OFF bytes.
-
-    Raises:
-        ValueError: no OFF header with counts.
-    """
-    lines = _Lines(data)
-    n_vertices, n_faces, first = _off_header(lines)
-    return n_vertices, n_faces, len(lines) - first
-
-
-def _check_off(data: bytes) -> tuple[int, int]:
-    lines = _Lines(data)
-    n_vertices, n_faces, first = _off_header(lines)
-    _check_text_body(lines, first, n_vertices, n_faces, "OFF")
-    return n_vertices, n_faces
-
-
-def _check_ply(path: Path, size: int) -> tuple[int, int]:
-    with open(path, "rb") as fh:
-        head = fh.read(65536)
-    end = head.find(b"end_header")
-    if not head.startswith(b"ply") or end < 0:
-        raise ValueError("does not start with a PLY header ending in end_header")
-    body_start = head.find(b"\n", end) + 1
-    if body_start <= 0:
-        raise ValueError("the PLY header is cut after end_header (truncated file)")
-    fmt = None
-    elements: list[list] = []  # [name, count, [(kind, ...)]]
-    for raw in head[:end].decode("ascii", errors="replace").splitlines():
-        parts = raw.split()
-        if not parts:
-            continue
-        if parts[0] == "format" and len(parts) >= 2:
-            fmt = parts[1]
-        elif parts[0] == "element" and len(parts) >= 3:
-            elements.append([parts[1], int(parts[2]), []])
-        elif parts[0] == "property" and elements:
-            if len(parts) >= 5 and parts[1] == "list":
-                elements[-1][2].append(("list", parts[2], parts[3], parts[4]))
-            elif len(parts) >= 3:
-                elements[-1][2].append(("scalar", parts[1], parts[2]))
-    counts = {e[0]: e[1] for e in elements}
-    n_vertices, n_faces = counts.get("vertex", 0), counts.get("face", 0)
-    if n_vertices <= 0 or n_faces <= 0:
-        raise ValueError(f"the PLY header announces {n_vertices} vertices and {n_faces} faces (empty mesh)")
-    if fmt == "ascii":
-        lines = _Lines(path.read_bytes(), body_start)
-        if [e[0] for e in elements][:2] != ["vertex", "face"]:  # unusual element order: count rows only
-            total = sum(e[1] for e in elements)
-            if len(lines) < total:
-                raise ValueError(
-                    f"the PLY header announces {total} element rows but only {len(lines)} data lines "
-                    "follow (truncated file)"
-                )
-            return n_vertices, n_faces
-        _check_text_body(lines, 0, n_vertices, n_faces, "PLY", exact=len(elements) == 2)
-        return n_vertices, n_faces
-    if fmt not in ("binary_little_endian", "binary_big_endian"):
-        raise ValueError(f"unknown PLY format {fmt!r}")
-    need = body_start
-    for name, count, props in elements:
-        row = 0
-        for prop in props:
-            if prop[0] == "scalar":
-                row += _PLY_SIZES.get(prop[1], 4)
-            else:
-                corners = 3 if name == "face" else 0
-                row += _PLY_SIZES.get(prop[1], 1) + corners * _PLY_SIZES.get(prop[2], 4)
-        need += row * count
-    if size < need:
-        raise ValueError(
-            f"the binary PLY header announces {n_vertices} vertices and {n_faces} triangles, which need "
-            f"at least {need} bytes, but the file has {size} (truncated file)"
-        )
-    order = "<" if fmt == "binary_little_endian" else ">"
-    first_element = elements[0]
-    if first_element[0] == "vertex" and first_element[2] and all(p[0] == "scalar" for p in first_element[2]):
-        dtype = np.dtype([(f"p{i}", order + _PLY_DTYPES.get(p[1], "f4")) for i, p in enumerate(first_element[2])])
-        with open(path, "rb") as fh:
-            fh.seek(body_start)
-            block = np.frombuffer(fh.read(dtype.itemsize * n_vertices), dtype=dtype, count=n_vertices)
-        for i, p in enumerate(first_element[2]):
-            column = block[f"p{i}"]
-            if column.dtype.kind == "f" and not np.isfinite(column).all():
-                bad = int(np.flatnonzero(~np.isfinite(column))[0])
-                raise _MeshProblem(f"vertex {bad} has a NaN or infinite '{p[2]}' coordinate", _NAN_FIX)
-    last = elements[-1]
-    if size == need and last[0] == "face" and len(last[2]) == 1 and last[2][0][0] == "list":
-        count_type, index_type = last[2][0][1:3]
-        row = _PLY_SIZES.get(count_type, 1) + 3 * _PLY_SIZES.get(index_type, 4)
-        with open(path, "rb") as fh:
-            fh.seek(size - row)
-            tail = fh.read(row)
-        k = int(np.frombuffer(tail, order + _PLY_DTYPES.get(count_type, "u1"), count=1)[0])
-        idx = np.frombuffer(tail, order + _PLY_DTYPES.get(index_type, "i4"), offset=_PLY_SIZES.get(count_type, 1))
-        if k != 3 or idx.min() < 0 or idx.max() >= n_vertices:
-            raise ValueError(f"the last face row ({k}: {idx.tolist()}) is not a triangle over [0, {n_vertices})")
-    return n_vertices, n_faces
-
-
-_OBJ_V = re.compile(rb"^v[ \t]", re.MULTILINE)
-_OBJ_F = re.compile(rb"^f[ \t]", re.MULTILINE)
-
-
-def _check_obj(data: bytes) -> tuple[int, int]:
-    n_vertices = len(_OBJ_V.findall(data))
-    n_faces = len(_OBJ_F.findall(data))
-    if n_vertices == 0 or n_faces == 0:
-        raise ValueError(f"holds {n_vertices} vertex lines and {n_faces} face lines (empty or truncated mesh)")
-    bad = re.search(rb"^v[ \t][^\n]*?(nan|inf)", data, re.MULTILINE | re.IGNORECASE)
-    if bad is not None:
-        line = data.count(b"\n", 0, bad.start()) + 1
-        raise _MeshProblem(
-            f"line {line} ({_line_at(data, bad.start())!r}) holds a NaN or infinite coordinate", _NAN_FIX
-        )
-    lines = _Lines(data)
-    tokens = lines.tokens(len(lines) - 1)
-    if tokens[0] == b"v":
-        if len(tokens) < 4:
-            raise ValueError(f"the last line {b' '.join(tokens)[:80]!r} is cut (truncated file)")
-        _parse_numbers(tokens[1:4], float, "the last vertex line")
-    elif tokens[0] == b"f":
-        if len(tokens) < 4:
-            raise ValueError(f"the last face line {b' '.join(tokens)[:80]!r} has fewer than 3 corners (truncated file)")
-        idx = _parse_numbers([t.split(b"/")[0] for t in tokens[1:]], int, "the last face line")
-        if any(i == 0 or i > n_vertices or i < -n_vertices for i in idx):
-            raise ValueError(f"the last face line uses vertex indices {idx} outside 1..{n_vertices} (truncated file)")
-    return n_vertices, n_faces
-
-
 def check_mesh_file(path: str | Path, full_parse: bool = False) -> tuple[int, int]:
-    """Cheap check that a mesh file is complete (see the module docstring); returns (V, F) counts.
+    """Cheap check that a mesh file is complete (see the module docstring; :func:`becos.formats.check_file`);
+    returns (V, F) counts.
 
     For OBJ the counts are the numbers of ``v`` and ``f`` lines. ``full_parse`` also reads the mesh
     with :func:`becos.mesh.read_mesh` and returns its array sizes.
@@ -462,25 +103,7 @@ def check_mesh_file(path: str | Path, full_parse: bool = False) -> tuple[int, in
     Raises:
         InputFileError: missing, empty, truncated or unparsable file.
     """
-    path = Path(path)
-    fix = _TRUNCATED_FIX
-    if not path.is_file():
-        raise InputFileError(path, "mesh file not found", fix)
-    size = path.stat().st_size
-    if size == 0:
-        raise InputFileError(path, "the mesh file is empty (0 bytes)", fix)
-    suffix = path.suffix.lower()
-    try:
-        if suffix == ".off":
-            counts = _check_off(path.read_bytes())
-        elif suffix == ".ply":
-            counts = _check_ply(path, size)
-        elif suffix == ".obj":
-            counts = _check_obj(path.read_bytes())
-        else:
-            raise ValueError(f"unknown mesh type '{suffix}' (use .off, .ply or .obj)")
-    except (ValueError, IndexError, OverflowError) as exc:
-        raise InputFileError(path, str(exc) or type(exc).__name__, getattr(exc, "fix", fix)) from None
+    counts = check_file(path)
     if full_parse:
         from becos.mesh import read_mesh
 
@@ -522,18 +145,13 @@ poses are near-isometric), while a file in other units is off by its unit factor
 def mesh_arrays(path: Path) -> tuple[np.ndarray, np.ndarray]:
     """(V, 3) float64 vertices and (F, 3) int64 faces of a mesh file that passed the cheap check.
 
-    Triangle OFF files are split with numpy (~4x faster than trimesh); other files are read with
-    :func:`becos.mesh.read_mesh`."""
+    Triangle OFF files are read by :func:`becos.formats.off.read_off` (numpy, ~4x faster than trimesh);
+    other files with :func:`becos.mesh.read_mesh`."""
     path = Path(path)
     if path.suffix.lower() == ".off":
-        data = path.read_bytes()
-        lines = _Lines(data)
-        n_vertices, n_faces, first = _off_header(lines)
-        v = np.array(data[lines.starts[first] : lines.ends[first + n_vertices - 1]].split(), dtype=np.float64)
-        last = first + n_vertices + n_faces - 1
-        f = np.array(data[lines.starts[first + n_vertices] : lines.ends[last]].split(), dtype=np.int64)
-        if v.size == 3 * n_vertices and f.size == 4 * n_faces and (f[::4] == 3).all():
-            return v.reshape(n_vertices, 3), f.reshape(n_faces, 4)[:, 1:]
+        arrays = read_off(path.read_bytes())
+        if arrays is not None:
+            return arrays
     from becos.mesh import read_mesh
 
     mesh = read_mesh(path)
@@ -818,7 +436,7 @@ def _check_one_dataset(
         bad = entry["bad_meshes"]
         if bad:
             listed = "; ".join(
-                f"{b['path']}: {b['problem']}" + (f" (fix: {b['fix']})" if b["fix"] != _TRUNCATED_FIX else "")
+                f"{b['path']}: {b['problem']}" + (f" (fix: {b['fix']})" if b["fix"] != TRUNCATED_FIX else "")
                 for b in bad[:MAX_LISTED_MESHES]
             )
             more = (
@@ -1324,97 +942,3 @@ def fetch_annotations(url: str, sha256: str, dest: str | Path) -> Path:
         return dest
     finally:
         shutil.rmtree(work, ignore_errors=True)
-
-
-# --- command line ----------------------------------------------------------------------------------
-def configure_parser(parser: argparse.ArgumentParser, name: str = "check") -> argparse.ArgumentParser:
-    """Arguments of ``becos check`` or ``becos fetch-annotations`` (``name``)."""
-    if name == "check":
-        parser.add_argument(
-            "--datasets",
-            nargs="+",
-            required=True,
-            metavar="NAME",
-            help="enabled datasets (config key `datasets`), e.g. tosca faust",
-        )
-        parser.add_argument("--data-dir", type=Path, required=True, help="data root (config key `data_dir`)")
-        parser.add_argument(
-            "--annotations", type=Path, required=True, help="BeCoS annotation folder (config key `annotations`)"
-        )
-        parser.add_argument(
-            "--template-table",
-            default="templates_all.csv",
-            help="template table in <annotations>/config (default templates_all.csv)",
-        )
-        parser.add_argument("--out", type=Path, help="write the JSON report here (also on failure)")
-        parser.add_argument(
-            "--no-mesh-check",
-            dest="read_meshes",
-            action="store_false",
-            help="only check folders and counts, not the mesh files",
-        )
-        parser.add_argument(
-            "--no-geometry-check",
-            dest="compare_geometry",
-            action="store_false",
-            help="do not compare shapes with their class template nor check edge files for "
-            "plausibility (only for stand-in meshes; config key `check_geometry`)",
-        )
-        parser.add_argument(
-            "--full-parse",
-            action="store_true",
-            help="also parse every mesh completely with read_mesh and list the repairs remeshing "
-            "applies to a copy (slow: ~35 s for TOSCA)",
-        )
-    elif name == "fetch-annotations":
-        parser.add_argument("--url", required=True, help="archive URL (http, https or file://)")
-        parser.add_argument("--sha256", required=True, help="pinned SHA-256 of the archive")
-        parser.add_argument("--dest", type=Path, required=True, help="folder to create (the annotation folder)")
-    else:
-        raise ValueError(f"becos.check serves 'check' and 'fetch-annotations', not {name!r}")
-    parser.set_defaults(check_command=name)
-    return parser
-
-
-def run_cli(args: argparse.Namespace) -> int:
-    """Run ``becos check`` / ``becos fetch-annotations``; BecosError propagates (the CLI exits 2)."""
-    command = getattr(args, "command", None) or getattr(args, "check_command", None)
-    if command == "fetch-annotations":
-        print(fetch_annotations(args.url, args.sha256, args.dest))
-        return 0
-    if command != "check":
-        raise ValueError(f"becos.check cannot run command {command!r}")
-    start = time.perf_counter()
-    try:
-        report = check_datasets(
-            args.datasets,
-            args.data_dir,
-            args.annotations,
-            read_meshes=args.read_meshes,
-            full_parse=args.full_parse,
-            template_table=args.template_table,
-            compare_geometry=args.compare_geometry,
-        )
-    except DatasetCheckError as exc:
-        if args.out is not None:
-            write_text(args.out, json.dumps(exc.report, indent=2) + "\n")
-        raise
-    text = json.dumps(report, indent=2) + "\n"
-    for name in args.datasets:
-        r = report[name]
-        print(f"check: {name}: {r['found']} shapes in {r['path']}", file=sys.stderr)
-        if r.get("repairs"):
-            print(
-                f"check: {name}: {len(r['repairs'])} meshes are repaired on a copy before remeshing (the files "
-                f"are not changed):",
-                file=sys.stderr,
-            )
-            for item in r["repairs"]:
-                print(f"  {item['path']}: {item['repair']}", file=sys.stderr)
-    print(f"check: all ok in {time.perf_counter() - start:.1f} s", file=sys.stderr)
-    if args.out is not None:
-        write_text(args.out, text)
-        print(args.out)
-    else:
-        sys.stdout.write(text)
-    return 0

@@ -55,7 +55,6 @@ from __future__ import annotations
 
 import json
 import logging
-import os
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -68,16 +67,13 @@ from becos.download import ARCHIVE_SCHEMES
 from becos.errors import BecosError, ConfigError, InputFileError
 from becos.geometry import surface_area
 from becos.mesh import MeshCache, TriMesh, read_mesh
+from becos.registry import CONFIG_DIR, available_datasets, registry_dir  # noqa: F401 (CONFIG_DIR re-exported)
 from becos.settings import SPLITS
 
 if TYPE_CHECKING:
     from becos.annotations import AnnotationSource
 
 log = logging.getLogger(__name__)
-
-CONFIG_DIR = Path(__file__).resolve().parent / "data" / "datasets"
-"""Default folder of the dataset YAMLs, shipped inside the package (``config/datasets`` in a checkout is a
-link to it); override with ``config_dir`` or ``$BECOS_DATASETS_DIR``."""
 
 CATEGORIES = ("human", "four-legged", "centaur")
 EXCLUDED = "excluded"
@@ -246,18 +242,6 @@ class DatasetArchive:
     expected: str
 
 
-def _config_dir(config_dir: Path | str | None) -> Path:
-    if config_dir is not None:
-        return Path(config_dir)
-    env = os.environ.get("BECOS_DATASETS_DIR")
-    return Path(env) if env else CONFIG_DIR
-
-
-def available_datasets(config_dir: Path | str | None = None) -> list[str]:
-    """Names of the dataset YAMLs in the registry folder, sorted."""
-    return sorted(p.stem for p in _config_dir(config_dir).glob("*.yaml"))
-
-
 @dataclass(frozen=True)
 class _Rule:
     pattern: re.Pattern
@@ -376,7 +360,7 @@ class DatasetSpec:
     @classmethod
     def load(cls, name: str, config_dir: Path | None = None) -> DatasetSpec:
         """The spec ``<config_dir>/<name>.yaml`` (default: the repository's ``config/datasets``)."""
-        folder = _config_dir(config_dir)
+        folder = registry_dir(config_dir)
         path = folder / f"{name}.yaml"
         if not path.is_file():
             raise ConfigError(

@@ -26,7 +26,6 @@ file, the problem and the fix.
 
 from __future__ import annotations
 
-import argparse
 import hashlib
 import http.client
 import json
@@ -570,26 +569,3 @@ def download_dataset(
             digest,
         )
     return result
-
-
-# --- command line ----------------------------------------------------------------------------------
-def configure_parser(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
-    """Arguments of ``becos download-dataset``."""
-    parser.add_argument("dataset", help="dataset with a public archive (source.archive of its YAML): kids, shrec20")
-    parser.add_argument("--data-dir", type=Path, required=True, help="data root (config key `data_dir`)")
-    parser.add_argument(
-        "--url", help="download from this URL instead of the YAML's (a mirror; config key `download_urls`)"
-    )
-    parser.add_argument("--out", type=Path, help="write the result as JSON here (the workflow's stamp)")
-    parser.add_argument("--no-progress", dest="progress", action="store_false", help="no progress bar")
-    return parser
-
-
-def run_cli(args: argparse.Namespace) -> int:
-    """Run ``becos download-dataset``; BecosError propagates (the CLI exits 2)."""
-    result = download_dataset(args.dataset, args.data_dir, args.url, progress=args.progress)
-    text = json.dumps(result, indent=2) + "\n"
-    if args.out is not None:
-        write_text(args.out, text)
-    print(result["folder"])
-    return 0

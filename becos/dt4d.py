@@ -39,10 +39,8 @@ so an interrupted run keeps what it finished. It is also the workflow rule's out
 
 from __future__ import annotations
 
-import argparse
 import hashlib
 import json
-import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -431,34 +429,6 @@ def preparation_plan(config: dict) -> list[PreparationJob]:
                 )
             )
     return jobs
-
-
-# --- command line ---------------------------------------------------------------------------------
-def configure_parser(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
-    parser.add_argument(
-        "--data-dir",
-        type=Path,
-        required=True,
-        help="data root (config key `data_dir`) holding DeformingThings4D/<kind>/",
-    )
-    parser.add_argument(
-        "--info",
-        type=Path,
-        required=True,
-        help="info JSON {class: {action: [frame ids]}} (the annotation folder's data/info_dt4d_<kind>.json)",
-    )
-    parser.add_argument("--kind", required=True, choices=KINDS, help="animals or humanoids")
-    parser.add_argument("--classes", nargs="+", metavar="CLASS", help="only these classes (default: all listed)")
-    return parser
-
-
-def run_cli(args: argparse.Namespace) -> int:
-    def log(message: str) -> None:
-        print(message, file=sys.stderr, flush=True)
-
-    total = prepare_dt4d(args.data_dir, args.info, args.kind, args.classes, log=log)
-    print(json.dumps({"out": str(output_folder(args.data_dir, args.kind)), **total}))
-    return 0
 
 
 __all__ = [

@@ -33,6 +33,9 @@ import numpy as np
 
 from becos.atomic import save_npz as atomic_save_npz
 from becos.errors import InputFileError
+from becos.formats import check_file
+from becos.formats.off import off_data_lines, read_off
+from becos.formats.problems import TRUNCATED_FIX
 
 MESH_SUFFIXES = (".off", ".ply", ".obj")
 
@@ -154,46 +157,30 @@ def _read_plain_triangle_off(path: Path) -> tuple[np.ndarray, np.ndarray] | None
     """(V, 3) float64 vertices and (F, 3) int64 faces of a PLAIN triangle OFF file, else None.
 
     Plain: ASCII, no comment, an ``OFF`` line, a line of three counts, exactly the announced number
-    of vertex lines (three numbers each) and face lines (``3 i j k``), nothing else. The values are
-    those trimesh reads (the same ``np.array`` conversion of the same text), without importing it
-    (~1 s of a remesh job) and without its second pass over the file for the header check (the
-    counts are checked here). Anything else returns None: :func:`read_mesh` then parses it with trimesh
-    and reports faults precisely.
+    of vertex lines (three numbers each) and face lines (``3 i j k``), nothing else. The arrays are
+    read by :func:`becos.formats.off.read_off`, without importing trimesh (~1 s of a remesh job) and
+    without its second pass over the file for the header check (the counts are checked there). Anything
+    else returns None: :func:`read_mesh` then parses it with trimesh and reports faults precisely.
     """
     data = path.read_bytes()
-    if b"#" in data:
+    if b"#" in data or not data.isascii():
         return None
-    try:
-        lines = [line for line in data.decode("ascii").split("\n") if line.strip()]
-    except UnicodeDecodeError:
+    head = [line.strip() for line in data.split(b"\n", 8)[:8] if line.strip()]
+    if len(head) < 2 or head[0] != b"OFF":
         return None
-    if len(lines) < 2 or lines[0].strip() != "OFF":
-        return None
-    counts = lines[1].split()
+    counts = head[1].split()
     if len(counts) != 3 or not all(c.isdigit() for c in counts):
         return None
-    n_vertices, n_faces = int(counts[0]), int(counts[1])
-    if len(lines) != 2 + n_vertices + n_faces or n_vertices == 0 or n_faces == 0:
-        return None
-    try:
-        vertices = np.array([line.split() for line in lines[2 : 2 + n_vertices]], dtype=np.float64)
-        faces = np.array([line.split() for line in lines[2 + n_vertices :]], dtype=np.int64)
-    except ValueError:  # ragged rows or a non-number
-        return None
-    if vertices.shape != (n_vertices, 3) or faces.shape != (n_faces, 4) or (faces[:, 0] != 3).any():
-        return None
-    return vertices, np.ascontiguousarray(faces[:, 1:])
+    return read_off(data)
 
 
 def _raise_precise(path: Path, exc: Exception) -> None:
-    """When the cheap check of :func:`becos.check.check_mesh_file` names a line at fault that is not a
+    """When the cheap check of :func:`becos.formats.check_file` names a line at fault that is not a
     cut file (a vertex line with 2 values, a quad face), raise its error instead of the parser's."""
-    from becos.check import _TRUNCATED_FIX, check_mesh_file
-
     try:
-        check_mesh_file(path)
+        check_file(path)
     except InputFileError as precise:
-        if precise.fix != _TRUNCATED_FIX:
+        if precise.fix != TRUNCATED_FIX:
             raise precise from exc
 
 
@@ -220,8 +207,6 @@ def _check_off_header(path: Path, n_vertices: int, n_faces: int) -> None:
             f"but {n_vertices} and {n_faces} were read (truncated or corrupt file)",
             "re-download or re-extract the file",
         )
-    from becos.check import off_data_lines
-
     _, _, have = off_data_lines(path.read_bytes())
     if have > n_vertices + n_faces:  # trimesh stops at the announced counts: the rest would be dropped silently
         raise InputFileError(

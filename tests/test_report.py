@@ -12,16 +12,15 @@ import numpy as np
 import pytest
 from matplotlib.image import imread
 
+from becos.cli.report import configure_parser, run_cli
 from becos.record import PairRecord
 from becos.report import (
     CAPTIONS,
     NO_MATCH_GREY,
     common_vertices,
-    configure_parser,
     overlap_histogram,
     position_colours,
     render_pair,
-    run_cli,
     select_render_ids,
     table_from_records,
     write_report,

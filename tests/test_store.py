@@ -298,10 +298,10 @@ def test_direct_reads_equal_zarr_reads_and_damage_is_named(stores, pair_record_f
         assert_same_record(bench.record(i), bench.read_block(i, i + 1).record(0))
     assert bench._files, "the direct reader was not used"
     assert bench.record(1).arrays["x_faces"].dtype == np.int64
-    import becos.store
+    import becos.store.write
 
-    monkeypatch.setattr(becos.store, "CHUNK_BYTES", 4096)  # many chunks over several shards per array
-    monkeypatch.setattr(becos.store, "SHARD_BYTES", 32768)
+    monkeypatch.setattr(becos.store.write, "CHUNK_BYTES", 4096)  # many chunks over several shards per array
+    monkeypatch.setattr(becos.store.write, "SHARD_BYTES", 32768)
     small = open_benchmark(
         write_store(
             pair_record_files["partial_partial"], tmp_path / "small.zarr", setting="partial_partial", progress=False

@@ -1,7 +1,7 @@
-"""``python -m becos.synthetic OUT_DIR``: generate the synthetic collection."""
+"""``python -m becos.synthetic OUT_DIR``: generate the synthetic collection (``becos synthetic OUT_DIR``)."""
 
 import sys
 
-from becos.synthetic import main
+from becos.cli import main
 
-sys.exit(main())
+sys.exit(main(["synthetic", *sys.argv[1:]]))

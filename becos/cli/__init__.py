@@ -1,0 +1,93 @@
+"""The ``becos`` command line: thin wrappers around library functions (one sub-command each).
+
+Every sub-command prints progress to stderr and a short result to stdout; errors from bad input
+print the message (file, problem, fix) and exit with status 2 instead of a traceback.
+
+The command line lives in this package only: one module per sub-command group (``becos.cli.check``,
+``becos.cli.workflow`` for the workflow's stages, ...), each with ``configure_parser(parser[, name])``
+and ``run_cli(args) -> int``; the science modules it calls know nothing of argparse.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+from becos.errors import BecosError
+
+SUBCOMMANDS: tuple[tuple[str, str, str], ...] = (
+    # (name, module exposing configure_parser(parser) and run_cli(args) -> int, help)
+    ("info", "becos.cli.info", "summarise a BeCoS annotation folder"),
+    ("synthetic", "becos.cli.synthetic", "generate the built-in synthetic shape collection"),
+    ("check", "becos.cli.check", "check that the enabled datasets and the annotation folder are present"),
+    ("fetch-annotations", "becos.cli.check", "download the annotation folder from a pinned archive"),
+    ("prepare-dt4d", "becos.cli.dt4d", "write DeformingThings4D frames (.anime) as the OBJ files BeCoS indexes"),
+    ("download-dataset", "becos.cli.download", "download and unpack a dataset's public archive (kids, shrec20)"),
+    ("write-config", "becos.cli.workflow", "validate a configuration and write it with defaults filled in"),
+    ("catalog", "becos.cli.workflow", "write the shape catalog of a workflow config"),
+    ("manifest", "becos.cli.workflow", "write the pair manifest of one setting"),
+    ("remesh", "becos.cli.workflow", "remesh one shape variant"),
+    ("ground-truth", "becos.cli.workflow", "compute the ground truth of one chunk of pairs"),
+    ("pairs", "becos.cli.workflow", "build the pair records of one chunk of pairs"),
+    ("metadata", "becos.cli.workflow", "metadata of a setting's store (config digest, dataset licences)"),
+    ("export-pairings", "becos.cli.workflow", "write a manifest in the published pickle schema"),
+    ("export-zarr", "becos.cli.export_zarr", "collect a setting's pair records into one Zarr store"),
+    ("validate", "becos.cli.validate", "check a benchmark store; non-zero exit with a list of problems"),
+    ("export-released", "becos.cli.export", "write a store in the released BeCoS folder layout"),
+    ("export-psmal", "becos.cli.export", "write a store as PSMAL-style shapes/*.off + maps/*.vts"),
+    ("export-geodesics", "becos.cli.export", "write geodesic matrices of a store's shapes in the loaders' layout"),
+    ("geodesic-plan", "becos.cli.geodesic_jobs", "spread the distinct full meshes of some stores over geodesic jobs"),
+    ("geodesic-rows", "becos.cli.geodesic_jobs", "compute the geodesic rows of one part of a geodesic plan"),
+    ("export-ulrssm", "becos.cli.export", "write a store ULRSSM style: one off/ corres/ [dist/] root per pair"),
+    ("export-dpfm", "becos.cli.export", "write a store DPFM style: shapes/*.off + maps/<x>_<y>.map"),
+    ("report", "becos.cli.report", "counts, overlap histogram and renders of a store"),
+    ("evaluate", "becos.cli.evaluate", "score predictions against a benchmark store"),
+    ("baseline", "becos.cli.baselines", "run a baseline matcher on a benchmark store"),
+)
+
+
+def build_parser(only: str | None = None) -> argparse.ArgumentParser:
+    """The parser. Only the module of sub-command ``only`` is imported (none for ``becos --help``):
+    the others are listed by name and help, so a job imports what its sub-command uses."""
+    parser = argparse.ArgumentParser(prog="becos", description=__doc__.splitlines()[0])
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    for name, module_name, help_text in SUBCOMMANDS:
+        if name != only:
+            sub.add_parser(name, help=help_text)
+            continue
+        module = importlib.import_module(module_name)
+        configure = module.configure_parser
+        command = sub.add_parser(name, help=help_text)
+        if _takes_name(configure):
+            configure(command, name)
+        else:
+            configure(command)
+        command.set_defaults(func=module.run_cli)
+    return parser
+
+
+def _takes_name(function) -> bool:
+    """Whether ``configure_parser`` takes the sub-command name (modules serving several commands)."""
+    import inspect
+
+    return len(inspect.signature(function).parameters) >= 2
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    known = {name for name, _, _ in SUBCOMMANDS}
+    only = argv[0] if argv and argv[0] in known else None
+    args = build_parser(only).parse_args(argv)
+    try:
+        return args.func(args)
+    except BecosError as exc:
+        # one problem per line, each prefixed (a config error lists several); indented lines continue one
+        for line in str(exc).splitlines() or [""]:
+            print(line if line[:1].isspace() else f"becos {args.command}: {line}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

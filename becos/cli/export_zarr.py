@@ -1,0 +1,60 @@
+"""``becos export-zarr``: collect a setting's pair records into one Zarr store (:mod:`becos.store`)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+from becos.errors import InputFileError
+from becos.settings import SETTINGS
+from becos.store import count_files, expand_inputs, open_benchmark, write_store
+
+
+def configure_parser(parser: argparse.ArgumentParser, name: str = "export-zarr") -> None:
+    parser.add_argument("--setting", required=True, choices=SETTINGS)
+    parser.add_argument("--out", required=True, type=Path, help="store folder to write (replaced if present)")
+    parser.add_argument(
+        "--metadata",
+        type=Path,
+        help="JSON file of extra root attributes (config, config_hash, "
+        "datasets ...), e.g. becos.workflow.store_metadata",
+    )
+    parser.add_argument(
+        "inputs",
+        nargs="+",
+        type=Path,
+        help="pair record .npz files and/or index files (a chunk index JSON of `becos pairs`, "
+        "or text with one record path per line)",
+    )
+
+
+def run_cli(args: argparse.Namespace) -> int:
+    metadata = None
+    if args.metadata is not None:
+        try:
+            metadata = json.loads(Path(args.metadata).read_text(encoding="utf-8"))
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+            raise InputFileError(
+                args.metadata, f"cannot be read as JSON ({exc})", "give the metadata JSON written by `becos metadata`"
+            ) from exc
+        if not isinstance(metadata, dict):
+            raise InputFileError(args.metadata, "is not a JSON object", "give a {key: value} JSON file")
+    paths = expand_inputs(args.inputs, args.setting)
+    started = time.perf_counter()
+    write_store(paths, args.out, setting=args.setting, metadata=metadata)
+    bench = open_benchmark(args.out)
+    print(
+        json.dumps(
+            {
+                "store": str(args.out),
+                "setting": bench.setting,
+                "n_pairs": len(bench),
+                "splits": bench.metadata.get("splits"),
+                "n_files": count_files(args.out),
+                "seconds": round(time.perf_counter() - started, 2),
+            }
+        )
+    )
+    return 0

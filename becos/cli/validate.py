@@ -1,0 +1,69 @@
+"""``becos validate``: check a benchmark store, optionally compare it with another (:mod:`becos.validate`,
+:mod:`becos.compare`)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from becos.errors import BecosError
+from becos.validate import validate
+
+
+def configure_parser(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("store", type=Path, help="benchmark store written by `becos export-zarr`")
+    parser.add_argument(
+        "--json",
+        type=Path,
+        help="also write the summary and the problems (and with --against the full comparison) to this JSON file",
+    )
+    parser.add_argument(
+        "--against",
+        type=Path,
+        metavar="OTHER",
+        help="then compare STORE with OTHER, a store of the same setting (e.g. rebuilt after a "
+        "library upgrade): pairs only in one store, per pair which arrays differ and why, "
+        "differing versions and config; exit status 1 when they differ",
+    )
+    parser.add_argument(
+        "--atol",
+        type=float,
+        default=0.0,
+        help="with --against: float values within ATOL count as equal (default 0: exact)",
+    )
+
+
+def run_cli(args: argparse.Namespace) -> int:
+    from becos.atomic import write_text
+
+    report = validate(args.store, progress=True)
+    summary = report.summary()
+    out = {**summary, "problems": report.problems}
+    print(json.dumps(summary))
+    for problem in report.problems:
+        print(f"becos validate: {problem}", file=sys.stderr)
+    status = 0 if report.valid else 1
+    against = getattr(args, "against", None)
+    if against is not None:
+        from becos.compare import compare_stores
+
+        if any(problem.startswith("store:") for problem in report.problems):
+            out["comparison"] = None
+            print(f"becos validate: not compared with {against}: {args.store} is damaged (see above)", file=sys.stderr)
+        else:
+            try:
+                comparison = compare_stores(args.store, against, atol=args.atol)
+            except BecosError as exc:
+                print(f"becos validate: --against: {exc}", file=sys.stderr)
+                out["comparison"] = {"error": str(exc)}
+                status = 2
+            else:
+                print(comparison.summary())
+                out["comparison"] = comparison.to_json()
+                if not comparison.identical:
+                    status = max(status, 1)
+    if args.json is not None:
+        write_text(args.json, json.dumps(out, indent=1) + "\n")
+    return status

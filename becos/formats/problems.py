@@ -1,0 +1,14 @@
+"""What the cheap structure checks of :mod:`becos.formats` raise, and the two standard fixes."""
+
+from __future__ import annotations
+
+NAN_FIX = "re-export or re-download the mesh; becos cannot guess the positions"
+TRUNCATED_FIX = "re-download or re-extract the dataset (the file is truncated or corrupt)"
+
+
+class FormatProblem(ValueError):
+    """A problem found by the cheap check whose fix is not 're-download a truncated file'."""
+
+    def __init__(self, message: str, fix: str):
+        super().__init__(message)
+        self.fix = fix
