@@ -2,7 +2,12 @@
 
 from __future__ import annotations
 
+import fcntl
+import json
+import os
+import shutil
 import subprocess
+from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
@@ -149,22 +154,54 @@ def store_of(tmp_path):
     return build
 
 
-@pytest.fixture(scope="session")
-def tiny_tosca_run(becos_code, tmp_path_factory) -> Path:
-    """A finished ``--cores 2`` run of the tiny TOSCA configuration (``.test/config/config.yaml``): all three
-    settings, every export. Read by ``test_workflow.py``; the reference of ``test_resume.py`` and
-    ``test_slurm.py``, which build the same configuration other ways."""
-    from test_workflow import snakemake
-    from tiny_tosca import tiny_tosca_config, write_config_file
+@dataclass(frozen=True)
+class TinyReference:
+    """The tiny TOSCA reference run: its working folder and :func:`tiny_tosca.results_fingerprint`,
+    taken as soon as the run ended (before any test touched the folder)."""
 
-    workdir = write_config_file(tmp_path_factory.mktemp("tiny-tosca"), tiny_tosca_config(becos_code))
-    snakemake(workdir, "--cores", "2")
-    return workdir
+    workdir: Path
+    fingerprint: dict[str, str]
+
+
+@pytest.fixture(scope="session")
+def tiny_tosca_reference(becos_code, tmp_path_factory) -> TinyReference:
+    """A finished ``--cores 2`` run of the tiny TOSCA configuration (``.test/config/config.yaml``): all three
+    settings, every export; made ONCE per pytest run, shared by the xdist workers.
+
+    Under pytest-xdist each worker has its own session, so the run goes to the folder the workers share
+    (the parent of their base temporary folders, new for each pytest run, as pytest-xdist's docs
+    advise) under an exclusive ``flock``: the first worker to ask makes it, the other waits and reads
+    it. The fingerprint is written after the run; its file marks the run complete."""
+    from test_workflow import snakemake
+    from tiny_tosca import results_fingerprint, tiny_tosca_config, write_config_file
+
+    shared = os.environ.get("PYTEST_XDIST_WORKER") is not None
+    root = tmp_path_factory.getbasetemp().parent if shared else tmp_path_factory.mktemp("tiny")
+    workdir, done = root / "tiny-tosca", root / "tiny-tosca.fingerprint.json"
+    with open(root / "tiny-tosca.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        if not done.exists():
+            shutil.rmtree(workdir, ignore_errors=True)  # a worker that died mid-run
+            write_config_file(workdir, tiny_tosca_config(becos_code))
+            snakemake(workdir, "--cores", "2")
+            partial = done.with_suffix(".tmp")
+            partial.write_text(json.dumps(results_fingerprint(workdir)))
+            partial.replace(done)
+    return TinyReference(workdir, json.loads(done.read_text()))
+
+
+@pytest.fixture(scope="session")
+def tiny_tosca_run(tiny_tosca_reference) -> Path:
+    """The working folder of the tiny TOSCA reference run, for tests that run Snakemake in it or read
+    it after other such tests (``test_workflow.py``): they share one xdist worker (below)."""
+    return tiny_tosca_reference.workdir
 
 
 def pytest_collection_modifyitems(items):
-    """Every test that reads ``tiny_tosca_run`` runs in one pytest-xdist worker (``--dist loadgroup`` in
-    pyproject.toml), so the session fixture's Snakemake run is made once, not once per worker."""
+    """Every test that uses the folder of the tiny reference run (``tiny_tosca_run``) runs in one
+    pytest-xdist worker (``--dist loadgroup`` in pyproject.toml): some of them run Snakemake in it.
+    Tests that only compare with the run (``tiny_tosca_reference``: its fingerprint and files no test
+    changes) are spread over the workers."""
     for item in items:
         if "tiny_tosca_run" in getattr(item, "fixturenames", ()):
             item.add_marker(pytest.mark.xdist_group("tiny_tosca_run"))

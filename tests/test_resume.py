@@ -3,7 +3,7 @@
 The tiny TOSCA configuration (8 shapes, all three settings, at most 6 pairs each) is built three ways
 and compared with :func:`tiny_tosca.results_fingerprint`:
 
-- ``--cores 2`` without interruption (the reference: conftest's ``tiny_tosca_run``);
+- ``--cores 2`` without interruption (the reference: conftest's ``tiny_tosca_reference``);
 - ``--cores 1`` without interruption: same manifests byte for byte, same arrays;
 - ``--cores 2`` killed with SIGKILL (the whole process tree: Snakemake and its jobs, as a crash or a
   cluster pre-emption would) while remeshing, while building pair records and while writing the Zarr
@@ -30,7 +30,7 @@ from tiny_tosca import SETTINGS, fingerprint_differences, results_fingerprint, t
 
 
 def small_config(workdir: Path, becos_code: Path) -> Path:
-    """``workdir`` with the tiny TOSCA configuration: the one conftest's ``tiny_tosca_run`` ran."""
+    """``workdir`` with the tiny TOSCA configuration: the one conftest's ``tiny_tosca_reference`` ran."""
     return write_config_file(workdir, tiny_tosca_config(becos_code))
 
 
@@ -127,9 +127,9 @@ def test_a_killed_write_leaves_a_temporary_file_the_next_writer_removes(tmp_path
 
 
 @pytest.fixture(scope="module")
-def reference_run(tiny_tosca_run) -> tuple[Path, dict]:
+def reference_run(tiny_tosca_reference) -> tuple[Path, dict]:
     """The uninterrupted ``--cores 2`` run and its fingerprint."""
-    return tiny_tosca_run, results_fingerprint(tiny_tosca_run)
+    return tiny_tosca_reference.workdir, tiny_tosca_reference.fingerprint
 
 
 def test_cores_1_and_cores_2_give_identical_results(reference_run, becos_code, tmp_path):

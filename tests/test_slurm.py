@@ -4,7 +4,7 @@
 slurmctld and slurmd on localhost with all state in a temporary folder. The tiny TOSCA configuration
 of ``tests/test_workflow.py`` (``tests/tiny_tosca.py``; one chunk job per setting and stage) then runs
 with ``--profile profiles/slurm`` and is compared with the local ``--cores 2`` run (conftest's
-``tiny_tosca_run``, which the workflow tests share); manifests, catalog and every array,
+``tiny_tosca_reference``, which the workflow tests share); manifests, catalog and every array,
 offset table, pair meta and table of the three Zarr stores must hash equal, and every SLURM job of
 the run must be COMPLETED in ``sacct``. ``profiles/cluster-generic`` submits one remesh job to the same cluster.
 
@@ -119,7 +119,7 @@ def _snakemake(workdir: Path, args: list[str], env: dict[str, str]) -> tuple[flo
     return seconds, output
 
 
-def test_workflow_on_slurm_equals_local_run(slurm_cluster, tiny_tosca_run, becos_code, tmp_path_factory):
+def test_workflow_on_slurm_equals_local_run(slurm_cluster, tiny_tosca_reference, becos_code, tmp_path_factory):
     harness = slurm_cluster
     env = _env(harness)
     print(f"\ncluster: install {harness.timings['install_s']:.1f} s, start {harness.timings['start_s']:.1f} s")
@@ -131,8 +131,8 @@ def test_workflow_on_slurm_equals_local_run(slurm_cluster, tiny_tosca_run, becos
     smoke = [j for j in harness.jobs() if j["JobName"] == "hostname"]
     assert smoke and smoke[0]["State"] == "COMPLETED", harness.sacct()
 
-    # 2. the configuration of the local run (tiny_tosca_run) through the SLURM profile, in its own working directory
-    local = tiny_tosca_run
+    # 2. the configuration of the local run (tiny_tosca_reference) through the SLURM profile, in its own working directory
+    local = tiny_tosca_reference.workdir
     remote = write_config_file(tmp_path_factory.mktemp("slurm-remote"), tiny_tosca_config(becos_code))
     slurm_s, out = _snakemake(remote, ["--profile", str(REPO / "profiles" / "slurm"), *FAST_STATUS], env)
     print(f"tiny TOSCA run through the SLURM profile: {slurm_s:.1f} s")
@@ -165,7 +165,7 @@ def test_workflow_on_slurm_equals_local_run(slurm_cluster, tiny_tosca_run, becos
     assert not rules & local_rules, rules & local_rules
 
     # 4. identical outputs
-    expected, got = results_fingerprint(local), results_fingerprint(remote)
+    expected, got = tiny_tosca_reference.fingerprint, results_fingerprint(remote)
     differ = fingerprint_differences(expected, got)
     assert not differ, f"SLURM run differs from the local run in {differ}"
     n_arrays = sum("/arrays/" in k for k in expected)
