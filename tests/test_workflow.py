@@ -230,7 +230,7 @@ def test_chunk_files_do_not_depend_on_the_shapes_a_job_keeps(tiny_tosca_run, tmp
     import becos.network
     import becos.workflow as bw
 
-    monkeypatch.setattr(bw, "SHAPES_KEPT", 1)
+    monkeypatch.setattr(bw.shapes, "SHAPES_KEPT", 1)  # read where ShapeStore is defined
     monkeypatch.setattr(becos.network.ShapeNetwork, "MESHES_KEPT", 1)
     source = tiny_tosca_run / "results"
     results = tmp_path / "results"
