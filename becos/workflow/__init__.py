@@ -50,7 +50,9 @@ from becos.workflow.config import (
 )
 from becos.workflow.layout import (
     Layout,
+    pair_file,
     remesh_token,
+    remeshed_file,
 )
 from becos.workflow.options import (
     GROUND_TRUTH_VERSION,
@@ -68,7 +70,9 @@ from becos.workflow.plan import (
     build_catalog,
     build_manifest,
     edge_files_between,
+    published_views_folder,
     remesh_target,
+    uses_published_views,
 )
 from becos.workflow.shapes import (
     MESHES_KEPT,
@@ -97,6 +101,10 @@ from becos.workflow.stages import (
 )
 
 __all__ = [
+    "pair_file",
+    "remeshed_file",
+    "published_views_folder",
+    "uses_published_views",
     "GROUND_TRUTH_VERSION",
     "RECORD_VERSION",
     "STAGE_VERSIONS",

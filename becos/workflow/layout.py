@@ -10,7 +10,14 @@ from pathlib import Path
 
 @dataclass(frozen=True)
 class Layout:
-    """Where every artefact of a run lives (relative to the working directory unless absolute)."""
+    """Where every artefact of a run lives (relative to the working directory unless absolute).
+
+    The one statement of every path the rules name: a rule's output is ``LAYOUT.<member>(...)`` with
+    wildcards as arguments (``LAYOUT.store("{setting}")``), its input the same member, so a file's name
+    is written once; the Python side (:class:`becos.workflow.plan.Plan`, tests) asks the same members
+    with values. A per-setting member takes a setting or ``"{setting}"``; a chunk an int (written as 4
+    digits) or ``"{chunk}"``.
+    """
 
     results: Path
 
@@ -36,25 +43,99 @@ class Layout:
 
     @property
     def cache(self) -> Path:
+        """Parsed meshes and edge files (safe to delete; no job declares it)."""
         return self.results / "cache"
 
     def manifest(self, setting: str) -> Path:
         return self.results / setting / "manifest.csv"
 
-    def remeshed(self, dataset: str, name: str, token: str) -> Path:
-        return self.results / "remeshed" / dataset / name / f"{token}.npz"
+    @property
+    def remeshed_root(self) -> Path:
+        """The folder of every remesh variant (:func:`remeshed_file`)."""
+        return self.results / "remeshed"
 
-    def ground_truth_index(self, setting: str, chunk: int) -> Path:
-        return self.results / setting / "ground_truth" / f"chunk_{chunk:04d}.json"
+    def remeshed(self, dataset: str, name: str, token: str) -> Path:
+        return remeshed_file(self.remeshed_root, dataset, name, token)
+
+    def remeshed_ply(self, dataset: str, name: str, token: str) -> Path:
+        """The remesh variant as PLY, beside its .npz (to look at; no job reads it)."""
+        return self.remeshed(dataset, name, token).with_suffix(".ply")
+
+    def ground_truth_folder(self, setting: str) -> Path:
+        """A setting's ground-truth files ``<pair_id>.npz`` and their chunk indices."""
+        return self.results / setting / "ground_truth"
+
+    def ground_truth_index(self, setting: str, chunk: int | str) -> Path:
+        return self.ground_truth_folder(setting) / _chunk_index_name(chunk)
 
     def ground_truth(self, setting: str, pair_id: str) -> Path:
-        return self.results / setting / "ground_truth" / f"{pair_id}.npz"
+        return pair_file(self.ground_truth_folder(setting), pair_id)
 
-    def pairs_index(self, setting: str, chunk: int) -> Path:
-        return self.results / setting / "pairs" / f"chunk_{chunk:04d}.json"
+    def pairs_folder(self, setting: str) -> Path:
+        """A setting's pair records ``<pair_id>.npz`` (:mod:`becos.record`) and their chunk indices."""
+        return self.results / setting / "pairs"
+
+    def pairs_index(self, setting: str, chunk: int | str) -> Path:
+        return self.pairs_folder(setting) / _chunk_index_name(chunk)
 
     def record(self, setting: str, pair_id: str) -> Path:
-        return self.results / setting / "pairs" / f"{pair_id}.npz"
+        return pair_file(self.pairs_folder(setting), pair_id)
+
+    def metadata(self, setting: str) -> Path:
+        """What a setting's store records about its making (``becos metadata``)."""
+        return self.results / setting / "metadata.json"
+
+    def store(self, setting: str) -> Path:
+        """A setting's Zarr store (:mod:`becos.store`)."""
+        return self.results / setting / "benchmark.zarr"
+
+    def validation(self, setting: str) -> Path:
+        return self.results / setting / "validation.json"
+
+    def released(self, setting: str) -> Path:
+        return self.results / setting / "released"
+
+    def psmal(self, setting: str) -> Path:
+        return self.results / setting / "psmal"
+
+    def geodesics(self, setting: str) -> Path:
+        return self.results / setting / "geodesics"
+
+    @property
+    def geodesic_plan(self) -> Path:
+        """The geodesic plan over every setting's store (temporary)."""
+        return self.results / "geodesics" / "plan"
+
+    def geodesic_rows(self, part: int | str) -> Path:
+        return self.results / "geodesics" / "rows" / f"part_{part}"
+
+    def published_pickle(self, setting: str) -> Path:
+        return self.results / setting / f"pairings_{setting}.pkl"
+
+    def report(self, setting: str) -> Path:
+        return self.results / setting / "report"
+
+    def predictions(self, setting: str, baseline: str) -> Path:
+        return self.results / setting / "predictions" / baseline
+
+    def evaluation(self, setting: str) -> Path:
+        """The folder ``becos evaluate`` writes ``summary.csv``, ``pck.png`` and ``per_pair.csv`` into."""
+        return self.results / setting / "evaluation"
+
+
+def _chunk_index_name(chunk: int | str) -> str:
+    """``chunk_0007.json`` for chunk 7; a wildcard pattern (``"{chunk}"``) is kept as it is."""
+    return f"chunk_{chunk}.json" if isinstance(chunk, str) else f"chunk_{chunk:04d}.json"
+
+
+def remeshed_file(root: str | Path, dataset: str, name: str, token: str) -> Path:
+    """A remesh variant's .npz under the remesh folder ``root`` (:attr:`Layout.remeshed_root`)."""
+    return Path(root) / dataset / name / f"{token}.npz"
+
+
+def pair_file(folder: str | Path, pair_id: str) -> Path:
+    """A pair's file in a chunk stage's folder, beside the chunk indices (ground truth or record)."""
+    return Path(folder) / f"{pair_id}.npz"
 
 
 def remesh_token(row, side: str, remesh: bool) -> str:

@@ -228,6 +228,26 @@ def remesh_target(config: dict, dataset: str, name: str, token: str) -> dict:
     return {"target_vertices": int(variant_target_vertices(config["seed"], dataset, name, int(token[1:])))}
 
 
+def uses_published_views(config: dict, setting: str) -> bool:
+    """Whether the pairs stage of ``setting`` takes its views from the published cameras
+    (``original_settings`` P2P with the reference remesh: the shipped triangle ids index its faces)."""
+    return (
+        setting == "partial_partial" and bool(config.get("original_settings")) and config.get("remesher") == "reference"
+    )
+
+
+def published_views_folder(config: dict, setting: str) -> Path | None:
+    """The folder of shipped triangle-id files the pairs stage of ``setting`` reads
+    (:func:`becos.reference_views.triangle_ids_folder`), or None: the stage reads none (it draws its
+    cameras, or the annotation folder ships no views and every published view is cast)."""
+    if not uses_published_views(config, setting):
+        return None
+    from becos.reference_views import triangle_ids_folder
+
+    folder = triangle_ids_folder(config["annotations"], setting)
+    return folder if folder.is_dir() else None
+
+
 def edge_files_between(annotations, x_key: str, y_key: str) -> list[Path]:
     """Edge files on the network path between the templates of template keys ``x_key`` and ``y_key``,
     both directions (the ground truth both ways reads them); identity edges have none."""

@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from becos.errors import ConfigError
-from becos.workflow.layout import Layout, remesh_token
+from becos.workflow.layout import Layout, remesh_token, remeshed_file
 from becos.workflow.plan import annotation_source
 
 if TYPE_CHECKING:
@@ -108,12 +108,15 @@ class ShapeStore:
     grow with the number of pairs in a chunk.
     """
 
-    def __init__(self, config: dict, catalog: pd.DataFrame | list[dict]):
-        """``catalog``: the catalog table, or some of its rows as dicts."""
+    def __init__(self, config: dict, catalog: pd.DataFrame | list[dict], remeshed: str | Path | None = None):
+        """``catalog``: the catalog table, or some of its rows as dicts. ``remeshed``: the folder of the
+        remesh variants (a chunk job's declared remesh root; default: the config's
+        :attr:`Layout.remeshed_root`)."""
         from becos.mesh import MeshCache
 
         self.config = config
         self.layout = Layout.of(config)
+        self.remeshed_root = self.layout.remeshed_root if remeshed is None else Path(remeshed)
         rows = catalog if isinstance(catalog, list) else catalog.to_dict("records")
         self.entries = {(r["dataset"], r["name"]): _entry(r) for r in rows}
         self.mesh_cache = MeshCache(self.layout.cache / "meshes", max_in_memory=MESHES_KEPT)
@@ -188,7 +191,7 @@ class ShapeStore:
         if token == "original":
             return None
         return self._remeshed.get_or_make(
-            (dataset, name, token), lambda: load_remeshed(self.layout.remeshed(dataset, name, token))
+            (dataset, name, token), lambda: load_remeshed(remeshed_file(self.remeshed_root, dataset, name, token))
         )
 
     def file_digest(self, path: Path) -> str:
@@ -201,7 +204,7 @@ class ShapeStore:
         """Digest of the file a pair side is built from (remesh variant, or the original mesh)."""
         if token == "original":
             return self.file_digest(self.entry(dataset, name).path)
-        return self.file_digest(self.layout.remeshed(dataset, name, token))
+        return self.file_digest(remeshed_file(self.remeshed_root, dataset, name, token))
 
     def edge_digests(self, x, y) -> list[str]:
         """Digests of the edge files the ground truth between entries ``x`` and ``y`` reads (both ways),

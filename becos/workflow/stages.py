@@ -13,9 +13,9 @@ import numpy as np
 
 from becos.atomic import remove_stale_temporaries, write_text
 from becos.errors import ConfigError
-from becos.workflow.layout import Layout, remesh_token
+from becos.workflow.layout import pair_file, remesh_token
 from becos.workflow.options import GROUND_TRUTH_VERSION, RECORD_VERSION, digest, stage_options
-from becos.workflow.plan import build_catalog, build_manifest, remesh_target
+from becos.workflow.plan import build_catalog, build_manifest, remesh_target, uses_published_views
 from becos.workflow.shapes import ShapeStore, visit_order
 
 if TYPE_CHECKING:
@@ -100,10 +100,10 @@ def _stored_key(path: Path, member: str) -> str | None:
     return value
 
 
-def _chunk_rows(config: dict, setting: str, chunk: int) -> pd.DataFrame:
+def _chunk_rows(manifest_path: Path, chunk: int) -> pd.DataFrame:
     from becos.sampling import read_manifest
 
-    manifest = read_manifest(Layout.of(config).manifest(setting))
+    manifest = read_manifest(manifest_path)
     return manifest[manifest["chunk"] == int(chunk)]
 
 
@@ -145,17 +145,23 @@ def _write_index(path: Path, setting: str, chunk: int, entries: list[dict], star
     return {"n": len(entries), "computed": computed}
 
 
-def ground_truth_stage(config: dict, setting: str, chunk: int, out_index: Path) -> dict:
-    """Ground truth both ways for every pair of a chunk; files already up to date are kept."""
+def ground_truth_stage(
+    config: dict, setting: str, chunk: int, out_index: Path, *, manifest: Path, catalog: Path, remeshed: Path
+) -> dict:
+    """Ground truth both ways for every pair of a chunk; files already up to date are kept.
+
+    Reads the setting's ``manifest``, the ``catalog`` and the remesh variants of the chunk's pairs under
+    the folder ``remeshed`` (the paths its rule declares); writes ``<pair_id>.npz`` beside ``out_index``.
+    """
     from becos.atomic import save_npz
     from becos.catalog import read_catalog
 
     started = time.perf_counter()
-    layout = Layout.of(config)
     remesh = bool(config.get("remesh", True))
-    shapes = ShapeStore(config, read_catalog(layout.catalog))
-    rows = _chunk_rows(config, setting, chunk)
-    _remove_killed_writes([*(layout.ground_truth(setting, pid) for pid in rows["pair_id"]), Path(out_index)])
+    shapes = ShapeStore(config, read_catalog(catalog), remeshed=remeshed)
+    rows = _chunk_rows(manifest, chunk)
+    folder = Path(out_index).parent
+    _remove_killed_writes([*(pair_file(folder, pid) for pid in rows["pair_id"]), Path(out_index)])
     entries = []
     ordered, last_used = visit_order(rows.to_dict("records"), remesh)
     for row, done in zip(ordered, last_used):
@@ -175,7 +181,7 @@ def ground_truth_stage(config: dict, setting: str, chunk: int, out_index: Path) 
                 "options": stage_options(config, "ground_truth"),
             }
         )
-        path = layout.ground_truth(setting, row["pair_id"])
+        path = pair_file(folder, row["pair_id"])
         computed = _stored_key(path, "input_key") != key
         if computed:
             x, y = shapes.entry(row["x_dataset"], row["x_name"]), shapes.entry(row["y_dataset"], row["y_name"])
@@ -233,20 +239,36 @@ def pair_options(config: dict, setting: str):
     return PairOptions(setting=setting, **fields)  # keys a setting does not use keep their defaults
 
 
-def pairs_stage(config: dict, setting: str, chunk: int, gt_index: Path, out_index: Path) -> dict:
-    """Pair records (partiality, alignment, rotation, annotations) for every pair of a chunk."""
+def pairs_stage(
+    config: dict,
+    setting: str,
+    chunk: int,
+    gt_index: Path,
+    out_index: Path,
+    *,
+    manifest: Path,
+    catalog: Path,
+    remeshed: Path,
+    triangle_ids: Path | None = None,
+) -> dict:
+    """Pair records (partiality, alignment, rotation, annotations) for every pair of a chunk.
+
+    Reads the setting's ``manifest``, the ``catalog``, the ground-truth files listed in ``gt_index``, the
+    remesh variants under ``remeshed`` and, for published P2P views, the shipped triangle ids in the
+    folder ``triangle_ids`` (None: every view is cast); writes ``<pair_id>.npz`` beside ``out_index``.
+    """
     from becos.catalog import read_catalog
     from becos.pairs import build_pair
     from becos.record import is_intact
 
     started = time.perf_counter()
-    layout = Layout.of(config)
     remesh = bool(config.get("remesh", True))
-    shapes = ShapeStore(config, read_catalog(layout.catalog))
+    shapes = ShapeStore(config, read_catalog(catalog), remeshed=remeshed)
     options = pair_options(config, setting)
     gt_files = {e["pair_id"]: e for e in json.loads(Path(gt_index).read_text())["pairs"]}
-    rows = _chunk_rows(config, setting, chunk)
-    _remove_killed_writes([*(layout.record(setting, pid) for pid in rows["pair_id"]), Path(out_index)])
+    rows = _chunk_rows(manifest, chunk)
+    folder = Path(out_index).parent
+    _remove_killed_writes([*(pair_file(folder, pid) for pid in rows["pair_id"]), Path(out_index)])
     labels = _labeller(config, shapes) if config.get("propagate_annotations", True) else None
     entries = []
     ordered, last_used = visit_order(rows.to_dict("records"), remesh)
@@ -270,7 +292,7 @@ def pairs_stage(config: dict, setting: str, chunk: int, gt_index: Path, out_inde
                 ],
             }
         )
-        path = layout.record(setting, row["pair_id"])
+        path = pair_file(folder, row["pair_id"])
         computed = _stored_key(path, "__meta__") != key
         if not computed and not is_intact(path):
             _log(
@@ -296,7 +318,7 @@ def pairs_stage(config: dict, setting: str, chunk: int, gt_index: Path, out_inde
                 options=options,
                 scanners=pair_scanners,
                 rotations=_published_rotations(row),
-                published_views=_published_views(config, row, options),
+                published_views=_published_views(config, row, options, triangle_ids),
             )
             if labels is not None:
                 for side, s, t in (("x", x, tx), ("y", y, ty)):
@@ -322,15 +344,14 @@ def pairs_stage(config: dict, setting: str, chunk: int, gt_index: Path, out_inde
     return _write_index(Path(out_index), setting, chunk, entries, started)
 
 
-def _published_views(config: dict, row: dict, options):
+def _published_views(config: dict, row: dict, options, triangle_ids: Path | None = None):
     """``original_settings`` P2P with the reference remesh: the views of the pair's published cameras
-    (:func:`becos.reference_views.published_scan`), else None (the pairs stage draws cameras)."""
-    if (
-        options.setting != "partial_partial"
-        or not config.get("original_settings")
-        or config.get("remesher") != "reference"
-        or "x_cam_pos_0" not in row
-    ):
+    (:func:`becos.reference_views.published_scan`), else None (the pairs stage draws cameras).
+
+    ``triangle_ids``: the folder of the shipped view files (:func:`published_views_folder`, as the rule
+    declares it); None: where the config's annotation folder has them (a view without its file is cast).
+    """
+    if not uses_published_views(config, options.setting) or "x_cam_pos_0" not in row:
         return None
     from becos.reference_views import published_scan
 
@@ -338,12 +359,14 @@ def _published_views(config: dict, row: dict, options):
     cameras = np.array([[row[f"{side}_cam_pos_{i}"] for i in range(n)] for side in "xy"], dtype=np.float64).reshape(
         2, -1, 3
     )
+    # published_scan names each file under the annotation folder: <root>/precomputed_triangle_ids/<setting>/
+    root = config["annotations"] if triangle_ids is None else Path(triangle_ids).parents[1]
     return lambda x, y, gt_xy, gt_yx: published_scan(
         x,
         y,
         gt_xy,
         gt_yx,
-        config["annotations"],
+        root,
         row["x_name"],
         row["y_name"],
         cameras,
@@ -414,21 +437,20 @@ def published_parts(config: dict, setting: str) -> dict[str, bool | None]:
     }
 
 
-def export_pairings_stage(config: dict, setting: str, out: Path, store: Path) -> None:
+def export_pairings_stage(config: dict, setting: str, out: Path, store: Path, *, manifest: Path, catalog: Path) -> None:
     """The manifest in the published pickle schema (share a benchmark as pair lists + code), with the
     random rotations, cameras and face counts the store's records actually used (docs/released-layout.md,
-    section "Published pair lists")."""
+    section "Published pair lists"). Reads the setting's ``manifest``, the ``catalog`` and ``store``."""
     from becos.catalog import read_catalog
     from becos.published import store_pair_facts, write_published_pickle
     from becos.sampling import read_manifest
     from becos.store import open_benchmark
 
-    layout = Layout.of(config)
     facts = store_pair_facts(open_benchmark(store))
     write_published_pickle(
-        read_manifest(layout.manifest(setting)),
+        read_manifest(manifest),
         out,
-        read_catalog(layout.catalog),
+        read_catalog(catalog),
         random_rotations=facts["random_rotations"],
         cameras=facts["cameras"],
         pair_face_targets=facts["face_targets"],
