@@ -112,28 +112,14 @@ def _run_stage(args: argparse.Namespace, config: dict) -> int:
         write_manifest_stage(config, args.setting, args.catalog, args.out)
     elif args.command == "remesh":
         remesh_stage(config, parse_json_option(args.shape, "--shape", args.command), args.token, args.out, args.ply)
-    elif args.command == "ground-truth":
-        ground_truth_stage(
-            config,
-            args.setting,
-            args.chunk,
-            args.out,
-            manifest=args.manifest,
-            catalog=args.catalog,
-            remeshed=args.remeshed,
-        )
-    elif args.command == "pairs":
-        pairs_stage(
-            config,
-            args.setting,
-            args.chunk,
-            args.ground_truth,
-            args.out,
-            manifest=args.manifest,
-            catalog=args.catalog,
-            remeshed=args.remeshed,
-            triangle_ids=args.triangle_ids,
-        )
+    elif args.command in ("ground-truth", "pairs"):
+        inputs = {"manifest": args.manifest, "catalog": args.catalog, "remeshed": args.remeshed}  # the rule's
+        if args.command == "ground-truth":
+            ground_truth_stage(config, args.setting, args.chunk, args.out, **inputs)
+        else:
+            pairs_stage(
+                config, args.setting, args.chunk, args.ground_truth, args.out, triangle_ids=args.triangle_ids, **inputs
+            )
     elif args.command == "metadata":
         write_text(
             args.out, json.dumps(store_metadata(config, args.setting), indent=1, sort_keys=True, default=str) + "\n"
