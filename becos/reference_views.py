@@ -46,15 +46,15 @@ SHRINK_DIAGONAL = 2.0
 SHRINK = 0.8
 
 
+def triangle_ids_folder(root: str | Path, setting: str) -> Path:
+    """The folder of a setting's shipped view files (``root``: the annotation folder)."""
+    return Path(root) / "precomputed_triangle_ids" / setting
+
+
 def triangle_ids_path(root: str | Path, setting: str, name: str, cam_pos) -> Path:
     """The shipped file of ``name``'s view from ``cam_pos`` (``root``: the annotation folder)."""
     c = np.asarray(cam_pos, dtype=np.float64).reshape(3)
-    return (
-        Path(root)
-        / "precomputed_triangle_ids"
-        / setting
-        / f"{name.replace('/', '_')}_cam_{c[0]:.3f}_{c[1]:.3f}_{c[2]:.3f}.npy"
-    )
+    return triangle_ids_folder(root, setting) / f"{name.replace('/', '_')}_cam_{c[0]:.3f}_{c[1]:.3f}_{c[2]:.3f}.npy"
 
 
 def pair_view_files(

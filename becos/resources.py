@@ -4,7 +4,7 @@
 ``benchmarks/resources.py`` measured on a real run (with margins), and for the chunk rules
 (``ground_truth``, ``pairs``) ``seconds_per_pair``: their run time grows with the pairs of the
 chunk, their memory does not (a chunk job keeps at most a few shapes loaded,
-:data:`becos.workflow.SHAPES_KEPT`). A rule missing from the file gets :data:`DEFAULT`.
+:data:`becos.workflow.shapes.SHAPES_KEPT`). A rule missing from the file gets :data:`DEFAULT`.
 
 Snakemake calls the functions returned here with the job's wildcards and ``attempt`` (1, then 2, ...
 when a profile sets ``retries``), so a retried job asks for ``attempt`` times the memory and time:

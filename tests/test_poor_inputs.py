@@ -90,6 +90,12 @@ def test_a_store_rewritten_under_a_reader_is_a_named_error(store, pair_record_fi
                 "full_full",
                 "--chunk",
                 "0",
+                "--manifest",
+                "RESULTS/full_full/manifest.csv",
+                "--catalog",
+                "RESULTS/catalog.csv",
+                "--remeshed",
+                "RESULTS/remeshed",
             ],
             "becos ground-truth: RESULTS/catalog.csv: not found (an input of this stage). "
             "Fix: run the stages before `becos ground-truth`",

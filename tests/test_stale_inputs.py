@@ -56,11 +56,22 @@ def built(becos_code, tmp_path_factory):
     rows = {(r["dataset"], r["name"]): r for r in plan.catalog.to_dict("records")}
     for dataset, name, token in plan.remesh_jobs:
         bw.remesh_stage(config, rows[(dataset, name)], token, layout.remeshed(dataset, name, token))
-    bw.ground_truth_stage(config, "full_full", 0, layout.ground_truth_index("full_full", 0))
+    bw.ground_truth_stage(config, "full_full", 0, layout.ground_truth_index("full_full", 0), **_inputs(config))
     bw.pairs_stage(
-        config, "full_full", 0, layout.ground_truth_index("full_full", 0), layout.pairs_index("full_full", 0)
+        config,
+        "full_full",
+        0,
+        layout.ground_truth_index("full_full", 0),
+        layout.pairs_index("full_full", 0),
+        **_inputs(config),
     )
     return work, config
+
+
+def _inputs(config) -> dict:
+    """The paths a chunk job of full_full is given (its rule's manifest, catalog and remesh folder)."""
+    layout = bw.Layout.of(config)
+    return {"manifest": layout.manifest("full_full"), "catalog": layout.catalog, "remeshed": layout.remeshed_root}
 
 
 def _ground_truth(config) -> tuple[dict, dict]:
@@ -87,13 +98,13 @@ def test_an_edited_then_restored_edge_file_recomputes_the_ground_truth_that_read
         lines[i] = f"{f} {c} {a} {b}"
     edge.write_text("\n".join(lines) + "\n")
     capsys.readouterr()
-    counts = bw.ground_truth_stage(config, "full_full", 0, layout.ground_truth_index("full_full", 0))
+    counts = bw.ground_truth_stage(config, "full_full", 0, layout.ground_truth_index("full_full", 0), **_inputs(config))
     edited, _ = _ground_truth(config)
     assert counts["computed"] == len(crossing), (counts, capsys.readouterr().err)
     assert {p for p in before if edited[p] != before[p]} == crossing  # the pairs across wolf and horse changed
 
     edge.write_text(original)  # restored: recomputed, as before
-    counts = bw.ground_truth_stage(config, "full_full", 0, layout.ground_truth_index("full_full", 0))
+    counts = bw.ground_truth_stage(config, "full_full", 0, layout.ground_truth_index("full_full", 0), **_inputs(config))
     restored, _ = _ground_truth(config)
     assert counts["computed"] == len(crossing)
     assert restored == before
@@ -104,7 +115,7 @@ def test_a_hand_edited_pair_record_is_rebuilt_and_refused_by_the_store_writer(bu
     work, config = built
     layout = bw.Layout.of(config)
     gt_index, pairs_index = layout.ground_truth_index("full_full", 0), layout.pairs_index("full_full", 0)
-    bw.pairs_stage(config, "full_full", 0, gt_index, pairs_index)  # up to date after the other test
+    bw.pairs_stage(config, "full_full", 0, gt_index, pairs_index, **_inputs(config))  # up to date after the other test
     entry = json.loads(pairs_index.read_text())["pairs"][0]
     path = Path(entry["path"])
     original = path.read_bytes()
@@ -117,7 +128,9 @@ def test_a_hand_edited_pair_record_is_rebuilt_and_refused_by_the_store_writer(bu
 
     edit_by_hand()
     capsys.readouterr()
-    counts = bw.pairs_stage(config, "full_full", 0, gt_index, pairs_index)  # what --forcerun pairs runs
+    counts = bw.pairs_stage(
+        config, "full_full", 0, gt_index, pairs_index, **_inputs(config)
+    )  # what --forcerun pairs runs
     err = capsys.readouterr().err
     assert counts["computed"] == 1, err
     assert f"{path}: its content no longer matches the digest becos recorded when writing it" in err

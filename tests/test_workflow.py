@@ -230,7 +230,7 @@ def test_chunk_files_do_not_depend_on_the_shapes_a_job_keeps(tiny_tosca_run, tmp
     import becos.network
     import becos.workflow as bw
 
-    monkeypatch.setattr(bw, "SHAPES_KEPT", 1)
+    monkeypatch.setattr(bw.shapes, "SHAPES_KEPT", 1)  # read where ShapeStore is defined
     monkeypatch.setattr(becos.network.ShapeNetwork, "MESHES_KEPT", 1)
     source = tiny_tosca_run / "results"
     results = tmp_path / "results"
@@ -244,8 +244,10 @@ def test_chunk_files_do_not_depend_on_the_shapes_a_job_keeps(tiny_tosca_run, tmp
             for name in files:
                 (results / setting / "ground_truth" / name).unlink(missing_ok=True)
                 (results / setting / "pairs" / name).unlink(missing_ok=True)
-            assert bw.ground_truth_stage(config, setting, chunk, gt_index)["computed"] > 0
-            assert bw.pairs_stage(config, setting, chunk, gt_index, pairs_index)["computed"] > 0
+            layout = bw.Layout.of(config)  # the paths the chunk's rules pass
+            inputs = {"manifest": layout.manifest(setting), "catalog": layout.catalog, "remeshed": layout.remeshed_root}
+            assert bw.ground_truth_stage(config, setting, chunk, gt_index, **inputs)["computed"] > 0
+            assert bw.pairs_stage(config, setting, chunk, gt_index, pairs_index, **inputs)["computed"] > 0
             for kind, ix in (("ground_truth", gt_index), ("pairs", pairs_index)):
                 for entry in json.loads(ix.read_text())["pairs"]:
                     name = Path(entry["path"]).name

@@ -32,9 +32,19 @@ def configure_parser(parser: argparse.ArgumentParser, name: str) -> None:
         parser.add_argument("--setting", required=True, choices=SETTINGS)
     if name in ("ground-truth", "pairs"):
         parser.add_argument("--chunk", required=True, type=int)
+        parser.add_argument(
+            "--remeshed", required=True, type=Path, help="the folder of the remesh variants (results/remeshed)"
+        )
     if name == "pairs":
         parser.add_argument("--ground-truth", required=True, type=Path, help="the chunk's ground-truth index")
-    if name == "manifest":
+        parser.add_argument(
+            "--triangle-ids",
+            type=Path,
+            help="the folder of the published views' triangle ids (original_settings P2P; default: cast every view)",
+        )
+    if name in ("ground-truth", "pairs", "export-pairings"):
+        parser.add_argument("--manifest", required=True, type=Path, help="the setting's pair manifest")
+    if name in ("manifest", "ground-truth", "pairs", "export-pairings"):
         parser.add_argument("--catalog", required=True, type=Path)
     if name == "export-pairings":
         parser.add_argument("--store", required=True, type=Path, help="the setting's benchmark store")
@@ -87,8 +97,8 @@ def run_cli(args: argparse.Namespace) -> int:
         raise InputFileError(
             exc.filename or "?",
             "not found (an input of this stage)",
-            f"run the stages before `becos {args.command}` (the workflow does), or check `results` "
-            f"in --options ({config.get('results', 'results')!r})",
+            f"run the stages before `becos {args.command}` (the workflow does), or check the paths given "
+            f"to it (its input options; `results` in --options: {config.get('results', 'results')!r})",
         ) from None
 
 
@@ -102,14 +112,18 @@ def _run_stage(args: argparse.Namespace, config: dict) -> int:
         write_manifest_stage(config, args.setting, args.catalog, args.out)
     elif args.command == "remesh":
         remesh_stage(config, parse_json_option(args.shape, "--shape", args.command), args.token, args.out, args.ply)
-    elif args.command == "ground-truth":
-        ground_truth_stage(config, args.setting, args.chunk, args.out)
-    elif args.command == "pairs":
-        pairs_stage(config, args.setting, args.chunk, args.ground_truth, args.out)
+    elif args.command in ("ground-truth", "pairs"):
+        inputs = {"manifest": args.manifest, "catalog": args.catalog, "remeshed": args.remeshed}  # the rule's
+        if args.command == "ground-truth":
+            ground_truth_stage(config, args.setting, args.chunk, args.out, **inputs)
+        else:
+            pairs_stage(
+                config, args.setting, args.chunk, args.ground_truth, args.out, triangle_ids=args.triangle_ids, **inputs
+            )
     elif args.command == "metadata":
         write_text(
             args.out, json.dumps(store_metadata(config, args.setting), indent=1, sort_keys=True, default=str) + "\n"
         )
     elif args.command == "export-pairings":
-        export_pairings_stage(config, args.setting, args.out, args.store)
+        export_pairings_stage(config, args.setting, args.out, args.store, manifest=args.manifest, catalog=args.catalog)
     return 0

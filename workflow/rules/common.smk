@@ -2,6 +2,7 @@
 # Snakemake (its bin folder goes first on PATH): the pip-installed environment is the only one.
 import json
 import os
+import shlex
 import sys
 from pathlib import Path
 
@@ -15,8 +16,9 @@ from becos.errors import BecosError
 from becos.resources import RuleResources
 
 SETTINGS = bw.settings_of(config)
+# Every path of the rules is stated once, in becos.workflow.layout.Layout. Outputs are LAYOUT patterns;
+# inputs are the producing rule's output (rules.<name>.output) or, across settings, LAYOUT with values.
 LAYOUT = bw.Layout.of(config)
-RESULTS = str(LAYOUT.results)
 EXPORTS = config["exports"]
 BASELINES = config["evaluation"]["baselines"]
 # mem_mb / runtime per rule from measured peaks (benchmarks/resources.py); x attempt on retries
@@ -81,27 +83,41 @@ def chunk_files(setting, kind):
     return [str(path(setting, c)) for c in p.chunks(setting)]
 
 
+def published_views_input(wildcards):
+    """The folder of shipped triangle ids a pairs job of the setting reads (original_settings P2P with the
+    reference remesh; becos.workflow.published_views_folder), or none."""
+    if not bw.uses_published_views(config, wildcards.setting):
+        return []
+    checkpoints.check_datasets.get()  # the annotation folder may be fetched by a job first
+    folder = bw.published_views_folder(config, wildcards.setting)
+    return [] if folder is None else [str(folder)]
+
+
+def optional_path(option, paths):
+    """``option 'path'`` for an optional input (a list of at most one path), or "" without one."""
+    paths = [paths] if isinstance(paths, str) else list(paths)
+    return " ".join(f"{option} {shlex.quote(str(p))}" for p in paths)
+
+
 def all_targets(wildcards):
     targets = [str(LAYOUT.config)]
     for setting in SETTINGS:
-        base = f"{RESULTS}/{setting}"
-        targets.append(f"{base}/validation.json")
-        if EXPORTS["released"]:
-            targets.append(f"{base}/released")
-        if EXPORTS["psmal"]:
-            targets.append(f"{base}/psmal")
-        if EXPORTS["geodesics"]:
-            targets.append(f"{base}/geodesics")
-        if EXPORTS["published_pickle"]:
-            targets.append(f"{base}/pairings_{setting}.pkl")
-        if EXPORTS["report"]:
-            targets.append(f"{base}/report")
+        targets.append(str(LAYOUT.validation(setting)))
+        for export, path in (
+            ("released", LAYOUT.released),
+            ("psmal", LAYOUT.psmal),
+            ("geodesics", LAYOUT.geodesics),
+            ("published_pickle", LAYOUT.published_pickle),
+            ("report", LAYOUT.report),
+        ):
+            if EXPORTS[export]:
+                targets.append(str(path(setting)))
         if BASELINES:
-            targets.append(f"{base}/evaluation/summary.csv")
+            targets.append(str(LAYOUT.evaluation(setting) / "summary.csv"))
     # every remesh output is a target once the dataset check has run, so a deleted one (e.g. the PLY that no
     # job reads) is rebuilt; before the check the targets above are listed (a first dry run shows them all)
     if LAYOUT.checks.exists():
-        targets += [str(LAYOUT.remeshed(*job).with_suffix(".ply")) for job in plan().remesh_jobs]
+        targets += [str(LAYOUT.remeshed_ply(*job)) for job in plan().remesh_jobs]
     return targets
 
 

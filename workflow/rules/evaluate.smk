@@ -3,10 +3,10 @@
 
 rule baseline:
     input:
-        store=f"{RESULTS}/{{setting}}/benchmark.zarr",
-        validation=f"{RESULTS}/{{setting}}/validation.json",
+        store=rules.zarr_store.output[0],
+        validation=rules.validate_store.output[0],
     output:
-        directory(f"{RESULTS}/{{setting}}/predictions/{{baseline}}"),
+        directory(str(LAYOUT.predictions("{setting}", "{baseline}"))),
     log:
         "logs/baseline/{setting}/{baseline}.log",
     wildcard_constraints:
@@ -24,12 +24,13 @@ rule baseline:
 
 rule evaluate:
     input:
-        store=f"{RESULTS}/{{setting}}/benchmark.zarr",
-        predictions=expand(f"{RESULTS}/{{{{setting}}}}/predictions/{{baseline}}", baseline=BASELINES),
+        store=rules.zarr_store.output[0],
+        predictions=expand(str(LAYOUT.predictions("{{setting}}", "{baseline}")), baseline=BASELINES),
     output:
-        summary=report(f"{RESULTS}/{{setting}}/evaluation/summary.csv", category="Evaluation"),
-        plot=report(f"{RESULTS}/{{setting}}/evaluation/pck.png", category="Evaluation"),
-        per_pair=f"{RESULTS}/{{setting}}/evaluation/per_pair.csv",
+        # the file names `becos evaluate` writes into its --out folder
+        summary=report(str(LAYOUT.evaluation("{setting}") / "summary.csv"), category="Evaluation"),
+        plot=report(str(LAYOUT.evaluation("{setting}") / "pck.png"), category="Evaluation"),
+        per_pair=LAYOUT.evaluation("{setting}") / "per_pair.csv",
     log:
         "logs/evaluate/{setting}.log",
     conda:
@@ -38,7 +39,7 @@ rule evaluate:
         mem_mb=RESOURCES.mem_mb("evaluate"),
         runtime=RESOURCES.runtime("evaluate", n_pairs=setting_pairs),
     params:
-        out=lambda w: f"{RESULTS}/{w.setting}/evaluation",
+        out=lambda w: str(LAYOUT.evaluation(w.setting)),
         split=config["evaluation"]["split"],
         geodesics=config["evaluation"]["geodesics"],
     shell:

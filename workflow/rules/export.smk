@@ -8,7 +8,7 @@ STORE_BLIND_KEYS = ("setting", "n_renders", "store_vis", "exports", "evaluation"
 
 rule store_metadata:
     output:
-        f"{RESULTS}/{{setting}}/metadata.json",
+        LAYOUT.metadata("{setting}"),
     log:
         "logs/store_metadata/{setting}.log",
     conda:
@@ -26,9 +26,9 @@ rule store_metadata:
 rule zarr_store:
     input:
         pairs=lambda w: chunk_files(w.setting, "pairs"),
-        metadata=f"{RESULTS}/{{setting}}/metadata.json",
+        metadata=rules.store_metadata.output[0],
     output:
-        directory(f"{RESULTS}/{{setting}}/benchmark.zarr"),
+        directory(str(LAYOUT.store("{setting}"))),
     log:
         "logs/zarr_store/{setting}.log",
     conda:
@@ -43,9 +43,9 @@ rule zarr_store:
 
 rule validate_store:
     input:
-        f"{RESULTS}/{{setting}}/benchmark.zarr",
+        rules.zarr_store.output[0],
     output:
-        f"{RESULTS}/{{setting}}/validation.json",
+        LAYOUT.validation("{setting}"),
     log:
         "logs/validate_store/{setting}.log",
     conda:
@@ -59,10 +59,10 @@ rule validate_store:
 
 rule released_layout:
     input:
-        store=f"{RESULTS}/{{setting}}/benchmark.zarr",
-        validation=f"{RESULTS}/{{setting}}/validation.json",
+        store=rules.zarr_store.output[0],
+        validation=rules.validate_store.output[0],
     output:
-        directory(f"{RESULTS}/{{setting}}/released"),
+        directory(str(LAYOUT.released("{setting}"))),
     log:
         "logs/released_layout/{setting}.log",
     conda:
@@ -76,10 +76,10 @@ rule released_layout:
 
 rule psmal_layout:
     input:
-        store=f"{RESULTS}/{{setting}}/benchmark.zarr",
-        validation=f"{RESULTS}/{{setting}}/validation.json",
+        store=rules.zarr_store.output[0],
+        validation=rules.validate_store.output[0],
     output:
-        directory(f"{RESULTS}/{{setting}}/psmal"),
+        directory(str(LAYOUT.psmal("{setting}"))),
     log:
         "logs/psmal_layout/{setting}.log",
     conda:
@@ -101,10 +101,10 @@ GEODESIC_SPLITS = " ".join(["--splits", *EXPORTS["geodesic_splits"]]) if EXPORTS
 # writes the loaders' layouts from their rows (the rows are temporary).
 rule geodesic_plan:
     input:
-        stores=expand(f"{RESULTS}/{{setting}}/benchmark.zarr", setting=SETTINGS),
-        validations=expand(f"{RESULTS}/{{setting}}/validation.json", setting=SETTINGS),
+        stores=[str(LAYOUT.store(s)) for s in SETTINGS],
+        validations=[str(LAYOUT.validation(s)) for s in SETTINGS],
     output:
-        temp(directory(f"{RESULTS}/geodesics/plan")),
+        temp(directory(str(LAYOUT.geodesic_plan))),
     log:
         "logs/geodesics/plan.log",
     conda:
@@ -121,9 +121,9 @@ rule geodesic_plan:
 
 rule geodesic_rows:
     input:
-        f"{RESULTS}/geodesics/plan",
+        rules.geodesic_plan.output[0],
     output:
-        temp(directory(f"{RESULTS}/geodesics/rows/part_{{part}}")),
+        temp(directory(str(LAYOUT.geodesic_rows("{part}")))),
     log:
         "logs/geodesics/rows_{part}.log",
     conda:
@@ -137,11 +137,11 @@ rule geodesic_rows:
 
 rule geodesics:
     input:
-        store=f"{RESULTS}/{{setting}}/benchmark.zarr",
-        validation=f"{RESULTS}/{{setting}}/validation.json",
-        rows=expand(f"{RESULTS}/geodesics/rows/part_{{part}}", part=range(GEODESIC_PARTS)),
+        store=rules.zarr_store.output[0],
+        validation=rules.validate_store.output[0],
+        rows=[str(LAYOUT.geodesic_rows(part)) for part in range(GEODESIC_PARTS)],
     output:
-        directory(f"{RESULTS}/{{setting}}/geodesics"),
+        directory(str(LAYOUT.geodesics("{setting}"))),
     log:
         "logs/geodesics/{setting}.log",
     conda:
@@ -159,11 +159,11 @@ rule geodesics:
 
 rule published_pairings:
     input:
-        manifest=f"{RESULTS}/{{setting}}/manifest.csv",
+        manifest=rules.manifest.output[0],
         catalog=LAYOUT.catalog,
-        store=f"{RESULTS}/{{setting}}/benchmark.zarr",
+        store=rules.zarr_store.output[0],
     output:
-        f"{RESULTS}/{{setting}}/pairings_{{setting}}.pkl",
+        LAYOUT.published_pickle("{setting}"),
     log:
         "logs/published_pairings/{setting}.log",
     conda:
@@ -172,16 +172,16 @@ rule published_pairings:
         options=bw.job_options(config, "export"),
     shell:
         "becos export-pairings --options {params.options:q} --setting {wildcards.setting} --store {input.store:q}"
-        " --out {output:q} > {log:q} 2>&1"
+        " --manifest {input.manifest:q} --catalog {input.catalog:q} --out {output:q} > {log:q} 2>&1"
 
 
 rule report:
     input:
-        store=f"{RESULTS}/{{setting}}/benchmark.zarr",
-        validation=f"{RESULTS}/{{setting}}/validation.json",
+        store=rules.zarr_store.output[0],
+        validation=rules.validate_store.output[0],
     output:
         report(
-            directory(f"{RESULTS}/{{setting}}/report"),
+            directory(str(LAYOUT.report("{setting}"))),
             htmlindex="index.html",
             caption="../report/index.rst",
             category="Benchmark report",

@@ -8,7 +8,7 @@ rule manifest:
     input:
         catalog=LAYOUT.catalog,
     output:
-        f"{RESULTS}/{{setting}}/manifest.csv",
+        LAYOUT.manifest("{setting}"),
     log:
         "logs/manifest/{setting}.log",
     conda:
@@ -24,8 +24,8 @@ rule remesh:
     input:
         lambda w: plan().files[(w.dataset, w.name)],
     output:
-        npz=f"{RESULTS}/remeshed/{{dataset}}/{{name}}/{{token}}.npz",
-        ply=f"{RESULTS}/remeshed/{{dataset}}/{{name}}/{{token}}.ply",
+        npz=LAYOUT.remeshed("{dataset}", "{name}", "{token}"),
+        ply=LAYOUT.remeshed_ply("{dataset}", "{name}", "{token}"),
     log:
         "logs/remesh/{dataset}/{name}/{token}.log",
     wildcard_constraints:
@@ -38,7 +38,9 @@ rule remesh:
         mem_mb=RESOURCES.mem_mb("remesh"),
         runtime=RESOURCES.runtime("remesh"),
     params:
-        target=lambda w: plan().remesh_target(w.dataset, w.name, w.token),
+        # a rerun trigger only (the job derives the target from --token and the seed): a change to the
+        # variant's target vertex count (becos.remesh.variant_target_vertices) reruns it
+        rerun_key=lambda w: plan().remesh_target(w.dataset, w.name, w.token),
         shape=lambda w: plan().shape_json(w.dataset, w.name),
         options=bw.job_options(config, "remesh"),
     shell:
@@ -46,14 +48,17 @@ rule remesh:
         " --token {wildcards.token} --out {output.npz:q} --ply {output.ply:q} > {log:q} 2>&1"
 
 
+# A chunk job's remesh files are declared one by one (input.remeshed) and passed as their folder
+# (params.remeshed): a chunk may read hundreds, more than one shell command line holds, and the job opens
+# exactly the declared ones (both named by remesh_token of the chunk's manifest rows, becos.workflow).
 rule ground_truth:
     input:
-        manifest=f"{RESULTS}/{{setting}}/manifest.csv",
+        manifest=rules.manifest.output[0],
         catalog=LAYOUT.catalog,
         remeshed=lambda w: plan().chunk_inputs(w.setting, int(w.chunk)),
         edges=lambda w: plan().chunk_edge_files(w.setting, int(w.chunk)),
     output:
-        f"{RESULTS}/{{setting}}/ground_truth/chunk_{{chunk}}.json",
+        LAYOUT.ground_truth_index("{setting}", "{chunk}"),
     log:
         "logs/ground_truth/{setting}/{chunk}.log",
     wildcard_constraints:
@@ -65,19 +70,22 @@ rule ground_truth:
         runtime=RESOURCES.runtime("ground_truth", n_pairs=chunk_pairs),
     params:
         options=bw.job_options(config, "ground_truth"),
+        remeshed=LAYOUT.remeshed_root,
     shell:
         "becos ground-truth --options {params.options:q} --setting {wildcards.setting} --chunk {wildcards.chunk}"
+        " --manifest {input.manifest:q} --catalog {input.catalog:q} --remeshed {params.remeshed:q}"
         " --out {output:q} > {log:q} 2>&1"
 
 
 rule pairs:
     input:
-        ground_truth=f"{RESULTS}/{{setting}}/ground_truth/chunk_{{chunk}}.json",
-        manifest=f"{RESULTS}/{{setting}}/manifest.csv",
+        ground_truth=rules.ground_truth.output[0],
+        manifest=rules.manifest.output[0],
         catalog=LAYOUT.catalog,
         remeshed=lambda w: plan().chunk_inputs(w.setting, int(w.chunk)),
+        triangle_ids=published_views_input,
     output:
-        f"{RESULTS}/{{setting}}/pairs/chunk_{{chunk}}.json",
+        LAYOUT.pairs_index("{setting}", "{chunk}"),
     log:
         "logs/pairs/{setting}/{chunk}.log",
     wildcard_constraints:
@@ -89,6 +97,9 @@ rule pairs:
         runtime=RESOURCES.runtime("pairs", n_pairs=chunk_pairs),
     params:
         options=lambda w: bw.job_options(config, "pairs", w.setting),
+        remeshed=LAYOUT.remeshed_root,
+        triangle_ids=lambda w, input: optional_path("--triangle-ids", input.triangle_ids),
     shell:
         "becos pairs --options {params.options:q} --setting {wildcards.setting} --chunk {wildcards.chunk}"
-        " --ground-truth {input.ground_truth:q} --out {output:q} > {log:q} 2>&1"
+        " --ground-truth {input.ground_truth:q} --manifest {input.manifest:q} --catalog {input.catalog:q}"
+        " --remeshed {params.remeshed:q} {params.triangle_ids} --out {output:q} > {log:q} 2>&1"

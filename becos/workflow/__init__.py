@@ -1,0 +1,154 @@
+"""The workflow's stages as library functions: config -> plan -> the work of one job.
+
+Snakemake (``Snakefile``, ``workflow/rules/*.smk``) only names files; every job runs one ``becos``
+sub-command, which calls one function of :mod:`becos.workflow.stages` (or of :mod:`becos.store`,
+:mod:`becos.export`, :mod:`becos.validate`, :mod:`becos.report`). One idea per module:
+
+    config    the schema (``becos/data/schema.yaml``), defaults, the checks across keys, config files
+    options   the config keys each stage depends on, the options JSON a job receives, digests
+    layout    where every file under ``results`` lives, which remesh file a pair side uses
+    plan      catalog, manifests and the jobs they imply (what Snakemake needs to build the job graph)
+    shapes    a chunk job's shapes, kept while its pairs use them
+    stages    one function per job kind
+
+Every public name is importable from ``becos.workflow`` itself (``import becos.workflow as bw``).
+
+Files under ``results`` (config key ``results``)::
+
+    config.json                         the resolved configuration (defaults filled in)
+    checks/datasets.json                what the dataset check found
+    catalog.csv                         every shape of the enabled datasets (becos.catalog)
+    remeshed/<dataset>/<name>/<v>.npz   one remesh variant: mesh + maps to/from the original (.ply beside)
+    <setting>/manifest.csv              the pairs of a setting (becos.sampling)
+    <setting>/ground_truth/chunk_<k>.json  index of the chunk's ground-truth files <pair_id>.npz
+    <setting>/pairs/chunk_<k>.json      index of the chunk's pair records <pair_id>.npz (becos.record)
+    <setting>/benchmark.zarr            the store (becos.store), validated into validation.json
+    cache/                              parsed meshes and edge files (safe to delete)
+
+Incremental rebuilds. A pair's chunk job is a contiguous range of fixed hash buckets of its id
+(:func:`becos.sampling.assign_chunks`; the manifest's ``chunk`` column records the grouping), so
+growth adds pairs to chunks and moves one only when the number of chunk jobs doubles; a moved pair
+keeps its files (named by pair id; the chunk is not part of any input key). A chunk job reruns when
+the manifest or catalog is rewritten or its stage's options change (they are its Snakemake
+``params``, :func:`job_options`); a remesh job only when its shape's catalog row or target changes.
+Inside a chunk job, a pair's file is rewritten only when the pair's *input key* changed: the digest
+of its manifest row (except its chunk), the stage options and the digests of the files
+it reads (remesh variants, ground truth). So enabling another dataset recomputes only the new or
+re-partnered pairs, and changing ``min_overlap`` recomputes records but no remesh and no ground truth.
+"""
+
+from becos.workflow.config import (
+    CONFIG_DOCS,
+    SCHEMA_PATH,
+    check_config,
+    check_config_files,
+    load_config,
+    read_config_file,
+    resolve_config,
+    schema_problems,
+    settings_of,
+)
+from becos.workflow.layout import (
+    Layout,
+    pair_file,
+    remesh_token,
+    remeshed_file,
+)
+from becos.workflow.options import (
+    GROUND_TRUTH_VERSION,
+    RECORD_VERSION,
+    SETTING_KEYS,
+    STAGE_KEYS,
+    STAGE_VERSIONS,
+    digest,
+    job_options,
+    stage_options,
+)
+from becos.workflow.plan import (
+    Plan,
+    annotation_source,
+    build_catalog,
+    build_manifest,
+    edge_files_between,
+    published_views_folder,
+    remesh_target,
+    uses_published_views,
+)
+from becos.workflow.shapes import (
+    MESHES_KEPT,
+    SHAPES_KEPT,
+    ShapeKey,
+    ShapeStore,
+    _entry,
+    pair_shape_keys,
+    visit_order,
+)
+from becos.workflow.stages import (
+    _narrow,
+    _published_rotations,
+    _published_views,
+    _stored_key,
+    export_pairings_stage,
+    ground_truth_stage,
+    load_ground_truth,
+    pair_options,
+    pairs_stage,
+    published_parts,
+    remesh_stage,
+    store_metadata,
+    write_catalog_stage,
+    write_manifest_stage,
+)
+
+__all__ = [
+    "pair_file",
+    "remeshed_file",
+    "published_views_folder",
+    "uses_published_views",
+    "GROUND_TRUTH_VERSION",
+    "RECORD_VERSION",
+    "STAGE_VERSIONS",
+    "STAGE_KEYS",
+    "SETTING_KEYS",
+    "digest",
+    "stage_options",
+    "job_options",
+    "SCHEMA_PATH",
+    "resolve_config",
+    "CONFIG_DOCS",
+    "schema_problems",
+    "check_config",
+    "settings_of",
+    "load_config",
+    "read_config_file",
+    "check_config_files",
+    "Layout",
+    "remesh_token",
+    "annotation_source",
+    "build_catalog",
+    "build_manifest",
+    "Plan",
+    "remesh_target",
+    "edge_files_between",
+    "SHAPES_KEPT",
+    "MESHES_KEPT",
+    "_entry",
+    "ShapeKey",
+    "pair_shape_keys",
+    "visit_order",
+    "ShapeStore",
+    "write_catalog_stage",
+    "write_manifest_stage",
+    "remesh_stage",
+    "_stored_key",
+    "ground_truth_stage",
+    "_narrow",
+    "load_ground_truth",
+    "pair_options",
+    "pairs_stage",
+    "_published_views",
+    "_published_rotations",
+    "store_metadata",
+    "published_parts",
+    "export_pairings_stage",
+]

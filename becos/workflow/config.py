@@ -1,0 +1,323 @@
+"""The configuration: ``becos/data/schema.yaml`` checked and defaults filled in, the checks across keys,
+config files read with errors that name the file, line and fix."""
+
+from __future__ import annotations
+
+from copy import deepcopy
+from pathlib import Path
+
+from becos.errors import ConfigError
+from becos.settings import SETTINGS, overlap_range_problem
+
+SCHEMA_PATH = Path(__file__).resolve().parents[1] / "data" / "schema.yaml"
+"""The config schema, shipped inside the package (config/README.md documents every key)."""
+
+
+def _schema() -> dict:
+    import yaml
+
+    return yaml.safe_load(SCHEMA_PATH.read_text())
+
+
+def _typed_command_line_values(schema: dict, instance):
+    """Nested values given as ``snakemake --config 'exports={zarr: true, ...}'`` arrive as strings
+    (Snakemake reads them with YAML's BaseLoader): turn ``"true"``/``"false"`` and numbers into the
+    boolean / integer / number the schema asks for, recursively; anything else is left to the schema."""
+    kind = schema.get("type")
+    if isinstance(instance, dict) and kind == "object":
+        props = schema.get("properties", {})
+        return {k: _typed_command_line_values(props[k], v) if k in props else v for k, v in instance.items()}
+    if isinstance(instance, list) and kind == "array" and isinstance(schema.get("items"), dict):
+        return [_typed_command_line_values(schema["items"], v) for v in instance]
+    if isinstance(instance, str):
+        text = instance.strip()
+        if kind == "boolean" and text.lower() in ("true", "false"):
+            return text.lower() == "true"
+        try:
+            if kind == "integer" and text.lstrip("+-").isdigit():
+                return int(text)
+            if kind == "number":
+                return float(text)
+        except ValueError:
+            pass
+    return instance
+
+
+def _fill_defaults(schema: dict, instance):
+    """Fill ``default`` values of object properties, recursively (like Snakemake's ``validate``)."""
+    if not isinstance(instance, dict) or schema.get("type") != "object":
+        return instance
+    for key, sub in schema.get("properties", {}).items():
+        if key not in instance and "default" in sub:
+            instance[key] = deepcopy(sub["default"])
+        if key in instance:
+            _fill_defaults(sub, instance[key])
+    return instance
+
+
+def resolve_config(raw: dict) -> dict:
+    """Validate ``raw`` against ``becos/data/schema.yaml``, fill defaults, check what a schema cannot.
+
+    Raises:
+        ConfigError: one line per problem (:func:`schema_problems`, :func:`check_config`), each
+            ``<key>: <what is wrong>. Fix: <fix>`` (unknown key, wrong type, reversed overlap range, ...).
+    """
+    import jsonschema
+
+    schema = _schema()
+    config = _fill_defaults(schema, _typed_command_line_values(schema, deepcopy(dict(raw))))
+    if config.get("remesher") == "auto":  # the published targets, rotations and views refer to the reference's remesh
+        config["remesher"] = "reference" if config.get("original_settings") else "becos"
+    validator = jsonschema.Draft202012Validator(schema)
+    errors = sorted(validator.iter_errors(config), key=lambda e: [str(k) for k in e.absolute_path])
+    if errors:
+        raise ConfigError("\n".join(line for e in errors for line in schema_problems(e)))
+    check_config(config)
+    return config
+
+
+CONFIG_DOCS = "config/README.md"
+_TYPE_NAMES = {
+    "integer": "an integer",
+    "number": "a number",
+    "string": "a string",
+    "boolean": "true or false",
+    "array": "a list",
+    "object": "a mapping (key: value)",
+    "null": "null",
+}
+
+
+def _key(path) -> str:
+    """A config key path as the user writes it: ``caps.train``, ``datasets[1]``, ``(top level)``."""
+    text = ""
+    for part in path:
+        text += f"[{part}]" if isinstance(part, int) else (f".{part}" if text else str(part))
+    return text or "(top level)"
+
+
+def _type_of(value) -> str:
+    """The JSON-schema type name of a YAML value."""
+    if value is None:
+        return "null"
+    if isinstance(value, bool):
+        return "boolean"
+    if isinstance(value, int):
+        return "integer"
+    return {float: "number", str: "string", list: "array", dict: "object"}.get(type(value), type(value).__name__)
+
+
+def _accepts_type(schema: dict, value) -> bool:
+    """Whether ``schema``'s ``type`` (if any) admits ``value``."""
+    wanted = schema.get("type")
+    if wanted is None:
+        return True
+    wanted = [wanted] if isinstance(wanted, str) else list(wanted)
+    kind = _type_of(value)
+    return kind in wanted or (kind == "integer" and "number" in wanted)
+
+
+def schema_problems(error) -> list[str]:
+    """One line per problem of a jsonschema ``ValidationError``: ``<key>: <what is wrong>. Fix: <fix>``.
+
+    ``oneOf``/``anyOf`` errors report the branch whose type fits the value (e.g. a bad ``sha256`` inside
+    ``annotations_archive``), or the allowed forms when none fits.
+    """
+    import difflib
+
+    key, value, rule, limit = _key(error.absolute_path), error.instance, error.validator, error.validator_value
+    docs = f"see {CONFIG_DOCS}"
+    if rule == "additionalProperties":
+        known = sorted(error.schema.get("properties", {}))
+        lines = []
+        for extra in sorted(set(value) - set(known), key=str):
+            name = _key([*error.absolute_path, extra])
+            close = difflib.get_close_matches(str(extra), known, n=1)
+            if close:
+                fix = f"did you mean '{close[0]}'? Correct the spelling or remove the key ({docs})"
+            elif len(known) <= 12:
+                fix = f"remove it; the keys here are {', '.join(known)} ({docs})"
+            else:
+                fix = f"remove it (every key: {CONFIG_DOCS})"
+            lines.append(f"{name}: unknown key. Fix: {fix}")
+        return lines
+    if rule == "type":
+        wanted = [limit] if isinstance(limit, str) else list(limit)
+        expected = " or ".join(_TYPE_NAMES.get(t, t) for t in wanted)
+        return [
+            f"{key}: {value!r} is {_TYPE_NAMES.get(_type_of(value), _type_of(value))}, not {expected}. "
+            f"Fix: give {expected} ({docs})"
+        ]
+    if rule == "enum":
+        choices = ", ".join(map(str, limit))
+        close = difflib.get_close_matches(str(value), [str(c) for c in limit], n=1)
+        hint = f" (did you mean '{close[0]}'?)" if close else ""
+        return [f"{key}: {value!r} is not an allowed value. Fix: use one of {choices}{hint}"]
+    bounds = {
+        "minimum": ("below the minimum", ">="),
+        "exclusiveMinimum": ("not above", ">"),
+        "maximum": ("above the maximum", "<="),
+        "exclusiveMaximum": ("not below", "<"),
+    }
+    if rule in bounds:
+        what, op = bounds[rule]
+        return [f"{key}: {value!r} is {what} {limit}. Fix: use a value {op} {limit}"]
+    if rule == "minItems":
+        return [f"{key}: the list has {len(value)} item(s), it needs at least {limit}. Fix: list at least {limit}"]
+    if rule == "maxItems":
+        return [f"{key}: the list has {len(value)} items, at most {limit} are allowed. Fix: shorten it"]
+    if rule == "uniqueItems":
+        repeated = sorted({str(v) for v in value if value.count(v) > 1})
+        return [f"{key}: lists {', '.join(repeated)} more than once. Fix: list each item once"]
+    if rule == "minLength":
+        return [f"{key}: is empty. Fix: give a non-empty value ({docs})"]
+    if rule == "pattern":
+        return [f"{key}: {value!r} does not have the expected form (pattern {limit}). Fix: {docs}"]
+    if rule == "required":
+        missing = [k for k in limit if k not in value]
+        return [f"{_key([*error.absolute_path, k])}: missing. Fix: add it ({docs})" for k in missing]
+    if rule in ("oneOf", "anyOf") and error.context:
+        branches = error.schema.get(rule, [])
+        fitting = [i for i, b in enumerate(branches) if _accepts_type(b, value)]
+        if len(fitting) == 1:
+            inner = [e for e in error.context if e.relative_schema_path and e.relative_schema_path[0] == fitting[0]]
+            lines = [line for e in inner for line in schema_problems(e)]
+            if lines:
+                return lines
+        kinds = [t for b in branches for t in ([b["type"]] if isinstance(b.get("type"), str) else b.get("type", []))]
+        forms = " or ".join(_TYPE_NAMES.get(t, t) for t in kinds) or "another form"
+        return [f"{key}: {value!r} is {_TYPE_NAMES.get(_type_of(value), _type_of(value))}. Fix: give {forms} ({docs})"]
+    message = " ".join(str(error.message).split())
+    return [f"{key}: {message}. Fix: {docs}"]
+
+
+def check_config(config: dict) -> None:
+    """Checks across keys, run right after the schema (so a bad config fails before any job).
+
+    Raises:
+        ConfigError: one line per problem, ``<key>: <what is wrong>. Fix: <fix>``.
+    """
+    import difflib
+
+    from becos.datasets import available_datasets
+
+    problems = []
+    if config["exports"].get("zarr") is False:
+        problems.append(
+            "exports.zarr: false is not supported: the Zarr store is always built (validation, the report "
+            "and every other export read it). Fix: remove exports.zarr from the configuration"
+        )
+    overlap = overlap_range_problem(config["min_overlap"], config["max_overlap"])
+    if overlap:
+        problems.append(overlap)
+    known = sorted(available_datasets())
+    for name in config["datasets"]:
+        if name not in known:
+            close = difflib.get_close_matches(name, known, n=1)
+            hint = f"did you mean '{close[0]}'? " if close else ""
+            problems.append(
+                f"datasets: '{name}' is not in the registry (config/datasets/*.yaml). "
+                f"Fix: {hint}use one of {', '.join(known)}"
+            )
+    if config.get("download") or config.get("download_urls"):
+        from becos.download import download_config_problems
+
+        problems += download_config_problems(config)
+    if config.get("original_settings") and "partial_full" in settings_of(config):
+        problems.append(
+            "original_settings: the reference publishes no partial_full pair list. "
+            "Fix: use setting full_full / partial_partial or original_settings: false"
+        )
+    synthetic = config.get("synthetic") or {}
+    if synthetic.get("enabled"):
+        out = Path(synthetic.get("out", "resources/synthetic"))
+        for key, expected in (("data_dir", out / "data"), ("annotations", out / "annotations")):
+            if Path(config[key]) != expected:
+                problems.append(
+                    f"{key}: {config[key]!r}, but the synthetic collection is generated into "
+                    f"{str(expected)!r}. Fix: set {key}: {expected} (or synthetic.enabled: false)"
+                )
+    results = Path(config.get("results", "results"))
+    if results.exists() and not results.is_dir():
+        problems.append(
+            f"results: {str(results)!r} ({results.absolute()}) is a file, not a folder. "
+            "Fix: set results to a folder path, or move the file away"
+        )
+    if problems:
+        raise ConfigError("\n".join(" ".join(p.split()) for p in problems))  # one line per problem
+
+
+def settings_of(config: dict) -> list[str]:
+    """The configured settings as a list, in the canonical order."""
+    value = config.get("setting", list(SETTINGS))
+    wanted = {value} if isinstance(value, str) else set(value)
+    return [s for s in SETTINGS if s in wanted]
+
+
+def load_config(path: str | Path) -> dict:
+    """Read a config (JSON or YAML) and resolve it (:func:`resolve_config`)."""
+    return resolve_config(read_config_file(path))
+
+
+def read_config_file(path: str | Path) -> dict:
+    """The mapping in a YAML (or JSON) config file, unresolved.
+
+    Raises:
+        ConfigError: ``<file>: <problem>. Fix: <fix>`` when the file is missing, is not valid YAML (with
+            its line and column) or does not hold a mapping.
+    """
+    import yaml
+
+    path = Path(path)
+    if not path.is_file():
+        what = "is a folder" if path.is_dir() else "not found"
+        raise ConfigError(
+            f"{path}: config file {what} ({path.absolute()}). Fix: check the path given to "
+            "--configfile (keys: config/README.md; an example: config/tosca.yaml)"
+        )
+    try:
+        value = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as exc:
+        mark, start = getattr(exc, "problem_mark", None), getattr(exc, "context_mark", None)
+        where = f"line {mark.line + 1}, column {mark.column + 1}: " if mark is not None else ""
+        problem = " ".join(str(getattr(exc, "problem", None) or exc).split())
+        if start is not None and getattr(exc, "context", None):
+            problem += f"; {exc.context} at line {start.line + 1}, column {start.column + 1}"
+        raise ConfigError(
+            f"{path}: {where}not valid YAML ({problem}). Fix: correct the YAML syntax there "
+            "(e.g. a missing ']' or ':', tabs used for indentation)"
+        ) from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"{path}: cannot be read ({exc}). Fix: check the file's permissions and encoding") from None
+    if value is None:
+        return {}
+    if not isinstance(value, dict):
+        raise ConfigError(
+            f"{path}: holds {type(value).__name__}, not a mapping of config keys. "
+            "Fix: write one `key: value` per line (config/README.md)"
+        )
+    return value
+
+
+def check_config_files(argv: list[str]) -> list[str]:
+    """Problems (one line each) of the ``--configfile``/``--configfiles`` files named in a Snakemake
+    command line: missing, not YAML, not a mapping. Snakemake itself reports these with a traceback or
+    without file and line, before the workflow is read (the default workflow profile calls this)."""
+    files, taking = [], False
+    for arg in argv:
+        name, eq, value = arg.partition("=")
+        if name in ("--configfile", "--configfiles"):
+            taking = not eq  # `--configfile a.yaml b.yaml` (nargs +) or `--configfile=a.yaml`
+            if eq:
+                files.append(value)
+        elif taking and not arg.startswith("-"):
+            files.append(arg)
+        else:
+            taking = False
+    problems = []
+    for name in files:
+        try:
+            read_config_file(name)
+        except ConfigError as exc:
+            problems.append(str(exc))
+    return problems

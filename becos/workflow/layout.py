@@ -1,0 +1,149 @@
+"""Where every artefact of a run lives under ``results`` (:class:`Layout`), and which remesh file a pair side
+uses (:func:`remesh_token`)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+
+@dataclass(frozen=True)
+class Layout:
+    """Where every artefact of a run lives (relative to the working directory unless absolute).
+
+    The one statement of every path the rules name: a rule's output is ``LAYOUT.<member>(...)`` with
+    wildcards as arguments (``LAYOUT.store("{setting}")``), its input the same member, so a file's name
+    is written once; the Python side (:class:`becos.workflow.plan.Plan`, tests) asks the same members
+    with values. A per-setting member takes a setting or ``"{setting}"``; a chunk an int (written as 4
+    digits) or ``"{chunk}"``.
+    """
+
+    results: Path
+
+    @classmethod
+    def of(cls, config: dict) -> Layout:
+        return cls(Path(config.get("results", "results")))
+
+    @property
+    def config(self) -> Path:
+        return self.results / "config.json"
+
+    @property
+    def checks(self) -> Path:
+        return self.results / "checks" / "datasets.json"
+
+    def downloaded(self, dataset: str) -> Path:
+        """Stamp of a dataset's download (``becos download-dataset --out``)."""
+        return self.results / "downloads" / f"{dataset}.json"
+
+    @property
+    def catalog(self) -> Path:
+        return self.results / "catalog.csv"
+
+    @property
+    def cache(self) -> Path:
+        """Parsed meshes and edge files (safe to delete; no job declares it)."""
+        return self.results / "cache"
+
+    def manifest(self, setting: str) -> Path:
+        return self.results / setting / "manifest.csv"
+
+    @property
+    def remeshed_root(self) -> Path:
+        """The folder of every remesh variant (:func:`remeshed_file`)."""
+        return self.results / "remeshed"
+
+    def remeshed(self, dataset: str, name: str, token: str) -> Path:
+        return remeshed_file(self.remeshed_root, dataset, name, token)
+
+    def remeshed_ply(self, dataset: str, name: str, token: str) -> Path:
+        """The remesh variant as PLY, beside its .npz (to look at; no job reads it)."""
+        return self.remeshed(dataset, name, token).with_suffix(".ply")
+
+    def ground_truth_folder(self, setting: str) -> Path:
+        """A setting's ground-truth files ``<pair_id>.npz`` and their chunk indices."""
+        return self.results / setting / "ground_truth"
+
+    def ground_truth_index(self, setting: str, chunk: int | str) -> Path:
+        return self.ground_truth_folder(setting) / _chunk_index_name(chunk)
+
+    def ground_truth(self, setting: str, pair_id: str) -> Path:
+        return pair_file(self.ground_truth_folder(setting), pair_id)
+
+    def pairs_folder(self, setting: str) -> Path:
+        """A setting's pair records ``<pair_id>.npz`` (:mod:`becos.record`) and their chunk indices."""
+        return self.results / setting / "pairs"
+
+    def pairs_index(self, setting: str, chunk: int | str) -> Path:
+        return self.pairs_folder(setting) / _chunk_index_name(chunk)
+
+    def record(self, setting: str, pair_id: str) -> Path:
+        return pair_file(self.pairs_folder(setting), pair_id)
+
+    def metadata(self, setting: str) -> Path:
+        """What a setting's store records about its making (``becos metadata``)."""
+        return self.results / setting / "metadata.json"
+
+    def store(self, setting: str) -> Path:
+        """A setting's Zarr store (:mod:`becos.store`)."""
+        return self.results / setting / "benchmark.zarr"
+
+    def validation(self, setting: str) -> Path:
+        return self.results / setting / "validation.json"
+
+    def released(self, setting: str) -> Path:
+        return self.results / setting / "released"
+
+    def psmal(self, setting: str) -> Path:
+        return self.results / setting / "psmal"
+
+    def geodesics(self, setting: str) -> Path:
+        return self.results / setting / "geodesics"
+
+    @property
+    def geodesic_plan(self) -> Path:
+        """The geodesic plan over every setting's store (temporary)."""
+        return self.results / "geodesics" / "plan"
+
+    def geodesic_rows(self, part: int | str) -> Path:
+        return self.results / "geodesics" / "rows" / f"part_{part}"
+
+    def published_pickle(self, setting: str) -> Path:
+        return self.results / setting / f"pairings_{setting}.pkl"
+
+    def report(self, setting: str) -> Path:
+        return self.results / setting / "report"
+
+    def predictions(self, setting: str, baseline: str) -> Path:
+        return self.results / setting / "predictions" / baseline
+
+    def evaluation(self, setting: str) -> Path:
+        """The folder ``becos evaluate`` writes ``summary.csv``, ``pck.png`` and ``per_pair.csv`` into."""
+        return self.results / setting / "evaluation"
+
+
+def _chunk_index_name(chunk: int | str) -> str:
+    """``chunk_0007.json`` for chunk 7; a wildcard pattern (``"{chunk}"``) is kept as it is."""
+    return f"chunk_{chunk}.json" if isinstance(chunk, str) else f"chunk_{chunk:04d}.json"
+
+
+def remeshed_file(root: str | Path, dataset: str, name: str, token: str) -> Path:
+    """A remesh variant's .npz under the remesh folder ``root`` (:attr:`Layout.remeshed_root`)."""
+    return Path(root) / dataset / name / f"{token}.npz"
+
+
+def pair_file(folder: str | Path, pair_id: str) -> Path:
+    """A pair's file in a chunk stage's folder, beside the chunk indices (ground truth or record)."""
+    return Path(folder) / f"{pair_id}.npz"
+
+
+def remesh_token(row, side: str, remesh: bool) -> str:
+    """The remesh file a pair side uses: ``v<k>`` (variant k), ``f<n>`` (published face target n) or
+    ``original`` (no remeshing)."""
+    if not remesh:
+        return "original"
+    target = row.get(f"{side}_face_target") if hasattr(row, "get") else None
+    if target is not None and not math.isnan(float(target)) and int(target) > 0:
+        return f"f{int(target)}"
+    return f"v{int(row[f'{side}_variant'])}"

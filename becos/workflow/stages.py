@@ -1,0 +1,458 @@
+"""The stage functions: the work of one job of each kind (``becos <sub-command>``, :mod:`becos.cli.workflow`)."""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+import time
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from becos.atomic import remove_stale_temporaries, write_text
+from becos.errors import ConfigError
+from becos.workflow.layout import pair_file, remesh_token
+from becos.workflow.options import GROUND_TRUTH_VERSION, RECORD_VERSION, digest, stage_options
+from becos.workflow.plan import build_catalog, build_manifest, remesh_target, uses_published_views
+from becos.workflow.shapes import ShapeStore, visit_order
+
+if TYPE_CHECKING:
+    import pandas as pd  # imported where used: write-config, metadata and remesh jobs start without it
+
+
+def _log(message: str) -> None:
+    print(message, file=sys.stderr, flush=True)
+
+
+def write_catalog_stage(config: dict, out: Path) -> pd.DataFrame:
+    from becos.catalog import write_catalog
+
+    catalog = build_catalog(config)
+    write_catalog(catalog, out)
+    counts = catalog.groupby(["dataset", "split"]).size().to_dict()
+    _log(f"catalog: {len(catalog)} shapes -> {out}; per dataset/split: {counts}")
+    return catalog
+
+
+def write_manifest_stage(config: dict, setting: str, catalog_path: Path, out: Path) -> pd.DataFrame:
+    from becos.catalog import read_catalog
+    from becos.sampling import write_manifest
+
+    manifest = build_manifest(config, setting, read_catalog(catalog_path))
+    write_manifest(manifest, out)
+    report = manifest.attrs.get("report", {})
+    _log(f"manifest {setting}: {len(manifest)} pairs -> {out}; {json.dumps(report, sort_keys=True)}")
+    return manifest
+
+
+def remesh_stage(config: dict, shape_row: dict, token: str, out: Path, ply: Path | None = None) -> None:
+    """Remesh one shape variant (prepared, common-frame mesh) and write the maps (+ a PLY to look at).
+
+    ``shape_row`` is the shape's catalog row (:mod:`becos.catalog` columns). With ``remesher:
+    reference`` the reference's remesh of the file coordinates (:mod:`becos.reference_remesh`; a vertex
+    target n becomes the face target 2n).
+    """
+    from becos.remesh import remesh_with_stats, save_remeshed, write_ply
+
+    cpu = {"job_start": time.process_time()}  # CPU seconds by step, logged for benchmarks/remesh.py
+    dataset, name = shape_row["dataset"], shape_row["name"]
+    shapes = ShapeStore(config, [shape_row])
+    target = remesh_target(config, dataset, name, token)
+    lap = time.process_time()
+    shapes.mesh(dataset, name)
+    cpu["load"], lap = time.process_time() - lap, time.process_time()
+    prepared = shapes.prepared(dataset, name)
+    cpu["prepare"], lap = time.process_time() - lap, time.process_time()
+    start = time.perf_counter()
+    if config.get("remesher") == "reference":
+        from becos.reference_remesh import remesh_like_reference
+
+        faces = target.get("target_faces") or 2 * int(target["target_vertices"])
+        result, _ = remesh_like_reference(shapes.mesh(dataset, name), prepared, faces, source=prepared.entry.path)
+        cpu["remesh"] = time.process_time() - lap
+    else:
+        result, stats = remesh_with_stats(prepared.mesh, **target, source=prepared.entry.path)
+        cpu.update(stats["cpu_seconds"])
+    lap = time.process_time()
+    _remove_killed_writes([Path(p) for p in (out, ply) if p is not None])
+    save_remeshed(Path(out), result)
+    if ply is not None:
+        write_ply(Path(ply), result.mesh)
+    cpu["save"] = time.process_time() - lap
+    _log(f"remesh cpu seconds: {json.dumps({k: round(v, 4) for k, v in cpu.items()})}")
+    _log(
+        f"remesh {dataset}/{name} {token} ({config.get('remesher', 'becos')}): {prepared.mesh.n_vertices} -> "
+        f"{result.mesh.n_vertices} vertices ({target}) in {time.perf_counter() - start:.1f} s"
+    )
+
+
+def _stored_key(path: Path, member: str) -> str | None:
+    """The input key stored in an .npz (None if absent or unreadable)."""
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            value = str(data[member]) if member in data.files else None
+    except Exception:
+        return None
+    if value is not None and member == "__meta__":
+        return json.loads(value).get("input_key")
+    return value
+
+
+def _chunk_rows(manifest_path: Path, chunk: int) -> pd.DataFrame:
+    from becos.sampling import read_manifest
+
+    manifest = read_manifest(manifest_path)
+    return manifest[manifest["chunk"] == int(chunk)]
+
+
+def _progress(stage: str, setting: str, chunk: int, entries: list[dict], n_rows: int, started: float) -> None:
+    """A progress line every 10 pairs and at the end of a chunk."""
+    done = len(entries)
+    if done % 10 == 0 or done == n_rows:
+        _log(
+            f"{stage} {setting} chunk {chunk}: {done}/{n_rows} pairs ({sum(e['computed'] for e in entries)} "
+            f"computed, the rest up to date) {time.perf_counter() - started:.1f} s"
+        )
+
+
+def _remove_killed_writes(paths: list[Path]) -> None:
+    """Before a job writes ``paths``: remove the temporary files a killed run of it left beside them."""
+    for folder in {p.parent for p in paths}:
+        n = remove_stale_temporaries(folder, [p.name for p in paths if p.parent == folder])
+        if n:
+            _log(f"removed {n} temporary file(s) left in {folder} by an interrupted run")
+
+
+def _write_index(path: Path, setting: str, chunk: int, entries: list[dict], started: float) -> dict:
+    """Write a chunk's index (pairs, their files, input keys and digests); return its counts.
+
+    The index holds content only, so a resumed or re-ordered run writes the same bytes; what was
+    computed or reused and how long it took go to the job's log."""
+    computed = sum(e["computed"] for e in entries)
+    index = {
+        "setting": setting,
+        "chunk": int(chunk),
+        "n_pairs": len(entries),
+        "pairs": sorted(({k: v for k, v in e.items() if k != "computed"} for e in entries), key=lambda e: e["pair_id"]),
+    }
+    write_text(path, json.dumps(index, indent=1) + "\n")
+    _log(
+        f"chunk {chunk} of {setting}: {len(entries)} pairs, {computed} computed, {len(entries) - computed} "
+        f"reused, {time.perf_counter() - started:.1f} s"
+    )
+    return {"n": len(entries), "computed": computed}
+
+
+def ground_truth_stage(
+    config: dict, setting: str, chunk: int, out_index: Path, *, manifest: Path, catalog: Path, remeshed: Path
+) -> dict:
+    """Ground truth both ways for every pair of a chunk; files already up to date are kept.
+
+    Reads the setting's ``manifest``, the ``catalog`` and the remesh variants of the chunk's pairs under
+    the folder ``remeshed`` (the paths its rule declares); writes ``<pair_id>.npz`` beside ``out_index``.
+    """
+    from becos.atomic import save_npz
+    from becos.catalog import read_catalog
+
+    started = time.perf_counter()
+    remesh = bool(config.get("remesh", True))
+    shapes = ShapeStore(config, read_catalog(catalog), remeshed=remeshed)
+    rows = _chunk_rows(manifest, chunk)
+    folder = Path(out_index).parent
+    _remove_killed_writes([*(pair_file(folder, pid) for pid in rows["pair_id"]), Path(out_index)])
+    entries = []
+    ordered, last_used = visit_order(rows.to_dict("records"), remesh)
+    for row, done in zip(ordered, last_used):
+        tx, ty = remesh_token(row, "x", remesh), remesh_token(row, "y", remesh)
+        key = digest(
+            {
+                "version": GROUND_TRUTH_VERSION,
+                "x": [row["x_dataset"], row["x_name"], tx],
+                "y": [row["y_dataset"], row["y_name"], ty],
+                "sources": [
+                    shapes.source_digest(row["x_dataset"], row["x_name"], tx),
+                    shapes.source_digest(row["y_dataset"], row["y_name"], ty),
+                ],
+                "edges": shapes.edge_digests(
+                    shapes.entry(row["x_dataset"], row["x_name"]), shapes.entry(row["y_dataset"], row["y_name"])
+                ),
+                "options": stage_options(config, "ground_truth"),
+            }
+        )
+        path = pair_file(folder, row["pair_id"])
+        computed = _stored_key(path, "input_key") != key
+        if computed:
+            x, y = shapes.entry(row["x_dataset"], row["x_name"]), shapes.entry(row["y_dataset"], row["y_name"])
+            rx, ry = shapes.remeshed(x.dataset, x.name, tx), shapes.remeshed(y.dataset, y.name, ty)
+            gt_xy = shapes.network.ground_truth(x, y, x_remesh=rx, y_remesh=ry)
+            gt_yx = shapes.network.ground_truth(y, x, x_remesh=ry, y_remesh=rx)
+            save_npz(
+                path,
+                compressed=True,
+                input_key=np.array(key),
+                xy_face=_narrow(gt_xy.face),
+                xy_weights=gt_xy.weights,
+                xy_distance=gt_xy.distance,
+                yx_face=_narrow(gt_yx.face),
+                yx_weights=gt_yx.weights,
+                yx_distance=gt_yx.distance,
+            )
+        entries.append(
+            {
+                "pair_id": row["pair_id"],
+                "path": str(path),
+                "input_key": key,
+                "computed": computed,
+                "digest": shapes.file_digest(path),
+            }
+        )
+        shapes.release(done)
+        _progress("ground truth", setting, chunk, entries, len(rows), started)
+    return _write_index(Path(out_index), setting, chunk, entries, started)
+
+
+def _narrow(face: np.ndarray) -> np.ndarray:
+    """Face indices as int32 on disk when they fit (:class:`SurfaceMap` widens them on load)."""
+    return face.astype(np.int32) if len(face) and face.max() <= np.iinfo(np.int32).max else face
+
+
+def load_ground_truth(path: Path):
+    """``(gt_xy, gt_yx)`` :class:`becos.surface_map.SurfaceMap` from a ground-truth file (a .npz,
+    :func:`becos.atomic.save_npz` compressed:
+    ``input_key``, ``xy_face`` (V_x,) int32, ``xy_weights`` (V_x, 3), ``xy_distance`` (V_x,), the same
+    for ``yx``; files of older becos hold int64 faces, uncompressed)."""
+    from becos.surface_map import SurfaceMap
+
+    with np.load(path, allow_pickle=False) as d:
+        return (
+            SurfaceMap(d["xy_face"], d["xy_weights"], d["xy_distance"]),
+            SurfaceMap(d["yx_face"], d["yx_weights"], d["yx_distance"]),
+        )
+
+
+def pair_options(config: dict, setting: str):
+    from becos.pairs import PairOptions
+
+    fields = {k: config[k] for k in PairOptions.__dataclass_fields__ if k in config and k != "setting"}
+    return PairOptions(setting=setting, **fields)  # keys a setting does not use keep their defaults
+
+
+def pairs_stage(
+    config: dict,
+    setting: str,
+    chunk: int,
+    gt_index: Path,
+    out_index: Path,
+    *,
+    manifest: Path,
+    catalog: Path,
+    remeshed: Path,
+    triangle_ids: Path | None = None,
+) -> dict:
+    """Pair records (partiality, alignment, rotation, annotations) for every pair of a chunk.
+
+    Reads the setting's ``manifest``, the ``catalog``, the ground-truth files listed in ``gt_index``, the
+    remesh variants under ``remeshed`` and, for published P2P views, the shipped triangle ids in the
+    folder ``triangle_ids`` (None: every view is cast); writes ``<pair_id>.npz`` beside ``out_index``.
+    """
+    from becos.catalog import read_catalog
+    from becos.pairs import build_pair
+    from becos.record import is_intact
+
+    started = time.perf_counter()
+    remesh = bool(config.get("remesh", True))
+    shapes = ShapeStore(config, read_catalog(catalog), remeshed=remeshed)
+    options = pair_options(config, setting)
+    gt_files = {e["pair_id"]: e for e in json.loads(Path(gt_index).read_text())["pairs"]}
+    rows = _chunk_rows(manifest, chunk)
+    folder = Path(out_index).parent
+    _remove_killed_writes([*(pair_file(folder, pid) for pid in rows["pair_id"]), Path(out_index)])
+    labels = _labeller(config, shapes) if config.get("propagate_annotations", True) else None
+    entries = []
+    ordered, last_used = visit_order(rows.to_dict("records"), remesh)
+    for row, done in zip(ordered, last_used):
+        tx, ty = remesh_token(row, "x", remesh), remesh_token(row, "y", remesh)
+        gt = gt_files.get(row["pair_id"])
+        if gt is None:
+            raise ConfigError(
+                f"{gt_index}: no ground truth for pair {row['pair_id']}; re-run the workflow "
+                "(the ground-truth index is older than the manifest)"
+            )
+        key = digest(
+            {
+                "version": RECORD_VERSION,
+                "row": {k: row[k] for k in sorted(row) if k != "chunk"},
+                "options": stage_options(config, "pairs", setting),
+                "ground_truth": gt["digest"],
+                "sources": [
+                    shapes.source_digest(row["x_dataset"], row["x_name"], tx),
+                    shapes.source_digest(row["y_dataset"], row["y_name"], ty),
+                ],
+            }
+        )
+        path = pair_file(folder, row["pair_id"])
+        computed = _stored_key(path, "__meta__") != key
+        if not computed and not is_intact(path):
+            _log(
+                f"{path}: its content no longer matches the digest becos recorded when writing it (edited or "
+                f"replaced by hand?); rebuilding it"
+            )
+            computed = True
+        if computed:
+            x = shapes.instance(row["x_dataset"], row["x_name"], tx)
+            y = shapes.instance(row["y_dataset"], row["y_name"], ty)
+            gt_xy, gt_yx = load_ground_truth(Path(gt["path"]))
+            pair_scanners = (None, None)
+            if setting != "full_full":
+                pair_scanners = tuple(shapes.scanner(s.dataset, s.name, t, s.mesh) for s, t in ((x, tx), (y, ty)))
+            record = build_pair(
+                x,
+                y,
+                gt_xy,
+                gt_yx,
+                pair_id=row["pair_id"],
+                seed=int(row["seed"]),
+                split=row["split"],
+                options=options,
+                scanners=pair_scanners,
+                rotations=_published_rotations(row),
+                published_views=_published_views(config, row, options, triangle_ids),
+            )
+            if labels is not None:
+                for side, s, t in (("x", x, tx), ("y", y, ty)):
+                    full = labels(s.dataset, s.name, t)
+                    if full is not None:
+                        record.arrays[f"{side}_annotation"] = full[record[f"{side}_partial_to_full"]]
+            record.meta.update(
+                input_key=key, category=row["category"], copy=int(row["copy"]), x_token=tx, y_token=ty
+            )  # no chunk: regrouping keeps the record
+            record.save(path)
+        entries.append(
+            {
+                "pair_id": row["pair_id"],
+                "path": str(path),
+                "input_key": key,
+                "computed": computed,
+                "split": row["split"],
+                "digest": shapes.file_digest(path),
+            }
+        )
+        shapes.release(done)
+        _progress("pairs", setting, chunk, entries, len(rows), started)
+    return _write_index(Path(out_index), setting, chunk, entries, started)
+
+
+def _published_views(config: dict, row: dict, options, triangle_ids: Path | None = None):
+    """``original_settings`` P2P with the reference remesh: the views of the pair's published cameras
+    (:func:`becos.reference_views.published_scan`), else None (the pairs stage draws cameras).
+
+    ``triangle_ids``: the folder of the shipped view files (:func:`published_views_folder`, as the rule
+    declares it); None: where the config's annotation folder has them (a view without its file is cast).
+    """
+    if not uses_published_views(config, options.setting) or "x_cam_pos_0" not in row:
+        return None
+    from becos.reference_views import published_scan
+
+    n = sum(1 for k in row if k.startswith("x_cam_pos_"))
+    cameras = np.array([[row[f"{side}_cam_pos_{i}"] for i in range(n)] for side in "xy"], dtype=np.float64).reshape(
+        2, -1, 3
+    )
+    # published_scan names each file under the annotation folder: <root>/precomputed_triangle_ids/<setting>/
+    root = config["annotations"] if triangle_ids is None else Path(triangle_ids).parents[1]
+    return lambda x, y, gt_xy, gt_yx: published_scan(
+        x,
+        y,
+        gt_xy,
+        gt_yx,
+        root,
+        row["x_name"],
+        row["y_name"],
+        cameras,
+        options.n_cam_pos,
+        options.min_overlap,
+        options.max_overlap,
+    )
+
+
+def _published_rotations(row: dict):
+    """The published lists' random rotations of a pair (``original_settings``), else None."""
+    if "x_random_rot_0" not in row or math.isnan(float(row["x_random_rot_0"])):
+        return None
+    return tuple(
+        np.array([row[f"{side}_random_rot_{i}"] for i in range(9)], dtype=np.float64).reshape(3, 3)
+        for side in ("x", "y")
+    )
+
+
+def _labeller(config: dict, shapes: ShapeStore):
+    """``labels(dataset, name, token) -> (V,) int8 or None``: propagated left/right labels of a full shape."""
+    from becos.propagation import labels_for_instance
+
+    cache: dict = {}
+
+    def labels(dataset: str, name: str, token: str):
+        key = (dataset, name, token)
+        if key not in cache:
+            cache[key] = labels_for_instance(
+                shapes.network, shapes.entry(dataset, name), remesh=shapes.remeshed(dataset, name, token)
+            )
+        return cache[key]
+
+    return labels
+
+
+def store_metadata(config: dict, setting: str) -> dict:
+    """Metadata for a setting's store: config and its digest, datasets with licence and citation."""
+    from becos.datasets import DatasetSpec
+
+    datasets = {}
+    for name in config["datasets"]:
+        spec = DatasetSpec.load(name)
+        datasets[name] = {"title": spec.title, **{k: spec.source.get(k) for k in ("url", "licence", "citation")}}
+    return {
+        "setting": setting,
+        "config": config,
+        "config_hash": digest(config),
+        "datasets": datasets,
+        "generator": "becos workflow",
+        "follows_published_lists": published_parts(config, setting),
+    }
+
+
+def published_parts(config: dict, setting: str) -> dict[str, bool | None]:
+    """Per part of a setting's benchmark, whether it follows the published pair lists (None: the
+    setting has no such part). P2P views follow them with the reference remesh (their triangle ids
+    index its faces; :mod:`becos.reference_views`); P2F has no published list."""
+    original = bool(config.get("original_settings"))
+    remesh = bool(config.get("remesh", True))
+    reference = original and remesh and config.get("remesher") == "reference"
+    return {
+        "pairs": original,
+        "rotations": original,
+        "face_targets": original and remesh,
+        "remesh": reference,
+        "views": None if setting == "full_full" else (reference and setting == "partial_partial"),
+    }
+
+
+def export_pairings_stage(config: dict, setting: str, out: Path, store: Path, *, manifest: Path, catalog: Path) -> None:
+    """The manifest in the published pickle schema (share a benchmark as pair lists + code), with the
+    random rotations, cameras and face counts the store's records actually used (docs/released-layout.md,
+    section "Published pair lists"). Reads the setting's ``manifest``, the ``catalog`` and ``store``."""
+    from becos.catalog import read_catalog
+    from becos.published import store_pair_facts, write_published_pickle
+    from becos.sampling import read_manifest
+    from becos.store import open_benchmark
+
+    facts = store_pair_facts(open_benchmark(store))
+    write_published_pickle(
+        read_manifest(manifest),
+        out,
+        read_catalog(catalog),
+        random_rotations=facts["random_rotations"],
+        cameras=facts["cameras"],
+        pair_face_targets=facts["face_targets"],
+        data_root=config.get("data_dir"),
+    )
