@@ -430,14 +430,41 @@ def measure_direction(run: Run, record, setting: str, s: str, t: str) -> Directi
     )
 
 
-def audit_setting(run: Run, setting: str, pair_ids: set[str] | None = None, log=None) -> list[DirectionResult]:
-    """Both directions of every same-class pair of a setting's store (``pair_ids``: only these)."""
+def store_records(path: Path):
+    """The pair records of a setting's store, in store order.
+
+    A store of format 2 (this becos) is read by :func:`becos.store.open_benchmark`. A store of
+    format 1 (becos before the int32 store of issue #15; same record schema, same node layout,
+    int64 indices) is read here through zarr, so that a run of an older checkout can be audited
+    with this script's truth (issue #20's before/after table)."""
+    import zarr
+
+    from becos.record import PairRecord
     from becos.store import open_benchmark
 
-    bench = open_benchmark(run.results / setting / "benchmark.zarr")
+    info = dict(zarr.open_group(str(path), mode="r", zarr_format=3).attrs).get("becos_store") if path.is_dir() else None
+    if not isinstance(info, dict) or info.get("format") != 1:
+        yield from open_benchmark(path).records()  # this becos's reader, and its errors for anything else
+        return
+    root = zarr.open_group(str(path), mode="r", zarr_format=3)
+    layout = dict(info["layout"])
+    arrays = {key: root[f"arrays/{key}"] for key in layout}
+    offsets = {g: np.asarray(root[f"offsets/{g}"][:]) for g in {g for g in layout.values() if g is not None}}
+    meta_offsets = np.asarray(root["pairs/meta_offsets"][:])
+    blob = np.asarray(root["pairs/meta_json"][:]).tobytes()
+    for i in range(len(meta_offsets) - 1):
+        record = {
+            key: np.asarray(a[i] if layout[key] is None else a[offsets[layout[key]][i] : offsets[layout[key]][i + 1]])
+            for key, a in arrays.items()
+        }
+        yield PairRecord(record, json.loads(blob[meta_offsets[i] : meta_offsets[i + 1]].decode("utf-8")))
+
+
+def audit_setting(run: Run, setting: str, pair_ids: set[str] | None = None, log=None) -> list[DirectionResult]:
+    """Both directions of every same-class pair of a setting's store (``pair_ids``: only these)."""
     out = []
     started = time.perf_counter()
-    for record in bench.records():
+    for record in store_records(run.results / setting / "benchmark.zarr"):
         mx, my = record.meta["x"], record.meta["y"]
         if (mx["dataset"], mx["class"]) != (my["dataset"], my["class"]):
             continue
