@@ -242,8 +242,11 @@ class _BlockChecker:
             rows = np.flatnonzero(face_ok)
             gface = face[rows] + self.rep(self.start[go_f], gv)[rows]
             corners = a[f"{o}_faces"][gface]  # (R, 3) vertices of the other shape, per pair
-            at = a[f"{o}_vertices"][corners + self.rep(self.start[go_v], gv)[rows, None]]  # (R, 3, 3)
-            dist = np.linalg.norm(at - np.einsum("rk,rkd->rd", np.nan_to_num(w[rows]), at)[:, None], axis=2)
+            local = np.clip(corners, 0, np.maximum(self.rep(Vo, gv)[rows, None] - 1, 0))  # bad faces: index_range
+            at = a[f"{o}_vertices"][local + self.rep(self.start[go_v], gv)[rows, None]]  # (R, 3, 3)
+            wr = np.nan_to_num(w[rows])
+            wr = wr / np.where(np.abs(wr.sum(axis=1)) > 0, wr.sum(axis=1), 1.0)[:, None]  # sums: the weights check
+            dist = np.linalg.norm(at - np.einsum("rk,rkd->rd", wr, at)[:, None], axis=2)
             is_corner = corners == c[rows, None]
             own = np.where(is_corner, dist, np.inf).min(axis=1)
             # the record rounds in the remesh frame: a near tie may fall either way in this frame
