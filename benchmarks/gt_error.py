@@ -56,7 +56,7 @@ may be off), from a checkout whose venv's ``bin`` is first on PATH::
     python benchmarks/gt_error.py RUN/results --json RUN/gt_error.json \
         --show 8d6580bccdd048a0,6dd3aa469736f68f,3bf77f0f633595ec,eb40ae8aa66c4dc5,8beeb2fde1d5b8cc,108978215154cf3d
 
-(measured: the run 1,320 s CPU, 63 min wall on a shared 2-core machine; this script 135 s CPU over
+(measured: the run 1,320 s CPU, 52 min wall on a shared 2-core machine; this script 135 s CPU over
 the run's 234 same-class pairs, 468 directions). CI runs the same measurement on
 the tiny run (``tests/test_workflow.py::test_every_same_class_pair_is_within_the_ground_truth_bound``).
 """
