@@ -33,8 +33,9 @@ measured on Y. The overlap file names always name the shape they cover.
 Metric rules (:mod:`becos.metrics`): the error of a vertex is the geodesic distance, on the FULL
 shape 0 (for a partial X: its full remeshed shape, ``x_full_vertices``/``x_full_faces`` of the record),
 between the predicted vertex and the true point, divided by sqrt(area of the full X). The true point
-is, by default (``truth="vertex"``), the record's vertex-form truth ``corr_10`` (the largest-weight
-corner of the exact point: the released ``corres_10``, what the paper's numbers were scored against;
+is, by default (``truth="vertex"``), the record's vertex-form truth ``corr_10`` (the corner of the
+exact point's face nearest it: the released ``corres_10``, the vertex form the paper's numbers were
+scored against, which the reference took as the largest-weight corner;
 the ground truth as prediction scores exactly 100); with ``truth="point"`` (``--truth point``) it is
 the exact barycentric point ``corr_10_face``/``corr_10_weights``, against which even the ground-truth
 vertex map has errors of up to about one edge (on ~9.5k-vertex TOSCA cats: AUC x100 ~93 under
@@ -371,8 +372,8 @@ def evaluate_record(
         geodesics: the shared per-shape solver cache (a heat-method one is made when None).
         direction: ``"yx"`` (maps Y -> X like ``corr_10``) or ``"xy"`` (X -> Y like ``corr_01``).
         truth: ``"vertex"`` (default): the true point is the record's vertex-form truth ``corr_10`` (the
-            largest-weight corner of the exact point; the released ``corres_10``, what the paper scored
-            against; the ground truth scores exactly 100); ``"point"``: the exact barycentric point
+            corner of the exact point's face nearest it; the released ``corres_10``; the ground truth
+            scores exactly 100); ``"point"``: the exact barycentric point
             ``corr_10_face``/``corr_10_weights`` (then even the ground-truth vertex map has errors up to
             about one edge; see the module docstring).
         info: identity columns (:func:`pair_info`); derived from the record when None.

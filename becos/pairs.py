@@ -281,8 +281,8 @@ def build_pair(
     )
     arrays.update({f"x_{k}": v for k, v in shape_x.items()})
     arrays.update({f"y_{k}": v for k, v in shape_y.items()})
-    for name, m, target_faces in (("corr_01", map_xy, py.mesh.faces), ("corr_10", map_yx, px.mesh.faces)):
-        arrays[name] = m.to_vertex_indices(target_faces)
+    for name, m, target in (("corr_01", map_xy, py.mesh), ("corr_10", map_yx, px.mesh)):
+        arrays[name] = m.to_nearest_corners(target.vertices, target.faces)
         arrays[f"{name}_face"] = m.face
         arrays[f"{name}_weights"] = m.weights
     return PairRecord(arrays, meta)

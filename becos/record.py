@@ -118,7 +118,13 @@ SIDE_FIELDS: dict[str, Field] = {
 """Per-shape keys, named ``<s>_<key>`` for s in :data:`SIDES`; group ``vertex`` means ``<s>_vertex``."""
 
 PAIR_FIELDS: dict[str, Field] = {
-    "": Field("int64", (), "vertex", "(V_s,) vertex of the other shape, -1 = no counterpart", stored="int32"),
+    "": Field(
+        "int64",
+        (),
+        "vertex",
+        "(V_s,) vertex of the other shape: the corner of ``_face`` nearest the point, -1 = no counterpart",
+        stored="int32",
+    ),
     "_face": Field("int64", (), "vertex", "(V_s,) face of the other shape holding the point", stored="int32"),
     "_weights": Field("float64", (3,), "vertex", "(V_s, 3) barycentric weights in that face"),
 }

@@ -31,7 +31,7 @@ attribute instead of pairs. Checks (vectorised over blocks of pairs of about
 ``unmatched``     corr_01 >= 0 and corr_01_face >= 0 exactly where x_overlap_mask (same for Y);
                   weight rows of unmatched vertices are all 0 (or all NaN)
 ``weights``       weights of matched vertices finite, >= 0, summing to 1
-``corr_face``     corr_01 is the largest-weight corner of corr_01_face (same for corr_10)
+``corr_face``     corr_01 is the corner of corr_01_face nearest its point (same for corr_10)
 ``overlap``       s_overlap equals the mask's mean; partial_partial pairs whose meta says
                   ``accepted`` have both overlaps in [min_overlap, max_overlap] of meta ``options``
 ``index_maps``    partial_to_full strictly increasing, full_to_partial its inverse (-1 elsewhere)
@@ -241,12 +241,20 @@ class _BlockChecker:
         if face_ok.any():
             rows = np.flatnonzero(face_ok)
             gface = face[rows] + self.rep(self.start[go_f], gv)[rows]
-            corner = np.nan_to_num(w[rows], nan=-1.0).argmax(axis=1)
-            expected = a[f"{o}_faces"][gface, corner]
+            corners = a[f"{o}_faces"][gface]  # (R, 3) vertices of the other shape, per pair
+            local = np.clip(corners, 0, np.maximum(self.rep(Vo, gv)[rows, None] - 1, 0))  # bad faces: index_range
+            at = a[f"{o}_vertices"][local + self.rep(self.start[go_v], gv)[rows, None]]  # (R, 3, 3)
+            wr = np.nan_to_num(w[rows])
+            wr = wr / np.where(np.abs(wr.sum(axis=1)) > 0, wr.sum(axis=1), 1.0)[:, None]  # sums: the weights check
+            dist = np.linalg.norm(at - np.einsum("rk,rkd->rd", wr, at)[:, None], axis=2)
+            is_corner = corners == c[rows, None]
+            own = np.where(is_corner, dist, np.inf).min(axis=1)
+            # the record rounds in the remesh frame: a near tie may fall either way in this frame
+            tol = 1e-9 * (dist.max(axis=1) + 1e-12)
             self.report(
                 "corr_face",
-                f"{corr} is not the largest-weight corner of {corr}_face",
-                np.unique(self.pair_of[gv][rows[expected != c[rows]]]),
+                f"{corr} is not the corner of {corr}_face nearest its point",
+                np.unique(self.pair_of[gv][rows[own > dist.min(axis=1) + tol]]),
             )
 
         # overlap values

@@ -1,4 +1,4 @@
-"""Exact ground-truth error of a finished workflow run, over EVERY same-class pair (issue #20).
+r"""Exact ground-truth error of a finished workflow run, over EVERY same-class pair (issue #20).
 
 For each setting's ``benchmark.zarr`` and each pair whose two shapes belong to one class (poses of
 one TOSCA class share a triangulation: vertex i is vertex i), both directions (``corr_01``: X -> Y,
@@ -32,7 +32,33 @@ Run: ``python benchmarks/gt_error.py RESULTS [--settings full_full,...] [--worst
 [--json OUT]`` where RESULTS is a run's ``results`` folder (with ``catalog.csv``, ``remeshed/`` and
 ``<setting>/benchmark.zarr``). Tables on stdout, progress on stderr. Large runs can be split into
 processes by ``--pairs`` lists, each with its own ``--json``; ``--combine A.json B.json ...`` then
-prints the tables over all of them.
+prints the tables over all of them. ``--show ID,...`` adds both directions of those pairs side by
+side; ``--worst N`` lists each setting's N worst vertices. A store of format 1 (older becos) is read
+too (:func:`store_records`), so runs of two checkouts can be compared with one truth.
+
+Issue #20's run (``config/tosca.yaml`` merged over ``config/config.yaml``, seed 42, two remesh
+variants, caps train 60 / val 20 / test 20, all three settings; exports that do not touch the maps
+may be off), from a checkout whose venv's ``bin`` is first on PATH::
+
+    cat > issue20.yaml <<EOF
+    synthetic: {enabled: false}
+    datasets: [tosca]
+    template_file: templates_tosca_demo.csv
+    remesh_variants: 2
+    seed: 42
+    caps: {train: 60, val: 20, test: 20}
+    setting: [full_full, partial_full, partial_partial]
+    store_vis: false
+    exports: {released: false, report: false, published_pickle: false}
+    EOF
+    snakemake --cores 2 --configfile issue20.yaml \
+        --config data_dir=$(../shared/unpack)/data annotations=$(../shared/unpack) -d RUN
+    python benchmarks/gt_error.py RUN/results --json RUN/gt_error.json \
+        --show 8d6580bccdd048a0,6dd3aa469736f68f,3bf77f0f633595ec,eb40ae8aa66c4dc5,8beeb2fde1d5b8cc,108978215154cf3d
+
+(measured: the run 1,320 s CPU, 52 min wall on a shared 2-core machine; this script 135 s CPU over
+the run's 234 same-class pairs, 468 directions). CI runs the same measurement on
+the tiny run (``tests/test_workflow.py::test_every_same_class_pair_is_within_the_ground_truth_bound``).
 """
 
 from __future__ import annotations
@@ -430,14 +456,41 @@ def measure_direction(run: Run, record, setting: str, s: str, t: str) -> Directi
     )
 
 
-def audit_setting(run: Run, setting: str, pair_ids: set[str] | None = None, log=None) -> list[DirectionResult]:
-    """Both directions of every same-class pair of a setting's store (``pair_ids``: only these)."""
+def store_records(path: Path):
+    """The pair records of a setting's store, in store order.
+
+    A store of format 2 (this becos) is read by :func:`becos.store.open_benchmark`. A store of
+    format 1 (becos before the int32 store of issue #15; same record schema, same node layout,
+    int64 indices) is read here through zarr, so that a run of an older checkout can be audited
+    with this script's truth (issue #20's before/after table)."""
+    import zarr
+
+    from becos.record import PairRecord
     from becos.store import open_benchmark
 
-    bench = open_benchmark(run.results / setting / "benchmark.zarr")
+    info = dict(zarr.open_group(str(path), mode="r", zarr_format=3).attrs).get("becos_store") if path.is_dir() else None
+    if not isinstance(info, dict) or info.get("format") != 1:
+        yield from open_benchmark(path).records()  # this becos's reader, and its errors for anything else
+        return
+    root = zarr.open_group(str(path), mode="r", zarr_format=3)
+    layout = dict(info["layout"])
+    arrays = {key: root[f"arrays/{key}"] for key in layout}
+    offsets = {g: np.asarray(root[f"offsets/{g}"][:]) for g in {g for g in layout.values() if g is not None}}
+    meta_offsets = np.asarray(root["pairs/meta_offsets"][:])
+    blob = np.asarray(root["pairs/meta_json"][:]).tobytes()
+    for i in range(len(meta_offsets) - 1):
+        record = {
+            key: np.asarray(a[i] if layout[key] is None else a[offsets[layout[key]][i] : offsets[layout[key]][i + 1]])
+            for key, a in arrays.items()
+        }
+        yield PairRecord(record, json.loads(blob[meta_offsets[i] : meta_offsets[i + 1]].decode("utf-8")))
+
+
+def audit_setting(run: Run, setting: str, pair_ids: set[str] | None = None, log=None) -> list[DirectionResult]:
+    """Both directions of every same-class pair of a setting's store (``pair_ids``: only these)."""
     out = []
     started = time.perf_counter()
-    for record in bench.records():
+    for record in store_records(run.results / setting / "benchmark.zarr"):
         mx, my = record.meta["x"], record.meta["y"]
         if (mx["dataset"], mx["class"]) != (my["dataset"], my["class"]):
             continue
@@ -481,6 +534,7 @@ def distribution_table(results: list) -> pd.DataFrame:
             row[f"{stat}: max"] = v.max()
         row["mean / best"] = float(g["mean"].mean() / g["best_mean"].mean())
         row[f"max > {BOUND}"] = int((g["max"] > BOUND).sum())
+        row[f"pairs max > {BOUND}"] = int(g.loc[g["max"] > BOUND, "pair_id"].nunique())
         row["residual max"] = g["residual_max"].max()
         rows.append(row)
     return pd.DataFrame(rows)
@@ -519,7 +573,32 @@ def worst_vertices(run: Run, results: list[DirectionResult], n: int) -> pd.DataF
     return pd.DataFrame(out)
 
 
-def _print_tables(summaries: list[dict]) -> None:
+def pair_table(summaries: list[dict], pair_ids: list[str]) -> pd.DataFrame:
+    """Both directions of the given pairs side by side (every setting holding them): X -> Y is
+    ``corr_01``, Y -> X ``corr_10``; max and mean x sqrt area of the target remesh."""
+    df = pd.DataFrame(summaries)
+    rows = []
+    for pid in pair_ids:
+        for setting, g in df[df["pair_id"] == pid].groupby("setting", sort=False):
+            xy, yx = g[g["direction"] == "x->y"].iloc[0], g[g["direction"] == "y->x"].iloc[0]
+            rows.append(
+                {
+                    "setting": setting,
+                    "pair_id": pid,
+                    "X -> Y": f"{xy['source']} -> {xy['target']}",
+                    "max X->Y": xy["max"],
+                    "max Y->X": yx["max"],
+                    "mean X->Y": xy["mean"],
+                    "mean Y->X": yx["mean"],
+                }
+            )
+    missing = [pid for pid in pair_ids if pid not in set(df["pair_id"])]
+    if missing:
+        print(f"(pairs not in these results: {', '.join(missing)})")
+    return pd.DataFrame(rows)
+
+
+def _print_tables(summaries: list[dict], show: list[str] | None = None) -> None:
     print("Distribution over pair directions (error x sqrt area of the target remesh):")
     print(distribution_table(summaries).to_string(index=False, float_format=lambda v: f"{v:.4f}"))
     per_pair = pd.DataFrame(summaries)
@@ -527,6 +606,9 @@ def _print_tables(summaries: list[dict]) -> None:
     print(f"\nPair directions with max > {BOUND}: {len(bad)} of {len(per_pair)}")
     if len(bad):
         print(bad.to_string(index=False, float_format=lambda v: f"{v:.4f}"))
+    if show:
+        print("\nRequested pairs, both directions:")
+        print(pair_table(summaries, show).to_string(index=False, float_format=lambda v: f"{v:.4f}"))
 
 
 def main(argv=None) -> int:
@@ -541,15 +623,17 @@ def main(argv=None) -> int:
     )
     parser.add_argument("--settings", default=",".join(SETTINGS))
     parser.add_argument("--pairs", default=None, help="comma-separated pair ids (default: every same-class pair)")
-    parser.add_argument("--worst", type=int, default=25, help="how many worst vertices to list")
+    parser.add_argument("--worst", type=int, default=25, help="how many worst vertices to list per setting")
+    parser.add_argument("--show", default=None, help="comma-separated pair ids: print both directions side by side")
     parser.add_argument("--json", type=Path, default=None, help="write per-direction summaries here")
     args = parser.parse_args(argv)
     pd.set_option("display.width", 250)
     pd.set_option("display.max_columns", 40)
     pd.set_option("display.max_rows", 500)
+    show = args.show.split(",") if args.show else None
     if args.combine:
         summaries = [row for path in args.combine for row in json.loads(path.read_text())]
-        _print_tables(summaries)
+        _print_tables(summaries, show)
         return 0
     run = Run(args.results)
     pair_ids = set(args.pairs.split(",")) if args.pairs else None
@@ -557,9 +641,13 @@ def main(argv=None) -> int:
     log = lambda m: print(m, file=sys.stderr, flush=True)  # noqa: E731
     for setting in args.settings.split(","):
         results += audit_setting(run, setting, pair_ids, log)
-    _print_tables([r.summary() for r in results])
-    print(f"\nWorst {args.worst} vertices (locations: bounding-box fractions on the class's first pose):")
-    print(worst_vertices(run, results, args.worst).to_string(index=False, float_format=lambda v: f"{v:.4f}"))
+    _print_tables([r.summary() for r in results], show)
+    for setting in dict.fromkeys(r.setting for r in results):
+        print(
+            f"\n{setting}: worst {args.worst} vertices (locations: bounding-box fractions on the class's first pose):"
+        )
+        worst = worst_vertices(run, [r for r in results if r.setting == setting], args.worst)
+        print(worst.to_string(index=False, float_format=lambda v: f"{v:.4f}"))
     if args.json:
         args.json.write_text(json.dumps([r.summary() for r in results], indent=1))
     return 0

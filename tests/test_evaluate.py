@@ -121,7 +121,10 @@ def test_ground_truth_other_direction_and_exact_points(records):
     face, weights = record["corr_10_face"], record["corr_10_weights"]
     ok = face >= 0
     corners = full.mesh.faces[full.face_to_full[face[ok]]]
-    nearest = corners[np.arange(ok.sum()), weights[ok].argmax(axis=1)]
+    points = np.einsum("nk,nkd->nd", weights[ok], full.mesh.vertices[corners])
+    nearest = corners[
+        np.arange(ok.sum()), np.linalg.norm(full.mesh.vertices[corners] - points[:, None], axis=2).argmin(1)
+    ]
     rounding = (
         np.einsum(
             "nk,nk->n",

@@ -204,7 +204,7 @@ def c_corr_face(store, bench):
     face = int(bench.array("corr_01_face")[row])
     corners = np.asarray(bench.array("y_faces")[_rows(bench, "y_faces", 1)[0] + face])
     weights = np.asarray(bench.array("corr_01_weights")[row])
-    _array(store, "corr_01")[row] = corners[np.argsort(weights)[1]]  # a corner, not the largest-weight one
+    _array(store, "corr_01")[row] = corners[np.argsort(weights)[1]]  # a corner, not the nearest one
     return 1
 
 
@@ -343,7 +343,7 @@ CORRUPTIONS = (
         "corr_face",
         "partial_partial",
         c_corr_face,
-        "corr_face: corr_01 is not the largest-weight corner of corr_01_face",
+        "corr_face: corr_01 is not the corner of corr_01_face nearest its point",
     ),
     Corruption("overlap", "partial_partial", c_overlap, "overlap: x_overlap differs from the mean of x_overlap_mask"),
     Corruption(

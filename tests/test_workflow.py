@@ -396,4 +396,4 @@ def test_every_same_class_pair_is_within_the_ground_truth_bound(tiny_tosca_run):
         s = r.summary()
         assert s["n"] > 0, s
         assert s["max"] <= gt_error.BOUND, s
-        assert s["mean"] <= 1.1 * s["best_mean"] + 1e-3, s  # + slack for short partial views
+        assert s["mean"] <= 1.1 * s["best_mean"], s  # nearest-corner rounding: 1.02-1.06 (largest weight: 1.10-1.19)
