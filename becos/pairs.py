@@ -25,7 +25,7 @@ from scipy.spatial.transform import Rotation
 
 from becos.mesh import TriMesh
 from becos.partiality import Partial, Scanner, align_to, cast_p2f, cast_p2p, whole
-from becos.record import PairRecord
+from becos.record import VERTEX_MAP_ROUNDING, PairRecord
 from becos.seeding import rng_for
 from becos.settings import MAX_OVERLAP, MIN_OVERLAP, SETTINGS, overlap_range_problem
 from becos.surface_map import SurfaceMap
@@ -183,6 +183,7 @@ def build_pair(
         "n_tries": 0,
         "accepted": True,
         "try_index": -1,
+        "vertex_rounding": VERTEX_MAP_ROUNDING,
         "options": {k: getattr(options, k) for k in options.__dataclass_fields__},
     }
     for key, s in (("x", x), ("y", y)):

@@ -28,6 +28,13 @@ from becos.settings import SETTINGS  # noqa: F401 (re-exported: becos.record.SET
 
 SCHEMA_VERSION = 1
 SIDES = ("x", "y")
+VERTEX_MAP_ROUNDING = "nearest_corner"
+"""How a record's final vertex maps (``corr_01``, ``corr_10``) round a point to a vertex, written as meta
+``vertex_rounding``: the corner of the holding face nearest the point in 3D
+(:meth:`becos.surface_map.SurfaceMap.to_nearest_corners`)."""
+LEGACY_VERTEX_MAP_ROUNDING = "largest_weight"
+"""The rounding of records without meta ``vertex_rounding`` (becos before issue #20; the reference's rule): the
+largest-weight corner of the holding face."""
 
 
 @dataclass(frozen=True)

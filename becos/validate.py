@@ -31,7 +31,8 @@ attribute instead of pairs. Checks (vectorised over blocks of pairs of about
 ``unmatched``     corr_01 >= 0 and corr_01_face >= 0 exactly where x_overlap_mask (same for Y);
                   weight rows of unmatched vertices are all 0 (or all NaN)
 ``weights``       weights of matched vertices finite, >= 0, summing to 1
-``corr_face``     corr_01 is the corner of corr_01_face nearest its point (same for corr_10)
+``corr_face``     corr_01 is the corner of corr_01_face nearest its point (same for corr_10); for a record
+                  without meta ``vertex_rounding`` (older becos) its largest-weight corner
 ``overlap``       s_overlap equals the mask's mean; partial_partial pairs whose meta says
                   ``accepted`` have both overlaps in [min_overlap, max_overlap] of meta ``options``
 ``index_maps``    partial_to_full strictly increasing, full_to_partial its inverse (-1 elsewhere)
@@ -73,7 +74,7 @@ from pathlib import Path
 import numpy as np
 
 from becos.errors import BecosError
-from becos.record import RECORD_SCHEMA, SCHEMA_VERSION
+from becos.record import LEGACY_VERTEX_MAP_ROUNDING, RECORD_SCHEMA, SCHEMA_VERSION, VERTEX_MAP_ROUNDING
 from becos.settings import SETTINGS, SPLITS
 from becos.store import DAMAGED_STORE_FIX as STORE_FIX
 
@@ -251,10 +252,22 @@ class _BlockChecker:
             own = np.where(is_corner, dist, np.inf).min(axis=1)
             # the record rounds in the remesh frame: a near tie may fall either way in this frame
             tol = 1e-9 * (dist.max(axis=1) + 1e-12)
+            wrong = own > dist.min(axis=1) + tol
+            # records written before meta "vertex_rounding" (older becos) hold the largest-weight corner
+            legacy = np.array(
+                [m.get("vertex_rounding", LEGACY_VERTEX_MAP_ROUNDING) != VERTEX_MAP_ROUNDING for m in self.b.metas]
+            )
+            legacy_rows = self.rep(legacy, gv)[rows] if len(legacy) else np.zeros(len(rows), dtype=bool)
+            largest = corners[np.arange(len(rows)), np.nan_to_num(w[rows], nan=-1.0).argmax(axis=1)]
             self.report(
                 "corr_face",
                 f"{corr} is not the corner of {corr}_face nearest its point",
-                np.unique(self.pair_of[gv][rows[own > dist.min(axis=1) + tol]]),
+                np.unique(self.pair_of[gv][rows[wrong & ~legacy_rows]]),
+            )
+            self.report(
+                "corr_face",
+                f"{corr} is not the largest-weight corner of {corr}_face (a record of an older becos, no meta vertex_rounding)",
+                np.unique(self.pair_of[gv][rows[legacy_rows & (largest != c[rows])]]),
             )
 
         # overlap values

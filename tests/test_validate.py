@@ -432,6 +432,41 @@ def test_corruption_is_caught(case, clean_stores, tmp_path):
     print(f"\n{case.check}: {case.corrupt.__name__} -> {hit}")
 
 
+def test_a_store_of_an_older_becos_validates_with_its_own_rounding(clean_stores, tmp_path):
+    """Records written before meta ``vertex_rounding`` (issue #20) hold the largest-weight corner: such a
+    store validates clean, and the nearest corner in such a record is reported as not its rounding."""
+    store = tmp_path / "older.zarr"
+    shutil.copytree(clean_stores["partial_partial"], store)
+    bench = open_benchmark(store)
+    differ = 0
+    for corr, o in (("corr_01", "y"), ("corr_10", "x")):
+        values, faces, weights = (np.asarray(bench.array(k)[:]) for k in (corr, f"{corr}_face", f"{corr}_weights"))
+        for pair in range(len(bench)):
+            start, stop = _rows(bench, corr, pair)
+            f0 = _rows(bench, f"{o}_faces", pair)[0]
+            rows = np.arange(start, stop)[faces[start:stop] >= 0]
+            corners = np.asarray(bench.array(f"{o}_faces")[:])[f0 + faces[rows]]
+            largest = corners[np.arange(len(rows)), weights[rows].argmax(axis=1)]
+            differ += int((largest != values[rows]).sum())
+            values[rows] = largest
+        _array(store, corr)[:] = values
+    assert differ > 0  # the two roundings differ on these remeshes
+    _rewrite_pairs(store, edit_metas=lambda metas: [m.pop("vertex_rounding") for m in metas])
+    _reseal(store)
+    assert validate_store(store) == []
+
+    # the nearest corner (today's rounding) in a record that does not say so
+    shutil.rmtree(store)
+    shutil.copytree(clean_stores["partial_partial"], store)
+    _rewrite_pairs(store, edit_metas=lambda metas: [m.pop("vertex_rounding") for m in metas])
+    _reseal(store)
+    problems = validate_store(store)
+    assert problems and all(
+        p.startswith("corr_face: corr_") and "is not the largest-weight corner" in p for p in problems
+    ), problems
+    print(f"\n{differ} vertices round differently; older store clean; mislabelled store: {problems[0]}")
+
+
 def test_class_in_train_and_test(pair_record_files, tmp_path):
     """The fixture's own split labels (cat in train and test) break class hold-out."""
     path = write_store(pair_record_files["full_full"], tmp_path / "ff.zarr", setting="full_full", progress=False)
