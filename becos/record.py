@@ -11,7 +11,8 @@ are listed at the end of this docstring (generated from the table).
 
 Final frame: ``final = ((file * scale - centre) @ frame_rotation @ align_rotation + align_translation)
 @ random_rotation``. Metadata (``meta``): schema_version, pair_id, seed, setting, split, n_tries,
-accepted, area_normalised, and per shape name, dataset, category, class.
+accepted, try_index, area_normalised, vertex_rounding (:data:`VERTEX_MAP_ROUNDING`), options, and per
+shape name, dataset, category, class.
 """
 
 from __future__ import annotations
