@@ -23,7 +23,8 @@ degenerate or duplicate face (:func:`becos.mesh.surface_faces`).
 
 The template-to-template part is composed once per pair of classes and cached (projected onto the
 last template, whose mesh is in Y's dataset); the shape and remesh hops are then composed onto the
-target per pair. Compositions run backwards from their target
+target per pair, the part of a path after its first hop (X's template ... remeshed Y) once per job
+for all the shapes of X's class (:meth:`ShapeNetwork._tail`). Compositions run backwards from their target
 (:func:`becos.surface_map.compose_path`), so an intermediate template needs only its faces (from
 the dataset when present, else the annotation folder's default faces).
 """
@@ -181,6 +182,7 @@ class ShapeNetwork:
         self._chains: dict[tuple[str, ...], SurfaceMap] = {}
         self._per_mesh: OrderedDict[tuple, tuple] = OrderedDict()
         self._geometries: OrderedDict[tuple, tuple] = OrderedDict()
+        self._tails: OrderedDict[tuple, tuple] = OrderedDict()
         self._vertex_counts: dict[tuple[str, str], int | None] = {}
 
     # --- paths ----------------------------------------------------------------------------------
@@ -295,6 +297,8 @@ class ShapeNetwork:
             del self._per_mesh[key]
         for key in [k for k in self._geometries if k[1] == id(mesh)]:
             del self._geometries[key]
+        for key in [k for k in self._tails if k[0] == id(mesh)]:
+            del self._tails[key]
 
     def locator(self, mesh: TriMesh) -> SurfaceLocator:
         """A closest-point structure of ``mesh``, kept for the last few meshes used as targets."""
@@ -325,6 +329,39 @@ class ShapeNetwork:
                 self._geometries.popitem(last=False)
         return self._geometries[key][2]
 
+    TAILS_KEPT = 16
+    """Composed path tails (:meth:`_tail`) kept; those onto a mesh are dropped with it (:meth:`forget`)."""
+
+    def _tail(
+        self,
+        hops: list[SurfaceMap | None],
+        landing: list[Surface | None],
+        middle: list[np.ndarray],
+        target: TriMesh,
+        locator: SurfaceLocator,
+    ) -> SurfaceMap:
+        """:func:`compose_path` of ``hops`` (all but a path's first hop) onto ``target``, kept.
+
+        In a chunk the paths from every shape X of one class to one remeshed Y differ only in their
+        first hop (remeshed X -> X); the rest -- X's template -> network templates -> Y's template ->
+        Y -> remeshed Y, a map from the vertices of X's template (= X's vertex order) to points on
+        the remeshed Y -- is the same, so it is composed once and the pair composes only its first
+        hop onto it (:func:`becos.surface_map.compose` of the same arrays: the same bytes). Keyed by
+        the target mesh, the mapped hop objects (the cached template chain, Y's ``from_original``)
+        and the surfaces they land on (identity hops are skipped by the composition, so X's template
+        itself and the other poses of its class share one tail); the entry holds the hops, so their
+        ids are not reused while it is kept.
+        """
+        key = (id(target), tuple((id(h), s) for h, s in zip(hops, landing) if h is not None))
+        if key in self._tails:
+            self._tails.move_to_end(key)
+            return self._tails[key][2]
+        tail = compose_path(hops, middle, target, locator)
+        self._tails[key] = (target, hops, tail)
+        while len(self._tails) > self.TAILS_KEPT:
+            self._tails.popitem(last=False)
+        return tail
+
     def _compose_onto(
         self, hops: list[SurfaceMap | None], landing: list[Surface | None], target: TriMesh
     ) -> SurfaceMap:
@@ -338,7 +375,11 @@ class ShapeNetwork:
         k = mapped[-1]
         middle = [self.faces_of(surface) for surface in landing[:k]]
         if k == len(hops) - 1:
-            return compose_path(hops, middle, target, self.locator(target))
+            locator = self.locator(target)
+            if len(mapped) > 2 and mapped[0] == 0:  # the tail needs a composition of its own: share it
+                tail = self._tail(hops[1:], landing[1:], middle[1:], target, locator)
+                return compose(hops[0], middle[0], tail, target, locator)
+            return compose_path(hops, middle, target, locator)
         faces = self.faces_of(landing[k])
         geometry = self._geometry_with_faces(target, faces)
         head = compose_path(hops[: k + 1], middle, geometry, self.locator(geometry))

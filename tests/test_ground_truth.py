@@ -162,3 +162,27 @@ def test_wrong_vertex_count_in_a_class_is_an_error(tosca_network, tosca_entries,
     broken = ShapeNetwork(tosca_network.annotations, meshes)
     with pytest.raises(BecosError, match="cat3.*share one triangulation"):
         broken.ground_truth(tosca_entries["cat3"], tosca_entries["cat1"])
+
+
+def test_shared_path_tail_leaves_each_pair_unchanged(annotations, tosca_entries, remeshed, tosca_dir, mesh_cache):
+    """Two cats onto one remeshed horse share the composed tail of their paths (cat0's template ->
+    dog0 -> horse0 -> remeshed horse0, :meth:`ShapeNetwork._tail`): composed once, and each pair's
+    ground truth is bit for bit what a job computing that pair alone gets."""
+    from becos.network import ShapeNetwork
+
+    def meshes(dataset, name):
+        path = tosca_dir / f"{name}.off"
+        return mesh_cache.load(path) if dataset == "tosca" and path.is_file() else None
+
+    x0, x3, y = tosca_entries["cat0"], tosca_entries["cat3"], tosca_entries["horse0"]
+    ry = remeshed["horse0"]
+    shared = ShapeNetwork(annotations, meshes)
+    first = shared.ground_truth(x0, y, x_remesh=remeshed["cat0"], y_remesh=ry)
+    second = shared.ground_truth(x3, y, x_remesh=remeshed["cat3"], y_remesh=ry)
+    assert len(shared._tails) == 1
+    for x, got in ((x0, first), (x3, second)):
+        alone = ShapeNetwork(annotations, meshes).ground_truth(x, y, x_remesh=remeshed[x.name], y_remesh=ry)
+        for a, b in ((got.face, alone.face), (got.weights, alone.weights), (got.distance, alone.distance)):
+            assert a.tobytes() == b.tobytes()
+    shared.forget(ry.mesh)
+    assert not shared._tails
