@@ -192,16 +192,7 @@ def tiny_tosca_reference(becos_code, tmp_path_factory) -> TinyReference:
 
 @pytest.fixture(scope="session")
 def tiny_tosca_run(tiny_tosca_reference) -> Path:
-    """The working folder of the tiny TOSCA reference run, for tests that run Snakemake in it or read
-    it after other such tests (``test_workflow.py``): they share one xdist worker (below)."""
+    """The working folder of the tiny TOSCA reference run. Tests on both workers read it at the same
+    time: a test may run Snakemake in it only without changing it (``-n``, ``--report``); one that
+    changes files works on a copy of it."""
     return tiny_tosca_reference.workdir
-
-
-def pytest_collection_modifyitems(items):
-    """Every test that uses the folder of the tiny reference run (``tiny_tosca_run``) runs in one
-    pytest-xdist worker (``--dist loadgroup`` in pyproject.toml): some of them run Snakemake in it.
-    Tests that only compare with the run (``tiny_tosca_reference``: its fingerprint and files no test
-    changes) are spread over the workers."""
-    for item in items:
-        if "tiny_tosca_run" in getattr(item, "fixturenames", ()):
-            item.add_marker(pytest.mark.xdist_group("tiny_tosca_run"))

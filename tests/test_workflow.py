@@ -111,10 +111,13 @@ def test_an_edit_to_a_report_key_reruns_the_reports_not_the_stores(tiny_tosca_ru
 
 
 def test_snakemake_report_packs_each_settings_report_with_its_caption(tiny_tosca_run, tmp_path):
+    import shutil
     import zipfile
 
+    run = tmp_path / "run"  # a copy: Snakemake writes into the folder it reports on
+    shutil.copytree(tiny_tosca_run, run, symlinks=True)
     out = tmp_path / "report.zip"
-    snakemake(tiny_tosca_run, "--report", str(out))
+    snakemake(run, "--report", str(out))
     with zipfile.ZipFile(out) as packed:
         names = packed.namelist()
         text = "\n".join(packed.read(n).decode("utf-8", "replace") for n in names if n.endswith((".html", ".js")))
@@ -125,21 +128,21 @@ def test_snakemake_report_packs_each_settings_report_with_its_caption(tiny_tosca
     assert "Sample pairs with their ground truth" in text  # workflow/report/index.rst
 
 
-def test_a_deleted_remesh_output_is_rebuilt(tiny_tosca_run):
+def test_a_deleted_remesh_output_is_rebuilt(tiny_tosca_run, tmp_path):
     """Issue #21: every remesh output (the .ply nothing else reads included) is a target of the run."""
     import shutil
 
-    ply = sorted((tiny_tosca_run / "results" / "remeshed").rglob("*.ply"))[0]
+    run = tmp_path / "run"  # a copy (modification times kept): other tests read the shared run meanwhile
+    shutil.copytree(tiny_tosca_run, run, symlinks=True)
+    ply = sorted((run / "results" / "remeshed").rglob("*.ply"))[0]
     kept = ply.with_name(ply.name + ".kept")
     shutil.copy2(ply, kept)
     ply.unlink()
-    try:
-        dry = snakemake(tiny_tosca_run, "-n").stdout
-        assert jobs_planned(dry).get("remesh") == 1, dry[-3000:]
-        assert str(ply.relative_to(tiny_tosca_run)) in dry
-    finally:
-        shutil.move(kept, ply)  # the other tests read the finished run
-    after = snakemake(tiny_tosca_run, "-n")
+    dry = snakemake(run, "-n").stdout
+    assert jobs_planned(dry).get("remesh") == 1, dry[-3000:]
+    assert str(ply.relative_to(run)) in dry
+    shutil.move(kept, ply)
+    after = snakemake(run, "-n")
     assert "Nothing to be done" in after.stdout + after.stderr
 
 
