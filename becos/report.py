@@ -47,6 +47,7 @@ import numpy as np
 from becos.atomic import write_bytes, write_text
 from becos.record import PairRecord
 from becos.settings import SPLITS
+from becos.store.layout import TABLE_COLUMNS
 
 #: RGB of Y vertices without a counterpart on X (``corr_10 == -1``), before shading.
 NO_MATCH_GREY = (0.62, 0.62, 0.62)
@@ -381,20 +382,7 @@ def table_from_records(records: Iterable[PairRecord]):
             row[f"{s}_overlap"] = float(np.asarray(record[f"{s}_overlap"]))
         row.update(n_tries=meta.get("n_tries"), accepted=bool(meta.get("accepted", True)))
         rows.append(row)
-    columns = [
-        "pair_id",
-        "setting",
-        "split",
-        "category",
-        "seed",
-        *[f"{s}_{k}" for s in ("x", "y") for k in ("dataset", "name", "class", "category")],
-        "x_n_vertices",
-        "y_n_vertices",
-        "x_overlap",
-        "y_overlap",
-        "n_tries",
-        "accepted",
-    ]
+    columns = ["pair_id", "setting", *TABLE_COLUMNS[TABLE_COLUMNS.index("split") :]]  # the store's, by setting
     table = pd.DataFrame(rows, columns=columns)
     if len(table):
         rank = {s: i for i, s in enumerate(split_order(table["split"].astype(str)))}
