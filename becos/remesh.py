@@ -53,7 +53,9 @@ both:
    (TOSCA victoria1: a hand at the hip; the arch of a foot against its heel) the plain or
    normal-aware closest point can lie on the other part, 0.01 mm away in space and a body length away
    along the surface; normals do not tell them apart there (the parts meet at an angle), mesh
-   connectivity does (issue #20).
+   connectivity does (issue #20). Where the closest such face bends away from the vertex's normal
+   (over the rim of a thin part: a horse's ear tip is two sheets closer together than the remesh's
+   chordal error), a face that agrees with it is taken if it is nearly as close.
 
 Guarantee on counts: with ``target_vertices`` the result has EXACTLY that many vertices unless the
 decimation cannot get there (it stalls when every remaining collapse would break the topology or a
@@ -133,6 +135,17 @@ class Remeshed:
 FROM_ORIGINAL_RINGS = 2
 """An original vertex's point on its remesh lies in a face with a corner within this many edge rings
 of the remeshed vertex nearest to it along the original surface (``from_original``)."""
+
+FROM_ORIGINAL_MIN_COS = 0.5
+"""An original vertex's point on its remesh lies in a face whose normal is within 60 degrees of the
+vertex's own (cosine above this) wherever such a face is nearly as close as the closest one
+(:data:`FROM_ORIGINAL_DETOUR`): the two sheets of a thin part (a TOSCA horse's ear tip, 0.0003
+sqrt(area) thick, thinner than the remesh's chordal error) are within rings of each other around the
+rim, and the closest face can be one that bends over the rim onto the other sheet (issue #20)."""
+
+FROM_ORIGINAL_DETOUR = 0.1
+"""How much farther (× the remesh's mean edge length) than the closest allowed face the face with an
+agreeing normal may be (:data:`FROM_ORIGINAL_MIN_COS`); beyond it the closest face is kept."""
 
 
 # ----------------------------------------------------------------------------------------------
@@ -321,7 +334,10 @@ def _from_original(shape: RemeshInput, remeshed: TriMesh, face: np.ndarray, weig
     vertex's point is then the closest point among remeshed faces with a corner within
     :data:`FROM_ORIGINAL_RINGS` rings of one of those (:meth:`SurfaceLocator.closest_near`): all of
     them lie on the vertex's own part, and together they reach across thin parts (a tail, an ear)
-    whose few long remeshed faces one of them alone may miss. Returns face, weights, distance and
+    whose few long remeshed faces one of them alone may miss. Among those faces, one whose normal
+    agrees with the vertex's (:data:`FROM_ORIGINAL_MIN_COS`) is preferred when nearly as close
+    (:data:`FROM_ORIGINAL_DETOUR`): at the tip of a thin part the rings reach round the rim onto the
+    other sheet. Returns face, weights, distance and
     ``unresolved`` (no such face: the normal-aware closest point is kept). ``shape``: the original's
     per-shape part (``shape.surface``: its repaired copy).
     """
@@ -346,7 +362,24 @@ def _from_original(shape: RemeshInput, remeshed: TriMesh, face: np.ndarray, weig
         ok = near.near(rows[:, None, None], remeshed.faces[cand]).any(axis=2)
         return ok | (~reached[rows])[:, None]
 
-    return SurfaceLocator(remeshed).closest_near(surface.vertices, accept, shape.vertex_normals)
+    locator = SurfaceLocator(remeshed)
+    normals = shape.vertex_normals
+    face, weights, distance, unresolved = locator.closest_near(surface.vertices, accept, normals)
+    # where that face bends away from the vertex's normal, an allowed face that agrees with it, if
+    # nearly as close (FROM_ORIGINAL_MIN_COS): the vertex's own sheet of a thin part
+    cosine = np.einsum("nd,nd->n", locator.face_normals[face], normals)
+    sign = 1.0 if np.median(cosine) >= 0 else -1.0  # the two orientations may be opposite globally
+    bent = np.flatnonzero(reached & ~unresolved & (sign * cosine <= FROM_ORIGINAL_MIN_COS))
+    if len(bent):
+
+        def agreeing(rows, cand):
+            cos = np.einsum("mkd,md->mk", locator.face_normals[cand], normals[bent[rows]])
+            return accept(bent[rows], cand) & (sign * cos > FROM_ORIGINAL_MIN_COS)
+
+        f2, w2, d2, u2 = locator.closest_near(surface.vertices[bent], agreeing, normals[bent])
+        better = ~u2 & (d2 <= distance[bent] + FROM_ORIGINAL_DETOUR * locator.max_detour)
+        face[bent[better]], weights[bent[better]], distance[bent[better]] = f2[better], w2[better], d2[better]
+    return face, weights, distance, unresolved
 
 
 SNAP_ROUNDS = 4

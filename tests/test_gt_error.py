@@ -9,6 +9,11 @@ truth once sent a few vertices across such a contact, an error of about 1 x sqrt
 - ``from_original`` (an original vertex's closest remeshed point on the other part) and the
   composition's projection of a point between its images (victoria2 -> victoria1: 1.07 and 0.99).
 
+A thin part is two sheets that touch: the tip of a TOSCA horse's ear is 0.0003 sqrt(area) thick,
+thinner than the remesh's chordal error, and ``from_original`` once put ear-tip vertices of horse5
+(variant 1) on a face bent over the rim, nearest the other sheet (horse10 -> horse5: 0.045, the
+geodesic around the rim).
+
 The truth is the exact one becos has, measured by ``benchmarks/gt_error.py`` (its full table over a
 large run comes from there): each remeshed vertex's ``to_original`` point carried to the other pose
 by vertex identity, located on the target's remesh without a jump across a contact. Every
@@ -35,7 +40,8 @@ SEED = 42
 def exact_truth_errors(network, entries, prepared, remeshes, x: str, y: str):
     """Errors (x sqrt area of Y's remesh) of the final vertex map X -> Y, and the best possible map's."""
     rx, ry = remeshes[x], remeshes[y]
-    predicted = network.ground_truth(entries[x], entries[y], x_remesh=rx, y_remesh=ry).to_vertex_indices(ry.mesh.faces)
+    gt = network.ground_truth(entries[x], entries[y], x_remesh=rx, y_remesh=ry)
+    predicted = gt.to_nearest_corners(ry.mesh.vertices, ry.mesh.faces)  # a record's rounding
     assert (predicted >= 0).all()
     poses = np.stack([prepared[x].vertices, prepared[y].vertices])  # one triangulation
     target = gt_error.RemeshTarget(ry, prepared[y].faces, poses, 1)
@@ -46,7 +52,9 @@ def exact_truth_errors(network, entries, prepared, remeshes, x: str, y: str):
     return target.errors(predicted, face, weights) / target.sqrt_area, target.best(face, weights) / target.sqrt_area
 
 
-@pytest.mark.parametrize("x, y, variant", [("victoria12", "victoria25", 1), ("victoria2", "victoria1", 0)])
+@pytest.mark.parametrize(
+    "x, y, variant", [("victoria12", "victoria25", 1), ("victoria2", "victoria1", 0), ("horse10", "horse5", 1)]
+)
 def test_no_vertex_crosses_a_contact(x, y, variant, tosca_entries, tosca_network, mesh_cache):
     from becos.datasets import prepare_shape
     from becos.remesh import remesh, variant_target_vertices
