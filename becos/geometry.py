@@ -264,7 +264,13 @@ class SurfaceLocator:
         return face, weights, np.linalg.norm(closest - points, axis=1)
 
     def closest_near(
-        self, points: np.ndarray, accept, normals: np.ndarray | None = None, ks: tuple[int, ...] = (32, 256)
+        self,
+        points: np.ndarray,
+        accept,
+        normals: np.ndarray | None = None,
+        ks: tuple[int, ...] = (32, 256),
+        min_cos: float | None = None,
+        detour: float = 0.0,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Closest surface point of each query among the faces ``accept`` allows: contact-safe by connectivity.
 
@@ -277,10 +283,36 @@ class SurfaceLocator:
         The answer of :meth:`closest` (with ``normals``, if given) is kept where accepted; otherwise the
         closest accepted face among the ``k`` faces with the nearest centroids, for ``k`` in ``ks``.
 
+        With ``normals`` and ``min_cos``, an answer whose face normal makes a cosine of at most
+        ``min_cos`` with the query's is replaced by the closest accepted face that agrees (cosine above
+        ``min_cos``) if that is at most ``detour`` (mesh units) farther: at the tip of a thin part (two
+        sheets closer than the mesh's chordal error) the closest allowed face can bend over the rim.
+
         Returns:
             face (N,), weights (N, 3), distance (N,) as :meth:`closest`, and ``unresolved`` (N,) bool:
             no accepted face was found, the answer is :meth:`closest`'s.
         """
+        points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
+        face, weights, distance, unresolved = self._closest_accepted(points, accept, normals, ks)
+        if min_cos is None or normals is None:
+            return face, weights, distance, unresolved
+        normals = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
+        cosine = np.einsum("nd,nd->n", self.face_normals[face], normals)
+        sign = 1.0 if np.median(cosine) >= 0 else -1.0  # the queries' surface may be oriented the other way
+        bent = np.flatnonzero(~unresolved & (sign * cosine <= min_cos))
+        if len(bent):
+
+            def agreeing(rows, cand):
+                cos = np.einsum("mkd,md->mk", self.face_normals[cand], normals[bent[rows]])
+                return np.asarray(accept(bent[rows], cand), dtype=bool) & (sign * cos > min_cos)
+
+            f, w, d, u = self._closest_accepted(points[bent], agreeing, normals[bent], ks)
+            better = ~u & (d <= distance[bent] + detour)
+            face[bent[better]], weights[bent[better]], distance[bent[better]] = f[better], w[better], d[better]
+        return face, weights, distance, unresolved
+
+    def _closest_accepted(self, points: np.ndarray, accept, normals: np.ndarray | None, ks: tuple[int, ...]):
+        """:meth:`closest_near` without the ``min_cos`` preference."""
         from scipy.spatial import cKDTree
 
         points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)

@@ -363,23 +363,13 @@ def _from_original(shape: RemeshInput, remeshed: TriMesh, face: np.ndarray, weig
         return ok | (~reached[rows])[:, None]
 
     locator = SurfaceLocator(remeshed)
-    normals = shape.vertex_normals
-    face, weights, distance, unresolved = locator.closest_near(surface.vertices, accept, normals)
-    # where that face bends away from the vertex's normal, an allowed face that agrees with it, if
-    # nearly as close (FROM_ORIGINAL_MIN_COS): the vertex's own sheet of a thin part
-    cosine = np.einsum("nd,nd->n", locator.face_normals[face], normals)
-    sign = 1.0 if np.median(cosine) >= 0 else -1.0  # the two orientations may be opposite globally
-    bent = np.flatnonzero(reached & ~unresolved & (sign * cosine <= FROM_ORIGINAL_MIN_COS))
-    if len(bent):
-
-        def agreeing(rows, cand):
-            cos = np.einsum("mkd,md->mk", locator.face_normals[cand], normals[bent[rows]])
-            return accept(bent[rows], cand) & (sign * cos > FROM_ORIGINAL_MIN_COS)
-
-        f2, w2, d2, u2 = locator.closest_near(surface.vertices[bent], agreeing, normals[bent])
-        better = ~u2 & (d2 <= distance[bent] + FROM_ORIGINAL_DETOUR * locator.max_detour)
-        face[bent[better]], weights[bent[better]], distance[bent[better]] = f2[better], w2[better], d2[better]
-    return face, weights, distance, unresolved
+    return locator.closest_near(
+        surface.vertices,
+        accept,
+        shape.vertex_normals,
+        min_cos=FROM_ORIGINAL_MIN_COS,
+        detour=FROM_ORIGINAL_DETOUR * locator.max_detour,
+    )
 
 
 SNAP_ROUNDS = 4
