@@ -211,7 +211,7 @@ def _run_job(tree: Path, config: dict, row: dict, token: str, out: Path) -> str:
     cmd = [
         sys.executable,
         "-m",
-        "becos.cli",
+        "becos",
         "remesh",
         "--options",
         job_options(config, "remesh"),
