@@ -165,6 +165,7 @@ class SurfaceLocator:
         self._tree.init(mesh.vertices, self._faces)
         self._normals = None
         self._centroids = None
+        self._triangles = None
         self._rings: dict[int, VertexRings] = {}
         edges = mesh.vertices[self._faces] - mesh.vertices[np.roll(self._faces, 1, axis=1)]
         self.max_detour = float(np.linalg.norm(edges, axis=2).mean())
@@ -180,6 +181,13 @@ class SurfaceLocator:
         """No face row is left out of the search (then :attr:`face_normals` is
         :func:`oriented_face_normals` of the mesh)."""
         return self._rows is None
+
+    @property
+    def triangles(self) -> np.ndarray:
+        """(F, 3, 3) float64 corner positions of every row of ``mesh.faces`` (computed once)."""
+        if self._triangles is None:
+            self._triangles = self.mesh.vertices[self.mesh.faces]
+        return self._triangles
 
     def _row(self, index: np.ndarray) -> np.ndarray:
         """Rows of ``mesh.faces`` of indices into the searched faces."""
@@ -214,7 +222,7 @@ class SurfaceLocator:
         k = min(k, len(self._faces))
         _, cand = self._centroids.query(points, k=k)
         cand = self._row(np.asarray(cand).reshape(len(points), k))
-        tri = self.mesh.vertices[self.mesh.faces[cand]]  # (M, k, 3, 3)
+        tri = self.triangles[cand]  # (M, k, 3, 3)
         closest = closest_points_on_triangles(points[:, None, :], tri[..., 0, :], tri[..., 1, :], tri[..., 2, :])
         dist = np.linalg.norm(closest - points[:, None, :], axis=2)
         ok = np.einsum("mkd,md->mk", self._normals[cand], normals) > min_cos
@@ -259,7 +267,7 @@ class SurfaceLocator:
                 found = (f >= 0) & (detour <= self.max_detour)
                 face[flipped[found]], closest[flipped[found]] = f[found], c[found]
                 flipped = flipped[(f < 0)]
-        tri = self.mesh.vertices[self.mesh.faces[face]]
+        tri = self.triangles[face]
         weights = barycentric_coordinates(closest, tri[:, 0], tri[:, 1], tri[:, 2])
         return face, weights, np.linalg.norm(closest - points, axis=1)
 
@@ -326,7 +334,7 @@ class SurfaceLocator:
             k = min(k, len(self._faces))
             _, cand = self._centroids.query(points[todo], k=k)
             cand = self._row(np.asarray(cand).reshape(len(todo), k))
-            tri = self.mesh.vertices[self.mesh.faces[cand]]  # (M, k, 3, 3)
+            tri = self.triangles[cand]  # (M, k, 3, 3)
             closest = closest_points_on_triangles(points[todo, None, :], tri[..., 0, :], tri[..., 1, :], tri[..., 2, :])
             dist = np.linalg.norm(closest - points[todo, None, :], axis=2)
             dist = np.where(np.asarray(accept(todo, cand), dtype=bool), dist, np.inf)
@@ -334,7 +342,7 @@ class SurfaceLocator:
             rows = np.arange(len(todo))
             found = np.isfinite(dist[rows, best])
             hit, f, c = todo[found], cand[rows, best][found], closest[rows, best][found]
-            tri = self.mesh.vertices[self.mesh.faces[f]]
+            tri = self.triangles[f]
             face[hit] = f
             weights[hit] = barycentric_coordinates(c, tri[:, 0], tri[:, 1], tri[:, 2])
             distance[hit] = np.linalg.norm(c - points[hit], axis=1)
