@@ -167,7 +167,8 @@ class SurfaceLocator:
         self._centroids = None
         self._triangles = None
         self._rings: dict[int, VertexRings] = {}
-        edges = mesh.vertices[self._faces] - mesh.vertices[np.roll(self._faces, 1, axis=1)]
+        searched = self.triangles if self._rows is None else self.triangles[self._rows]  # (F_s, 3, 3)
+        edges = searched - np.roll(searched, 1, axis=1)
         self.max_detour = float(np.linalg.norm(edges, axis=2).mean())
 
     def rings(self, rings: int) -> VertexRings:
@@ -256,8 +257,8 @@ class SurfaceLocator:
             has_normal = np.linalg.norm(normals, axis=1) > 0
             cosine = (self.face_normals[face] * normals).sum(axis=1)
             if np.median(cosine[has_normal]) < 0:  # the queries come from a surface oriented the other way
-                normals = -normals
-            flipped = np.flatnonzero(has_normal & ((self.face_normals[face] * normals).sum(axis=1) <= min_cos))
+                normals, cosine = -normals, -cosine
+            flipped = np.flatnonzero(has_normal & (cosine <= min_cos))
             plain_distance = np.linalg.norm(closest - points, axis=1)
             for k in (32, 256):
                 if len(flipped) == 0:
