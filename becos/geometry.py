@@ -402,7 +402,9 @@ class VertexRings(SparsePairs):
         self.rings = int(rings)
         reach = a
         for _ in range(self.rings - 1):
-            reach = ((reach @ a) > 0).astype(np.float32)
+            reach = reach @ a
+            reach.sum_duplicates()  # sorted indices, as a comparison's result has them
+            reach.data[:] = 1.0  # products of 0/1 matrices without zeros: every stored entry is >= 1
         self.matrix = reach.tocsr()
         super().__init__(self.matrix)
 
