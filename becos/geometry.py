@@ -165,8 +165,10 @@ class SurfaceLocator:
         self._tree.init(mesh.vertices, self._faces)
         self._normals = None
         self._centroids = None
+        self._triangles = None
         self._rings: dict[int, VertexRings] = {}
-        edges = mesh.vertices[self._faces] - mesh.vertices[np.roll(self._faces, 1, axis=1)]
+        searched = self.triangles if self._rows is None else self.triangles[self._rows]  # (F_s, 3, 3)
+        edges = searched - np.roll(searched, 1, axis=1)
         self.max_detour = float(np.linalg.norm(edges, axis=2).mean())
 
     def rings(self, rings: int) -> VertexRings:
@@ -180,6 +182,13 @@ class SurfaceLocator:
         """No face row is left out of the search (then :attr:`face_normals` is
         :func:`oriented_face_normals` of the mesh)."""
         return self._rows is None
+
+    @property
+    def triangles(self) -> np.ndarray:
+        """(F, 3, 3) float64 corner positions of every row of ``mesh.faces`` (computed once)."""
+        if self._triangles is None:
+            self._triangles = self.mesh.vertices[self.mesh.faces]
+        return self._triangles
 
     def _row(self, index: np.ndarray) -> np.ndarray:
         """Rows of ``mesh.faces`` of indices into the searched faces."""
@@ -214,7 +223,7 @@ class SurfaceLocator:
         k = min(k, len(self._faces))
         _, cand = self._centroids.query(points, k=k)
         cand = self._row(np.asarray(cand).reshape(len(points), k))
-        tri = self.mesh.vertices[self.mesh.faces[cand]]  # (M, k, 3, 3)
+        tri = self.triangles[cand]  # (M, k, 3, 3)
         closest = closest_points_on_triangles(points[:, None, :], tri[..., 0, :], tri[..., 1, :], tri[..., 2, :])
         dist = np.linalg.norm(closest - points[:, None, :], axis=2)
         ok = np.einsum("mkd,md->mk", self._normals[cand], normals) > min_cos
@@ -248,8 +257,8 @@ class SurfaceLocator:
             has_normal = np.linalg.norm(normals, axis=1) > 0
             cosine = (self.face_normals[face] * normals).sum(axis=1)
             if np.median(cosine[has_normal]) < 0:  # the queries come from a surface oriented the other way
-                normals = -normals
-            flipped = np.flatnonzero(has_normal & ((self.face_normals[face] * normals).sum(axis=1) <= min_cos))
+                normals, cosine = -normals, -cosine
+            flipped = np.flatnonzero(has_normal & (cosine <= min_cos))
             plain_distance = np.linalg.norm(closest - points, axis=1)
             for k in (32, 256):
                 if len(flipped) == 0:
@@ -259,7 +268,7 @@ class SurfaceLocator:
                 found = (f >= 0) & (detour <= self.max_detour)
                 face[flipped[found]], closest[flipped[found]] = f[found], c[found]
                 flipped = flipped[(f < 0)]
-        tri = self.mesh.vertices[self.mesh.faces[face]]
+        tri = self.triangles[face]
         weights = barycentric_coordinates(closest, tri[:, 0], tri[:, 1], tri[:, 2])
         return face, weights, np.linalg.norm(closest - points, axis=1)
 
@@ -326,7 +335,7 @@ class SurfaceLocator:
             k = min(k, len(self._faces))
             _, cand = self._centroids.query(points[todo], k=k)
             cand = self._row(np.asarray(cand).reshape(len(todo), k))
-            tri = self.mesh.vertices[self.mesh.faces[cand]]  # (M, k, 3, 3)
+            tri = self.triangles[cand]  # (M, k, 3, 3)
             closest = closest_points_on_triangles(points[todo, None, :], tri[..., 0, :], tri[..., 1, :], tri[..., 2, :])
             dist = np.linalg.norm(closest - points[todo, None, :], axis=2)
             dist = np.where(np.asarray(accept(todo, cand), dtype=bool), dist, np.inf)
@@ -334,7 +343,7 @@ class SurfaceLocator:
             rows = np.arange(len(todo))
             found = np.isfinite(dist[rows, best])
             hit, f, c = todo[found], cand[rows, best][found], closest[rows, best][found]
-            tri = self.mesh.vertices[self.mesh.faces[f]]
+            tri = self.triangles[f]
             face[hit] = f
             weights[hit] = barycentric_coordinates(c, tri[:, 0], tri[:, 1], tri[:, 2])
             distance[hit] = np.linalg.norm(c - points[hit], axis=1)
@@ -393,7 +402,9 @@ class VertexRings(SparsePairs):
         self.rings = int(rings)
         reach = a
         for _ in range(self.rings - 1):
-            reach = ((reach @ a) > 0).astype(np.float32)
+            reach = reach @ a
+            reach.sum_duplicates()  # sorted indices, as a comparison's result has them
+            reach.data[:] = 1.0  # products of 0/1 matrices without zeros: every stored entry is >= 1
         self.matrix = reach.tocsr()
         super().__init__(self.matrix)
 

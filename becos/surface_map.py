@@ -197,23 +197,34 @@ def compose(
 
     loose = ~exact
     if loose.any():
-        target_vertices = target.vertices[target.faces[np.where(image_face[loose] >= 0, image_face[loose], 0)]]
-        image_points = np.einsum("mkj,mkjd->mkd", image_weights[loose], target_vertices)  # (L, 3, 3)
+        locator = locator if locator is not None else SurfaceLocator(target)
+        safe_face = np.where(image_face[loose] >= 0, image_face[loose], 0)
+        # (L, 3, 3) corners of the image faces: the locator's cached ones when it was built on this very mesh
+        if locator.mesh is target:
+            corners = locator.triangles[safe_face]
+        else:
+            corners = target.vertices[target.faces[safe_face]]
+        image_points = np.einsum("mkj,mkjd->mkd", image_weights[loose], corners)  # (L, 3, 3)
         points = np.einsum("mk,mkd->md", w[loose], image_points)
         # the point lies between its images: it may only land near their faces along the target's
         # connectivity, never on another part that touches them in space (normals alone are misled
         # where parts pass through each other or meet at an angle)
-        locator = locator if locator is not None else SurfaceLocator(target)
-        safe_face = np.where(image_face[loose] >= 0, image_face[loose], 0)
         normals = np.einsum("mk,mkd->md", w[loose], locator.face_normals[safe_face])
         near_vertices = np.asarray(target.faces)[safe_face].reshape(-1, 9)  # (L, 9) image corners
         used = np.repeat(w[loose] > 0, 3, axis=1)  # (L, 9)
         near_vertices = np.where(used, near_vertices, near_vertices[np.arange(len(used)), used.argmax(axis=1)][:, None])
         rings = locator.rings(COMPOSE_RINGS)
+        target_faces = np.asarray(target.faces)
 
         def accept(rows, cand):
-            corners = np.asarray(target.faces)[cand]  # (M, K, 3)
-            return rings.near(near_vertices[rows][:, None, :, None], corners[:, :, None, :]).any(axis=(2, 3))
+            corners = target_faces[cand]  # (M, K, 3)
+            near = near_vertices[rows]  # (M, 9)
+            # a face sharing a corner with an image face is within the rings (a vertex is within 0 rings
+            # of itself): only the others need the sparse lookup
+            ok = (near[:, None, :, None] == corners[:, :, None, :]).any(axis=(2, 3))  # (M, K)
+            row, col = np.nonzero(~ok)
+            ok[row, col] = rings.near(near[row][:, :, None], corners[row, col][:, None, :]).any(axis=(1, 2))
+            return ok
 
         f, bw, d, _ = locator.closest_near(points, accept, normals)
         face[alive[loose]] = f

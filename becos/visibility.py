@@ -134,6 +134,15 @@ class VisibilityScene:
         self.adjacency = face_adjacency(mesh.faces)
         self.areas = face_areas(mesh)
         self._triangles = mesh.vertices[mesh.faces]  # (F, 3, 3)
+        self._centroids = self._triangles.mean(axis=1)  # (F, 3)
+        self._samples: dict[int, np.ndarray] = {}
+
+    def _sample_points(self, samples_per_face: int) -> np.ndarray:
+        """(F, S - 1, 3) the non-centroid sample points of every face (computed once per ``S``)."""
+        if samples_per_face not in self._samples:
+            bary = SAMPLE_BARYCENTRICS[samples_per_face]
+            self._samples[samples_per_face] = np.matmul(bary[None, 1:], self._triangles)
+        return self._samples[samples_per_face]
 
     def first_hits(self, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
         """(N,) int64 id of the first face each ray hits, -1 for a miss.
@@ -160,8 +169,7 @@ class VisibilityScene:
         bary = SAMPLE_BARYCENTRICS[samples_per_face]
         n_faces = self.mesh.n_faces
         seen = np.zeros(n_faces, dtype=bool)
-        tri = self._triangles
-        centroids = tri.mean(axis=1)
+        centroids = self._centroids
         inside = camera.in_frustum(centroids)
         faces = np.flatnonzero(inside)
         hits = self.first_hits(camera.position, centroids[faces] - camera.position)
@@ -170,7 +178,7 @@ class VisibilityScene:
             rest = np.ones(n_faces, dtype=bool)
             rest[faces[hits == faces]] = False  # seen at the centroid
             rest_ids = np.flatnonzero(rest)
-            points = np.matmul(bary[None, 1:], tri[rest_ids]).reshape(-1, 3)  # (R*(S-1), 3)
+            points = self._sample_points(samples_per_face)[rest_ids].reshape(-1, 3)  # (R*(S-1), 3)
             points = points[camera.in_frustum(points)]
             hits = self.first_hits(camera.position, points - camera.position)
             seen[hits[hits >= 0]] = True

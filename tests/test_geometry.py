@@ -56,3 +56,25 @@ def test_sparse_pairs_keys_are_the_sorted_unique_non_zeros():
         assert np.array_equal(pairs._keys, expected)
         a, b = rng.integers(0, matrix.shape[0], 300), rng.integers(0, matrix.shape[1], 300)
         assert np.array_equal(pairs.near(a, b), np.isin(a.astype(np.int64) * matrix.shape[1] + b, expected))
+
+
+def test_vertex_rings_pattern_and_diagonal():
+    """VertexRings holds the canonical 0/1 CSR of the non-zeros of ``(A + I) ** r`` (the same matrix
+    as thresholding each product), and every vertex is within the rings of itself (compose accepts a
+    face that shares a corner with an image face without a lookup)."""
+    from becos.geometry import VertexRings, vertex_adjacency
+
+    vertices, faces = _strip(12, np.zeros(3))
+    n = len(vertices)
+    a = vertex_adjacency(faces, n)
+    for rings in (1, 2, 3, 5):
+        expected = a
+        for _ in range(rings - 1):
+            expected = ((expected @ a) > 0).astype(np.float32)
+        expected = expected.tocsr()
+        got = VertexRings(faces, n, rings)
+        assert got.matrix.has_canonical_format and got.matrix.dtype == np.float32
+        assert np.array_equal(got.matrix.indptr, expected.indptr)
+        assert np.array_equal(got.matrix.indices, expected.indices)
+        assert np.array_equal(got.matrix.data, expected.data)
+        assert got.near(np.arange(n), np.arange(n)).all()

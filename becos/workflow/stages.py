@@ -16,10 +16,12 @@ from becos.errors import ConfigError
 from becos.workflow.layout import pair_file, remesh_token
 from becos.workflow.options import GROUND_TRUTH_VERSION, RECORD_VERSION, digest, stage_options
 from becos.workflow.plan import build_catalog, build_manifest, remesh_target, uses_published_views
-from becos.workflow.shapes import ShapeStore, visit_order
+from becos.workflow.shapes import ShapeKey, ShapeStore, visit_order
 
 if TYPE_CHECKING:
     import pandas as pd  # imported where used: write-config, metadata and remesh jobs start without it
+
+    from becos.surface_map import SurfaceMap
 
 
 def _log(message: str) -> None:
@@ -163,6 +165,9 @@ def ground_truth_stage(
     folder = Path(out_index).parent
     _remove_killed_writes([*(pair_file(folder, pid) for pid in rows["pair_id"]), Path(out_index)])
     entries = []
+    # the maps between the two shapes of the last computed pair, both ways: a chunk's pairs of the same
+    # two shapes (copies, either order) come one after another (visit_order) and share them
+    maps: dict[tuple[ShapeKey, ShapeKey], SurfaceMap] = {}
     ordered, last_used = visit_order(rows.to_dict("records"), remesh)
     for row, done in zip(ordered, last_used):
         tx, ty = remesh_token(row, "x", remesh), remesh_token(row, "y", remesh)
@@ -185,9 +190,13 @@ def ground_truth_stage(
         computed = _stored_key(path, "input_key") != key
         if computed:
             x, y = shapes.entry(row["x_dataset"], row["x_name"]), shapes.entry(row["y_dataset"], row["y_name"])
-            rx, ry = shapes.remeshed(x.dataset, x.name, tx), shapes.remeshed(y.dataset, y.name, ty)
-            gt_xy = shapes.network.ground_truth(x, y, x_remesh=rx, y_remesh=ry)
-            gt_yx = shapes.network.ground_truth(y, x, x_remesh=ry, y_remesh=rx)
+            kx, ky = (x.dataset, x.name, tx), (y.dataset, y.name, ty)
+            if (kx, ky) not in maps:
+                rx, ry = shapes.remeshed(x.dataset, x.name, tx), shapes.remeshed(y.dataset, y.name, ty)
+                gt_xy = shapes.network.ground_truth(x, y, x_remesh=rx, y_remesh=ry)
+                gt_yx = shapes.network.ground_truth(y, x, x_remesh=ry, y_remesh=rx)
+                maps = {(kx, ky): gt_xy, (ky, kx): gt_yx}
+            gt_xy, gt_yx = maps[(kx, ky)], maps[(ky, kx)]
             save_npz(
                 path,
                 compressed=True,
