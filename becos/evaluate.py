@@ -38,8 +38,8 @@ exact point's face nearest it: the released ``corres_10``, the vertex form the p
 scored against, which the reference took as the largest-weight corner;
 the ground truth as prediction scores exactly 100); with ``truth="point"`` (``--truth point``) it is
 the exact barycentric point ``corr_10_face``/``corr_10_weights``, against which even the ground-truth
-vertex map has errors of up to about one edge (on ~9.5k-vertex TOSCA cats: AUC x100 ~93 under
-``mean-0.10x40``, ~98.4 under the paper preset). Geodesics: potpourri3d's heat method by default,
+vertex map has errors of up to about one edge (on ~9.5k-vertex TOSCA cats: AUC x100 ~92.4 under
+``mean-0.10x40``, ~98.3 under the paper preset). Geodesics: potpourri3d's heat method by default,
 rows computed from the true points' corners (one set of rows serves every method; a prediction equal
 to the true vertex needs none) and cached per shape across pairs
 (:class:`becos.geodesics.GeodesicsCache`); ``--geodesics dijkstra`` uses exact edge-graph distances by

@@ -338,6 +338,31 @@ def undirected_edges(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return _unique_pairs(e)
 
 
+def edge_neighbours(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Across each edge of each face: the face on the other side and its corner off the edge.
+
+    Edge k of face f joins its corners k and k+1 (mod 3). Returns (F, 3) int64 ``neighbour`` (the other
+    face using that edge) and (F, 3) int64 ``far`` (that face's corner not on the edge); both -1 where
+    the edge is a boundary or non-manifold edge (used by one face, or by more than two)."""
+    f = np.asarray(faces, dtype=np.int64)
+    if len(f) == 0:
+        return np.zeros((0, 3), dtype=np.int64), np.zeros((0, 3), dtype=np.int64)
+    a, b, c = f.ravel(), f[:, [1, 2, 0]].ravel(), f[:, [2, 0, 1]].ravel()  # half-edge (a, b), c across
+    n = int(f.max()) + 1
+    order = np.argsort(np.minimum(a, b) * n + np.maximum(a, b))
+    key = (np.minimum(a, b) * n + np.maximum(a, b))[order]
+    same = key[1:] == key[:-1]
+    pair = same.copy()  # sorted entries i, i+1 are an edge's only two half-edges
+    pair[1:] &= ~same[:-1]
+    pair[:-1] &= ~same[1:]
+    i = np.flatnonzero(pair)
+    first, second = order[i], order[i + 1]
+    neighbour, far = np.full(len(a), -1, dtype=np.int64), np.full(len(a), -1, dtype=np.int64)
+    neighbour[first], neighbour[second] = second // 3, first // 3
+    far[first], far[second] = c[second], c[first]
+    return neighbour.reshape(-1, 3), far.reshape(-1, 3)
+
+
 def misoriented_edge_count(faces: np.ndarray) -> int:
     """Directed edges used by two faces (two neighbours wound against each other); 0 when consistent."""
     directed = np.asarray(faces, dtype=np.int64)[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)

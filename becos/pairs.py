@@ -87,6 +87,14 @@ class ShapeInstance:
 
         return surface_area(self.mesh)
 
+    @cached_property
+    def edge_neighbours(self) -> tuple[np.ndarray, np.ndarray]:
+        """:func:`becos.mesh.edge_neighbours` of ``mesh.faces``, computed once per instance (every
+        partial cut from it derives its own from these, :meth:`becos.partiality.Partial.far_corners`)."""
+        from becos.mesh import edge_neighbours
+
+        return edge_neighbours(self.mesh.faces)
+
 
 def random_rotation(rng: np.random.Generator, up_axis: str = "y", one_axis: bool = True) -> np.ndarray:
     """(3, 3) rotation for row vectors (``V @ R``): about the up axis by an angle uniform in [0, 2π),
@@ -282,8 +290,9 @@ def build_pair(
     )
     arrays.update({f"x_{k}": v for k, v in shape_x.items()})
     arrays.update({f"y_{k}": v for k, v in shape_y.items()})
-    for name, m, target in (("corr_01", map_xy, py.mesh), ("corr_10", map_yx, px.mesh)):
-        arrays[name] = m.to_nearest_corners(target.vertices, target.faces)
+    for name, m, target, full in (("corr_01", map_xy, py, y), ("corr_10", map_yx, px, x)):
+        far = target.far_corners(full.edge_neighbours)
+        arrays[name] = m.to_nearest_vertices(target.mesh.vertices, target.mesh.faces, far=far)
         arrays[f"{name}_face"] = m.face
         arrays[f"{name}_weights"] = m.weights
     return PairRecord(arrays, meta)

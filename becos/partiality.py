@@ -62,6 +62,15 @@ class Partial:
     def n_full_faces(self) -> int:
         return len(self.kept_faces)
 
+    def far_corners(self, full_edge_neighbours: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
+        """(F_p, 3) int64 far corners of the partial's faces (:func:`becos.mesh.edge_neighbours` of
+        ``mesh.faces``: partial vertex ids, -1 where the neighbour across the edge is not kept),
+        derived from the full mesh's ``edge_neighbours`` (a partial face keeps its full face's corner
+        order)."""
+        neighbour, far = (a[self.face_ids] for a in full_edge_neighbours)
+        kept = (neighbour >= 0) & self.kept_faces[np.maximum(neighbour, 0)]
+        return np.where(kept, self.full_to_partial[far], -1)
+
     @property
     def full_to_partial_face(self) -> np.ndarray:
         """(F_full,) int64 partial face id of each full face, -1 where not kept."""

@@ -29,10 +29,13 @@ from becos.settings import SETTINGS  # noqa: F401 (re-exported: becos.record.SET
 
 SCHEMA_VERSION = 1
 SIDES = ("x", "y")
-VERTEX_MAP_ROUNDING = "nearest_corner"
+VERTEX_MAP_ROUNDING = "nearest_along_surface"
 """How a record's final vertex maps (``corr_01``, ``corr_10``) round a point to a vertex, written as meta
-``vertex_rounding``: the corner of the holding face nearest the point in 3D
-(:meth:`becos.surface_map.SurfaceMap.to_nearest_corners`)."""
+``vertex_rounding``: the vertex nearest the point along the surface among the holding face's corners and
+its edge neighbours' far corners (:meth:`becos.surface_map.SurfaceMap.to_nearest_vertices`)."""
+NEAREST_CORNER_VERTEX_MAP_ROUNDING = "nearest_corner"
+"""The rounding of records with meta ``vertex_rounding: nearest_corner`` (becos between issue #20's first
+fix and :data:`VERTEX_MAP_ROUNDING`): the corner of the holding face nearest the point in 3D."""
 LEGACY_VERTEX_MAP_ROUNDING = "largest_weight"
 """The rounding of records without meta ``vertex_rounding`` (becos before issue #20; the reference's rule): the
 largest-weight corner of the holding face."""

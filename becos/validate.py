@@ -31,8 +31,10 @@ attribute instead of pairs. Checks (vectorised over blocks of pairs of about
 ``unmatched``     corr_01 >= 0 and corr_01_face >= 0 exactly where x_overlap_mask (same for Y);
                   weight rows of unmatched vertices are all 0 (or all NaN)
 ``weights``       weights of matched vertices finite, >= 0, summing to 1
-``corr_face``     corr_01 is the corner of corr_01_face nearest its point (same for corr_10); for a record
-                  without meta ``vertex_rounding`` (older becos) its largest-weight corner
+``corr_face``     corr_01 is the vertex nearest its point along the surface among corr_01_face's corners
+                  and its edge neighbours' far corners (same for corr_10); records of an older becos by
+                  their meta ``vertex_rounding``: ``nearest_corner``, the corner nearest in 3D; none, the
+                  largest-weight corner
 ``overlap``       s_overlap equals the mask's mean; partial_partial pairs whose meta says
                   ``accepted`` have both overlaps in [min_overlap, max_overlap] of meta ``options``
 ``index_maps``    partial_to_full strictly increasing, full_to_partial its inverse (-1 elsewhere)
@@ -74,9 +76,17 @@ from pathlib import Path
 import numpy as np
 
 from becos.errors import BecosError
-from becos.record import LEGACY_VERTEX_MAP_ROUNDING, RECORD_SCHEMA, SCHEMA_VERSION, VERTEX_MAP_ROUNDING
+from becos.mesh import edge_neighbours
+from becos.record import (
+    LEGACY_VERTEX_MAP_ROUNDING,
+    NEAREST_CORNER_VERTEX_MAP_ROUNDING,
+    RECORD_SCHEMA,
+    SCHEMA_VERSION,
+    VERTEX_MAP_ROUNDING,
+)
 from becos.settings import SETTINGS, SPLITS
 from becos.store import DAMAGED_STORE_FIX as STORE_FIX
+from becos.surface_map import rounding_candidates
 
 WEIGHT_TOL = 1e-6
 ROTATION_TOL = 1e-6
@@ -242,32 +252,47 @@ class _BlockChecker:
         if face_ok.any():
             rows = np.flatnonzero(face_ok)
             gface = face[rows] + self.rep(self.start[go_f], gv)[rows]
-            corners = a[f"{o}_faces"][gface]  # (R, 3) vertices of the other shape, per pair
-            local = np.clip(corners, 0, np.maximum(self.rep(Vo, gv)[rows, None] - 1, 0))  # bad faces: index_range
-            at = a[f"{o}_vertices"][local + self.rep(self.start[go_v], gv)[rows, None]]  # (R, 3, 3)
+            # the other shape's faces in block-wide vertex numbers (bad indices clipped: index_range reports them)
+            vertex_start = self.rep(self.start[go_v], go_f)
+            local_faces = np.clip(a[f"{o}_faces"], 0, np.maximum(self.rep(Vo, go_f)[:, None] - 1, 0))
+            block_faces = local_faces + vertex_start[:, None]
             wr = np.nan_to_num(w[rows])
             wr = wr / np.where(np.abs(wr.sum(axis=1)) > 0, wr.sum(axis=1), 1.0)[:, None]  # sums: the weights check
-            dist = np.linalg.norm(at - np.einsum("rk,rkd->rd", wr, at)[:, None], axis=2)
-            is_corner = corners == c[rows, None]
-            own = np.where(is_corner, dist, np.inf).min(axis=1)
-            # the record rounds in the remesh frame: a near tie may fall either way in this frame
-            tol = 1e-9 * (dist.max(axis=1) + 1e-12)
-            wrong = own > dist.min(axis=1) + tol
-            # records written before meta "vertex_rounding" (older becos) hold the largest-weight corner
-            legacy = np.array(
-                [m.get("vertex_rounding", LEGACY_VERTEX_MAP_ROUNDING) != VERTEX_MAP_ROUNDING for m in self.b.metas]
+            candidates, along = rounding_candidates(
+                a[f"{o}_vertices"], block_faces, edge_neighbours(block_faces)[1], gface, wr
             )
-            legacy_rows = self.rep(legacy, gv)[rows] if len(legacy) else np.zeros(len(rows), dtype=bool)
+            corners = candidates[:, :3] - vertex_start[gface, None]  # (R, 3) vertices of the other shape, per pair
+            target = c[rows, None] + vertex_start[gface, None]
+            dist = np.linalg.norm(
+                a[f"{o}_vertices"][candidates[:, :3]]
+                - np.einsum("rk,rkd->rd", wr, a[f"{o}_vertices"][candidates[:, :3]])[:, None],
+                axis=2,
+            )
+            # the record rounds in the remesh frame: a near tie may fall either way in this frame
+            rounding = np.array([m.get("vertex_rounding", LEGACY_VERTEX_MAP_ROUNDING) for m in self.b.metas])
+            rule = self.rep(rounding, gv)[rows] if len(rounding) else np.zeros(len(rows), dtype=rounding.dtype)
+            current, nearest_corner = rule == VERTEX_MAP_ROUNDING, rule == NEAREST_CORNER_VERTEX_MAP_ROUNDING
+            own = np.where(candidates == target, along, np.inf).min(axis=1)
+            tol = 1e-9 * (dist.max(axis=1) + 1e-12)
+            wrong = own > along.min(axis=1) + tol
+            own_corner = np.where(candidates[:, :3] == target, dist, np.inf).min(axis=1)
+            wrong_corner = own_corner > dist.min(axis=1) + tol
             largest = corners[np.arange(len(rows)), np.nan_to_num(w[rows], nan=-1.0).argmax(axis=1)]
+            legacy = ~current & ~nearest_corner
             self.report(
                 "corr_face",
-                f"{corr} is not the corner of {corr}_face nearest its point",
-                np.unique(self.pair_of[gv][rows[wrong & ~legacy_rows]]),
+                f"{corr} is not the vertex nearest its point along the surface (corners of {corr}_face and far corners of its neighbours)",
+                np.unique(self.pair_of[gv][rows[wrong & current]]),
+            )
+            self.report(
+                "corr_face",
+                f"{corr} is not the corner of {corr}_face nearest its point (a record of an older becos, vertex_rounding nearest_corner)",
+                np.unique(self.pair_of[gv][rows[wrong_corner & nearest_corner]]),
             )
             self.report(
                 "corr_face",
                 f"{corr} is not the largest-weight corner of {corr}_face (a record of an older becos, no meta vertex_rounding)",
-                np.unique(self.pair_of[gv][rows[legacy_rows & (largest != c[rows])]]),
+                np.unique(self.pair_of[gv][rows[legacy & (largest != c[rows])]]),
             )
 
         # overlap values

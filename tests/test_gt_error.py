@@ -41,7 +41,7 @@ def exact_truth_errors(network, entries, prepared, remeshes, x: str, y: str):
     """Errors (x sqrt area of Y's remesh) of the final vertex map X -> Y, and the best possible map's."""
     rx, ry = remeshes[x], remeshes[y]
     gt = network.ground_truth(entries[x], entries[y], x_remesh=rx, y_remesh=ry)
-    predicted = gt.to_nearest_corners(ry.mesh.vertices, ry.mesh.faces)  # a record's rounding
+    predicted = gt.to_nearest_vertices(ry.mesh.vertices, ry.mesh.faces)  # a record's rounding
     assert (predicted >= 0).all()
     poses = np.stack([prepared[x].vertices, prepared[y].vertices])  # one triangulation
     target = gt_error.RemeshTarget(ry, prepared[y].faces, poses, 1)
@@ -67,4 +67,4 @@ def test_no_vertex_crosses_a_contact(x, y, variant, tosca_entries, tosca_network
         errors, best = exact_truth_errors(tosca_network, tosca_entries, prepared, remeshes, a, b)
         print(f"\n{a} -> {b}: mean {errors.mean():.5f} (best vertex map {best.mean():.5f}), max {errors.max():.4f}")
         assert errors.max() <= gt_error.BOUND
-        assert errors.mean() <= 1.1 * best.mean() + 1e-3
+        assert errors.mean() <= 1.03 * best.mean()  # along-surface rounding 1.01-1.015; nearest corner in 3D 1.04

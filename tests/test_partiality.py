@@ -13,7 +13,7 @@ import pytest
 
 from becos.align import RigidTransform
 from becos.cameras import REGIMES, camera_angles
-from becos.mesh import TriMesh
+from becos.mesh import TriMesh, edge_neighbours
 from becos.partiality import Partial, Scanner, cast_p2f, cast_p2p, cut, overlap_mask, partial_map, whole
 from becos.seeding import rng_for
 from becos.surface_map import SurfaceMap, compose_path
@@ -115,6 +115,12 @@ def test_cut_is_exact_on_a_random_mask(cat_pair):
     w = whole(x)
     np.testing.assert_array_equal(w.partial_to_full, np.arange(x.n_vertices))
     np.testing.assert_array_equal(w.mesh.faces, x.faces)
+    # far corners derived from the full mesh's neighbours are the partial's own (a random mask: many cut edges)
+    full = edge_neighbours(x.faces)
+    own = edge_neighbours(p.mesh.faces)[1]
+    assert (own < 0).sum() > (full[1] < 0).sum()
+    np.testing.assert_array_equal(p.far_corners(full), own)
+    np.testing.assert_array_equal(w.far_corners(full), full[1])
     with pytest.raises(ValueError):
         cut(x, mask[:-1])
 

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from becos.geometry import SurfaceLocator
-from becos.mesh import TriMesh
-from becos.surface_map import SurfaceMap, compose, compose_path
+from becos.mesh import TriMesh, edge_neighbours
+from becos.surface_map import SurfaceMap, compose, compose_path, rounding_candidates
 
 
 def grid(n: int = 6, z: float = 0.0) -> TriMesh:
@@ -26,6 +26,52 @@ def test_vertex_form_round_trip():
     assert np.allclose(m.positions(mesh)[[0, 1, 3, 4]], mesh.vertices[idx[[0, 1, 3, 4]]])
     assert np.isnan(m.positions(mesh)[2]).all()
     assert m.missing_fraction == pytest.approx(0.2)
+
+
+def test_edge_neighbours_pair_each_inner_edge_and_mark_boundaries():
+    mesh = grid(4)
+    neighbour, far = edge_neighbours(mesh.faces)
+    f = mesh.faces
+    for face, k in zip(*np.nonzero(far >= 0)):
+        a, b = f[face, k], f[face, (k + 1) % 3]
+        other = np.flatnonzero((f == a).any(1) & (f == b).any(1) & (np.arange(len(f)) != face))
+        assert len(other) == 1 and neighbour[face, k] == other[0]
+        assert far[face, k] in f[other[0]] and far[face, k] not in (a, b)
+    n_edges = len({tuple(sorted(e)) for e in f[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2).tolist()})
+    n_boundary = 4 * 3  # the 4 x 4 grid's outline
+    assert (far >= 0).sum() == 2 * (n_edges - n_boundary) and (far < 0).sum() == n_boundary
+    assert ((far < 0) == (neighbour < 0)).all()
+
+
+def test_rounding_distances_are_along_the_surface():
+    # flat: unfolding changes nothing, so every finite distance is the straight line in 3D
+    mesh = grid(5)
+    rng = np.random.default_rng(0)
+    face = rng.integers(0, len(mesh.faces), 200)
+    weights = rng.dirichlet(np.ones(3), 200)
+    cand, along = rounding_candidates(mesh.vertices, mesh.faces, edge_neighbours(mesh.faces)[1], face, weights)
+    point = np.einsum("nk,nkd->nd", weights, mesh.vertices[mesh.faces[face]])
+    chord = np.linalg.norm(mesh.vertices[cand] - point[:, None], axis=2)
+    finite = np.isfinite(along)
+    assert finite[:, :3].all() and finite[:, 3:].any()
+    np.testing.assert_allclose(along[finite], chord[finite], rtol=1e-12, atol=1e-12)
+    # a large face beside a small one: the neighbour's far corner is nearer than every corner
+    big = TriMesh(np.array([[0, 0, 0], [4, 0, 0], [2, 4, 0], [2, -0.5, 0]], float), np.array([[0, 1, 2], [1, 0, 3]]))
+    m = SurfaceMap(np.array([0]), np.array([[0.49, 0.49, 0.02]]))
+    assert m.to_nearest_corners(big.vertices, big.faces)[0] in (0, 1)
+    assert m.to_nearest_vertices(big.vertices, big.faces)[0] == 3
+
+    # a thin fold: the neighbour folded back over the face. Its far corner D is 0.05 above the point in
+    # 3D, but along the surface the path runs over the edge y = 0, 1.8 away: the face's corner C (0.3) wins
+    fold = TriMesh(
+        np.array([[0, 0, 0], [2, 0, 0], [1, 1.2, 0], [1, 0.9, 0.05]], float), np.array([[0, 1, 2], [1, 0, 3]])
+    )
+    m = SurfaceMap(np.array([0]), np.array([[0.125, 0.125, 0.75]]))  # (1, 0.9, 0)
+    point = m.positions(fold)[0]
+    assert np.linalg.norm(fold.vertices - point, axis=1).argmin() == 3  # nearest in 3D: across the fold
+    _, along = rounding_candidates(fold.vertices, fold.faces, edge_neighbours(fold.faces)[1], m.face, m.weights)
+    assert along[0, 3] > 1.5  # edge 0 (corners 0, 1) has D across it
+    assert m.to_nearest_vertices(fold.vertices, fold.faces)[0] == 2
 
 
 def test_compose_with_identity_is_exact_and_needs_no_projection():

@@ -204,7 +204,9 @@ def c_corr_face(store, bench):
     face = int(bench.array("corr_01_face")[row])
     corners = np.asarray(bench.array("y_faces")[_rows(bench, "y_faces", 1)[0] + face])
     weights = np.asarray(bench.array("corr_01_weights")[row])
-    _array(store, "corr_01")[row] = corners[np.argsort(weights)[1]]  # a corner, not the nearest one
+    at = np.asarray(bench.array("y_vertices")[_rows(bench, "y_vertices", 1)[0] + corners])
+    farthest = np.linalg.norm(at - weights @ at, axis=1).argmax()
+    _array(store, "corr_01")[row] = corners[farthest]  # a corner, not the nearest vertex
     return 1
 
 
@@ -343,7 +345,7 @@ CORRUPTIONS = (
         "corr_face",
         "partial_partial",
         c_corr_face,
-        "corr_face: corr_01 is not the corner of corr_01_face nearest its point",
+        "corr_face: corr_01 is not the vertex nearest its point along the surface",
     ),
     Corruption("overlap", "partial_partial", c_overlap, "overlap: x_overlap differs from the mean of x_overlap_mask"),
     Corruption(
@@ -433,38 +435,56 @@ def test_corruption_is_caught(case, clean_stores, tmp_path):
 
 
 def test_a_store_of_an_older_becos_validates_with_its_own_rounding(clean_stores, tmp_path):
-    """Records written before meta ``vertex_rounding`` (issue #20) hold the largest-weight corner: such a
-    store validates clean, and the nearest corner in such a record is reported as not its rounding."""
-    store = tmp_path / "older.zarr"
-    shutil.copytree(clean_stores["partial_partial"], store)
-    bench = open_benchmark(store)
-    differ = 0
-    for corr, o in (("corr_01", "y"), ("corr_10", "x")):
-        values, faces, weights = (np.asarray(bench.array(k)[:]) for k in (corr, f"{corr}_face", f"{corr}_weights"))
-        for pair in range(len(bench)):
-            start, stop = _rows(bench, corr, pair)
-            f0 = _rows(bench, f"{o}_faces", pair)[0]
-            rows = np.arange(start, stop)[faces[start:stop] >= 0]
-            corners = np.asarray(bench.array(f"{o}_faces")[:])[f0 + faces[rows]]
-            largest = corners[np.arange(len(rows)), weights[rows].argmax(axis=1)]
-            differ += int((largest != values[rows]).sum())
-            values[rows] = largest
-        _array(store, corr)[:] = values
-    assert differ > 0  # the two roundings differ on these remeshes
-    _rewrite_pairs(store, edit_metas=lambda metas: [m.pop("vertex_rounding") for m in metas])
-    _reseal(store)
-    assert validate_store(store) == []
+    """Records of an older becos validate by the rounding they were written with: without meta
+    ``vertex_rounding`` (before issue #20) the largest-weight corner, with ``nearest_corner`` the corner
+    nearest in 3D. Today's rounding in a record that says neither is reported as not its rounding."""
+    from becos.record import NEAREST_CORNER_VERTEX_MAP_ROUNDING
 
-    # the nearest corner (today's rounding) in a record that does not say so
-    shutil.rmtree(store)
-    shutil.copytree(clean_stores["partial_partial"], store)
-    _rewrite_pairs(store, edit_metas=lambda metas: [m.pop("vertex_rounding") for m in metas])
-    _reseal(store)
-    problems = validate_store(store)
-    assert problems and all(
-        p.startswith("corr_face: corr_") and "is not the largest-weight corner" in p for p in problems
-    ), problems
-    print(f"\n{differ} vertices round differently; older store clean; mislabelled store: {problems[0]}")
+    def older(store, pick, edit_metas):
+        shutil.copytree(clean_stores["partial_partial"], store)
+        bench = open_benchmark(store)
+        differ = 0
+        for corr, o in (("corr_01", "y"), ("corr_10", "x")):
+            values, faces, weights = (np.asarray(bench.array(k)[:]) for k in (corr, f"{corr}_face", f"{corr}_weights"))
+            for pair in range(len(bench)):
+                start, stop = _rows(bench, corr, pair)
+                f0 = _rows(bench, f"{o}_faces", pair)[0]
+                v0 = _rows(bench, f"{o}_vertices", pair)[0]
+                rows = np.arange(start, stop)[faces[start:stop] >= 0]
+                corners = np.asarray(bench.array(f"{o}_faces")[:])[f0 + faces[rows]]
+                at = np.asarray(bench.array(f"{o}_vertices")[:])[v0 + corners]
+                chosen = corners[np.arange(len(rows)), pick(weights[rows], at)]
+                differ += int((chosen != values[rows]).sum())
+                values[rows] = chosen
+            _array(store, corr)[:] = values
+        _rewrite_pairs(store, edit_metas=edit_metas)
+        _reseal(store)
+        return differ
+
+    largest = lambda w, at: w.argmax(axis=1)  # noqa: E731
+    nearest = lambda w, at: np.linalg.norm(at - np.einsum("nk,nkd->nd", w, at)[:, None], axis=2).argmin(axis=1)  # noqa: E731
+    unlabelled = lambda metas: [m.pop("vertex_rounding") for m in metas]  # noqa: E731
+    nearest_corner = lambda metas: [m.update(vertex_rounding=NEAREST_CORNER_VERTEX_MAP_ROUNDING) for m in metas]  # noqa: E731
+    differ = older(tmp_path / "largest.zarr", largest, unlabelled)
+    assert differ > 0 and validate_store(tmp_path / "largest.zarr") == []  # the two roundings differ on these remeshes
+    differ_corner = older(tmp_path / "corner.zarr", nearest, nearest_corner)
+    assert differ_corner > 0 and validate_store(tmp_path / "corner.zarr") == []
+
+    # today's rounding in records that do not say so
+    for name, edit, message in (
+        ("mislabelled.zarr", unlabelled, "is not the largest-weight corner"),
+        ("mislabelled-corner.zarr", nearest_corner, "vertex_rounding nearest_corner"),
+    ):
+        store = tmp_path / name
+        shutil.copytree(clean_stores["partial_partial"], store)
+        _rewrite_pairs(store, edit_metas=edit)
+        _reseal(store)
+        problems = validate_store(store)
+        assert problems and all(p.startswith("corr_face: corr_") and message in p for p in problems), problems
+    print(
+        f"\n{differ} vertices (largest weight) and {differ_corner} (nearest corner) round differently from today's "
+        f"rule; older stores clean; mislabelled store: {problems[0]}"
+    )
 
 
 def test_class_in_train_and_test(pair_record_files, tmp_path):

@@ -8,7 +8,7 @@ import json
 
 GROUND_TRUTH_VERSION = 1
 """Bumped when the ground-truth computation changes, so cached files are recomputed."""
-RECORD_VERSION = 2
+RECORD_VERSION = 3
 """Bumped when pair assembly changes, so cached records are rebuilt."""
 STAGE_VERSIONS = {"ground_truth": GROUND_TRUTH_VERSION, "pairs": RECORD_VERSION}
 
