@@ -387,7 +387,7 @@ def test_every_same_class_pair_is_within_the_ground_truth_bound(tiny_tosca_run):
     """Issue #20: the final vertex maps (``corr_01`` and ``corr_10``) of EVERY same-class pair of the
     run, all three settings, against the exact truth (each remeshed vertex's ``to_original`` point
     carried by vertex identity; ``benchmarks/gt_error.py``, which prints the full table of a large
-    run): max <= 0.04 x sqrt(area) on every pair, means within 10 % of the best possible vertex map."""
+    run): max <= 0.04 x sqrt(area) on every pair, means within 5 % of the best possible vertex map."""
     sys.path.insert(0, str(REPO / "benchmarks"))
     import gt_error
 
@@ -399,4 +399,5 @@ def test_every_same_class_pair_is_within_the_ground_truth_bound(tiny_tosca_run):
         s = r.summary()
         assert s["n"] > 0, s
         assert s["max"] <= gt_error.BOUND, s
-        assert s["mean"] <= 1.1 * s["best_mean"], s  # nearest-corner rounding: 1.02-1.06 (largest weight: 1.10-1.19)
+        # along-surface rounding: at most 1.023 per pair (nearest corner in 3D: 1.02-1.06; largest weight: 1.10-1.19)
+        assert s["mean"] <= 1.05 * s["best_mean"], s
