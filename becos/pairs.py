@@ -88,12 +88,12 @@ class ShapeInstance:
         return surface_area(self.mesh)
 
     @cached_property
-    def edge_neighbours(self) -> tuple[np.ndarray, np.ndarray]:
-        """:func:`becos.mesh.edge_neighbours` of ``mesh.faces``, computed once per instance (every
-        partial cut from it derives its own from these, :meth:`becos.partiality.Partial.far_corners`)."""
-        from becos.mesh import edge_neighbours
+    def vertex_rounding(self):
+        """:class:`becos.surface_map.VertexRounding` of ``mesh``, built once per instance; partials cut
+        from it round through it with their kept faces."""
+        from becos.surface_map import VertexRounding
 
-        return edge_neighbours(self.mesh.faces)
+        return VertexRounding(self.mesh.vertices, self.mesh.faces)
 
 
 def random_rotation(rng: np.random.Generator, up_axis: str = "y", one_axis: bool = True) -> np.ndarray:
@@ -291,8 +291,7 @@ def build_pair(
     arrays.update({f"x_{k}": v for k, v in shape_x.items()})
     arrays.update({f"y_{k}": v for k, v in shape_y.items()})
     for name, m, target, full in (("corr_01", map_xy, py, y), ("corr_10", map_yx, px, x)):
-        far = target.far_corners(full.edge_neighbours)
-        arrays[name] = m.to_nearest_vertices(target.mesh.vertices, target.mesh.faces, far=far)
+        arrays[name] = target.round_to_vertices(m, full.vertex_rounding)
         arrays[f"{name}_face"] = m.face
         arrays[f"{name}_weights"] = m.weights
     return PairRecord(arrays, meta)

@@ -28,7 +28,7 @@ from becos.cameras import Camera, draw_camera, draw_camera_pair, normalise_to_un
 from becos.mesh import TriMesh
 from becos.seeding import rng_for
 from becos.settings import MAX_OVERLAP, MIN_OVERLAP
-from becos.surface_map import NONE, SurfaceMap
+from becos.surface_map import NONE, SurfaceMap, VertexRounding
 from becos.visibility import DEFAULT_SAMPLES_PER_FACE, VisibilityScene
 
 # --------------------------------------------------------------------------------------------
@@ -62,14 +62,17 @@ class Partial:
     def n_full_faces(self) -> int:
         return len(self.kept_faces)
 
-    def far_corners(self, full_edge_neighbours: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
-        """(F_p, 3) int64 far corners of the partial's faces (:func:`becos.mesh.edge_neighbours` of
-        ``mesh.faces``: partial vertex ids, -1 where the neighbour across the edge is not kept),
-        derived from the full mesh's ``edge_neighbours`` (a partial face keeps its full face's corner
-        order)."""
-        neighbour, far = (a[self.face_ids] for a in full_edge_neighbours)
-        kept = (neighbour >= 0) & self.kept_faces[np.maximum(neighbour, 0)]
-        return np.where(kept, self.full_to_partial[far], -1)
+    def round_to_vertices(self, surface_map: SurfaceMap, full_rounding: VertexRounding) -> np.ndarray:
+        """(N,) int64 partial vertex per row of ``surface_map`` (points on this partial; -1 = none): its
+        :meth:`SurfaceMap.to_nearest_vertices`, through the full mesh's ``full_rounding`` (a partial
+        face keeps its full face's corner order; neighbours the partial does not keep are absent)."""
+        out = np.full(len(surface_map), -1, dtype=np.int64)
+        matched = surface_map.matched
+        full = full_rounding.nearest(
+            self.face_ids[surface_map.face[matched]], surface_map.weights[matched], self.kept_faces
+        )
+        out[matched] = self.full_to_partial[full]
+        return out
 
     @property
     def full_to_partial_face(self) -> np.ndarray:

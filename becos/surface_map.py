@@ -116,12 +116,12 @@ class SurfaceMap:
         return out
 
     def to_nearest_vertices(
-        self, target_vertices: np.ndarray, target_faces: np.ndarray, far: np.ndarray | None = None
+        self, target_vertices: np.ndarray, target_faces: np.ndarray, rounding: VertexRounding | None = None
     ) -> np.ndarray:
         """(N,) int64 target vertex per source vertex (-1 = none): the vertex nearest the point ALONG
         the target surface among the holding face's three corners and the far corners of its three
-        edge neighbours (:func:`rounding_candidates`; ties: the first candidate). This is the final
-        vertex map of a pair record (``corr_01``/``corr_10``, :data:`becos.record.VERTEX_MAP_ROUNDING`).
+        edge neighbours (:class:`VertexRounding`; ties: the first candidate). This is the final vertex
+        map of a pair record (``corr_01``/``corr_10``, :data:`becos.record.VERTEX_MAP_ROUNDING`).
 
         On a large face the nearest vertex is often a neighbour's far corner rather than a corner of
         the face; its distance is measured in the two faces unfolded into one plane, so a vertex that
@@ -133,16 +133,12 @@ class SurfaceMap:
             target_vertices: (V, 3) float target vertex positions (any frame: distances are compared,
                 and a similarity keeps their order).
             target_faces: (F, 3) target faces, as ``face`` indexes them.
-            far: optional (F, 3) far corners of ``target_faces`` (:func:`becos.mesh.edge_neighbours`,
-                or :meth:`becos.partiality.Partial.far_corners`), computed here when None.
+            rounding: optional :class:`VertexRounding` of these vertices and faces (built here if None).
         """
         out = np.full(len(self), NONE, dtype=np.int64)
         matched = self.matched
-        faces = np.asarray(target_faces, dtype=np.int64)
-        far = edge_neighbours(faces)[1] if far is None else far
-        vertices = np.asarray(target_vertices, dtype=np.float64)
-        candidates, distance = rounding_candidates(vertices, faces, far, self.face[matched], self.weights[matched])
-        out[matched] = candidates[np.arange(len(candidates)), distance.argmin(axis=1)]
+        rounding = VertexRounding(target_vertices, target_faces) if rounding is None else rounding
+        out[matched] = rounding.nearest(self.face[matched], self.weights[matched])
         return out
 
     def to_nearest_corners(self, target_vertices: np.ndarray, target_faces: np.ndarray) -> np.ndarray:
@@ -178,49 +174,82 @@ class SurfaceMap:
         return out
 
 
-def rounding_candidates(
-    vertices: np.ndarray, faces: np.ndarray, far: np.ndarray, face: np.ndarray, weights: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """The vertices a surface point may round to, and their distances from it along the surface.
+class VertexRounding:
+    """Rounds points of one mesh's surface to the vertex nearest them ALONG the surface, among the
+    holding face's three corners and the far corners of its three edge neighbours
+    (:meth:`SurfaceMap.to_nearest_vertices`, a pair record's final vertex maps).
+
+    What depends on the mesh alone is computed once here: per face f and edge k (corners k, k+1) the
+    edge's unit direction and length, and the neighbour's far corner unfolded into f's plane (its
+    distances to the edge's two ends kept, on the side away from f).
 
     Args:
-        vertices: (V, 3) float64 mesh vertices; faces: (F, 3) int64 mesh faces.
-        far: (F, 3) far corners of ``faces`` (:func:`becos.mesh.edge_neighbours`).
-        face: (M,) int64 face holding each point (all >= 0); weights: (M, 3) its barycentric weights.
-
-    Returns:
-        candidates: (M, 6) int64: the holding face's corners 0, 1, 2, then for its edges k = 0, 1, 2
-            (corners k, k+1) the far corner of the face across that edge (-1 where there is none).
-        distance: (M, 6) float64, in the units of ``vertices``: to a corner, the straight line inside
-            the face; to a far corner, the straight line in the two faces unfolded into the holding
-            face's plane, which is the geodesic when it crosses the shared edge. Where it does not (the
-            shortest path then runs through a corner of that edge, so that corner is nearer), where
-            there is no far corner, or on a degenerate face: inf.
+        vertices: (V, 3) float64 positions (any frame: only distances are compared).
+        faces: (F, 3) int64 faces.
     """
-    corners = faces[face]  # (M, 3)
-    start = vertices[corners]  # (M, 3, 3): edge k runs from corner k ...
-    edge = start[:, [1, 2, 0]] - start  # ... to corner k + 1
-    point = np.einsum("mk,mkd->md", weights, start)
-    across = far[face]
-    to_point = point[:, None] - start
-    to_far = vertices[across] - start  # rows of across == -1 are masked below
-    with np.errstate(divide="ignore", invalid="ignore"):
-        length2 = np.einsum("mkd,mkd->mk", edge, edge)
-        length = np.sqrt(length2)
-        corner2 = np.einsum("mkd,mkd->mk", to_point, to_point)
-        # the holding face's plane: x along edge k from its start, y away from the face's third corner
-        px = np.einsum("mkd,mkd->mk", to_point, edge) / length
-        py = np.sqrt(np.maximum(corner2 - px * px, 0.0))  # the point's distance from the edge's line
-        far2 = np.einsum("mkd,mkd->mk", to_far, to_far)
-        beyond = to_far - edge
-        qx = (far2 - np.einsum("mkd,mkd->mk", beyond, beyond) + length2) / (2 * length)
-        qy = -np.sqrt(np.maximum(far2 - qx * qx, 0.0))  # the far corner unfolded across the edge
-        crossing = px + py / (py - qy) * (qx - px)  # where the straight line meets the edge's line
-        straight = np.hypot(px - qx, py - qy)
-        ok = (across >= 0) & (py - qy > 0) & (crossing >= 0) & (crossing <= length) & np.isfinite(straight)
-        distance = np.concatenate([np.sqrt(corner2), np.where(ok, straight, np.inf)], axis=1)
-    distance[~np.isfinite(distance)] = np.inf
-    return np.concatenate([corners, across], axis=1), distance
+
+    def __init__(self, vertices: np.ndarray, faces: np.ndarray):
+        self.vertices = np.asarray(vertices, dtype=np.float64)
+        self.faces = np.asarray(faces, dtype=np.int64)
+        self.neighbour, self.far = edge_neighbours(self.faces)
+        start = self.vertices[self.faces]  # (F, 3, 3): edge k runs from corner k ...
+        edge = start[:, [1, 2, 0]] - start  # ... to corner k + 1
+        to_far = self.vertices[self.far] - start  # rows with far == -1 are never used
+        with np.errstate(divide="ignore", invalid="ignore"):
+            length2 = np.einsum("fkd,fkd->fk", edge, edge)
+            length = np.sqrt(length2)
+            far2 = np.einsum("fkd,fkd->fk", to_far, to_far)
+            beyond = to_far - edge
+            # the far corner in the face's plane: x along the edge from its start, y < 0 (across it)
+            far_x = (far2 - np.einsum("fkd,fkd->fk", beyond, beyond) + length2) / (2 * length)
+            far_y = -np.sqrt(np.maximum(far2 - far_x**2, 0.0))
+            # (F, 3, 6) per face and edge: unit direction (3), length, far corner x, y; one gather per query
+            self._edges = np.concatenate([edge / length[..., None], np.stack([length, far_x, far_y], axis=2)], axis=2)
+        self._indices = np.stack([self.faces, self.far, self.neighbour], axis=2)  # (F, 3, 3)
+
+    def candidates(
+        self, face: np.ndarray, weights: np.ndarray, kept_faces: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """The vertices each point may round to, and their distances from it along the surface.
+
+        Args:
+            face: (M,) int64 face holding each point (all >= 0); weights: (M, 3) its barycentric weights.
+            kept_faces: optional (F,) bool: only these faces exist (a partial cut from this mesh, with
+                its faces' corner order); a neighbour outside them has no far corner.
+
+        Returns:
+            candidates: (M, 6) int64 vertices: the holding face's corners 0, 1, 2, then for its edges
+                k = 0, 1, 2 the far corner of the face across that edge (-1 where there is none).
+            distance: (M, 6) float64, in the units of ``vertices``: to a corner, the straight line
+                inside the face; to a far corner, the straight line in the two faces unfolded into one
+                plane, which is the geodesic when it crosses the shared edge. Where it does not (the
+                shortest path then runs through a corner of that edge, which is nearer), where there is
+                no far corner, or on a degenerate face: inf.
+        """
+        indices = np.take(self._indices, face, axis=0)  # (M, 3, 3): corner, far corner, neighbour per edge
+        corners, across = indices[..., 0], indices[..., 1]
+        if kept_faces is not None:
+            across = np.where(kept_faces[np.maximum(indices[..., 2], 0)], across, -1)
+        start = np.take(self.vertices, corners, axis=0)  # (M, 3, 3)
+        to_point = np.einsum("mk,mkd->md", weights, start)[:, None] - start
+        edges = np.take(self._edges, face, axis=0)  # (M, 3, 6)
+        length, qx, qy = edges[..., 3], edges[..., 4], edges[..., 5]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            corner2 = np.einsum("mkd,mkd->mk", to_point, to_point)
+            px = np.einsum("mkd,mkd->mk", to_point, edges[..., :3])
+            py = np.sqrt(np.maximum(corner2 - px * px, 0.0))  # the point's distance from the edge's line
+            crossing = px + py / (py - qy) * (qx - px)  # where the straight line meets the edge's line
+            straight = np.hypot(px - qx, py - qy)
+            ok = (across >= 0) & (py - qy > 0) & (crossing >= 0) & (crossing <= length) & np.isfinite(straight)
+            distance = np.concatenate([np.sqrt(corner2), np.where(ok, straight, np.inf)], axis=1)
+        distance[~np.isfinite(distance)] = np.inf
+        return np.concatenate([corners, across], axis=1), distance
+
+    def nearest(self, face: np.ndarray, weights: np.ndarray, kept_faces: np.ndarray | None = None) -> np.ndarray:
+        """(M,) int64 the candidate nearest each point along the surface (ties: the first candidate);
+        arguments as :meth:`candidates`."""
+        candidates, distance = self.candidates(face, weights, kept_faces)
+        return candidates[np.arange(len(candidates)), distance.argmin(axis=1)]
 
 
 def compose(

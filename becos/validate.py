@@ -76,7 +76,6 @@ from pathlib import Path
 import numpy as np
 
 from becos.errors import BecosError
-from becos.mesh import edge_neighbours
 from becos.record import (
     LEGACY_VERTEX_MAP_ROUNDING,
     NEAREST_CORNER_VERTEX_MAP_ROUNDING,
@@ -86,7 +85,7 @@ from becos.record import (
 )
 from becos.settings import SETTINGS, SPLITS
 from becos.store import DAMAGED_STORE_FIX as STORE_FIX
-from becos.surface_map import rounding_candidates
+from becos.surface_map import VertexRounding
 
 WEIGHT_TOL = 1e-6
 ROTATION_TOL = 1e-6
@@ -258,9 +257,7 @@ class _BlockChecker:
             block_faces = local_faces + vertex_start[:, None]
             wr = np.nan_to_num(w[rows])
             wr = wr / np.where(np.abs(wr.sum(axis=1)) > 0, wr.sum(axis=1), 1.0)[:, None]  # sums: the weights check
-            candidates, along = rounding_candidates(
-                a[f"{o}_vertices"], block_faces, edge_neighbours(block_faces)[1], gface, wr
-            )
+            candidates, along = VertexRounding(a[f"{o}_vertices"], block_faces).candidates(gface, wr)
             corners = candidates[:, :3] - vertex_start[gface, None]  # (R, 3) vertices of the other shape, per pair
             target = c[rows, None] + vertex_start[gface, None]
             dist = np.linalg.norm(

@@ -16,7 +16,7 @@ from becos.cameras import REGIMES, camera_angles
 from becos.mesh import TriMesh, edge_neighbours
 from becos.partiality import Partial, Scanner, cast_p2f, cast_p2p, cut, overlap_mask, partial_map, whole
 from becos.seeding import rng_for
-from becos.surface_map import SurfaceMap, compose_path
+from becos.surface_map import SurfaceMap, VertexRounding, compose_path
 
 TARGET_VERTICES = 10_000
 _CACHE: dict = {}
@@ -115,12 +115,13 @@ def test_cut_is_exact_on_a_random_mask(cat_pair):
     w = whole(x)
     np.testing.assert_array_equal(w.partial_to_full, np.arange(x.n_vertices))
     np.testing.assert_array_equal(w.mesh.faces, x.faces)
-    # far corners derived from the full mesh's neighbours are the partial's own (a random mask: many cut edges)
-    full = edge_neighbours(x.faces)
-    own = edge_neighbours(p.mesh.faces)[1]
-    assert (own < 0).sum() > (full[1] < 0).sum()
-    np.testing.assert_array_equal(p.far_corners(full), own)
-    np.testing.assert_array_equal(w.far_corners(full), full[1])
+    # rounding a partial's points through the full mesh's VertexRounding (its kept faces) is rounding
+    # on the partial itself (a random mask: many neighbours cut away)
+    rng = np.random.default_rng(1)
+    points = SurfaceMap(rng.integers(0, p.mesh.n_faces, 3000), rng.dirichlet(np.ones(3), 3000))
+    own = points.to_nearest_vertices(p.mesh.vertices, p.mesh.faces)
+    np.testing.assert_array_equal(p.round_to_vertices(points, VertexRounding(x.vertices, x.faces)), own)
+    assert (edge_neighbours(p.mesh.faces)[1] < 0).sum() > (edge_neighbours(x.faces)[1] < 0).sum()
     with pytest.raises(ValueError):
         cut(x, mask[:-1])
 

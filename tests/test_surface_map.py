@@ -5,7 +5,7 @@ import pytest
 
 from becos.geometry import SurfaceLocator
 from becos.mesh import TriMesh, edge_neighbours
-from becos.surface_map import SurfaceMap, compose, compose_path, rounding_candidates
+from becos.surface_map import SurfaceMap, VertexRounding, compose, compose_path
 
 
 def grid(n: int = 6, z: float = 0.0) -> TriMesh:
@@ -49,7 +49,7 @@ def test_rounding_distances_are_along_the_surface():
     rng = np.random.default_rng(0)
     face = rng.integers(0, len(mesh.faces), 200)
     weights = rng.dirichlet(np.ones(3), 200)
-    cand, along = rounding_candidates(mesh.vertices, mesh.faces, edge_neighbours(mesh.faces)[1], face, weights)
+    cand, along = VertexRounding(mesh.vertices, mesh.faces).candidates(face, weights)
     point = np.einsum("nk,nkd->nd", weights, mesh.vertices[mesh.faces[face]])
     chord = np.linalg.norm(mesh.vertices[cand] - point[:, None], axis=2)
     finite = np.isfinite(along)
@@ -69,7 +69,7 @@ def test_rounding_distances_are_along_the_surface():
     m = SurfaceMap(np.array([0]), np.array([[0.125, 0.125, 0.75]]))  # (1, 0.9, 0)
     point = m.positions(fold)[0]
     assert np.linalg.norm(fold.vertices - point, axis=1).argmin() == 3  # nearest in 3D: across the fold
-    _, along = rounding_candidates(fold.vertices, fold.faces, edge_neighbours(fold.faces)[1], m.face, m.weights)
+    _, along = VertexRounding(fold.vertices, fold.faces).candidates(m.face, m.weights)
     assert along[0, 3] > 1.5  # edge 0 (corners 0, 1) has D across it
     assert m.to_nearest_vertices(fold.vertices, fold.faces)[0] == 2
 
