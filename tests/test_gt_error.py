@@ -68,3 +68,35 @@ def test_no_vertex_crosses_a_contact(x, y, variant, tosca_entries, tosca_network
         print(f"\n{a} -> {b}: mean {errors.mean():.5f} (best vertex map {best.mean():.5f}), max {errors.max():.4f}")
         assert errors.max() <= gt_error.BOUND
         assert errors.mean() <= 1.03 * best.mean()  # along-surface rounding 1.01-1.015; nearest corner in 3D 1.04
+
+
+def test_exact_point_distances_follow_the_surface():
+    """The exact re-measure (errors above EXACT_ABOVE): on a grid bent 90 degrees along x = 2 the
+    distance from (0, 0) to the grid point (5, 0) is 5 along the surface, not the 3.61 chord."""
+    from becos.mesh import TriMesh
+
+    n = 6
+    xs, ys = np.meshgrid(np.arange(n, dtype=float), np.arange(n, dtype=float))
+    x, y = xs.ravel(), ys.ravel()
+    bent = np.stack([np.minimum(x, 2.0), y, np.maximum(x - 2.0, 0.0)], axis=1)
+    i = np.arange(n - 1)
+    a = (i[:, None] * n + i[None, :]).ravel()
+    faces = np.concatenate([np.stack([a, a + 1, a + n + 1], 1), np.stack([a, a + n + 1, a + n], 1)])
+    mesh = TriMesh(bent, faces)
+    far = 5  # grid point (5, 0)
+    face = int(np.flatnonzero((faces == far).any(axis=1))[0])
+    weights = (faces[face] == far).astype(float)[None]
+    got = gt_error.exact_point_distances(mesh, np.array([0]), np.array([face]), weights)
+    assert got[0] == pytest.approx(5.0, rel=1e-9)
+    assert np.linalg.norm(bent[far] - bent[0]) == pytest.approx(np.sqrt(13))
+    # a point inside a face: the bent grid unfolds to the flat one, where the true distance is the straight
+    # line; the corner route is never shorter, and longer by at most twice the point's nearest-corner distance
+    rng = np.random.default_rng(0)
+    f = rng.integers(0, len(faces), 20)
+    w = rng.dirichlet(np.ones(3), 20)
+    d = gt_error.exact_point_distances(mesh, np.zeros(20, dtype=np.int64), f, w)
+    flat = np.stack([x, y], axis=1)[faces[f]]  # (20, 3, 2) the faces' corners unfolded
+    point = np.einsum("nk,nkd->nd", w, flat)
+    true = np.linalg.norm(point, axis=1)
+    to_corner = np.linalg.norm(flat - point[:, None], axis=2).min(axis=1)
+    assert (d >= true - 1e-9).all() and (d <= true + 2 * to_corner + 1e-9).all()
