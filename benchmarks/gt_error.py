@@ -170,18 +170,23 @@ def _adjacency(faces: np.ndarray, n: int) -> sp.csr_matrix:
 
 
 def exact_point_distances(mesh, vertex: np.ndarray, face: np.ndarray, weights: np.ndarray) -> np.ndarray:
-    """(N,) distance along ``mesh`` from vertex ``vertex[i]`` to the point (``face[i]``, ``weights[i]``),
-    in mesh units: the shortest over the face's corners c of the exact polyhedral geodesic to c
-    (libigl's ``exact_geodesic``, MMP) plus the straight line from c to the point inside the face. Never
-    shorter than the true distance; equal to it when the shortest path enters the face at a corner."""
+    """(N,) exact distance along ``mesh`` from vertex ``vertex[i]`` to the point (``face[i]``,
+    ``weights[i]``), in mesh units: libigl's ``exact_geodesic`` (MMP) on a copy of the mesh whose face
+    ``face[i]`` is split into three at the point (the same surface; weights kept >= 1e-6 so that no
+    split face is degenerate, which moves the point by at most 1e-6 of the face's size)."""
     import igl
 
-    corners = np.asarray(mesh.faces, dtype=np.int64)[face]
-    points = np.einsum("nk,nkd->nd", weights, mesh.vertices[corners])
+    v0, f0 = np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces, dtype=np.int64)
+    n = len(v0)
     out = np.empty(len(face))
     for i in range(len(face)):
-        to_corners = igl.exact_geodesic(mesh.vertices, mesh.faces, VS=vertex[i : i + 1], VT=corners[i])
-        out[i] = (to_corners + np.linalg.norm(mesh.vertices[corners[i]] - points[i], axis=1)).min()
+        w = np.maximum(np.asarray(weights[i], dtype=np.float64), 1e-6)
+        a, b, c = f0[face[i]]
+        point = (w / w.sum()) @ v0[[a, b, c]]
+        faces = np.concatenate([np.delete(f0, face[i], axis=0), [[a, b, n], [b, c, n], [c, a, n]]])
+        out[i] = igl.exact_geodesic(
+            np.vstack([v0, point]), faces, VS=np.asarray(vertex[i : i + 1], dtype=np.int64), VT=np.array([n])
+        )[0]
     return out
 
 
@@ -318,8 +323,8 @@ class RemeshTarget:
     def exact_errors(
         self, predicted: np.ndarray, face: np.ndarray, weights: np.ndarray, heat: np.ndarray
     ) -> np.ndarray:
-        """``heat`` (N,) with its entries above :data:`EXACT_ABOVE` x sqrt area replaced by
-        :func:`exact_point_distances`."""
+        """``heat`` (N,) with its entries above :data:`EXACT_ABOVE` x sqrt area replaced by the exact
+        distance (:func:`exact_point_distances`)."""
         out = heat.copy()
         again = np.flatnonzero(heat > EXACT_ABOVE * self.sqrt_area)
         out[again] = exact_point_distances(self.mesh, predicted[again], face[again], weights[again])

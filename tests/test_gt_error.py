@@ -87,16 +87,12 @@ def test_exact_point_distances_follow_the_surface():
     face = int(np.flatnonzero((faces == far).any(axis=1))[0])
     weights = (faces[face] == far).astype(float)[None]
     got = gt_error.exact_point_distances(mesh, np.array([0]), np.array([face]), weights)
-    assert got[0] == pytest.approx(5.0, rel=1e-9)
+    assert got[0] == pytest.approx(5.0, rel=1e-6)
     assert np.linalg.norm(bent[far] - bent[0]) == pytest.approx(np.sqrt(13))
-    # a point inside a face: the bent grid unfolds to the flat one, where the true distance is the straight
-    # line; the corner route is never shorter, and longer by at most twice the point's nearest-corner distance
+    # a point inside a face: the bent grid unfolds to the flat one, where the true distance is the straight line
     rng = np.random.default_rng(0)
     f = rng.integers(0, len(faces), 20)
     w = rng.dirichlet(np.ones(3), 20)
     d = gt_error.exact_point_distances(mesh, np.zeros(20, dtype=np.int64), f, w)
     flat = np.stack([x, y], axis=1)[faces[f]]  # (20, 3, 2) the faces' corners unfolded
-    point = np.einsum("nk,nkd->nd", w, flat)
-    true = np.linalg.norm(point, axis=1)
-    to_corner = np.linalg.norm(flat - point[:, None], axis=2).min(axis=1)
-    assert (d >= true - 1e-9).all() and (d <= true + 2 * to_corner + 1e-9).all()
+    np.testing.assert_allclose(d, np.linalg.norm(np.einsum("nk,nkd->nd", w, flat), axis=1), rtol=1e-6, atol=1e-6)
