@@ -349,8 +349,9 @@ def edge_neighbours(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         return np.zeros((0, 3), dtype=np.int64), np.zeros((0, 3), dtype=np.int64)
     a, b, c = f.ravel(), f[:, [1, 2, 0]].ravel(), f[:, [2, 0, 1]].ravel()  # half-edge (a, b), c across
     n = int(f.max()) + 1
-    order = np.argsort(np.minimum(a, b) * n + np.maximum(a, b))
-    key = (np.minimum(a, b) * n + np.maximum(a, b))[order]
+    key = np.minimum(a, b) * n + np.maximum(a, b)
+    order = np.argsort(key)
+    key = key[order]
     same = key[1:] == key[:-1]
     pair = same.copy()  # sorted entries i, i+1 are an edge's only two half-edges
     pair[1:] &= ~same[:-1]

@@ -115,9 +115,7 @@ class SurfaceMap:
         out[matched] = np.asarray(target_faces)[self.face[matched], corner]
         return out
 
-    def to_nearest_vertices(
-        self, target_vertices: np.ndarray, target_faces: np.ndarray, rounding: VertexRounding | None = None
-    ) -> np.ndarray:
+    def to_nearest_vertices(self, target_vertices: np.ndarray, target_faces: np.ndarray) -> np.ndarray:
         """(N,) int64 target vertex per source vertex (-1 = none): the vertex nearest the point ALONG
         the target surface among the holding face's three corners and the far corners of its three
         edge neighbours (:class:`VertexRounding`; ties: the first candidate). This is the final vertex
@@ -132,13 +130,13 @@ class SurfaceMap:
         Args:
             target_vertices: (V, 3) float target vertex positions (any frame: distances are compared,
                 and a similarity keeps their order).
-            target_faces: (F, 3) target faces, as ``face`` indexes them.
-            rounding: optional :class:`VertexRounding` of these vertices and faces (built here if None).
+            target_faces: (F, 3) target faces, as ``face`` indexes them. (A partial cut from a shape
+                rounds through its full shape's :class:`VertexRounding` instead:
+                :meth:`becos.partiality.Partial.round_to_vertices`.)
         """
         out = np.full(len(self), NONE, dtype=np.int64)
         matched = self.matched
-        rounding = VertexRounding(target_vertices, target_faces) if rounding is None else rounding
-        out[matched] = rounding.nearest(self.face[matched], self.weights[matched])
+        out[matched] = VertexRounding(target_vertices, target_faces).nearest(self.face[matched], self.weights[matched])
         return out
 
     def to_nearest_corners(self, target_vertices: np.ndarray, target_faces: np.ndarray) -> np.ndarray:
@@ -191,10 +189,10 @@ class VertexRounding:
     def __init__(self, vertices: np.ndarray, faces: np.ndarray):
         self.vertices = np.asarray(vertices, dtype=np.float64)
         self.faces = np.asarray(faces, dtype=np.int64)
-        self.neighbour, self.far = edge_neighbours(self.faces)
+        neighbour, far = edge_neighbours(self.faces)
         start = self.vertices[self.faces]  # (F, 3, 3): edge k runs from corner k ...
         edge = start[:, [1, 2, 0]] - start  # ... to corner k + 1
-        to_far = self.vertices[self.far] - start  # rows with far == -1 are never used
+        to_far = self.vertices[far] - start  # rows with far == -1 are never used
         with np.errstate(divide="ignore", invalid="ignore"):
             length2 = np.einsum("fkd,fkd->fk", edge, edge)
             length = np.sqrt(length2)
@@ -205,7 +203,7 @@ class VertexRounding:
             far_y = -np.sqrt(np.maximum(far2 - far_x**2, 0.0))
             # (F, 3, 6) per face and edge: unit direction (3), length, far corner x, y; one gather per query
             self._edges = np.concatenate([edge / length[..., None], np.stack([length, far_x, far_y], axis=2)], axis=2)
-        self._indices = np.stack([self.faces, self.far, self.neighbour], axis=2)  # (F, 3, 3)
+        self._indices = np.stack([self.faces, far, neighbour], axis=2)  # (F, 3, 3)
 
     def candidates(
         self, face: np.ndarray, weights: np.ndarray, kept_faces: np.ndarray | None = None

@@ -260,11 +260,7 @@ class _BlockChecker:
             candidates, along = VertexRounding(a[f"{o}_vertices"], block_faces).candidates(gface, wr)
             corners = candidates[:, :3] - vertex_start[gface, None]  # (R, 3) vertices of the other shape, per pair
             target = c[rows, None] + vertex_start[gface, None]
-            dist = np.linalg.norm(
-                a[f"{o}_vertices"][candidates[:, :3]]
-                - np.einsum("rk,rkd->rd", wr, a[f"{o}_vertices"][candidates[:, :3]])[:, None],
-                axis=2,
-            )
+            dist = along[:, :3]  # to the corners: the straight line, as the nearest-corner rule measures
             # the record rounds in the remesh frame: a near tie may fall either way in this frame
             rounding = np.array([m.get("vertex_rounding", LEGACY_VERTEX_MAP_ROUNDING) for m in self.b.metas])
             rule = self.rep(rounding, gv)[rows] if len(rounding) else np.zeros(len(rows), dtype=rounding.dtype)
