@@ -302,12 +302,8 @@ def compose(
     if loose.any():
         locator = locator if locator is not None else SurfaceLocator(target)
         safe_face = np.where(image_face[loose] >= 0, image_face[loose], 0)
-        # (L, 3, 3) corners of the image faces: the locator's cached ones when it was built on this very mesh
-        if locator.mesh is target:
-            corners = locator.triangles[safe_face]
-        else:
-            corners = target.vertices[target.faces[safe_face]]
-        image_points = np.einsum("mkj,mkjd->mkd", image_weights[loose], corners)  # (L, 3, 3)
+        # (L, 3, 3) corners of the image faces (the locator is the target's, as its normals and rings are)
+        image_points = np.einsum("mkj,mkjd->mkd", image_weights[loose], locator.triangles[safe_face])
         points = np.einsum("mk,mkd->md", w[loose], image_points)
         # the point lies between its images: it may only land near their faces along the target's
         # connectivity, never on another part that touches them in space (normals alone are misled
