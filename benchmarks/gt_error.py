@@ -233,19 +233,19 @@ class RemeshTarget:
             else others
         )
         self.pose_rows = np.concatenate([[self_pose], others]).astype(np.int64)  # row 0: this shape
-        own_pose = poses[self_pose]
+        original = TriMesh(poses[self_pose], np.asarray(original_faces))  # this shape's original mesh
         poses = poses[self.pose_rows]
         self.images = np.einsum("vk,pvkd->pvd", m.weights, poses[:, corners])  # (P', V_r, 3) in the poses used
         # each original vertex -> the remesh vertex whose original point is nearest along the original surface
         anchor = corners[np.arange(len(corners)), m.weights.argmax(axis=1)]
-        self.owner = nearest_along_surface(TriMesh(own_pose, np.asarray(original_faces)), anchor)
+        self.owner = nearest_along_surface(original, anchor)
         tri = self.mesh.vertices[self.mesh.faces]
         self._pose_centroids = [cKDTree(img[self.mesh.faces].mean(axis=1)) for img in self.images]
         edges = np.linalg.norm(tri - np.roll(tri, 1, axis=1), axis=2)
         self._tie = TIE * float(edges.mean())
         self._vertices = cKDTree(self.mesh.vertices)
         # the original surface's normal (libigl-oriented faces, own pose) at each remesh vertex's point
-        self.original_normals = oriented_face_normals(TriMesh(own_pose, np.asarray(original_faces)))  # (F_o, 3)
+        self.original_normals = oriented_face_normals(original)  # (F_o, 3)
         self._corner_normals = self.original_normals[m.face]  # (V_r, 3)
         n = self.mesh.n_vertices
         a = _adjacency(self.mesh.faces, n)

@@ -78,10 +78,10 @@ def test_a_thin_tip_is_located_on_its_own_sheet(tosca_entries, mesh_cache):
     of the tip's vertex 10401 is located on a face whose corners' ``to_original`` points are within
     BOUND of it along the original surface (edge-graph distance, an upper bound of the geodesic);
     the other sheet's are 0.055 away (before the same-sheet rule, 3 of the 711 vertices were)."""
-    import scipy.sparse as sp
     from scipy.sparse.csgraph import dijkstra
 
     from becos.datasets import prepare_shape
+    from becos.geodesics import edge_graph
     from becos.geometry import surface_area
     from becos.remesh import remesh, variant_target_vertices
 
@@ -96,10 +96,7 @@ def test_a_thin_tip_is_located_on_its_own_sheet(tosca_entries, mesh_cache):
     triple = original.faces[face_o]
     face, _, _ = target.locate(original.vertices[tip][None], triple, face_o)
 
-    edges = original.faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
-    length = np.linalg.norm(original.vertices[edges[:, 0]] - original.vertices[edges[:, 1]], axis=1)
-    graph = sp.coo_matrix((length, (edges[:, 0], edges[:, 1])), shape=(original.n_vertices,) * 2).tocsr()
-    along = dijkstra(graph.maximum(graph.T), indices=tip)  # (N, V_o)
+    along = dijkstra(edge_graph(original), indices=tip)  # (N, V_o)
     m = remeshed.to_original
     corners = remeshed.mesh.faces[face]  # (N, 3)
     anchor = original.faces[m.face[corners], m.weights[corners].argmax(axis=2)]  # (N, 3) original vertices
