@@ -21,7 +21,8 @@ Names used here:
 Edge files (``A_B_corres.txt``, template A -> template B) have one row per vertex of A and four
 whitespace columns: a face index into B's faces (as in B's original file / default faces) and three
 barycentric weights in face-column order; ``-1 0 0 0`` means "no counterpart". Each text file is
-parsed once into a binary cache (``.npz``, keyed by path, size and mtime); later loads read that.
+parsed once into a binary cache (``.npz``, keyed by path, size, mtime, ctime and inode: an edit that
+restores the modification time is parsed again); later loads read that.
 """
 
 from __future__ import annotations
@@ -507,7 +508,7 @@ class AnnotationSource:
     # --- edge maps ----------------------------------------------------------------------------------
     def _cache_file(self, path: Path) -> Path:
         stat = path.stat()
-        text = f"{_CACHE_VERSION}|{path.resolve()}|{stat.st_size}|{stat.st_mtime_ns}"
+        text = f"{_CACHE_VERSION}|{path.resolve()}|{stat.st_size}|{stat.st_mtime_ns}|{stat.st_ctime_ns}|{stat.st_ino}"
         digest = hashlib.sha1(text.encode()).hexdigest()[:20]
         return self.cache_dir / f"{path.stem}-{digest}.npz"
 

@@ -221,7 +221,8 @@ def _check_off_header(path: Path, n_vertices: int, n_faces: int) -> None:
 
 
 class MeshCache:
-    """Parse each mesh file once: arrays are kept in ``cache_dir`` as .npz, keyed by path, size and mtime.
+    """Parse each mesh file once: arrays are kept in ``cache_dir`` as .npz, keyed by path, size, mtime,
+    ctime and inode (an edit that restores the modification time is parsed again).
 
     Parsing a 50k-vertex OFF with trimesh takes ~0.4 s; reading the cached arrays a few ms.
     ``cache_dir=None`` keeps only an in-process cache.
@@ -234,7 +235,7 @@ class MeshCache:
 
     def _key(self, path: Path) -> str:
         stat = path.stat()
-        text = f"{path.resolve()}|{stat.st_size}|{stat.st_mtime_ns}"
+        text = f"{path.resolve()}|{stat.st_size}|{stat.st_mtime_ns}|{stat.st_ctime_ns}|{stat.st_ino}"
         return hashlib.sha1(text.encode()).hexdigest()[:20]
 
     def load(self, path: str | Path) -> TriMesh:

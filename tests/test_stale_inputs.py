@@ -143,3 +143,41 @@ def test_a_hand_edited_pair_record_is_rebuilt_and_refused_by_the_store_writer(bu
     code = becos_main(["export-zarr", str(pairs_index), "--setting", "full_full", "--out", str(tmp_path / "s.zarr")])
     assert code == 2 and "is not the file the pairs job wrote" in capsys.readouterr().err
     path.write_bytes(original)
+
+
+def test_a_hand_edited_ground_truth_file_is_recomputed_and_never_reaches_a_record(built, capsys):
+    """Issue #29, BAD 6: a ``ground_truth/<id>.npz`` edited by hand (a map changed, its input key kept)."""
+    work, config = built
+    layout = bw.Layout.of(config)
+    gt_index, pairs_index = layout.ground_truth_index("full_full", 0), layout.pairs_index("full_full", 0)
+    bw.ground_truth_stage(config, "full_full", 0, gt_index, **_inputs(config))  # up to date after the other tests
+    bw.pairs_stage(config, "full_full", 0, gt_index, pairs_index, **_inputs(config))
+    entry = json.loads(gt_index.read_text())["pairs"][0]
+    path = Path(entry["path"])
+    original = path.read_bytes()
+    record = layout.record("full_full", entry["pair_id"])
+    record_bytes = record.read_bytes()
+
+    def edit_by_hand():
+        with np.load(path) as data:
+            arrays = {k: data[k] for k in data.files}
+        arrays["xy_face"] = np.roll(arrays["xy_face"], 1)  # input key (and stored digest) unchanged
+        np.savez_compressed(path, **arrays)
+
+    edit_by_hand()
+    assert not bw.ground_truth_intact(path)
+    capsys.readouterr()
+    counts = bw.ground_truth_stage(config, "full_full", 0, gt_index, **_inputs(config))  # --forcerun ground_truth
+    err = capsys.readouterr().err
+    assert counts["computed"] == 1, err
+    assert f"{path}: its content no longer matches the digest becos recorded when writing it" in err
+    assert path.read_bytes() == original
+
+    edit_by_hand()  # edited after the job, then a record that reads it is rebuilt: refused
+    record.unlink()
+    with pytest.raises(InputFileError, match="is not the file the ground-truth job wrote") as exc:
+        bw.pairs_stage(config, "full_full", 0, gt_index, pairs_index, **_inputs(config))
+    assert exc.value.path == path and "snakemake --forcerun ground_truth" in exc.value.fix
+    path.write_bytes(original)
+    bw.pairs_stage(config, "full_full", 0, gt_index, pairs_index, **_inputs(config))
+    assert record.read_bytes() == record_bytes

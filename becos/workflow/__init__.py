@@ -5,6 +5,7 @@ sub-command, which calls one function of :mod:`becos.workflow.stages` (or of :mo
 :mod:`becos.export`, :mod:`becos.validate`, :mod:`becos.report`). One idea per module:
 
     config    the schema (``becos/data/schema.yaml``), defaults, the checks across keys, config files
+    digests   content digests of the input files (what reruns the dataset check and a remesh)
     options   the config keys each stage depends on, the options JSON a job receives, digests
     layout    where every file under ``results`` lives, which remesh file a pair side uses
     plan      catalog, manifests and the jobs they imply (what Snakemake needs to build the job graph)
@@ -48,6 +49,13 @@ from becos.workflow.config import (
     schema_problems,
     settings_of,
 )
+from becos.workflow.digests import (
+    DigestCache,
+    annotation_input_files,
+    check_input_files,
+    dataset_input_files,
+    generated_folders,
+)
 from becos.workflow.layout import (
     Layout,
     pair_file,
@@ -89,6 +97,7 @@ from becos.workflow.stages import (
     _published_views,
     _stored_key,
     export_pairings_stage,
+    ground_truth_intact,
     ground_truth_stage,
     load_ground_truth,
     pair_options,
@@ -101,6 +110,11 @@ from becos.workflow.stages import (
 )
 
 __all__ = [
+    "DigestCache",
+    "check_input_files",
+    "generated_folders",
+    "dataset_input_files",
+    "annotation_input_files",
     "pair_file",
     "remeshed_file",
     "published_views_folder",
@@ -144,6 +158,7 @@ __all__ = [
     "ground_truth_stage",
     "_narrow",
     "load_ground_truth",
+    "ground_truth_intact",
     "pair_options",
     "pairs_stage",
     "_published_views",

@@ -46,6 +46,12 @@ class Layout:
         """Parsed meshes and edge files (safe to delete; no job declares it)."""
         return self.results / "cache"
 
+    @property
+    def input_digests(self) -> Path:
+        """Content digests of the input files, cached on their status (:class:`becos.workflow.digests.DigestCache`;
+        safe to delete)."""
+        return self.cache / "input_digests.json"
+
     def manifest(self, setting: str) -> Path:
         return self.results / setting / "manifest.csv"
 

@@ -192,6 +192,11 @@ class Plan:
             self._chunk_inputs[key] = [str(self.layout.remeshed(*k)) for k in self._side_files(rows)]
         return list(self._chunk_inputs[key])
 
+    def chunk_original_files(self, setting: str, chunk: int) -> list[str]:
+        """The original mesh files of the chunk's pairs' shapes (what a chunk job reads without remeshing)."""
+        rows = self.chunk_rows(setting, chunk)
+        return sorted({self.files[key] for side in "xy" for key in zip(rows[f"{side}_dataset"], rows[f"{side}_name"])})
+
     @cached_property
     def _catalog_rows(self) -> dict[tuple[str, str], dict]:
         return {(r["dataset"], r["name"]): r for r in self.catalog.to_dict("records")}

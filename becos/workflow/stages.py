@@ -155,7 +155,6 @@ def ground_truth_stage(
     Reads the setting's ``manifest``, the ``catalog`` and the remesh variants of the chunk's pairs under
     the folder ``remeshed`` (the paths its rule declares); writes ``<pair_id>.npz`` beside ``out_index``.
     """
-    from becos.atomic import save_npz
     from becos.catalog import read_catalog
 
     started = time.perf_counter()
@@ -188,6 +187,12 @@ def ground_truth_stage(
         )
         path = pair_file(folder, row["pair_id"])
         computed = _stored_key(path, "input_key") != key
+        if not computed and not ground_truth_intact(path):
+            _log(
+                f"{path}: its content no longer matches the digest becos recorded when writing it (edited or "
+                f"replaced by hand?); recomputing it"
+            )
+            computed = True
         if computed:
             x, y = shapes.entry(row["x_dataset"], row["x_name"]), shapes.entry(row["y_dataset"], row["y_name"])
             kx, ky = (x.dataset, x.name, tx), (y.dataset, y.name, ty)
@@ -197,17 +202,7 @@ def ground_truth_stage(
                 gt_yx = shapes.network.ground_truth(y, x, x_remesh=ry, y_remesh=rx)
                 maps = {(kx, ky): gt_xy, (ky, kx): gt_yx}
             gt_xy, gt_yx = maps[(kx, ky)], maps[(ky, kx)]
-            save_npz(
-                path,
-                compressed=True,
-                input_key=np.array(key),
-                xy_face=_narrow(gt_xy.face),
-                xy_weights=gt_xy.weights,
-                xy_distance=gt_xy.distance,
-                yx_face=_narrow(gt_yx.face),
-                yx_weights=gt_yx.weights,
-                yx_distance=gt_yx.distance,
-            )
+            save_ground_truth(path, key, gt_xy, gt_yx)
         entries.append(
             {
                 "pair_id": row["pair_id"],
@@ -222,6 +217,40 @@ def ground_truth_stage(
     return _write_index(Path(out_index), setting, chunk, entries, started)
 
 
+def save_ground_truth(path: Path, key: str, gt_xy: SurfaceMap, gt_yx: SurfaceMap) -> None:
+    """Write a pair's ground-truth file (:func:`load_ground_truth`), with its ``content_digest``."""
+    from becos.atomic import save_npz
+
+    arrays = {
+        "input_key": np.array(key),
+        "xy_face": _narrow(gt_xy.face),
+        "xy_weights": gt_xy.weights,
+        "xy_distance": gt_xy.distance,
+        "yx_face": _narrow(gt_yx.face),
+        "yx_weights": gt_yx.weights,
+        "yx_distance": gt_yx.distance,
+    }
+    save_npz(path, compressed=True, content_digest=np.array(_ground_truth_digest(arrays)), **arrays)
+
+
+def _ground_truth_digest(arrays: dict[str, np.ndarray]) -> str:
+    from becos.record import content_digest
+
+    return content_digest({k: v for k, v in arrays.items() if k != "content_digest"}, {})
+
+
+def ground_truth_intact(path: Path) -> bool:
+    """True when the ground-truth file at ``path`` still holds what :func:`save_ground_truth` wrote (its
+    ``content_digest`` matches its arrays); False for an edited, unreadable or digest-less file."""
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            arrays = {k: data[k] for k in data.files}
+    except Exception:
+        return False
+    stored = arrays.get("content_digest")
+    return stored is not None and str(stored) == _ground_truth_digest(arrays)
+
+
 def _narrow(face: np.ndarray) -> np.ndarray:
     """Face indices as int32 on disk when they fit (:class:`SurfaceMap` widens them on load)."""
     return face.astype(np.int32) if len(face) and face.max() <= np.iinfo(np.int32).max else face
@@ -231,7 +260,8 @@ def load_ground_truth(path: Path):
     """``(gt_xy, gt_yx)`` :class:`becos.surface_map.SurfaceMap` from a ground-truth file (a .npz,
     :func:`becos.atomic.save_npz` compressed:
     ``input_key``, ``xy_face`` (V_x,) int32, ``xy_weights`` (V_x, 3), ``xy_distance`` (V_x,), the same
-    for ``yx``; files of older becos hold int64 faces, uncompressed)."""
+    for ``yx``, and ``content_digest`` (:func:`ground_truth_intact`); files of older becos hold int64
+    faces, uncompressed, and no digest, so the ground-truth stage recomputes them)."""
     from becos.surface_map import SurfaceMap
 
     with np.load(path, allow_pickle=False) as d:
@@ -312,6 +342,7 @@ def pairs_stage(
         if computed:
             x = shapes.instance(row["x_dataset"], row["x_name"], tx)
             y = shapes.instance(row["y_dataset"], row["y_name"], ty)
+            _require_indexed(Path(gt["path"]), gt["digest"], gt_index, shapes)
             gt_xy, gt_yx = load_ground_truth(Path(gt["path"]))
             pair_scanners = (None, None)
             if setting != "full_full":
@@ -351,6 +382,28 @@ def pairs_stage(
         shapes.release(done)
         _progress("pairs", setting, chunk, entries, len(rows), started)
     return _write_index(Path(out_index), setting, chunk, entries, started)
+
+
+def _require_indexed(path: Path, recorded: str, index: Path, shapes: ShapeStore) -> None:
+    """Raise unless the ground-truth file at ``path`` is the one its chunk ``index`` records (digest
+    ``recorded``): an edited or replaced file must not reach a pair record."""
+    from becos.errors import InputFileError
+
+    if not path.is_file():
+        raise InputFileError(
+            path,
+            f"is missing, though {index} lists it",
+            "rebuild the ground truth: snakemake --forcerun ground_truth (the other pairs' files are kept)",
+        )
+    found = shapes.file_digest(path)
+    if found != recorded:
+        raise InputFileError(
+            path,
+            f"is not the file the ground-truth job wrote: its digest is {found}, {index} records {recorded} "
+            "(edited or replaced after the job)",
+            "rebuild it: snakemake --forcerun ground_truth (it recomputes exactly the files that changed), then "
+            "run snakemake again",
+        )
 
 
 def _published_views(config: dict, row: dict, options, triangle_ids: Path | None = None):

@@ -1,5 +1,7 @@
 # Shared names and the plan. Every job runs `becos <sub-command>` from the environment that runs
 # Snakemake (its bin folder goes first on PATH): the pip-installed environment is the only one.
+import atexit
+import functools
 import json
 import os
 import shlex
@@ -100,7 +102,9 @@ def optional_path(option, paths):
 
 
 def all_targets(wildcards):
-    targets = [str(LAYOUT.config)]
+    # the dataset check is a target itself: a deleted check report is rebuilt (the targets below reach it
+    # only through input functions, which Snakemake does not follow to a checkpoint whose output is gone)
+    targets = [str(LAYOUT.config), str(LAYOUT.checks)]
     for setting in SETTINGS:
         targets.append(str(LAYOUT.validation(setting)))
         for export, path in (
@@ -119,6 +123,39 @@ def all_targets(wildcards):
     if LAYOUT.checks.exists():
         targets += [str(LAYOUT.remeshed_ply(*job)) for job in plan().remesh_jobs]
     return targets
+
+
+# Content digests of the input files (becos.workflow.digests): the jobs that read a dataset or annotation
+# file get its digest as a param, so a file replaced by other content reruns them whatever its modification
+# time. The cache is written once, when Snakemake exits (dry runs included).
+DIGESTS = bw.DigestCache(LAYOUT.input_digests.absolute())
+atexit.register(DIGESTS.save)
+
+
+@functools.cache
+def inputs_digest():
+    """One digest over every file the dataset check reads (the check's, catalog's and manifests' trigger)."""
+    return DIGESTS.files(bw.check_input_files(config))
+
+
+@functools.cache
+def annotations_digest():
+    """One digest over the annotation folder's files."""
+    return DIGESTS.files(bw.annotation_input_files(config))
+
+
+def mesh_digest(wildcards):
+    """The content digest of a remesh job's mesh file."""
+    return DIGESTS.file(plan().files[(wildcards.dataset, wildcards.name)])
+
+
+def chunk_sources_digest(wildcards):
+    """What a chunk job reads from outside ``results``: the annotation folder and, without remeshing (the
+    remesh files are declared inputs otherwise), the original meshes of its pairs."""
+    if config["remesh"]:
+        return annotations_digest()
+    files = plan().chunk_original_files(wildcards.setting, int(wildcards.chunk))
+    return f"{annotations_digest()}-{DIGESTS.files(files)}"
 
 
 def generated_inputs(wildcards):

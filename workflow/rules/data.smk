@@ -119,6 +119,9 @@ checkpoint check_datasets:
     conda:
         "../envs/becos.yaml"
     params:
+        # a rerun trigger only: the content of every file the check reads (becos.workflow.digests), so a
+        # mesh or annotation file replaced after a finished run is checked again, whatever its time
+        inputs=lambda w: inputs_digest(),
         datasets=" ".join(config["datasets"]),
         data_dir=config["data_dir"],
         annotations=config["annotations"],
@@ -141,5 +144,6 @@ rule catalog:
         "../envs/becos.yaml"
     params:
         options=bw.job_options(config, "catalog"),
+        inputs=lambda w: inputs_digest(),  # a rerun trigger only, as for check_datasets
     shell:
         "becos catalog --options {params.options:q} --out {output:q} > {log:q} 2>&1"

@@ -15,6 +15,7 @@ rule manifest:
         "../envs/becos.yaml"
     params:
         options=bw.job_options(config, "manifest"),
+        inputs=lambda w: inputs_digest(),  # a rerun trigger only, as for check_datasets
     shell:
         "becos manifest --options {params.options:q} --setting {wildcards.setting}"
         " --catalog {input.catalog:q} --out {output:q} > {log:q} 2>&1"
@@ -41,6 +42,8 @@ rule remesh:
         # a rerun trigger only (the job derives the target from --token and the seed): a change to the
         # variant's target vertex count (becos.remesh.variant_target_vertices) reruns it
         rerun_key=lambda w: plan().remesh_target(w.dataset, w.name, w.token),
+        # and the mesh file's content (becos.workflow.digests): a replaced file reruns it whatever its time
+        source=mesh_digest,
         shape=lambda w: plan().shape_json(w.dataset, w.name),
         options=bw.job_options(config, "remesh"),
     shell:
@@ -70,6 +73,7 @@ rule ground_truth:
         runtime=RESOURCES.runtime("ground_truth", n_pairs=chunk_pairs),
     params:
         options=bw.job_options(config, "ground_truth"),
+        sources=chunk_sources_digest,  # a rerun trigger only: the content of what it reads outside results
         remeshed=LAYOUT.remeshed_root,
     shell:
         "becos ground-truth --options {params.options:q} --setting {wildcards.setting} --chunk {wildcards.chunk}"
@@ -97,6 +101,7 @@ rule pairs:
         runtime=RESOURCES.runtime("pairs", n_pairs=chunk_pairs),
     params:
         options=lambda w: bw.job_options(config, "pairs", w.setting),
+        sources=chunk_sources_digest,  # a rerun trigger only, as for ground_truth
         remeshed=LAYOUT.remeshed_root,
         triangle_ids=lambda w, input: optional_path("--triangle-ids", input.triangle_ids),
     shell:
