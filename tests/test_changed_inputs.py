@@ -205,3 +205,33 @@ def test_an_edge_file_with_other_content_and_an_old_time_recomputes_the_ground_t
     changed = {p for p in before if after[p] != before[p]}
     assert changed == reads_edge
     assert snakemake(copy_of, "-n").stdout.count("Nothing to be done") == 1
+
+
+def _records(work: Path) -> dict[str, bytes]:
+    folder = work / "results" / "full_full" / "pairs"
+    return {p.name: p.read_bytes() for p in sorted(folder.glob("*.npz"))}
+
+
+def test_deleted_pair_records_are_written_again_by_the_next_store_rebuild(copy_of):
+    """POOR: results/<setting>/pairs/ deleted after a finished run is fine while the store is intact
+    ("Nothing to be done"); a later store rebuild writes the records again, the same bytes. A single
+    record deleted (its chunk index kept) likewise: the workflow drops the index that lists it."""
+    from becos.store import open_benchmark
+
+    records = _records(copy_of)
+    folder = copy_of / "results" / "full_full" / "pairs"
+    shutil.rmtree(folder)
+    assert "Nothing to be done" in snakemake(copy_of, "-n").stdout
+    result = snakemake(copy_of, "--forcerun", "zarr_store")
+    assert result.returncode == 0, result.stderr[-3000:]
+    assert _records(copy_of) == records
+
+    gone = sorted(folder.glob("*.npz"))[0]
+    gone.unlink()
+    result = snakemake(copy_of, "--forcerun", "zarr_store")
+    assert result.returncode == 0, (result.stdout + result.stderr)[-3000:]
+    assert f"lists 1 file(s) that are gone (e.g. results/full_full/pairs/{gone.name})" in result.stderr
+    assert _records(copy_of) == records
+    bench = open_benchmark(copy_of / "results" / "full_full" / "benchmark.zarr")
+    assert sorted(bench.table["pair_id"]) == sorted(name[:-4] for name in records)
+    assert "Nothing to be done" in snakemake(copy_of, "-n").stdout

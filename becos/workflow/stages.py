@@ -147,6 +147,17 @@ def _write_index(path: Path, setting: str, chunk: int, entries: list[dict], star
     return {"n": len(entries), "computed": computed}
 
 
+def missing_indexed_files(index: Path) -> list[Path]:
+    """The files a chunk index (:func:`_write_index`) lists that no longer exist; [] for an index that
+    does not exist or cannot be read (its job reruns, or fails naming it, anyway)."""
+    try:
+        entries = json.loads(Path(index).read_text())["pairs"]
+        paths = [Path(e["path"]) for e in entries]
+    except (OSError, ValueError, KeyError, TypeError):
+        return []
+    return [p for p in paths if not p.is_file()]
+
+
 def ground_truth_stage(
     config: dict, setting: str, chunk: int, out_index: Path, *, manifest: Path, catalog: Path, remeshed: Path
 ) -> dict:

@@ -82,7 +82,27 @@ def chunk_files(setting, kind):
     """Index files of every chunk of a setting (kind: ground_truth or pairs)."""
     p = plan()
     path = LAYOUT.ground_truth_index if kind == "ground_truth" else LAYOUT.pairs_index
+    drop_stale_indexes(setting)
     return [str(path(setting, c)) for c in p.chunks(setting)]
+
+
+@functools.cache
+def drop_stale_indexes(setting):
+    """Remove each chunk index of ``setting`` that lists files which are gone (ground truth or pair records
+    deleted after a finished run), so that its chunk job runs again and writes them back (the others'
+    files are kept): Snakemake itself does not rerun a job whose outputs exist, for a deleted file they
+    list. Once per setting and Snakemake call."""
+    for c in plan().chunks(setting):
+        for index in (LAYOUT.ground_truth_index(setting, c), LAYOUT.pairs_index(setting, c)):
+            missing = bw.missing_indexed_files(index)
+            if missing:
+                print(
+                    f"becos: {index} lists {len(missing)} file(s) that are gone (e.g. {missing[0]}); removed "
+                    "it, so that its chunk job writes them again",
+                    file=sys.stderr,
+                    flush=True,
+                )
+                index.unlink(missing_ok=True)
 
 
 def published_views_input(wildcards):
