@@ -85,7 +85,12 @@ def main() -> None:
             {**base, "data_dir": str(tree.data_dir), "datasets": list(DATASETS)}, args.workdir / "standin.json"
         ),
         "tosca": measure(
-            {**base, "data_dir": str(code / "data"), "datasets": ["tosca"], "template_file": "templates_tosca_demo.csv"},
+            {
+                **base,
+                "data_dir": str(code / "data"),
+                "datasets": ["tosca"],
+                "template_file": "templates_tosca_demo.csv",
+            },
             args.workdir / "tosca.json",
         ),
     }

@@ -38,6 +38,7 @@ from collections.abc import Iterable
 from pathlib import Path
 
 from becos.atomic import write_text
+from becos.errors import DiskFullError
 
 DIGEST_CACHE_VERSION = 1
 """Bumped when the cache file's layout changes (an older cache is then ignored)."""
@@ -119,8 +120,8 @@ class DigestCache:
         try:
             write_text(self.path, json.dumps({"version": DIGEST_CACHE_VERSION, "files": live}) + "\n")
             self._dirty = False
-        except OSError:
-            pass  # a read-only results folder: hash again next time
+        except (OSError, DiskFullError):
+            pass  # a read-only or full results folder: hash again next time
 
 
 def generated_folders(config: dict) -> list[Path]:

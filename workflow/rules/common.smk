@@ -96,13 +96,17 @@ def drop_stale_indexes(setting):
         for index in (LAYOUT.ground_truth_index(setting, c), LAYOUT.pairs_index(setting, c)):
             missing = bw.missing_indexed_files(index)
             if missing:
+                try:
+                    index.unlink(missing_ok=True)
+                except OSError as exc:  # a read-only results folder: the store writer names the record
+                    print(f"becos: {index} lists files that are gone, and cannot be removed ({exc})", file=sys.stderr)
+                    continue
                 print(
                     f"becos: {index} lists {len(missing)} file(s) that are gone (e.g. {missing[0]}); removed "
                     "it, so that its chunk job writes them again",
                     file=sys.stderr,
                     flush=True,
                 )
-                index.unlink(missing_ok=True)
 
 
 def published_views_input(wildcards):
