@@ -151,9 +151,18 @@ def all_targets(wildcards):
 
 # Content digests of the input files (becos.workflow.digests): the jobs that read a dataset or annotation
 # file get its digest as a param, so a file replaced by other content reruns them whatever its modification
-# time. The cache is written once, when Snakemake exits (dry runs included).
+# time. The cache is written once, when Snakemake exits, except after a dry run (which writes nothing).
 DIGESTS = bw.DigestCache(LAYOUT.input_digests.absolute())
-atexit.register(DIGESTS.save)
+
+
+def save_digests():
+    """Write the digest cache when Snakemake exits, unless it was a dry run (``workflow.dryrun`` is known
+    only once the run's settings are, so it is read at exit)."""
+    if not workflow.dryrun:
+        DIGESTS.save()
+
+
+atexit.register(save_digests)
 
 
 @functools.cache
