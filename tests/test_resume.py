@@ -56,8 +56,14 @@ def kill_tree(process: subprocess.Popen) -> int:
     return len(procs)
 
 
+def holds_lock(workdir: Path) -> bool:
+    """Whether a Snakemake run holds its lock on ``workdir`` (its lock files exist)."""
+    return any((workdir / ".snakemake" / "locks").glob("*.lock"))
+
+
 def run_until(workdir: Path, cores: str, marker, *extra: str, timeout: float = 600) -> tuple[bool, int]:
-    """Start ``snakemake --cores N`` and SIGKILL it once ``marker(workdir)`` is true.
+    """Start ``snakemake --cores N`` and SIGKILL it once ``marker(workdir)`` is true while it holds its lock
+    (a temporary folder a previous kill left can match a marker before the new run has taken the lock).
 
     Returns (killed, processes killed); killed is False when the run ended before the marker."""
     cmd = [*SNAKEMAKE, "-d", str(workdir), "--configfile", str(workdir / "config.yaml"), "--cores", cores, *extra]
@@ -71,7 +77,7 @@ def run_until(workdir: Path, cores: str, marker, *extra: str, timeout: float = 6
         )
         deadline = time.monotonic() + timeout
         while process.poll() is None and time.monotonic() < deadline:
-            if marker(workdir):
+            if marker(workdir) and holds_lock(workdir):
                 return True, kill_tree(process)
             time.sleep(0.05)
         if process.poll() is None:
