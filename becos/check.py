@@ -484,6 +484,56 @@ edge files into a TOSCA template whose source faces are known (mesh or default f
 swapped file above: 4.85."""
 
 
+EDGE_ROW_MAX_JUMP = 0.3
+"""Largest row jump of a plausible edge file (see :func:`edge_row_jumps`), in units of
+``sqrt(target template area)``: the median distance between a row's mapped point and its source-template
+neighbours' mapped points. The rule: an edge file with any row above it is refused
+(:func:`require_plausible_edge`), naming the rows; becos never drops rows (a file with moved rows may
+have others moved less, below the limit: only the original file is safe). Measured on the 17 edge files
+into a TOSCA template whose source faces are known (mesh or default faces): largest row jump per file
+0.019-0.060, except ``shrec20_dog_tosca_dog0_corres.txt``: 0.218. ``tosca_wolf0_tosca_dog0_corres.txt``
+with 217 of its 4,344 rows replaced by random faces and weights (issue #29, BAD 5): 154 rows above the
+limit (exactly the randomised rows moved more than 0.3 from their original point), largest 1.16."""
+
+MAX_LISTED_ROWS = 10
+"""How many outlier rows (line numbers) an edge-file refusal lists; the report counts them all."""
+
+
+def edge_row_jumps(
+    points: np.ndarray, ok: np.ndarray, source_faces: np.ndarray, area: float, trusted: np.ndarray | None = None
+) -> np.ndarray:
+    """Per-row locality of an edge map. ``points``: (N, 3) mapped point of each source template vertex on
+    the target (NaN rows allowed), ``ok``: (N,) bool matched rows, ``source_faces``: (F, 3) faces of the
+    source template (indices < N), ``area``: target surface area (> 0, in the target's squared units),
+    ``trusted``: (N,) bool rows that may serve as neighbours (default ``ok``).
+
+    Returns (N,) float64: for each matched row ``i``, the median over its trusted neighbours ``j`` (the
+    source template's edges ``(i, j)``) of ``|P_i - P_j|``, divided by ``sqrt(area)`` (scale-free); NaN for
+    unmatched rows and rows without a trusted neighbour. A real map keeps it small (neighbours stay
+    neighbours: about one target edge length); a row moved elsewhere on the target has a large one,
+    while its neighbours' medians stay small (one far neighbour among ~6)."""
+    from becos.mesh import undirected_edges
+
+    trusted = ok if trusted is None else ok & trusted
+    out = np.full(len(points), np.nan)
+    pairs, _ = undirected_edges(source_faces)
+    pairs = np.concatenate([pairs, pairs[:, ::-1]])  # each edge seen from both ends: (row, neighbour)
+    pairs = pairs[ok[pairs[:, 0]] & trusted[pairs[:, 1]]]
+    if not len(pairs) or area <= 0:
+        return out
+    row = pairs[:, 0]
+    d = np.linalg.norm(points[pairs[:, 0]] - points[pairs[:, 1]], axis=1) / np.sqrt(area)
+    order = np.lexsort((d, row))  # by row, then by distance
+    row, d = row[order], d[order]
+    count = np.bincount(row, minlength=len(points))
+    start = np.concatenate([[0], np.cumsum(count)[:-1]])
+    has = count > 0
+    lo = start[has] + (count[has] - 1) // 2
+    hi = start[has] + count[has] // 2
+    out[has] = 0.5 * (d[lo] + d[hi])
+    return out
+
+
 def edge_plausibility(
     edge,
     target_vertices: np.ndarray,
@@ -503,7 +553,14 @@ def edge_plausibility(
       vertex count on the target surface). Neighbours stay neighbours under a real map (~1); a map
       of other faces scatters them. Needs ``source_faces``.
 
-    Returns ``{"residual": float | None, "stretch": float | None, "matched": int}``.
+    - ``max_row_jump``: the largest per-row jump (:func:`edge_row_jumps`, in ``sqrt(target area)``),
+      ``outlier_rows``: how many rows exceed :data:`EDGE_ROW_MAX_JUMP`, ``outlier_lines``: the first
+      :data:`MAX_LISTED_ROWS` of them as 1-based line numbers of the file (line ``k`` = source vertex
+      ``k - 1``), ``outlier_jumps``: their jumps. A local test: a few rows moved elsewhere leave the
+      global statistics unchanged. Needs ``source_faces``.
+
+    Returns ``{"residual": float | None, "stretch": float | None, "matched": int, "max_row_jump":
+    float | None, "outlier_rows": int, "outlier_lines": list[int], "outlier_jumps": list[float]}``.
     """
     from becos.align import procrustes
     from becos.mesh import undirected_edges
@@ -511,7 +568,16 @@ def edge_plausibility(
     ok = edge.face >= 0
     points = np.full((len(edge.face), 3), np.nan)
     points[ok] = np.einsum("ij,ijk->ik", edge.weights[ok], target_vertices[target_faces[edge.face[ok]]])
-    out: dict = {"residual": None, "stretch": None, "matched": int(ok.sum())}
+    out: dict = {
+        "residual": None,
+        "stretch": None,
+        "matched": int(ok.sum()),
+        "rows": len(edge.face),
+        "max_row_jump": None,
+        "outlier_rows": 0,
+        "outlier_lines": [],
+        "outlier_jumps": [],
+    }
     if ok.sum() < 3:
         return out
     if source_vertices is not None and len(source_vertices) == len(edge.face):
@@ -524,23 +590,50 @@ def edge_plausibility(
         pairs, _ = undirected_edges(source_faces)
         pairs = pairs[ok[pairs[:, 0]] & ok[pairs[:, 1]]]
         tri = target_vertices[target_faces]
-        area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1).sum()
+        area = float(0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1).sum())
         if len(pairs) and area > 0:
             out["stretch"] = float(
                 np.median(np.linalg.norm(points[pairs[:, 0]] - points[pairs[:, 1]], axis=1))
                 / np.sqrt(area / len(edge.face))
             )
+            # second pass: rows are measured against neighbours that are no outliers themselves, so a
+            # correct row beside moved ones is not named
+            first = edge_row_jumps(points, ok, source_faces, area)
+            jumps = edge_row_jumps(points, ok, source_faces, area, ~(first > EDGE_ROW_MAX_JUMP))
+            jumps = np.where(np.isnan(jumps), first, jumps)
+            if np.isfinite(jumps).any():
+                out["max_row_jump"] = float(np.nanmax(jumps))
+                outliers = np.flatnonzero(np.nan_to_num(jumps, nan=0.0) > EDGE_ROW_MAX_JUMP)
+                out["outlier_rows"] = int(len(outliers))
+                out["outlier_lines"] = (outliers[:MAX_LISTED_ROWS] + 1).tolist()
+                out["outlier_jumps"] = [round(float(x), 4) for x in jumps[outliers[:MAX_LISTED_ROWS]]]
     return out
 
 
 def require_plausible_edge(path: Path, a: str, b: str, stats: dict) -> None:
     """Raise :class:`InputFileError` naming the edge file ``path`` (edge ``a -> b``) when its
-    :func:`edge_plausibility` ``stats`` exceed :data:`EDGE_MAX_RESIDUAL` or :data:`EDGE_MAX_STRETCH`."""
+    :func:`edge_plausibility` ``stats`` exceed :data:`EDGE_MAX_RESIDUAL` or :data:`EDGE_MAX_STRETCH`
+    (the whole map is elsewhere), or when any row exceeds :data:`EDGE_ROW_MAX_JUMP` (rows moved: the
+    error names them by line number)."""
     from becos.annotations import _FIX_FOLDER
 
     too_far = stats["residual"] is not None and stats["residual"] > EDGE_MAX_RESIDUAL
     too_spread = stats["stretch"] is not None and stats["stretch"] > EDGE_MAX_STRETCH
     if not (too_far or too_spread):
+        if stats.get("outlier_rows"):
+            n, lines = stats["outlier_rows"], stats["outlier_lines"]
+            more = f" and {n - len(lines)} more" if n > len(lines) else ""
+            raise InputFileError(
+                path,
+                f"{n} of its {stats['rows']} rows map a vertex of template {a} far from where its neighbours "
+                f"land on {b}: file lines {', '.join(map(str, lines))}{more} (1-based line numbers in the file; "
+                f"line k is vertex k-1 of {a}) lie a median {', '.join(f'{x:.2f}' for x in stats['outlier_jumps'])}"
+                f"{' ...' if more else ''} x sqrt(area of {b}) from their neighbours' mapped points (largest "
+                f"{stats['max_row_jump']:.3g}; real BeCoS edge files: at most 0.22; limit {EDGE_ROW_MAX_JUMP}); "
+                "the rows were edited or corrupted",
+                f"restore the annotation folder's original file (becos refuses the file, it never drops rows); "
+                f"{_FIX_FOLDER}",
+            )
         return
     found = []
     if stats["residual"] is not None:

@@ -616,3 +616,91 @@ def test_edge_file_holding_another_edges_map_is_named_by_the_dataset_check(
     stats = report["annotations"]["edge_contents"]["plausibility"]
     assert set(stats) == {"tosca_dog0 -> tosca_wolf0", "tosca_wolf0 -> tosca_dog0"}
     assert all(s["residual"] < 0.2 and s["stretch"] < 1.4 for s in stats.values()), stats
+
+
+WOLF_DOG = "tosca_wolf0_tosca_dog0_corres.txt"
+N_DOG_FACES = 50528
+
+
+def _edge_copy_with_rows(becos_code: Path, tmp_path: Path, edit_rows) -> tuple[Path, Path, Path]:
+    """An annotation-folder copy whose ``tosca_wolf0_tosca_dog0_corres.txt`` rows are edited by
+    ``edit_rows(lines) -> lines``, a data folder with dog0 and wolf0 and a registry expecting them;
+    returns (annotation root, edge path, registry)."""
+    root = annotation_copy(becos_code, tmp_path)
+    edge_path = root / "precomputed_corr_templates" / WOLF_DOG
+    lines = (becos_code / "precomputed_corr_templates" / WOLF_DOG).read_text().splitlines()
+    edge_path.unlink()
+    edge_path.write_text("\n".join(edit_rows(lines)) + "\n")
+    folder = tmp_path / "data" / "tosca-off"
+    folder.mkdir(parents=True)
+    for name in ("dog0", "wolf0"):
+        (folder / f"{name}.off").symlink_to(becos_code / "data" / "tosca-off" / f"{name}.off")
+    return root, edge_path, small_registry(tmp_path, {"dog": 1, "wolf": 1})
+
+
+def _named_lines(text: str) -> list[int]:
+    """The 1-based line numbers an edge-row refusal lists (``file lines 12, 345, ...``)."""
+    match = re.search(r"file lines ([0-9, ]+)", text)
+    assert match, text
+    return [int(x) for x in match[1].split(",")]
+
+
+def test_edge_file_with_randomised_rows_is_refused_naming_the_rows(becos_code, tmp_path):
+    """BAD 5: 217 of the 4,344 rows (5 %) of tosca_wolf0_tosca_dog0_corres.txt replaced by random faces in
+    range with random barycentric weights. Before: `becos check` said all ok (the global residual and
+    median stretch do not move), the run exited 0 with 14 % of a horse0-wolf pair's map moved. Each
+    row's mapped point is compared with its template neighbours' (median distance, x sqrt(target area)):
+    real files stay below 0.22, the limit is 0.3; the file is refused naming the rows."""
+    rng = np.random.default_rng(29)
+    rows = np.sort(rng.choice(N_WOLF, size=217, replace=False))
+
+    def randomise(lines):
+        faces = rng.integers(0, N_DOG_FACES, size=len(rows))
+        weights = rng.dirichlet(np.ones(3), size=len(rows))
+        for r, f, (a, b, c) in zip(rows, faces, weights):
+            lines[r] = f"{f} {a:.6f} {b:.6f} {c:.6f}"
+        return lines
+
+    root, edge_path, registry = _edge_copy_with_rows(becos_code, tmp_path, randomise)
+    with pytest.raises(DatasetCheckError) as err:
+        check_datasets(["tosca"], tmp_path / "data", root, config_dir=registry)
+    text = str(err.value)
+    assert "1 problem(s)" in text
+    match = re.search(
+        rf"annotation folder: {re.escape(str(edge_path))}: ([0-9]+) of its 4344 rows map a vertex of template "
+        r"tosca_wolf0 far from where its neighbours land on tosca_dog0",
+        text,
+    )
+    assert match, text
+    print(f"BAD 5: {match[1]} of the 217 randomised rows found")
+    assert int(match[1]) >= 100, text
+    named = _named_lines(text)
+    assert named and set(np.array(named) - 1) <= set(rows.tolist()), (named, rows)
+    assert "Fix: restore the annotation folder's original file" in text
+    report = err.value.report["annotations"]["edge_contents"]["plausibility"]["tosca_wolf0 -> tosca_dog0"]
+    assert report["outlier_rows"] == int(match[1]) and report["max_row_jump"] > 0.3
+
+
+def test_edge_file_with_three_moved_rows_is_refused_naming_exactly_them(becos_code, tmp_path, tosca_dir):
+    """Three rows of tosca_wolf0_tosca_dog0_corres.txt moved to the dog0 face farthest from their mapped
+    point (face index in range, weights 1/3): the check names exactly their line numbers."""
+    from becos.mesh import read_mesh as read
+
+    dog = read(tosca_dir / "dog0.off")
+    centroids = dog.vertices[dog.faces].mean(axis=1)
+    rows = [41, 2000, 4300]  # 0-based rows = vertices of wolf0; lines 42, 2001, 4301
+
+    def move(lines):
+        for r in rows:
+            face, *w = lines[r].split()
+            here = np.asarray(w, dtype=float) @ dog.vertices[dog.faces[int(face)]]
+            far = int(np.argmax(np.linalg.norm(centroids - here, axis=1)))
+            lines[r] = f"{far} 0.333333 0.333333 0.333334"
+        return lines
+
+    root, edge_path, registry = _edge_copy_with_rows(becos_code, tmp_path, move)
+    with pytest.raises(DatasetCheckError) as err:
+        check_datasets(["tosca"], tmp_path / "data", root, config_dir=registry)
+    text = str(err.value)
+    assert f"{edge_path}: 3 of its 4344 rows map a vertex" in text, text
+    assert _named_lines(text) == [42, 2001, 4301], text
