@@ -25,7 +25,9 @@ faces, unreferenced vertices, small extra components, inconsistent winding); a m
 components are too large to drop is a problem. With mesh checks on, the edge files the enabled datasets
 need are parsed, and where both templates' files are present their row counts and face indices are
 compared with the meshes' header counts; an edge file into a present template must also be
-geometrically plausible (:func:`edge_plausibility`). With mesh checks on, every shape that shares its
+geometrically plausible (:func:`edge_plausibility`): as a whole (Procrustes residual, median stretch) and
+row by row (no row's mapped point far from its template neighbours', :data:`EDGE_ROW_MAX_JUMP`; a file
+with such rows is refused, naming their line numbers). With mesh checks on, every shape that shares its
 class template's triangulation is compared with the template (:func:`compare_with_class_template`:
 faces as vertex sets, median edge-length ratio, flatness), every vertex line must hold 3 values and
 every face line be a triangle, a header may not announce fewer lines than the file holds, and stray
@@ -41,7 +43,9 @@ Report layout (``check_datasets`` return value)::
      "annotations": {"ok", "path", "found", "nodes", "edges", "template_rows", "files": {rel: bool},
                      "edge_files": {"needed", "missing"}, "default_faces": {"needed", "missing"},
                      "edge_contents": {"parsed", "compared_with_meshes", "bad",
-                                       "plausibility": {"a -> b": {"residual", "stretch", "matched"}}},
+                                       "plausibility": {"a -> b": {"residual", "stretch", "matched", "rows",
+                                                                   "max_row_jump", "outlier_rows",
+                                                                   "outlier_lines", "outlier_jumps"}}},
                      "unresolved_template_keys", "problems", "notes"},
      "ok": bool, "data_dir": str}
 """
@@ -496,7 +500,7 @@ with 217 of its 4,344 rows replaced by random faces and weights (issue #29, BAD 
 limit (exactly the randomised rows moved more than 0.3 from their original point), largest 1.16."""
 
 MAX_LISTED_ROWS = 10
-"""How many outlier rows (line numbers) an edge-file refusal lists; the report counts them all."""
+"""How many outlier rows (line numbers) an edge-file refusal lists; the check report lists them all."""
 
 
 def edge_row_jumps(
@@ -554,9 +558,10 @@ def edge_plausibility(
       of other faces scatters them. Needs ``source_faces``.
 
     - ``max_row_jump``: the largest per-row jump (:func:`edge_row_jumps`, in ``sqrt(target area)``),
-      ``outlier_rows``: how many rows exceed :data:`EDGE_ROW_MAX_JUMP`, ``outlier_lines``: the first
-      :data:`MAX_LISTED_ROWS` of them as 1-based line numbers of the file (line ``k`` = source vertex
-      ``k - 1``), ``outlier_jumps``: their jumps. A local test: a few rows moved elsewhere leave the
+      ``outlier_rows``: how many rows exceed :data:`EDGE_ROW_MAX_JUMP`, ``outlier_lines``: all of them
+      as 1-based line numbers of the file (line ``k`` = source vertex ``k - 1``), ``outlier_jumps``:
+      their jumps (rounded to 4 decimals). Each row is measured against the neighbours that are no
+      outliers themselves (a second pass), so a correct row beside moved ones is not named. A local test: a few rows moved elsewhere leave the
       global statistics unchanged. Needs ``source_faces``.
 
     Returns ``{"residual": float | None, "stretch": float | None, "matched": int, "max_row_jump":
@@ -605,8 +610,8 @@ def edge_plausibility(
                 out["max_row_jump"] = float(np.nanmax(jumps))
                 outliers = np.flatnonzero(np.nan_to_num(jumps, nan=0.0) > EDGE_ROW_MAX_JUMP)
                 out["outlier_rows"] = int(len(outliers))
-                out["outlier_lines"] = (outliers[:MAX_LISTED_ROWS] + 1).tolist()
-                out["outlier_jumps"] = [round(float(x), 4) for x in jumps[outliers[:MAX_LISTED_ROWS]]]
+                out["outlier_lines"] = (outliers + 1).tolist()
+                out["outlier_jumps"] = [round(float(x), 4) for x in jumps[outliers]]
     return out
 
 
@@ -621,16 +626,17 @@ def require_plausible_edge(path: Path, a: str, b: str, stats: dict) -> None:
     too_spread = stats["stretch"] is not None and stats["stretch"] > EDGE_MAX_STRETCH
     if not (too_far or too_spread):
         if stats.get("outlier_rows"):
-            n, lines = stats["outlier_rows"], stats["outlier_lines"]
-            more = f" and {n - len(lines)} more" if n > len(lines) else ""
+            n, lines, jumps = stats["outlier_rows"], stats["outlier_lines"], stats["outlier_jumps"]
+            listed = ", ".join(map(str, lines[:MAX_LISTED_ROWS]))
+            more = f" and {n - MAX_LISTED_ROWS} more" if n > MAX_LISTED_ROWS else ""
             raise InputFileError(
                 path,
                 f"{n} of its {stats['rows']} rows map a vertex of template {a} far from where its neighbours "
-                f"land on {b}: file lines {', '.join(map(str, lines))}{more} (1-based line numbers in the file; "
-                f"line k is vertex k-1 of {a}) lie a median {', '.join(f'{x:.2f}' for x in stats['outlier_jumps'])}"
-                f"{' ...' if more else ''} x sqrt(area of {b}) from their neighbours' mapped points (largest "
-                f"{stats['max_row_jump']:.3g}; real BeCoS edge files: at most 0.22; limit {EDGE_ROW_MAX_JUMP}); "
-                "the rows were edited or corrupted",
+                f"land on {b}: file lines {listed}{more} (1-based line numbers in the file, line k being vertex "
+                f"k-1 of {a}{'; all in the check report' if more else ''}); each lies a median "
+                f"{min(jumps):.3g} to {stats['max_row_jump']:.3g} x sqrt(area "
+                f"of {b}) from its template neighbours' mapped points (real BeCoS edge files: at most 0.22; "
+                f"limit {EDGE_ROW_MAX_JUMP}): the rows were edited or corrupted",
                 f"restore the annotation folder's original file (becos refuses the file, it never drops rows); "
                 f"{_FIX_FOLDER}",
             )
@@ -663,7 +669,8 @@ def _check_edge_contents(
     templates' mesh files are present, compare its rows with the source template's vertex count and
     its face indices with the target template's face count (counts from the file headers); where the
     target template's mesh is present, check that the map is geometrically plausible
-    (:func:`edge_plausibility`, :data:`EDGE_MAX_RESIDUAL`, :data:`EDGE_MAX_STRETCH`)."""
+    (:func:`edge_plausibility`, :data:`EDGE_MAX_RESIDUAL`, :data:`EDGE_MAX_STRETCH`,
+    :data:`EDGE_ROW_MAX_JUMP`)."""
     paths = {(e.dataset, e.name): e.path for entries in present.values() for e in entries}
     counts: dict = {}
     arrays: dict = {}
