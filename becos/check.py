@@ -561,11 +561,12 @@ def edge_plausibility(
       ``outlier_rows``: how many rows exceed :data:`EDGE_ROW_MAX_JUMP`, ``outlier_lines``: all of them
       as 1-based line numbers of the file (line ``k`` = source vertex ``k - 1``), ``outlier_jumps``:
       their jumps (rounded to 4 decimals). Each row is measured against the neighbours that are no
-      outliers themselves (a second pass), so a correct row beside moved ones is not named. A local test: a few rows moved elsewhere leave the
-      global statistics unchanged. Needs ``source_faces``.
+      outliers themselves (a second pass), so a correct row beside moved ones is not named. A local
+      test: a few rows moved elsewhere leave the global statistics unchanged. Needs ``source_faces``.
 
-    Returns ``{"residual": float | None, "stretch": float | None, "matched": int, "max_row_jump":
-    float | None, "outlier_rows": int, "outlier_lines": list[int], "outlier_jumps": list[float]}``.
+    Returns ``{"residual": float | None, "stretch": float | None, "matched": int, "rows": int (rows of
+    the file), "max_row_jump": float | None, "outlier_rows": int, "outlier_lines": list[int],
+    "outlier_jumps": list[float]}``.
     """
     from becos.align import procrustes
     from becos.mesh import undirected_edges

@@ -181,3 +181,35 @@ def test_a_hand_edited_ground_truth_file_is_recomputed_and_never_reaches_a_recor
     path.write_bytes(original)
     bw.pairs_stage(config, "full_full", 0, gt_index, pairs_index, **_inputs(config))
     assert record.read_bytes() == record_bytes
+
+
+def test_an_edge_file_with_moved_rows_after_the_check_is_refused_by_the_ground_truth_job(built, becos_code):
+    """Issue #29, BAD 5 after a finished run: three rows of tosca_dog0_tosca_wolf0_corres.txt moved to the
+    wolf0 face farthest from their mapped point. The ground-truth job checks each edge file it reads row by
+    row (``becos.check.edge_plausibility``) and refuses it, naming the lines; restored, it runs again."""
+    from becos.mesh import read_mesh
+
+    work, config = built
+    edge = Path(config["annotations"]) / "precomputed_corr_templates" / EDGE
+    original = edge.read_text()
+    wolf = read_mesh(becos_code / "data" / "tosca-off" / "wolf0.off")
+    centroids = wolf.vertices[wolf.faces].mean(axis=1)
+    lines = original.splitlines()
+    for r in (10, 5000, 20000):
+        face, *w = lines[r].split()
+        here = np.asarray(w, dtype=float) @ wolf.vertices[wolf.faces[int(face)]]
+        lines[r] = f"{int(np.argmax(np.linalg.norm(centroids - here, axis=1)))} 0.333333 0.333333 0.333334"
+    edge.write_text("\n".join(lines) + "\n")
+    layout = bw.Layout.of(config)
+    try:
+        with pytest.raises(InputFileError) as exc:
+            bw.ground_truth_stage(config, "full_full", 0, layout.ground_truth_index("full_full", 0), **_inputs(config))
+        assert exc.value.path == edge
+        assert f"{edge}: 3 of its {len(lines)} rows map a vertex of template tosca_dog0 far from where its " in str(
+            exc.value
+        )
+        assert "file lines 11, 5001, 20001 (1-based line numbers in the file" in str(exc.value)
+        assert "restore the annotation folder's original file" in exc.value.fix
+    finally:
+        edge.write_text(original)
+    bw.ground_truth_stage(config, "full_full", 0, layout.ground_truth_index("full_full", 0), **_inputs(config))
