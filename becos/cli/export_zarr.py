@@ -14,7 +14,18 @@ from becos.store import count_files, expand_inputs, open_benchmark, write_store
 
 def configure_parser(parser: argparse.ArgumentParser, name: str = "export-zarr") -> None:
     parser.add_argument("--setting", required=True, choices=SETTINGS)
-    parser.add_argument("--out", required=True, type=Path, help="store folder to write (replaced if present)")
+    parser.add_argument(
+        "--out",
+        required=True,
+        type=Path,
+        help="store folder to write: new, empty, or a becos store (replaced); anything else needs --overwrite",
+    )
+    parser.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace an --out folder that is not a becos store, deleting what it holds "
+        "(refused while an input lies inside it)",
+    )
     parser.add_argument(
         "--metadata",
         type=Path,
@@ -43,7 +54,8 @@ def run_cli(args: argparse.Namespace) -> int:
             raise InputFileError(args.metadata, "is not a JSON object", "give a {key: value} JSON file")
     paths = expand_inputs(args.inputs, args.setting)
     started = time.perf_counter()
-    write_store(paths, args.out, setting=args.setting, metadata=metadata)
+    protect = [*args.inputs, *([args.metadata] if args.metadata is not None else [])]
+    write_store(paths, args.out, setting=args.setting, metadata=metadata, overwrite=args.overwrite, protect=protect)
     bench = open_benchmark(args.out)
     print(
         json.dumps(

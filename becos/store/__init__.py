@@ -63,6 +63,10 @@ temporary folder beside ``out`` that replaces ``out`` when complete. Command lin
 
     becos export-zarr --setting partial_partial --out results/partial_partial/benchmark.zarr \\
         [--metadata metadata.json] results/partial_partial/pairs/chunk_*.json
+
+``--out`` may be new, an empty folder or a becos store (replaced: the workflow rewrites its stores);
+any other folder is refused unless ``--overwrite`` is given, and never replaced while an input (a
+record, an index file, the metadata file) lies inside it (:func:`check_out_folder`).
 """
 
 from __future__ import annotations
@@ -98,7 +102,9 @@ from becos.store.write import (
     STACKED_CHUNK_BYTES,
     VERSION_PACKAGES,
     ContentDigests,
+    check_out_folder,
     disk_dtype,
+    is_becos_store,
     table_row,
     write_pairs,
     write_store,
@@ -123,10 +129,12 @@ __all__ = [
     "TABLE_DTYPES",
     "TrainingView",
     "VERSION_PACKAGES",
+    "check_out_folder",
     "count_files",
     "disk_dtype",
     "expand_inputs",
     "index_setting",
+    "is_becos_store",
     "open_benchmark",
     "read_record_index",
     "store_order_key",

@@ -354,6 +354,67 @@ def _add_record(info: _RecordInfo, sinks: dict, layout: dict, metas: list, rows:
     )
 
 
+def is_becos_store(folder: str | Path) -> bool:
+    """True when ``folder`` holds a becos store's root metadata: a ``zarr.json`` whose attributes carry
+    ``becos_store`` (any store format, damaged arrays or not). :func:`write_store` replaces such a
+    folder without asking, since rewriting its store is what the workflow does."""
+    try:
+        meta = json.loads((Path(folder) / "zarr.json").read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError):
+        return False
+    attrs = meta.get("attributes") if isinstance(meta, dict) else None
+    return isinstance(attrs, dict) and isinstance(attrs.get("becos_store"), dict)
+
+
+def _listing(folder: Path, limit: int = 5) -> str:
+    """The first ``limit`` entries of a folder (folders with a trailing ``/``) and how many there are."""
+    names = sorted(e.name + ("/" if e.is_dir() else "") for e in os.scandir(folder))
+    shown = ", ".join(names[:limit]) + (", ..." if len(names) > limit else "")
+    return f"{shown} ({len(names)} entries)" if len(names) > limit else shown
+
+
+def check_out_folder(out: str | Path, inputs: Iterable[str | Path], *, overwrite: bool = False) -> None:
+    """Refuse an ``out`` that :func:`write_store` must not replace, before anything is written.
+
+    ``out`` may be absent, an empty folder or a becos store (:func:`is_becos_store`, replaced as
+    the workflow does); anything else only with ``overwrite``, since replacing it deletes what it
+    holds. Never when one of ``inputs`` (records, index files, metadata) lies inside ``out``, with
+    or without ``overwrite``: the export would delete its own inputs.
+
+    Raises:
+        InputFileError: naming ``out``, what it holds and the fix.
+    """
+    out = Path(out)
+    if not (out.exists() or out.is_symlink()):
+        return
+    homes = {Path(os.path.abspath(out)), out.resolve()}
+    inside = []
+    for path in map(Path, inputs):  # the path as given (a link inside out) and what it points at
+        if any(p.is_relative_to(h) for p in (Path(os.path.abspath(path)), path.resolve()) for h in homes):
+            inside.append(path)
+    store, is_dir = is_becos_store(out), out.is_dir() and not out.is_symlink()
+    empty = is_dir and next(os.scandir(out), None) is None
+    elsewhere = "choose another --out (a new or empty folder, or a becos store)"
+    if inside and (overwrite or store):
+        more = f" and {len(inside) - 1} more" if len(inside) > 1 else ""
+        raise InputFileError(
+            out,
+            f"holds inputs of this export ({inside[0]}{more}): replacing the folder would delete them",
+            f"{elsewhere}, or move the inputs out of it first",
+        )
+    if store or empty or overwrite:
+        return
+    held = f"a folder holding {_listing(out)}" if is_dir else "a file or link"
+    if inside:
+        held += f", among them inputs of this export ({inside[0]})"
+        fix = f"{elsewhere}; --overwrite replaces such a folder, deleting what it holds, once no input lies inside it"
+    else:
+        fix = f"{elsewhere}, or pass --overwrite to replace it, deleting what it holds"
+    raise InputFileError(
+        out, f"is not a becos store but {held}, and export-zarr replaces the --out folder as a whole", fix
+    )
+
+
 def write_store(
     record_paths: Iterable[str | Path],
     out: str | Path,
@@ -361,6 +422,8 @@ def write_store(
     setting: str,
     metadata: Mapping | None = None,
     progress: bool = True,
+    overwrite: bool = False,
+    protect: Iterable[str | Path] = (),
 ) -> Path:
     """One Zarr v3 store per setting: every PairRecord concatenated per key (+ offsets), a pairs table,
     metadata. Written to a temp dir then renamed (atomic).
@@ -368,11 +431,15 @@ def write_store(
     Args:
         record_paths: pair record .npz files (:meth:`becos.record.PairRecord.save`), any order; each
             pair_id once, every record of ``setting`` and of this schema version.
-        out: the store folder (``*.zarr``); an existing store there is replaced.
+        out: the store folder (``*.zarr``); an existing becos store or empty folder there is replaced,
+            anything else only with ``overwrite`` (:func:`check_out_folder`).
         setting: full_full | partial_full | partial_partial.
         metadata: JSON-able extra root attributes (``config_hash``, ``config``, ``datasets`` ...);
             a ``setting`` in it must equal ``setting``.
         progress: print progress to stderr (about every 10 % for 50 records or more).
+        overwrite: replace an ``out`` that is not a becos store (deleting what it holds).
+        protect: further input files (index files, metadata) that ``out`` must not hold, besides
+            ``record_paths``.
 
     Returns:
         ``out`` as a Path. Raises :class:`InputFileError` naming the offending record file.
@@ -392,6 +459,7 @@ def write_store(
     paths = [Path(p) for p in record_paths]
     if not paths:
         raise BecosError(f"{out}: no pair records given. Fix: pass record .npz files or chunk index files")
+    check_out_folder(out, [*protect, *paths], overwrite=overwrite)  # the files named first
     infos = []
     seen: dict[str, Path] = {}
     for path in paths:
