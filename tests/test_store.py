@@ -365,3 +365,31 @@ def test_export_refuses_a_folder_that_is_not_a_store_and_never_deletes_its_input
     empty.mkdir()
     assert main(["export-zarr", "--setting", "partial_partial", "--out", str(empty), *records]) == 0
     assert len(open_benchmark(empty)) == 2
+
+
+def test_a_truncated_chunk_raises_one_damaged_store_error_and_no_pending_task_noise(stores, tmp_path):
+    """POOR of issue #29: reading a store with truncated chunks raised DamagedStoreError, then printed
+    dozens of ``Task was destroyed but it is pending!`` and RuntimeError tracebacks at exit (zarr's
+    reads of the other arrays and chunks left running). They are cancelled or awaited before the error."""
+    import shutil
+    import subprocess
+    import sys
+
+    damaged = tmp_path / "damaged.zarr"
+    shutil.copytree(stores["partial_partial"], damaged)
+    for key in ("y_faces", "x_overlap_mask", "corr_01"):  # half of a chunk file: many reads still running
+        chunk = sorted((damaged / "arrays" / key).glob("c.*"))[0]
+        chunk.write_bytes(chunk.read_bytes()[: chunk.stat().st_size // 2])
+    script = (
+        "import sys\n"
+        "from becos.store import DamagedStoreError, open_benchmark\n"
+        "try:\n"
+        "    open_benchmark(sys.argv[1]).record(0)\n"
+        "except DamagedStoreError as exc:\n"
+        "    print('caught:', exc)\n"
+    )
+    done = subprocess.run([sys.executable, "-c", script, str(damaged)], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.count("caught:") == 1 and "damaged.zarr: pairs 0:1 cannot be read" in done.stdout, done.stdout
+    err = done.stderr
+    assert "Task was destroyed" not in err and "RuntimeError" not in err and "Traceback" not in err, err[:3000]

@@ -179,6 +179,32 @@ class _ChunkFiles:
         return out
 
 
+DRAIN_ROUNDS = 20
+"""Most rounds :func:`_drain` waits for tasks started by a failed read (zarr nests its tasks a few deep)."""
+
+
+async def _drain(tasks, before: set) -> None:
+    """After one read of a concurrent batch failed: cancel the batch's other ``tasks`` and wait until
+    they, and the tasks zarr started for them since ``before`` (its own ``gather`` leaves a failed
+    array's other chunk reads running), have ended, so the error is raised alone.
+
+    Left running, those tasks were destroyed pending at exit (``Task was destroyed but it is
+    pending!``, about 60 times) and one of them failed to schedule a thread after interpreter
+    shutdown (a ``RuntimeError`` traceback). Tasks started meanwhile by other threads on zarr's loop
+    are waited for as well, never cancelled."""
+    import asyncio
+
+    for task in tasks:
+        task.cancel()
+    await asyncio.gather(*tasks, return_exceptions=True)  # retrieves their exceptions, too
+    me = asyncio.current_task()
+    for _ in range(DRAIN_ROUNDS):
+        started = [t for t in asyncio.all_tasks() - before if t is not me and not t.done()]
+        if not started:
+            return
+        await asyncio.wait(started)
+
+
 class PairKeyError(BecosError, TypeError):
     """A pair asked for by something that is neither a row index (int) nor a pair_id (str)."""
 
@@ -429,7 +455,13 @@ class Benchmark:
         ranges.append((self._meta_json, int(mo[start]), int(mo[stop])))
 
         async def read_all():  # every array's slice concurrently: one round trip, not one per key
-            return await asyncio.gather(*(array.async_array.getitem(slice(a, b)) for array, a, b in ranges))
+            before = asyncio.all_tasks()
+            tasks = [asyncio.ensure_future(array.async_array.getitem(slice(a, b))) for array, a, b in ranges]
+            try:
+                return await asyncio.gather(*tasks)
+            except BaseException:
+                await _drain(tasks, before)
+                raise
 
         self._check_unchanged(f"pairs {start}:{stop}")
         try:
