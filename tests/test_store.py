@@ -393,3 +393,25 @@ def test_a_truncated_chunk_raises_one_damaged_store_error_and_no_pending_task_no
     assert done.stdout.count("caught:") == 1 and "damaged.zarr: pairs 0:1 cannot be read" in done.stdout, done.stdout
     err = done.stderr
     assert "Task was destroyed" not in err and "RuntimeError" not in err and "Traceback" not in err, err[:3000]
+
+
+def test_a_store_of_an_older_format_says_so_and_how_to_rebuild_it(stores, pair_record_files, tmp_path):
+    """POOR of issue #29: a format 1 store (an older becos) was "not a becos benchmark store of
+    format 2"; the message says it is older and names the commands that rebuild it. export-zarr
+    replaces it like any becos store."""
+    import shutil
+
+    old = tmp_path / "partial_partial" / "benchmark.zarr"
+    shutil.copytree(stores["partial_partial"], old)
+    meta = json.loads((old / "zarr.json").read_text())
+    meta["attributes"]["becos_store"]["format"] = 1
+    (old / "zarr.json").write_text(json.dumps(meta))
+    with pytest.raises(InputFileError) as caught:
+        open_benchmark(old)
+    message = str(caught.value)
+    assert message.startswith(f"{old}: was written by an older becos: store format 1, this becos reads format 2")
+    assert "snakemake --cores 1 --forcerun zarr_store" in message
+    pairs = tmp_path / "partial_partial" / "pairs"
+    assert f"becos export-zarr --setting partial_partial --out {old} " in message and f"{pairs}/chunk_*.json" in message
+    write_store(pair_record_files["partial_partial"], old, setting="partial_partial", progress=False)
+    assert len(open_benchmark(old)) == 2

@@ -216,6 +216,19 @@ class DamagedStoreError(InputFileError):
 DAMAGED_STORE_FIX = "re-export the store with `becos export-zarr` (it is damaged or was copied incompletely)"
 
 
+def _rebuild_fix(store: Path, setting: object) -> str:
+    """How to rewrite a store of an older format with this becos: rerun its workflow job, or export the
+    setting's pair records again (the workflow's layout: ``results/<setting>/benchmark.zarr`` beside
+    ``pairs/chunk_*.json`` and ``metadata.json``, :class:`becos.workflow.layout.Layout`)."""
+    setting = setting if isinstance(setting, str) and setting else "<setting>"
+    folder = store.parent
+    return (
+        "rebuild it with this becos: in the run folder, `snakemake --cores 1 --forcerun zarr_store`; or from "
+        f"the setting's pair records, `becos export-zarr --setting {setting} --out {store} "
+        f"--metadata {folder / 'metadata.json'} {folder / 'pairs'}/chunk_*.json`"
+    )
+
+
 class Benchmark:
     """A benchmark store opened for reading (:func:`open_benchmark`).
 
@@ -248,6 +261,12 @@ class Benchmark:
                 self.path,
                 f"was written by a newer becos: store format {found}, this becos reads format {STORE_FORMAT}",
                 newer,
+            )
+        if isinstance(found, int) and not isinstance(found, bool) and 0 < found < STORE_FORMAT:
+            raise InputFileError(
+                self.path,
+                f"was written by an older becos: store format {found}, this becos reads format {STORE_FORMAT}",
+                _rebuild_fix(self.path, attrs.get("setting")),
             )
         if not isinstance(info, dict) or found != STORE_FORMAT:
             raise InputFileError(self.path, f"is not a becos benchmark store of format {STORE_FORMAT}", fix)
