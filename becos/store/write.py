@@ -389,7 +389,7 @@ def check_out_folder(out: str | Path, inputs: Iterable[str | Path], *, overwrite
         return
     homes = {Path(os.path.abspath(out)), out.resolve()}
     inside = []
-    for path in map(Path, inputs):  # the path as given (a link inside out) and what it points at
+    for path in dict.fromkeys(map(Path, inputs)):  # the path as given (a link inside out) and its target
         if any(p.is_relative_to(h) for p in (Path(os.path.abspath(path)), path.resolve()) for h in homes):
             inside.append(path)
     store, is_dir = is_becos_store(out), out.is_dir() and not out.is_symlink()
@@ -406,7 +406,7 @@ def check_out_folder(out: str | Path, inputs: Iterable[str | Path], *, overwrite
         return
     held = f"a folder holding {_listing(out)}" if is_dir else "a file or link"
     if inside:
-        held += f", among them inputs of this export ({inside[0]})"
+        held += f" (among them inputs of this export: {inside[0]})"
         fix = f"{elsewhere}; --overwrite replaces such a folder, deleting what it holds, once no input lies inside it"
     else:
         fix = f"{elsewhere}, or pass --overwrite to replace it, deleting what it holds"
