@@ -131,6 +131,34 @@ def test_a_plan_error_after_the_dataset_check_is_one_line(tmp_path):
     assert not (workdir / ".snakemake" / "locks").exists() or not any((workdir / ".snakemake" / "locks").iterdir())
 
 
+def test_nested_command_line_values_are_typed_by_the_schema(tmp_path):
+    """Issue #29: Snakemake reads the values inside a ``--config`` mapping as strings, so
+    ``caps={train: 2}`` used to stop every run with ``caps.train: '2' is a string``: caps could not be set
+    on the command line at all (its keys admit an integer or null). A real run of the rule writing the
+    resolved configuration; a value that is no integer stays the one-line error."""
+    import json
+
+    workdir = write_config_file(tmp_path / "run", {"seed": 7})
+    given = ("caps={train: 2, val: null, test: 0}", "exports={psmal: true}")
+    result = run_snakemake(tmp_path, "-d", str(workdir), "--cores", "1", "results/config.json", "--config", *given)
+    assert result.returncode == 0, result.stderr[-3000:]
+    resolved = json.loads((workdir / "results" / "config.json").read_text())
+    assert resolved["caps"] == {"train": 2, "val": None, "test": 0} and resolved["exports"]["psmal"] is True
+
+    result = run_snakemake(tmp_path, "-d", str(workdir), "-n", "--cores", "1", "--config", "caps={train: two}")
+    assert result.returncode != 0
+    assert problem_lines(result.stderr) == [
+        "becos config: caps.train: 'two' is a string, not an integer or null. Fix: give an integer or null "
+        "(see config/README.md)"
+    ], result.stderr[-3000:]
+    base = {"synthetic": {"enabled": False}, "data_dir": "data", "annotations": "ann", "datasets": ["tosca"]}
+    with pytest.raises(ConfigError, match=r"^caps.train: -1 is below the minimum 0\. Fix: use a value >= 0$"):
+        resolve_config({**base, "caps": {"train": "-1"}})  # read as an integer, then checked like one
+    assert resolve_config({**base, "evaluation": {"geodesics": "heat"}})["evaluation"]["geodesics"] == "heat"
+    with pytest.raises(ConfigError, match=r"^seed: 'null' is a string, not an integer"):
+        resolve_config({**base, "seed": "null"})  # top-level values: typed by Snakemake itself, not here
+
+
 def test_config_file_faults_are_one_line_naming_the_file(tmp_path):
     """A YAML syntax error names file, line and column; a missing --configfile is one line (the default
     workflow profile reads the files before Snakemake does)."""

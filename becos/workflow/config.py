@@ -19,17 +19,23 @@ def _schema() -> dict:
     return yaml.safe_load(SCHEMA_PATH.read_text())
 
 
-def _typed_command_line_values(schema: dict, instance):
-    """Nested values given as ``snakemake --config 'exports={zarr: true, ...}'`` arrive as strings
-    (Snakemake reads them with YAML's BaseLoader): turn ``"true"``/``"false"`` and numbers into the
-    boolean / integer / number the schema asks for, recursively; anything else is left to the schema."""
+def _typed_command_line_values(schema: dict, instance, depth: int = 0):
+    """Nested values given as ``snakemake --config 'caps={train: 2, val: null}'`` arrive as strings
+    (Snakemake reads the values inside such a mapping with YAML's BaseLoader): a string below the top level
+    where the schema admits no string is read as a YAML scalar (:func:`_scalar_from_text`) and kept when
+    the result has a type the schema admits, recursively; anything else is left to the schema (and its
+    one-line error). ``depth`` counts the levels below the whole configuration (1: a top-level key's
+    value): top-level values keep the older typing here (``"4"`` -> 4 for an integer key), as Snakemake
+    types those itself."""
     kind = schema.get("type")
     if isinstance(instance, dict) and kind == "object":
         props = schema.get("properties", {})
-        return {k: _typed_command_line_values(props[k], v) if k in props else v for k, v in instance.items()}
+        return {k: _typed_command_line_values(props[k], v, depth + 1) if k in props else v for k, v in instance.items()}
     if isinstance(instance, list) and kind == "array" and isinstance(schema.get("items"), dict):
-        return [_typed_command_line_values(schema["items"], v) for v in instance]
+        return [_typed_command_line_values(schema["items"], v, depth + 1) for v in instance]
     if isinstance(instance, str):
+        if depth > 1:
+            return _scalar_from_text(schema, instance)
         text = instance.strip()
         if kind == "boolean" and text.lower() in ("true", "false"):
             return text.lower() == "true"
@@ -41,6 +47,30 @@ def _typed_command_line_values(schema: dict, instance):
         except ValueError:
             pass
     return instance
+
+
+def _scalar_from_text(schema: dict, text: str):
+    """``text`` read as a YAML scalar (``'2'`` -> 2, ``'null'`` -> None, ``'true'`` -> True) when ``schema``
+    admits no string but admits the value read; else ``text`` unchanged. A number such as ``'1e-3'``, which
+    YAML 1.1 reads as a string, is read with ``float`` where the schema admits a number."""
+    import yaml
+
+    wanted = schema.get("type")
+    wanted = [wanted] if isinstance(wanted, str) else list(wanted or [])
+    if not wanted or "string" in wanted:
+        return text
+    try:
+        value = yaml.safe_load(text)
+    except yaml.YAMLError:
+        return text
+    if isinstance(value, (dict, list)) or not _accepts_type(schema, value):
+        if "number" not in wanted:
+            return text
+        try:
+            return float(text)
+        except ValueError:
+            return text
+    return value
 
 
 def _fill_defaults(schema: dict, instance):
