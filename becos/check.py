@@ -31,14 +31,16 @@ with such rows is refused, naming their line numbers). With mesh checks on, ever
 class template's triangulation is compared with the template (:func:`compare_with_class_template`:
 faces as vertex sets, median edge-length ratio, flatness), every vertex line must hold 3 values and
 every face line be a triangle, a header may not announce fewer lines than the file holds, and stray
-files (names no class rule matches) and dangling symbolic links are named.
+files (names no class rule matches) are named, and so is every entry with a mesh file's name that is no
+regular file (a folder, a named pipe, a link to a device, a dangling link: :func:`becos.formats.not_a_regular_file`,
+decided by ``stat`` without opening it), instead of being counted as missing.
 
 Report layout (``check_datasets`` return value)::
 
     {<dataset>: {"ok", "path", "folder", "found", "expected", "excluded_found", "meshes_checked",
                  "bad_meshes": [{"path", "problem", "fix"}], "repairs": [{"path", "repair", <counts>}],
                  "class_mismatches": [{"path", "template", "problem", "fix"}], "stray_files": [...],
-                 "problems": [...]},
+                 "not_mesh_files": {path: what it is}, "problems": [...]},
      ...,
      "annotations": {"ok", "path", "found", "nodes", "edges", "template_rows", "files": {rel: bool},
                      "edge_files": {"needed", "missing"}, "default_faces": {"needed", "missing"},
@@ -75,7 +77,7 @@ from becos.download import (
     partial_path,
 )
 from becos.errors import BecosError, ConfigError, InputFileError
-from becos.formats import check_file
+from becos.formats import check_file, not_a_mesh_file, not_a_regular_file
 from becos.formats.off import read_off
 from becos.formats.problems import TRUNCATED_FIX
 
@@ -318,6 +320,16 @@ def _missing_dataset_text(spec, folder: Path, data_dir: Path) -> str:
     return " ".join(parts)
 
 
+def _classified(spec, name: str) -> bool:
+    """Whether ``name`` matches a class and a category rule of the dataset ``spec``."""
+    try:
+        spec.class_of(name)
+        spec.category_of(name)
+    except BecosError:
+        return False
+    return True
+
+
 def _check_one_dataset(
     name: str,
     data_dir: Path,
@@ -364,19 +376,15 @@ def _check_one_dataset(
         names = spec.list_names(data_dir, annotations)
     except BecosError as exc:
         return stop(f"dataset '{name}': {exc}")
-    dangling = sorted(p for p in folder.glob(spec.file_glob) if p.is_symlink() and not p.exists())
-    for p in dangling:
-        problems.append(
-            f"{p}: is a symbolic link to {os.readlink(p)}, which does not exist (a dangling link). Fix: "
-            f"point the link at the real file, or put the file itself there"
-        )
-    stray = []
-    for n in names:
-        try:
-            spec.class_of(n)
-            spec.category_of(n)
-        except BecosError:
-            stray.append(n)
+    not_files = {}  # shape name: path, of the entries named like a mesh file that are none
+    for p in sorted(folder.glob(spec.mesh_glob)):
+        odd = not_a_mesh_file(p)
+        if odd is not None:
+            problems.append(f"{p}: {odd[0]}. Fix: {odd[1]}")
+            not_files[spec.name_of(p)] = p
+    if not_files:
+        entry["not_mesh_files"] = {str(p): not_a_regular_file(p) for p in not_files.values()}
+    stray = [n for n in names if not _classified(spec, n)]
     if stray:
         shown = ", ".join(f"{n}.{spec.file_type}" for n in stray[:MAX_LISTED_MESHES])
         problems.append(
@@ -389,13 +397,15 @@ def _check_one_dataset(
         names = [n for n in names if n not in stray]
     used = [n for n in names if n not in spec.excluded]
     entry.update(found=len(used), excluded_found=len(names) - len(used))
-    counts_ok = True
-    if len(used) != spec.expected_count:
+    counts_ok = not not_files  # named above; counted below as present, so that they are not called missing
+    there = [*used, *(n for n in not_files if n not in spec.excluded and _classified(spec, n))]
+    if len(there) != spec.expected_count:
         counts_ok = False
         published = _published_names(getattr(annotations, "root", None)).get(name, set())
         # the published lists name every shape of the reference's datasets; a registry that expects
         # another count (a subset, a newer release) gets no names
-        absent = sorted(published - set(names), key=natural_key) if len(published) == spec.expected_count else []
+        present = set(names) | set(not_files)
+        absent = sorted(published - present, key=natural_key) if len(published) == spec.expected_count else []
         entry["missing_published"] = absent
         named = ""
         if absent:
@@ -403,13 +413,13 @@ def _check_one_dataset(
             more = f" and {len(absent) - MAX_LISTED_MESHES} more" if len(absent) > MAX_LISTED_MESHES else ""
             named = f"; missing files named by the published BeCoS pair lists: {shown}{more}"
         problems.append(
-            f"dataset '{name}': found {len(used)} shapes ({spec.file_glob}) in {folder}, expected "
+            f"dataset '{name}': found {len(there)} shapes ({spec.file_glob}) in {folder}, expected "
             f"{spec.expected_count}{named}. Fix: complete or re-extract the download "
             f"({spec.download_help()}), or check `data_dir`"
         )
     if spec.expected_per_class:
         per_class: dict[str, int] = {}
-        for n in used:
+        for n in there:
             c = spec.class_of(n)
             per_class[c] = per_class.get(c, 0) + 1
         entry["found_per_class"] = per_class

@@ -550,6 +550,18 @@ class DatasetSpec:
             ) from exc
         return names, path
 
+    @property
+    def mesh_glob(self) -> str:
+        """The glob of the dataset's mesh files below its folder: ``file_glob`` (layout flat), else
+        ``*/<file_glob>`` (one folder per class: class_folders, dt4d). It matches entries of any kind
+        (folders, named pipes, ...): :meth:`list_names` keeps the regular files."""
+        return self.file_glob if self.layout == "flat" else f"*/{self.file_glob}"
+
+    def name_of(self, path: str | Path) -> str:
+        """The shape name of a mesh file found by :attr:`mesh_glob` (``wolf1``, ``<class>/<stem>``)."""
+        path = Path(path)
+        return path.stem if self.layout == "flat" else f"{path.parent.name}/{path.stem}"
+
     def list_names(self, data_root: str | Path, annotations: AnnotationSource | None = None) -> list[str]:
         """Shape names found below ``data_root`` (excluded ones included), in natural order.
 
@@ -564,10 +576,8 @@ class DatasetSpec:
                 f"dataset folder of {self.name} not found",
                 f"download it and place it there. {self.download_help()}",
             )
-        if self.layout == "flat":
-            names = [p.name[: -len(p.suffix)] for p in folder.glob(self.file_glob) if p.is_file()]
-        elif self.layout == "class_folders":
-            names = [f"{p.parent.name}/{p.stem}" for p in folder.glob(f"*/{self.file_glob}") if p.is_file()]
+        if self.layout in ("flat", "class_folders"):
+            names = [self.name_of(p) for p in folder.glob(self.mesh_glob) if p.is_file()]
         else:
             names, info_path = self._dt4d_names(annotations, Path(data_root))
             missing = [n for n in names if not (folder / f"{n}.{self.file_type}").is_file()]

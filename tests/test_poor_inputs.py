@@ -364,3 +364,53 @@ def test_an_ascii_ply_header_announcing_fewer_faces_than_the_file_holds(tosca_di
     ) as err:
         check_mesh_file(path)
     assert err.value.path == path and "correct the header's counts" in err.value.fix
+
+
+# --- an entry that is no regular file --------------------------------------------------------------------
+def _make_fifo(path: Path) -> None:
+    import os
+
+    os.mkfifo(path)
+
+
+NOT_A_FILE = {  # kind: (how wolf1.off is made, what the check calls it)
+    "fifo": (_make_fifo, "is a named pipe (FIFO), not a mesh file"),
+    "folder": (lambda p: (p.mkdir(), (p / "wolf1.off").write_text("OFF\n")), "is a folder, not a mesh file"),
+    "link_to_dev_zero": (
+        lambda p: p.symlink_to("/dev/zero"),
+        "is a symbolic link to /dev/zero, a device file (character device), not a mesh file",
+    ),
+}
+
+
+@pytest.mark.parametrize("kind", sorted(NOT_A_FILE))
+def test_an_entry_that_is_no_regular_file_is_named_not_called_missing(becos_code, tmp_path, kind):
+    """Issue #29: a FIFO, a folder or a link to /dev/zero named wolf1.off used to be skipped by the listing
+    and reported as `found 75 shapes … missing files named by the published BeCoS pair lists: wolf1.off`,
+    although an entry of that name is there. The check (the real `becos check`, in a subprocess with a
+    timeout: opening the FIFO or reading /dev/zero would never end) names it and what it is."""
+    import os
+    import sys
+
+    make, what = NOT_A_FILE[kind]
+    tosca = tmp_path / "data" / "tosca-off"
+    tosca.mkdir(parents=True)
+    for mesh in (becos_code / "data" / "tosca-off").glob("*.off"):
+        if mesh.name != "wolf1.off":
+            (tosca / mesh.name).symlink_to(mesh)
+    make(tosca / "wolf1.off")
+    command = [sys.executable, "-m", "becos", "check", "--datasets", "tosca", "--data-dir", str(tmp_path / "data")]
+    result = subprocess.run(
+        [*command, "--annotations", str(becos_code), "--out", str(tmp_path / "report.json")],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        env=dict(os.environ, PYTHONPATH=str(Path(__file__).resolve().parents[1])),
+    )
+    assert result.returncode == 2, result.stderr[-3000:]
+    text = result.stderr
+    assert f"{tosca / 'wolf1.off'}: {what}. Fix: " in text, text[-3000:]
+    assert "missing files named by the published" not in text and "found 75 shapes" not in text, text[-3000:]
+    assert "Traceback" not in text
+    report = json.loads((tmp_path / "report.json").read_text())["tosca"]
+    assert report["not_mesh_files"] == {str(tosca / "wolf1.off"): what.removesuffix(", not a mesh file")[3:]}

@@ -11,18 +11,77 @@ of a file, and for OFF the one reader of becos.
 
 PLY, OBJ and irregular OFF files are read by trimesh (:func:`becos.mesh.read_mesh`). The checks are
 what :func:`becos.check.check_mesh_file` runs on every mesh of a dataset (~10 ms per 5 MB file);
-:func:`check_file` dispatches on the suffix.
+:func:`check_file` dispatches on the suffix. :func:`not_a_regular_file` says what an entry that is no
+file is (a folder, a named pipe, a link to a device, ...), from ``stat`` alone.
 """
 
 from __future__ import annotations
 
+import errno
+import os
+import stat
 from pathlib import Path
 
 from becos.errors import InputFileError
 from becos.formats.obj import check_obj
 from becos.formats.off import check_off
 from becos.formats.ply import check_ply
-from becos.formats.problems import TRUNCATED_FIX
+from becos.formats.problems import LINK_FIX, NOT_A_FILE_FIX, TRUNCATED_FIX
+
+_KINDS = (  # (test of st_mode, what the entry is), for everything but a regular file and a link
+    (stat.S_ISDIR, "a folder"),
+    (stat.S_ISFIFO, "a named pipe (FIFO)"),
+    (stat.S_ISSOCK, "a socket"),
+    (stat.S_ISCHR, "a device file (character device)"),
+    (stat.S_ISBLK, "a device file (block device)"),
+)
+
+
+def _kind(mode: int) -> str:
+    """What a ``st_mode`` that is no regular file and no link names (``a folder``, ``a socket``, ...)."""
+    return next((what for test, what in _KINDS if test(mode)), f"a special file (mode {stat.S_IFMT(mode):o})")
+
+
+def not_a_regular_file(path: str | Path) -> str | None:
+    """What is at ``path`` when it is no regular file (symbolic links followed): ``'a folder'``,
+    ``'a named pipe (FIFO)'``, ``'a socket'``, ``'a device file (character device)'``,
+    ``'a symbolic link to /dev/zero, a device file (character device)'``,
+    ``'a symbolic link to <target>, which does not exist (a dangling link)'``, a loop of links;
+    ``None`` for a regular file (or a link to one) and where nothing is at all (the caller's "not found").
+
+    Decided by ``lstat``/``stat`` alone: nothing is opened, so a named pipe (which would block) or a link
+    to ``/dev/zero`` (which never ends) is safe to ask about. The same test as the input digests
+    (:meth:`becos.workflow.digests.DigestCache.file`, whose stand-in is ``not a regular file``)."""
+    path = Path(path)
+    try:
+        own = os.lstat(path)
+    except OSError:
+        return None
+    if not stat.S_ISLNK(own.st_mode):
+        return None if stat.S_ISREG(own.st_mode) else _kind(own.st_mode)
+    try:
+        target = os.stat(path)
+    except OSError as exc:
+        if exc.errno == errno.ELOOP:
+            return f"a symbolic link to {os.readlink(path)} that never reaches a file (a loop of links)"
+        if exc.errno in (errno.ENOENT, errno.ENOTDIR):
+            return f"a symbolic link to {os.readlink(path)}, which does not exist (a dangling link)"
+        return f"a symbolic link to {os.readlink(path)}, which cannot be examined ({exc.strerror})"
+    if stat.S_ISREG(target.st_mode):
+        return None
+    return f"a symbolic link to {os.path.realpath(path)}, {_kind(target.st_mode)}"
+
+
+def not_a_mesh_file(path: str | Path) -> tuple[str, str] | None:
+    """``(problem, fix)`` for an entry at ``path`` that is no regular file (:func:`not_a_regular_file`),
+    e.g. ``('is a named pipe (FIFO), not a mesh file', 'replace it with the mesh file itself ...')``;
+    ``None`` for a regular file, a link to one, or nothing."""
+    what = not_a_regular_file(path)
+    if what is None:
+        return None
+    if what.endswith("(a dangling link)"):
+        return f"is {what}", LINK_FIX
+    return f"is {what}, not a mesh file", LINK_FIX if os.path.islink(path) else NOT_A_FILE_FIX
 
 
 def check_file(path: str | Path) -> tuple[int, int]:
@@ -35,6 +94,9 @@ def check_file(path: str | Path) -> tuple[int, int]:
     """
     path = Path(path)
     fix = TRUNCATED_FIX
+    odd = not_a_mesh_file(path)
+    if odd is not None:
+        raise InputFileError(path, *odd)
     if not path.is_file():
         raise InputFileError(path, "mesh file not found", fix)
     size = path.stat().st_size

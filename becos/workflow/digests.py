@@ -168,8 +168,7 @@ def dataset_input_files(config: dict) -> list[Path]:
             continue
         folder = data_dir / spec.folder
         if outside(folder):
-            pattern = spec.file_glob if spec.layout == "flat" else f"*/{spec.file_glob}"
-            out += [p for p in folder.glob(pattern) if outside(p)]
+            out += [p for p in folder.glob(spec.mesh_glob) if outside(p)]
     return sorted(set(out))
 
 
