@@ -33,7 +33,7 @@ import numpy as np
 
 from becos.atomic import save_npz as atomic_save_npz
 from becos.errors import InputFileError
-from becos.formats import check_file
+from becos.formats import check_file, not_a_mesh_file
 from becos.formats.off import off_data_lines, read_off
 from becos.formats.problems import TRUNCATED_FIX
 
@@ -121,6 +121,9 @@ def read_mesh(path: str | Path) -> TriMesh:
         InputFileError: missing file, unknown type, unreadable or inconsistent content.
     """
     path = Path(path)
+    odd = not_a_mesh_file(path)  # a folder, a named pipe, a link to /dev/zero: named, never opened
+    if odd is not None:
+        raise InputFileError(path, *odd)
     if not path.is_file():
         raise InputFileError(
             path,

@@ -414,3 +414,57 @@ def test_an_entry_that_is_no_regular_file_is_named_not_called_missing(becos_code
     assert "Traceback" not in text
     report = json.loads((tmp_path / "report.json").read_text())["tosca"]
     assert report["not_mesh_files"] == {str(tosca / "wolf1.off"): what.removesuffix(", not a mesh file")[3:]}
+
+
+def test_what_an_entry_that_is_no_regular_file_is(tosca_dir, tmp_path):
+    """:func:`becos.formats.not_a_regular_file` by ``stat`` alone (a FIFO is never opened: the calls would
+    block; an alarm fails the test instead), and the readers of a single mesh (the cheap check,
+    ``read_mesh`` of the remesh job) name it."""
+    import os
+    import signal
+    import socket
+
+    from becos.check import check_mesh_file
+    from becos.formats import not_a_regular_file
+    from becos.mesh import read_mesh
+
+    os.mkfifo(tmp_path / "fifo.off")
+    (tmp_path / "folder.off").mkdir()
+    (tmp_path / "zero.off").symlink_to("/dev/zero")
+    (tmp_path / "to_fifo.off").symlink_to(tmp_path / "fifo.off")
+    (tmp_path / "loop.off").symlink_to(tmp_path / "loop.off")
+    (tmp_path / "gone.off").symlink_to(tmp_path / "nothing" / "gone.off")
+    (tmp_path / "mesh.off").symlink_to(tosca_dir / "wolf1.off")
+    server = socket.socket(socket.AF_UNIX)
+    server.bind(str(tmp_path / "sock.off"))
+
+    def hung(signum, frame):
+        raise AssertionError("a FIFO or /dev/zero was opened: the call did not return within 60 s")
+
+    previous = signal.signal(signal.SIGALRM, hung)
+    signal.alarm(60)
+    try:
+        assert {p.name: not_a_regular_file(p) for p in sorted(tmp_path.iterdir())} == {
+            "fifo.off": "a named pipe (FIFO)",
+            "folder.off": "a folder",
+            "gone.off": f"a symbolic link to {tmp_path / 'nothing' / 'gone.off'}, which does not exist (a dangling link)",
+            "loop.off": f"a symbolic link to {tmp_path / 'loop.off'} that never reaches a file (a loop of links)",
+            "mesh.off": None,
+            "sock.off": "a socket",
+            "to_fifo.off": f"a symbolic link to {tmp_path / 'fifo.off'}, a named pipe (FIFO)",
+            "zero.off": "a symbolic link to /dev/zero, a device file (character device)",
+        }
+        assert not_a_regular_file(tmp_path / "absent.off") is None
+        for read in (check_mesh_file, read_mesh):
+            with pytest.raises(InputFileError, match=r"fifo.off: is a named pipe \(FIFO\), not a mesh file\. Fix: re"):
+                read(tmp_path / "fifo.off")
+            with pytest.raises(
+                InputFileError, match=r"zero.off: is a symbolic link to /dev/zero, a device .*Fix: point"
+            ):
+                read(tmp_path / "zero.off")
+            with pytest.raises(InputFileError, match="absent.off: mesh file not found"):
+                read(tmp_path / "absent.off")
+    finally:
+        signal.alarm(0)
+        signal.signal(signal.SIGALRM, previous)
+        server.close()
