@@ -10,7 +10,8 @@ Writers, each taking an iterable of :class:`~becos.record.PairRecord` (a store's
   ``<out>/<split>/maps/<A>_<B>.vts`` in both directions.
 - :func:`write_ulrssm` -- ULRSSM style: one ``off/``, ``corres/*.vts`` (template convention) and
   optional ``dist/*.mat`` root per pair.
-- :func:`write_dpfm` -- DPFM style: ``shapes/*.off`` + ``maps/<A>_<B>.map`` with ids free of ``_``.
+- :func:`write_dpfm` -- DPFM style: ``shapes/*.off`` + ``maps/<A>_<B>.map`` with ids free of ``_``;
+  only the directions without a ``-1`` row in ``maps/`` (the rest in ``maps_with_none/``).
 - :func:`write_geodesic_matrices` -- (V, V) float32 geodesic matrices of every shape, measured on its
   FULL shape, where loaders read them (``geodesic_dist_matrices/<released stem>.npy``, ÷ sqrt-area);
   :func:`write_geodesics` the same for the PSMAL ids (``<out>/<split>/geodesics/<shape id>.npy``).
@@ -525,6 +526,10 @@ def dpfm_shape_id(index: int, side: int, dataset: str, name: str) -> str:
     return "-".join([str(int(index)), str(int(side)), _id_field(dataset), _id_field(name)])
 
 
+DPFM_NONE_MAPS = "maps_with_none"
+"""Folder beside ``maps/`` of a DPFM export for the map directions that hold a ``-1`` row."""
+
+
 def write_dpfm(
     records: Iterable[PairRecord],
     out_dir: str | Path,
@@ -533,12 +538,28 @@ def write_dpfm(
     overwrite: bool = False,
     progress: bool = False,
 ) -> Path:
-    """Write the records DPFM style (``docs/released-layout.md``, section DPFM): per split
-    ``<out>/<split>/shapes/<id>.off`` and ``<out>/<split>/maps/<A>_<B>.map`` in both directions (one
-    line per vertex of A: the 0-based vertex of B, -1 = none, as DPFM's SHREC'16 maps), ids
-    :func:`dpfm_shape_id`; ``ids.csv`` and ``logs/config.yaml`` as :func:`write_psmal`."""
+    """Write the records DPFM style (``docs/released-layout.md``, section 6): per split
+    ``<out>/<split>/shapes/<id>.off`` and, for both directions A -> B of every pair, ``<A>_<B>.map``
+    (one line per vertex of A: the 0-based vertex of B, -1 = none), ids :func:`dpfm_shape_id`;
+    ``ids.csv`` and ``logs/config.yaml`` as :func:`write_psmal`.
+
+    A direction goes to ``<split>/maps/`` (which DPFM's ``ShrecPartialDataset`` trains on) only when
+    every vertex of A has a counterpart, as in DPFM's SHREC'16 maps: its loader sets
+    ``P[range(n2), map21] = 1`` and has no "none", so a ``-1`` row would become a match with B's last
+    vertex and a wrong ``C_gt``. Directions holding a ``-1`` go to ``<split>/maps_with_none/``
+    (:data:`DPFM_NONE_MAPS`, same format), which DPFM does not read; together the two folders hold
+    both directions of every pair, and ``<A>_<B>.map != -1`` is A's own overlap mask."""
     return _write_shapes_and_maps(
-        records, out_dir, dpfm_shape_id, "map", "write_dpfm", "DPFM-style", metadata, overwrite, progress
+        records,
+        out_dir,
+        dpfm_shape_id,
+        "map",
+        "write_dpfm",
+        "DPFM-style",
+        metadata,
+        overwrite,
+        progress,
+        none_maps=DPFM_NONE_MAPS,
     )
 
 
@@ -552,8 +573,11 @@ def _write_shapes_and_maps(
     metadata: Mapping | None,
     overwrite: bool,
     progress: bool,
+    none_maps: str | None = None,
 ) -> Path:
-    """``<out>/<split>/shapes/<id>.off`` + ``<out>/<split>/maps/<A>_<B>.<map_ext>`` (both directions)."""
+    """``<out>/<split>/shapes/<id>.off`` + ``<out>/<split>/maps/<A>_<B>.<map_ext>`` (both directions);
+    with ``none_maps``, a direction that holds a ``-1`` goes to ``<out>/<split>/<none_maps>/`` instead
+    (both folders are made in every split, empty or not)."""
     out = Path(out_dir)
     with _staged_dir(out, overwrite) as tmp:
         staging = _Staging(tmp, f"export-{map_ext}", progress)
@@ -566,20 +590,28 @@ def _write_shapes_and_maps(
                 (folder / f"{k}.off").write_text(
                     off_text(record[f"{s}_vertices"], record[f"{s}_faces"]), encoding="utf-8"
                 )
-            (folder / "01.map").write_text(vts_text(record["corr_01"]), encoding="utf-8")
-            (folder / "10.map").write_text(vts_text(record["corr_10"]), encoding="utf-8")
+            for direction in ("01", "10"):
+                corr = np.asarray(record[f"corr_{direction}"], dtype=np.int64)
+                kind = "none" if none_maps is not None and (corr < 0).any() else "map"
+                (folder / f"{direction}.{kind}").write_text(vts_text(corr), encoding="utf-8")
         rows, counts = [], {}
         for split, entries in staging.by_split().items():
             shapes, maps = tmp / split / "shapes", tmp / split / "maps"
             shapes.mkdir(parents=True)
             maps.mkdir()
+            folders = {"map": maps}
+            if none_maps is not None:
+                folders["none"] = tmp / split / none_maps
+                folders["none"].mkdir()
             for i, e in enumerate(entries):
                 a = shape_id(i, 0, e.x_dataset, e.x_name)
                 b = shape_id(i, 1, e.y_dataset, e.y_name)
                 os.replace(e.folder / "0.off", shapes / f"{a}.off")
                 os.replace(e.folder / "1.off", shapes / f"{b}.off")
-                os.replace(e.folder / "01.map", maps / f"{a}_{b}.{map_ext}")
-                os.replace(e.folder / "10.map", maps / f"{b}_{a}.{map_ext}")
+                for direction, name in (("01", f"{a}_{b}"), ("10", f"{b}_{a}")):
+                    for kind, target in folders.items():
+                        if (e.folder / f"{direction}.{kind}").is_file():
+                            os.replace(e.folder / f"{direction}.{kind}", target / f"{name}.{map_ext}")
                 rows.append([split, i, e.pair_id, e.x_name, e.y_name, a, b])
             counts[split] = len(entries)
         staging.finish()

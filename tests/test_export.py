@@ -640,17 +640,22 @@ def dpfm_pairs(data_root: Path, name: str = "") -> dict:
 
 @pytest.mark.parametrize("setting", SETTINGS)
 def test_dpfm_layout_reads_like_dpfm(setting, records, tmp_path):
-    from becos.export import write_dpfm
+    from becos.export import DPFM_NONE_MAPS, write_dpfm
 
     recs = records[setting][:2]
     out = write_dpfm(_shuffled(recs, 3), tmp_path / "dpfm")
     rows = read_ids(out)
-    _check_numbering(out, rows, recs, {"shapes", "maps"})
+    _check_numbering(out, rows, recs, {"shapes", "maps", DPFM_NONE_MAPS})
     by_id = {r.pair_id: r for r in recs}
     for split in {row["split"] for row in rows}:
         pairs = dpfm_pairs(out / split)
+        # the directions with a -1 row, read the same way from the folder DPFM does not train on
+        (out / split / "maps").rename(out / split / "representable")
+        (out / split / DPFM_NONE_MAPS).rename(out / split / "maps")
+        unrepresentable = dpfm_pairs(out / split)
         split_rows = [row for row in rows if row["split"] == split]
-        assert len(pairs) == 2 * len(split_rows)  # both directions of every pair survive the id parsing
+        # both directions of every pair survive the id parsing, each in one of the two folders
+        assert len(pairs) + len(unrepresentable) == 2 * len(split_rows)
         for row in split_rows:
             r = by_id[row["pair_id"]]
             assert "_" not in row["x_id"] + row["y_id"]
@@ -658,7 +663,8 @@ def test_dpfm_layout_reads_like_dpfm(setting, records, tmp_path):
                 ((row["x_id"], row["y_id"]), r["corr_01"], "x", "y"),
                 ((row["y_id"], row["x_id"]), r["corr_10"], "y", "x"),
             ):
-                got = pairs[(x, y)]
+                got = pairs[(x, y)] if (corr >= 0).all() else unrepresentable[(x, y)]
+                assert ((x, y) in pairs) == (corr >= 0).all()  # DPFM trains only on maps without -1
                 assert np.array_equal(got["map21"], corr)
                 assert np.array_equal(got["mask21"].astype(bool), r[f"{mask_x}_overlap_mask"])
                 hit = np.zeros(len(r[f"{mask_y}_vertices"]), bool)
