@@ -390,8 +390,15 @@ def _plain(value):
 
 
 def _write_log(
-    root: Path, writer: str, layout: str, counts: dict[str, int], setting: str | None, metadata: Mapping | None
+    root: Path,
+    writer: str,
+    layout: str,
+    counts: dict[str, int],
+    setting: str | None,
+    metadata: Mapping | None,
+    maps: Mapping | None = None,
 ) -> None:
+    """``<root>/logs/config.yaml``; ``maps``: optional ``{split: {folder: map files}}`` (DPFM)."""
     import yaml
 
     from becos import __version__
@@ -402,6 +409,7 @@ def _write_log(
         "created": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
         "setting": setting,
         "pairs": counts,
+        **({"maps": _plain(dict(maps))} if maps is not None else {}),
         "source_metadata": _plain(dict(metadata)) if metadata else None,
     }
     (root / LOGS_DIR).mkdir(exist_ok=True)
@@ -548,7 +556,8 @@ def write_dpfm(
     ``P[range(n2), map21] = 1`` and has no "none", so a ``-1`` row would become a match with B's last
     vertex and a wrong ``C_gt``. Directions holding a ``-1`` go to ``<split>/maps_with_none/``
     (:data:`DPFM_NONE_MAPS`, same format), which DPFM does not read; together the two folders hold
-    both directions of every pair, and ``<A>_<B>.map != -1`` is A's own overlap mask."""
+    both directions of every pair, and ``<A>_<B>.map != -1`` is A's own overlap mask. The log's
+    ``maps`` gives each split's file count per folder (``maps`` = the items DPFM will form)."""
     return _write_shapes_and_maps(
         records,
         out_dir,
@@ -594,7 +603,7 @@ def _write_shapes_and_maps(
                 corr = np.asarray(record[f"corr_{direction}"], dtype=np.int64)
                 kind = "none" if none_maps is not None and (corr < 0).any() else "map"
                 (folder / f"{direction}.{kind}").write_text(vts_text(corr), encoding="utf-8")
-        rows, counts = [], {}
+        rows, counts, map_counts = [], {}, {}
         for split, entries in staging.by_split().items():
             shapes, maps = tmp / split / "shapes", tmp / split / "maps"
             shapes.mkdir(parents=True)
@@ -614,10 +623,19 @@ def _write_shapes_and_maps(
                             os.replace(e.folder / f"{direction}.{kind}", target / f"{name}.{map_ext}")
                 rows.append([split, i, e.pair_id, e.x_name, e.y_name, a, b])
             counts[split] = len(entries)
+            map_counts[split] = {f.name: sum(1 for _ in f.iterdir()) for f in folders.values()}
         staging.finish()
         _write_ids(tmp / IDS_FILE, ["split", "index", "pair_id", "x", "y", "x_id", "y_id"], rows)
         setting = settings.pop() if len(settings) == 1 else None
-        _write_log(tmp, f"becos.export.{writer}", f"becos {layout} layout", counts, setting, metadata)
+        _write_log(
+            tmp,
+            f"becos.export.{writer}",
+            f"becos {layout} layout",
+            counts,
+            setting,
+            metadata,
+            map_counts if none_maps is not None else None,
+        )
     return out
 
 
