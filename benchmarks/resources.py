@@ -47,6 +47,8 @@ RULES = {
     "validate": "validate_store",
     "export-released": "released_layout",
     "export-psmal": "psmal_layout",
+    "export-ulrssm": "ulrssm_layout",
+    "export-dpfm": "dpfm_layout",
     "export-geodesics": "geodesics",
     "export-pairings": "published_pairings",
     "report": "report",
@@ -63,6 +65,8 @@ PAIR_RULES = (
     "validate_store",
     "released_layout",
     "psmal_layout",
+    "ulrssm_layout",
+    "dpfm_layout",
     "report",
     "baseline",
     "evaluate",
@@ -143,10 +147,12 @@ def summarise(workdir: Path, jobs: list[dict]) -> dict:
     return dict(sorted(per_rule.items()))
 
 
-# rules this benchmark does not run (baselines and evaluation need `evaluation.baselines`; the PSMAL
-# layout is off by default): written as estimates, marked so
+# rules this benchmark does not run (baselines and evaluation need `evaluation.baselines`; the PSMAL,
+# ULRSSM and DPFM layouts are off by default): written as estimates, marked so
 ESTIMATES = {
     "psmal_layout": {"mem_mb": 4000, "runtime": 60},
+    "ulrssm_layout": {"mem_mb": 4000, "runtime": 60},
+    "dpfm_layout": {"mem_mb": 4000, "runtime": 60},
     "baseline": {"mem_mb": 4000, "runtime": 120},
     "evaluate": {"mem_mb": 6000, "runtime": 240},
 }

@@ -104,6 +104,14 @@ class Layout:
     def psmal(self, setting: str) -> Path:
         return self.results / setting / "psmal"
 
+    def ulrssm(self, setting: str) -> Path:
+        """ULRSSM-style layout (``becos export-ulrssm``; without ``dist/``)."""
+        return self.results / setting / "ulrssm"
+
+    def dpfm(self, setting: str) -> Path:
+        """DPFM-style layout (``becos export-dpfm``)."""
+        return self.results / setting / "dpfm"
+
     def geodesics(self, setting: str) -> Path:
         return self.results / setting / "geodesics"
 

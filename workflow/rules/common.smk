@@ -134,6 +134,8 @@ def all_targets(wildcards):
         for export, path in (
             ("released", LAYOUT.released),
             ("psmal", LAYOUT.psmal),
+            ("ulrssm", LAYOUT.ulrssm),
+            ("dpfm", LAYOUT.dpfm),
             ("geodesics", LAYOUT.geodesics),
             ("published_pickle", LAYOUT.published_pickle),
             ("report", LAYOUT.report),

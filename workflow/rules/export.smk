@@ -91,6 +91,42 @@ rule psmal_layout:
         "becos export-psmal {input.store:q} {output:q} > {log:q} 2>&1"
 
 
+# ULRSSM's layout without dist/ (no geodesics: `becos export-ulrssm STORE OUT --geodesics` by hand writes
+# them; config/README.md, docs/released-layout.md section 5)
+rule ulrssm_layout:
+    input:
+        store=rules.zarr_store.output[0],
+        validation=rules.validate_store.output[0],
+    output:
+        directory(str(LAYOUT.ulrssm("{setting}"))),
+    log:
+        "logs/ulrssm_layout/{setting}.log",
+    conda:
+        "../envs/becos.yaml"
+    resources:
+        mem_mb=RESOURCES.mem_mb("ulrssm_layout"),
+        runtime=RESOURCES.runtime("ulrssm_layout", n_pairs=setting_pairs),
+    shell:
+        "becos export-ulrssm {input.store:q} {output:q} > {log:q} 2>&1"
+
+
+rule dpfm_layout:
+    input:
+        store=rules.zarr_store.output[0],
+        validation=rules.validate_store.output[0],
+    output:
+        directory(str(LAYOUT.dpfm("{setting}"))),
+    log:
+        "logs/dpfm_layout/{setting}.log",
+    conda:
+        "../envs/becos.yaml"
+    resources:
+        mem_mb=RESOURCES.mem_mb("dpfm_layout"),
+        runtime=RESOURCES.runtime("dpfm_layout", n_pairs=setting_pairs),
+    shell:
+        "becos export-dpfm {input.store:q} {output:q} > {log:q} 2>&1"
+
+
 from becos.geodesic_jobs import WORKFLOW_PARTS as GEODESIC_PARTS
 
 GEODESIC_SPLITS = " ".join(["--splits", *EXPORTS["geodesic_splits"]]) if EXPORTS["geodesic_splits"] else ""
