@@ -705,3 +705,7 @@ def test_nested_export_keys_on_the_snakemake_command_line():
     assert exports["geodesic_splits"] == ["test", "val"] and exports["released"] is True  # defaults kept
     with pytest.raises(ConfigError, match=r"exports\.psmal"):
         resolve_config({**base, **parse_config(["exports={psmal: maybe}"])})
+    # issue #34: the ULRSSM and DPFM layouts are workflow exports too (rules ulrssm_layout, dpfm_layout)
+    exports = resolve_config({**base, **parse_config(["exports={ulrssm: true, dpfm: true}"])})["exports"]
+    assert exports["ulrssm"] is True and exports["dpfm"] is True and exports["psmal"] is False
+    assert resolve_config(base)["exports"]["ulrssm"] is False and resolve_config(base)["exports"]["dpfm"] is False

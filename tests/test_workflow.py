@@ -7,6 +7,7 @@ run (four-legged first, then humans and centaurs).
 
 from __future__ import annotations
 
+import csv
 import json
 import os
 import re
@@ -401,3 +402,57 @@ def test_every_same_class_pair_is_within_the_ground_truth_bound(tiny_tosca_run):
         assert s["max"] <= gt_error.BOUND, s
         # along-surface rounding: at most 1.023 per pair (nearest corner in 3D: 1.02-1.06; largest weight: 1.10-1.19)
         assert s["mean"] <= 1.05 * s["best_mean"], s
+
+
+def _tree(root: Path) -> dict[str, bytes]:
+    """Every file under ``root`` by relative path, but ``logs/config.yaml`` (it quotes its creation time)."""
+    return {
+        str(p.relative_to(root)): p.read_bytes()
+        for p in sorted(root.rglob("*"))
+        if p.is_file() and p.relative_to(root) != Path("logs", "config.yaml")
+    }
+
+
+def test_ulrssm_and_dpfm_exports_are_rules_with_cached_outputs(tiny_tosca_run, tmp_path):
+    """Issue #34: ``--config 'exports={ulrssm: true, dpfm: true}'`` is accepted; on a finished run it adds
+    exactly the two layouts per setting (rules ulrssm_layout, dpfm_layout; the stores stay), each the
+    same files as ``becos export-ulrssm`` / ``export-dpfm`` write from the store (ULRSSM without
+    ``dist/``), and a second call does nothing."""
+    import shutil
+
+    from becos.export import IDS_FILE, write_dpfm, write_ulrssm
+    from becos.store import open_benchmark
+
+    run = tmp_path / "run"  # a copy (modification times kept): other tests read the shared run meanwhile
+    shutil.copytree(tiny_tosca_run, run, symlinks=True)
+    exports = ("--config", "exports={ulrssm: true, dpfm: true}")
+    dry = snakemake(run, "-n", *exports).stdout
+    assert jobs_planned(dry) == {"ulrssm_layout": 3, "dpfm_layout": 3, "all": 1}, dry[-3000:]
+    snakemake(run, "--cores", "2", *exports)
+    for setting in SETTINGS:
+        base = run / "results" / setting
+        bench = open_benchmark(base / "benchmark.zarr")
+        ulrssm, dpfm = base / "ulrssm", base / "dpfm"
+        for out in (ulrssm, dpfm):
+            with open(out / IDS_FILE, encoding="utf-8", newline="") as fh:
+                assert sorted(r["pair_id"] for r in csv.DictReader(fh)) == sorted(bench.table["pair_id"])
+            assert (out / "logs" / "config.yaml").is_file()
+        roots = sorted(p.parent for p in ulrssm.glob("*/*/off"))
+        assert len(roots) == len(bench)
+        for root in roots:  # one ULRSSM data_root per pair, without dist/
+            assert sorted(str(p.relative_to(root)) for p in root.rglob("*")) == [
+                "corres",
+                "corres/0.vts",
+                "corres/1.vts",
+                "off",
+                "off/0.off",
+                "off/1.off",
+            ]
+        assert list(dpfm.glob("*/shapes/*.off")) and list(dpfm.glob("*/maps/*.map"))
+        by_hand = tmp_path / "by_hand" / setting
+        write_ulrssm(bench.records(), by_hand / "ulrssm", metadata=bench.metadata)
+        write_dpfm(bench.records(), by_hand / "dpfm", metadata=bench.metadata)
+        assert _tree(ulrssm) == _tree(by_hand / "ulrssm")
+        assert _tree(dpfm) == _tree(by_hand / "dpfm")
+    again = snakemake(run, "--cores", "2", *exports)
+    assert "Nothing to be done" in again.stdout + again.stderr, again.stdout[-2000:]
