@@ -80,6 +80,7 @@ def test_job_options_are_the_stage_keys_results_and_version(config):
         ({"n_renders": 1}, set()),
         ({"store_vis": False}, set()),
         ({"exports": {"psmal": True}}, set()),
+        ({"exports": {"ulrssm": True, "dpfm": True}}, set()),
         ({"results": "elsewhere"}, None),  # every job: the paths change
     ],
 )
