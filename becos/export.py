@@ -48,7 +48,7 @@ from pathlib import Path
 
 import numpy as np
 
-from becos.errors import BecosError
+from becos.errors import BecosError, DiskFullError, InputFileError
 from becos.record import SETTINGS, PairRecord, full_shape
 
 LAYOUT_VERSION = 1
@@ -662,16 +662,26 @@ def write_ulrssm(
     method: str = "heat",
     splits=None,
     jobs: int = 1,
+    rows=None,
+    free_bytes: int | None = None,
 ) -> Path:
     """Write the records ULRSSM style (``docs/released-layout.md``, section ULRSSM): one data root per
     pair, ``<out>/<split>/<i>/`` with ``off/0.off``, ``off/1.off``, ``corres/0.vts``, ``corres/1.vts``
-    (:func:`ulrssm_template_vts`) and, with ``geodesics``, ``dist/0.mat``, ``dist/1.mat`` (MATLAB files,
-    key ``dist``: (V, V) geodesic distances on the full shape divided by its sqrt-area, as
-    :func:`write_geodesic_matrices`; only for ``splits`` when given, by ``jobs`` processes).
+    (:func:`ulrssm_template_vts`) and, with ``geodesics``, ``dist/0.mat``, ``dist/1.mat``: MATLAB v5
+    files, key ``dist``, (V, V) float32 geodesic distances on the full shape divided by its sqrt-area
+    (the values of :func:`write_geodesic_matrices`; only for ``splits`` when given).
     ULRSSM's ``PairDataset`` pairs every two shapes of its data root, so one root per pair keeps our
-    pairs. ``ids.csv`` and ``logs/config.yaml`` as :func:`write_released`."""
-    import scipy.io
+    pairs. ``ids.csv`` and ``logs/config.yaml`` as :func:`write_released`.
 
+    Geodesics (:func:`_write_ulrssm_dist`): each distinct matrix (a full mesh up to rigid motion, or
+    one cut of it that a scan keeps) is written ONCE, streamed from its mesh's (R, R) block, and every
+    other pair side showing it gets a hard link (a copy only where the file system refuses links,
+    reported on stderr and in ``logs/geodesics.json``). The blocks are computed one mesh at a time by
+    ``jobs`` processes, or read from ``rows`` (folders of ``becos geodesic-rows``: the workflow's one
+    geodesic computation). Before any matrix is written the disk (distinct files × V² × 4 bytes) and
+    the peak memory are estimated and printed; an estimate above the free space of the output's file
+    system (``free_bytes`` when given, else :func:`shutil.disk_usage`) stops the export
+    (:class:`DiskEstimateError`) and leaves ``out`` untouched."""
     out = Path(out_dir)
     with _staged_dir(out, overwrite) as tmp:
         staging = _Staging(tmp, "export-ulrssm", progress)
@@ -690,22 +700,402 @@ def write_ulrssm(
                 (folder / "corres" / f"{k}.vts").write_text(text, encoding="utf-8")
 
         shapes, meshes, needed, numbers = _geodesic_plan(records, splits if geodesics else [], each=write_pair)
-        rows, counts = _place_by_split(staging, tmp)
+        id_rows, counts = _place_by_split(staging, tmp)
         if geodesics and shapes:
-            work = tmp / ".rows"
-            work.mkdir()
-            matrices = _compute_geodesic_rows(meshes, needed, method, jobs, work, progress)
-            for sh in shapes:
-                folder = tmp / sh.split / str(numbers[(sh.split, sh.pair_id)]) / "dist"
-                folder.mkdir(exist_ok=True)
-                dist = _shape_matrix(sh, needed[sh.key], matrices[sh.key]) / np.float32(sh.sqrt_area)
-                scipy.io.savemat(folder / f"{sh.side}.mat", {"dist": dist.astype(np.float32, copy=False)})
-            del matrices
-            shutil.rmtree(work)
-        _write_ids(tmp / IDS_FILE, ["split", "index", "pair_id", "x", "y"], rows)
+            summary = _write_ulrssm_dist(
+                tmp, out, shapes, meshes, needed, numbers, method, jobs, progress, rows, free_bytes
+            )
+            (tmp / LOGS_DIR).mkdir(exist_ok=True)
+            (tmp / LOGS_DIR / "geodesics.json").write_text(json.dumps(summary, indent=1) + "\n", encoding="utf-8")
+        _write_ids(tmp / IDS_FILE, ["split", "index", "pair_id", "x", "y"], id_rows)
         setting = settings.pop() if len(settings) == 1 else None
         _write_log(tmp, "becos.export.write_ulrssm", "becos ULRSSM-style layout", counts, setting, metadata)
     return out
+
+
+class DiskEstimateError(DiskFullError):
+    """An export would not fit: its estimated size exceeds the free space of its file system (raised
+    before anything is written)."""
+
+    def __init__(self, path: str | Path, problem: str, fix: str):
+        InputFileError.__init__(self, path, problem, fix)
+
+
+# --------------------------------------------------------------------------------------------------
+# MATLAB v5 files of one symmetric float32 matrix, streamed (ULRSSM's dist/<k>.mat)
+
+_MI_INT8, _MI_INT32, _MI_UINT32, _MI_SINGLE, _MI_MATRIX = 1, 5, 6, 7, 14
+_MX_SINGLE_CLASS = 7
+MAT_MAX_VERTICES = 32767
+"""Largest V of a (V, V) float32 MAT v5 matrix: its element's byte count is a uint32 (4 V² + 48 < 2³²).
+scipy's ``loadmat`` (ULRSSM's reader) cannot read the HDF5-based v7.3 files that would hold more."""
+_MAT_TEXT = b"MATLAB 5.0 MAT-file, Platform: posix, Created by: becos (scipy.io.loadmat reads it)"
+_WRITE_CHUNK_BYTES = 32 << 20
+"""Bytes per buffered write of a matrix (rows of a cut, gathered at a time)."""
+
+
+def _mat_pad(nbytes: int) -> int:
+    return -nbytes % 8
+
+
+def mat_prefix(n: int, name: str = "dist") -> bytes:
+    """The first bytes of a little-endian MAT v5 file holding one real (n, n) float32 matrix ``name``:
+    the 128-byte header (fixed text, no date, so the bytes depend on the matrix alone) and the tags of
+    the ``miMATRIX`` element (array flags ``mxSINGLE_CLASS``, dimensions (n, n), name, ``miSINGLE``
+    data of 4 n² bytes) laid out as ``scipy.io.savemat`` lays them out. The 4 n² data bytes follow in
+    column-major order, then :func:`mat_suffix`'s padding. For a symmetric matrix column-major is
+    row-major: the rows of a C-ordered array are written as they are, in as many pieces as wanted."""
+    import struct
+
+    if not 0 <= n <= MAT_MAX_VERTICES:
+        raise ExportError(
+            f"a {n} x {n} float32 matrix does not fit a MATLAB v5 file (at most {MAT_MAX_VERTICES} rows), "
+            f"and ULRSSM's scipy.io.loadmat reads no v7.3 file. Fix: leave out --geodesics for shapes this "
+            f"large (ULRSSM computes dist itself), or remesh to fewer vertices"
+        )
+    label = name.encode("ascii")
+    if len(label) <= 4:  # small data element: byte count and type in one word, data in the next four bytes
+        name_element = struct.pack("<HH", _MI_INT8, len(label)) + label.ljust(4, b"\0")
+    else:
+        name_element = struct.pack("<II", _MI_INT8, len(label)) + label + b"\0" * _mat_pad(len(label))
+    data = 4 * n * n
+    body = (
+        struct.pack("<IIII", _MI_UINT32, 8, _MX_SINGLE_CLASS, 0)
+        + struct.pack("<IIii", _MI_INT32, 8, n, n)
+        + name_element
+        + struct.pack("<II", _MI_SINGLE, data)
+    )
+    header = _MAT_TEXT.ljust(116, b" ") + b"\0" * 8 + struct.pack("<H", 0x0100) + b"IM"
+    return header + struct.pack("<II", _MI_MATRIX, len(body) + data + _mat_pad(data)) + body
+
+
+def mat_size(n: int, name: str = "dist") -> int:
+    """Bytes of the MAT v5 file of an (n, n) float32 matrix (:func:`mat_prefix`)."""
+    data = 4 * n * n
+    return len(mat_prefix(n, name)) + data + _mat_pad(data)
+
+
+def write_symmetric_mat(path: str | Path, n: int, chunks: Iterable[np.ndarray], name: str = "dist") -> int:
+    """Write a symmetric (n, n) float32 matrix as the MAT v5 file ``path`` (variable ``name``),
+    atomically, from ``chunks``: consecutive (k, n) float32 row blocks whose rows add up to n (the
+    matrix is never whole in memory here). Returns the bytes written; ``scipy.io.loadmat(path)[name]``
+    gives the matrix back (float32, (n, n))."""
+    from becos.atomic import atomic_path
+
+    data = 4 * n * n
+    with atomic_path(path, suffix=".tmp.mat") as tmp:
+        with open(tmp, "wb") as fh:
+            fh.write(mat_prefix(n, name))
+            done = 0
+            for chunk in chunks:
+                chunk = np.ascontiguousarray(chunk, dtype=np.float32)
+                if chunk.ndim != 2 or chunk.shape[1] != n:
+                    raise ValueError(f"row block of shape {chunk.shape}, expected (k, {n})")
+                fh.write(memoryview(chunk).cast("B"))
+                done += chunk.shape[0]
+            if done != n:
+                raise ValueError(f"{done} rows written, expected {n}")
+            fh.write(b"\0" * _mat_pad(data))
+    return Path(path).stat().st_size
+
+
+def _cut_chunks(block: np.ndarray, cut: np.ndarray | None) -> Iterator[np.ndarray]:
+    """Row blocks of ``block[np.ix_(cut, cut)]`` (of ``block`` itself when ``cut`` is None), of at most
+    :data:`_WRITE_CHUNK_BYTES` each."""
+    n = len(block) if cut is None else len(cut)
+    step = max(1, _WRITE_CHUNK_BYTES // (4 * max(n, 1)))
+    for start in range(0, n, step):
+        if cut is None:
+            yield block[start : start + step]
+        else:
+            yield block[cut[start : start + step]][:, cut]
+
+
+# --------------------------------------------------------------------------------------------------
+# per-mesh blocks, one at a time
+
+
+def _symmetrise_in_place(block: np.ndarray, sqrt_area: float, tile: int = 1024) -> np.ndarray:
+    """Turn the (R, R) float32 ``block`` of distance rows between R sources into
+    :func:`symmetric_block`'s matrix in place, tile by tile: entry by entry the same float32 operations
+    ((d(a, b) + d(b, a)) · 0.5 / sqrt_area, zero diagonal), so the same bytes, with one (R, R) array
+    instead of three."""
+    n = len(block)
+    half, scale = np.float32(0.5), np.float32(sqrt_area)
+    for i in range(0, n, tile):
+        for j in range(i, n, tile):
+            t = block[j : j + tile, i : i + tile].T + block[i : i + tile, j : j + tile]
+            t *= half
+            t /= scale
+            block[i : i + tile, j : j + tile] = t
+            block[j : j + tile, i : i + tile] = t.T
+    np.fill_diagonal(block, 0.0)
+    return block
+
+
+def _read_npy_block(path: Path, pick: np.ndarray | None, out: np.ndarray) -> np.ndarray:
+    """Fill ``out`` with rows and columns ``pick`` (sorted; all when None) of the (R, R) float32 ``.npy``
+    file ``path``, by buffered reads of :data:`_WRITE_CHUNK_BYTES` (no memory map: the file's pages do
+    not stay in this process's memory)."""
+    with open(path, "rb") as fh:
+        version = np.lib.format.read_magic(fh)
+        reader = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
+        shape, fortran, dtype = reader(fh)
+        if len(shape) != 2 or shape[0] != shape[1] or dtype != np.float32 or fortran:
+            raise ExportError(
+                f"{path}: a {shape} {dtype} block, expected (R, R) float32. Fix: rerun `becos geodesic-rows`"
+            )
+        n = shape[0]
+        step = max(1, _WRITE_CHUNK_BYTES // (4 * max(n, 1)))
+        buffer = np.empty((step, n), dtype=np.float32)
+        for start in range(0, n, step):
+            rows = min(step, n - start)
+            view = out[start : start + rows] if pick is None else buffer[:rows]
+            if fh.readinto(memoryview(view).cast("B")) != 4 * rows * n:
+                raise ExportError(f"{path}: truncated block. Fix: rerun `becos geodesic-rows`")
+            if pick is not None:
+                lo, hi = np.searchsorted(pick, [start, start + rows])
+                out[lo:hi] = view[pick[lo:hi] - start][:, pick]
+    return out
+
+
+def _mesh_blocks(
+    meshes: dict,
+    needed: dict,
+    scales: Mapping[str, float],
+    method: str,
+    jobs: int,
+    progress: bool,
+    rows_folders=None,
+    label: str = "geodesics",
+) -> Iterator[tuple[str, np.ndarray, np.ndarray]]:
+    """Yield ``(key, sources, block)`` for every mesh, ONE at a time, largest first: ``sources`` (R,)
+    its sorted needed vertices, ``block`` the (R, R) float32 :func:`symmetric_block` between them
+    (symmetrised, divided by ``scales[key]``, the sqrt-area). The caller writes it before asking for
+    the next; only one block is in memory.
+
+    Computed: tasks of :data:`_GEODESIC_TASK_ROWS` source rows, run by ``jobs`` processes with at most
+    ``jobs + 1`` finished or running tasks at a time (bounded memory), each task's (rows, V) result
+    cut to the block's columns as it arrives; no rows file on disk. From ``rows_folders`` (outputs of
+    ``becos geodesic-rows``): each block read (and cut to ``needed``) from its file."""
+    import time
+    from collections import deque
+
+    order = sorted(meshes, key=lambda k: (-len(needed[k]), k))
+    started = time.monotonic()
+    if rows_folders is not None:
+        from becos.geodesic_jobs import load_rows
+
+        loaded = load_rows(rows_folders)
+        for key in order:
+            if key not in loaded:
+                raise ExportError(
+                    f"{', '.join(map(str, rows_folders))}: no geodesic rows of mesh {key}. Fix: plan the rows "
+                    f"with this store and the same splits (`becos geodesic-plan`), then rerun `becos geodesic-rows`"
+                )
+            have, path, scale = loaded[key]
+            if not np.isin(needed[key], have).all():
+                raise ExportError(
+                    f"geodesic rows of mesh {key}: {len(have)} rows, missing some of the {len(needed[key])} this "
+                    f"store needs. Fix: rerun `becos geodesic-plan` and `becos geodesic-rows` with this store"
+                )
+            if abs(scale - scales[key]) > 1e-6 * abs(scale):
+                raise ExportError(
+                    f"{path}: sqrt-area {scale!r} differs from {scales[key]!r} of this store. Fix: build every "
+                    f"setting's store with the same config (area_normalised) and rerun `becos geodesic-plan`"
+                )
+        for i, key in enumerate(order):
+            have, path, _ = loaded[key]
+            whole = len(have) == len(needed[key])
+            block = np.empty((len(needed[key]),) * 2, dtype=np.float32)
+            _read_npy_block(path, None if whole else np.searchsorted(have, needed[key]), block)
+            if progress:
+                print(
+                    f"{label}: read mesh {i + 1}/{len(order)} ({len(block)} rows) from {path.parent}, "
+                    f"{time.monotonic() - started:.0f} s",
+                    file=sys.stderr,
+                    flush=True,
+                )
+            yield key, needed[key], block
+            del block
+        return
+
+    from concurrent.futures import ProcessPoolExecutor
+
+    tasks = [
+        (key, start, *meshes[key], needed[key][start : start + _GEODESIC_TASK_ROWS], method)
+        for key in order
+        for start in range(0, len(needed[key]), _GEODESIC_TASK_ROWS)
+    ]
+    total, done = sum(len(needed[k]) for k in order), 0
+    pool = ProcessPoolExecutor(max_workers=jobs) if jobs > 1 and len(tasks) > 1 else None
+
+    def results() -> Iterator[tuple[str, int, np.ndarray]]:
+        if pool is None:
+            yield from map(_geodesic_task, tasks)
+            return
+        pending, queue = deque(), iter(tasks)
+        for task in queue:
+            pending.append(pool.submit(_geodesic_task, task))
+            if len(pending) > jobs:  # jobs running + one finished waiting: bounded memory
+                yield pending.popleft().result()
+        while pending:
+            yield pending.popleft().result()
+
+    try:
+        block, filled, n_meshes = None, 0, 0
+        for key, start, rows in results():
+            sources = needed[key]
+            if block is None:
+                block, filled = np.empty((len(sources), len(sources)), dtype=np.float32), 0
+            whole = len(sources) == rows.shape[1] and sources[-1] == len(sources) - 1
+            block[start : start + len(rows)] = rows if whole else rows[:, sources]
+            filled += len(rows)
+            done += len(rows)
+            del rows
+            if progress:
+                print(
+                    f"{label} ({method}, {jobs} jobs): {done}/{total} rows of {len(order)} meshes, "
+                    f"{time.monotonic() - started:.0f} s",
+                    file=sys.stderr,
+                    flush=True,
+                )
+            if filled == len(sources):
+                n_meshes += 1
+                yield key, sources, _symmetrise_in_place(block, scales[key])
+                block = None
+    finally:
+        if pool is not None:
+            pool.shutdown(cancel_futures=True)
+
+
+# --------------------------------------------------------------------------------------------------
+# ULRSSM's dist/<k>.mat: estimate, then each distinct matrix once, links for the rest
+
+_SOLVER_BYTES_PER_VERTEX = 40_000
+"""Peak memory of one heat-method task beyond its result, per mesh vertex (factorisations, (V, B) and
+(2F, B) solve blocks; measured: ~0.4 GB at 10k vertices), for :func:`ulrssm_geodesic_estimate`."""
+
+
+def ulrssm_geodesic_estimate(shapes: list[_GeodesicShape], needed: dict, meshes: dict, jobs: int, computed: bool) -> dict:
+    """The ULRSSM geodesics export's cost before it starts: ``files`` distinct matrices (one per full
+    mesh, one per distinct cut a scan keeps) for ``sides`` pair sides, ``disk_bytes`` their MAT files
+    (Σ 4 n² + headers; links cost nothing), ``memory_bytes`` the peak resident memory of this process
+    and its ``jobs`` workers together (the largest (R, R) float32 block, a write chunk, and while
+    ``computed``: the tasks in flight, (rows, V) float32 each, plus each worker's solver)."""
+    distinct = {(sh.key, len(sh.p2f), sh.p2f.tobytes()) for sh in shapes}
+    disk = sum(mat_size(n) for _, n, _ in distinct)
+    memory = 0
+    for key, sources in needed.items():
+        r, v = len(sources), len(meshes[key][0])
+        peak = 4 * r * r + _WRITE_CHUNK_BYTES
+        if computed:
+            task = 4 * min(r, _GEODESIC_TASK_ROWS) * v
+            peak += (jobs + 1) * task + max(jobs, 1) * (task + _SOLVER_BYTES_PER_VERTEX * v)
+        memory = max(memory, peak)
+    return {
+        "meshes": len(needed),
+        "files": len(distinct),
+        "sides": len(shapes),
+        "disk_bytes": int(disk),
+        "memory_bytes": int(memory + (150 << 20)),  # + the interpreter and its libraries
+        "largest_mesh_rows": max((len(s) for s in needed.values()), default=0),
+    }
+
+
+def _gb(n: float) -> str:
+    return f"{n / 1e9:.2f} GB"
+
+
+def _write_ulrssm_dist(
+    tmp: Path,
+    out: Path,
+    shapes: list[_GeodesicShape],
+    meshes: dict,
+    needed: dict,
+    numbers: dict,
+    method: str,
+    jobs: int,
+    progress: bool,
+    rows_folders=None,
+    free_bytes: int | None = None,
+) -> dict:
+    """Write ``<tmp>/<split>/<i>/dist/<side>.mat`` of every shape (:func:`write_ulrssm`); returns the
+    summary written to ``logs/geodesics.json`` (estimate, files, links, copies, bytes, seconds)."""
+    import hashlib
+    import time
+
+    from becos.atomic import link_or_copy
+
+    started = time.monotonic()
+    scales = mesh_sqrt_areas(shapes)
+    groups: dict[str, dict[bytes, list[_GeodesicShape]]] = {}
+    for sh in shapes:
+        digest = hashlib.sha1(np.ascontiguousarray(sh.p2f, dtype=np.int64).tobytes()).digest()
+        groups.setdefault(sh.key, {}).setdefault(digest, []).append(sh)
+    estimate = ulrssm_geodesic_estimate(shapes, needed, meshes, jobs, rows_folders is None)
+    free = int(shutil.disk_usage(tmp).free if free_bytes is None else free_bytes)
+    print(
+        f"export-ulrssm geodesics: {estimate['files']} distinct dist matrices of {estimate['meshes']} meshes for "
+        f"{estimate['sides']} pair sides (the rest hard links): disk {_gb(estimate['disk_bytes'])}, peak memory "
+        f"~{_gb(estimate['memory_bytes'])} ({jobs} jobs, largest mesh {estimate['largest_mesh_rows']} vertices); "
+        f"free on the output's disk: {_gb(free)}",
+        file=sys.stderr,
+        flush=True,
+    )
+    if estimate["disk_bytes"] > free:
+        raise DiskEstimateError(
+            out,
+            f"the ULRSSM geodesic matrices need about {_gb(estimate['disk_bytes'])} ({estimate['files']} distinct "
+            f"(V, V) float32 .mat files of {estimate['meshes']} meshes) but its file system has {_gb(free)} "
+            f"free; nothing was written",
+            "free disk space, choose another --out on a larger disk, or export geodesics of fewer splits "
+            "(--splits test)",
+        )
+
+    def dist_path(sh: _GeodesicShape) -> Path:
+        return tmp / sh.split / str(numbers[(sh.split, sh.pair_id)]) / "dist" / f"{sh.side}.mat"
+
+    written = links = copies = nbytes = 0
+    for key, sources, block in _mesh_blocks(
+        meshes, needed, scales, method, jobs, progress, rows_folders, "export-ulrssm geodesics"
+    ):
+        for group in groups[key].values():
+            first = group[0]
+            cut = np.searchsorted(sources, first.p2f)
+            whole = len(cut) == len(sources) and np.array_equal(cut, np.arange(len(sources)))
+            path = dist_path(first)
+            path.parent.mkdir(exist_ok=True)
+            nbytes += write_symmetric_mat(path, len(cut), _cut_chunks(block, None if whole else cut))
+            written += 1
+            for sh in group[1:]:
+                dist_path(sh).parent.mkdir(exist_ok=True)
+                if link_or_copy(path, dist_path(sh)):
+                    links += 1
+                else:
+                    copies += 1
+                    nbytes += path.stat().st_size
+        del block
+    if copies:
+        print(
+            f"export-ulrssm geodesics: {out}: the file system refused hard links; {copies} dist files are "
+            f"copies ({_gb(nbytes - estimate['disk_bytes'])} more than estimated)",
+            file=sys.stderr,
+            flush=True,
+        )
+    summary = {
+        "method": method,
+        "estimate": {**estimate, "free_bytes": free},
+        "written": written,
+        "hard_links": links,
+        "copies": copies,
+        "bytes": nbytes,
+        "seconds": round(time.monotonic() - started, 1),
+        "rows_from": [str(p) for p in rows_folders] if rows_folders is not None else None,
+    }
+    if progress:
+        print(f"export-ulrssm geodesics: {json.dumps(summary)}", file=sys.stderr, flush=True)
+    return summary
 
 
 GEODESIC_FOLDER = "geodesic_dist_matrices"
@@ -987,18 +1377,18 @@ def _blocks_for(
 ) -> dict[str, tuple[np.ndarray, Path, float]]:
     """``{key: (sorted source vertices, (R, R) block file, sqrt_area)}`` (:func:`symmetric_block`):
     read from ``rows_folders`` (outputs of ``becos geodesic-rows``; they may hold more meshes, and
-    rows other stores need) or computed here into ``work``."""
+    rows other stores need) or computed here one mesh at a time (:func:`_mesh_blocks`: no rows file)
+    and saved into ``work``."""
     from becos.atomic import save_npy
 
     if rows_folders is None:
         scales = mesh_sqrt_areas(shapes)
-        rows = _compute_geodesic_rows(meshes, needed, method, jobs, work, progress)
         out = {}
-        for key in list(rows):
+        for key, sources, block in _mesh_blocks(meshes, needed, scales, method, jobs, progress):
             path = work / f"{key}.block.npy"
-            save_npy(path, symmetric_block(rows.pop(key), needed[key], scales[key]))
-            (work / f"{key}.npy").unlink()
-            out[key] = (needed[key], path, scales[key])
+            save_npy(path, block)
+            del block
+            out[key] = (sources, path, scales[key])
         return out
     from becos.geodesic_jobs import load_rows
 
