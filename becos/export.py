@@ -791,7 +791,8 @@ def write_symmetric_mat(path: str | Path, n: int, chunks: Iterable[np.ndarray], 
                 chunk = np.ascontiguousarray(chunk, dtype=np.float32)
                 if chunk.ndim != 2 or chunk.shape[1] != n:
                     raise ValueError(f"row block of shape {chunk.shape}, expected (k, {n})")
-                fh.write(memoryview(chunk).cast("B"))
+                if chunk.size:
+                    fh.write(memoryview(chunk).cast("B"))
                 done += chunk.shape[0]
             if done != n:
                 raise ValueError(f"{done} rows written, expected {n}")
@@ -977,7 +978,9 @@ _SOLVER_BYTES_PER_VERTEX = 40_000
 (2F, B) solve blocks; measured: ~0.4 GB at 10k vertices), for :func:`ulrssm_geodesic_estimate`."""
 
 
-def ulrssm_geodesic_estimate(shapes: list[_GeodesicShape], needed: dict, meshes: dict, jobs: int, computed: bool) -> dict:
+def ulrssm_geodesic_estimate(
+    shapes: list[_GeodesicShape], needed: dict, meshes: dict, jobs: int, computed: bool
+) -> dict:
     """The ULRSSM geodesics export's cost before it starts: ``files`` distinct matrices (one per full
     mesh, one per distinct cut a scan keeps) for ``sides`` pair sides, ``disk_bytes`` their MAT files
     (Σ 4 n² + headers; links cost nothing), ``memory_bytes`` the peak resident memory of this process

@@ -51,7 +51,16 @@ def configure_parser(parser: argparse.ArgumentParser, name: str) -> argparse.Arg
         parser.add_argument(
             "--geodesics",
             action="store_true",
-            help="also write dist/<k>.mat (key dist: geodesics divided by the sqrt-area)",
+            help="also write dist/<k>.mat (key dist: (V, V) float32 geodesics divided by the sqrt-area; each "
+            "distinct matrix once, hard links for the other pair sides; disk and memory estimated first)",
+        )
+        parser.add_argument(
+            "--rows",
+            type=Path,
+            nargs="+",
+            metavar="DIR",
+            help="with --geodesics: read each mesh's matrix from these `becos geodesic-rows` folders (the "
+            "workflow's one geodesic computation) instead of computing it",
         )
     else:
         parser.add_argument(
@@ -97,6 +106,8 @@ def run_cli(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if getattr(args, "jobs", 1) < 1:
         raise ExportError(f"--jobs must be at least 1, got {args.jobs}")
+    if getattr(args, "rows", None) and args.export_kind == "export-ulrssm" and not args.geodesics:
+        raise ExportError("--rows reads geodesic matrices: pass it with --geodesics")
     if args.export_kind == "export-geodesics":
         write_geodesic_matrices(
             bench.records(),
@@ -149,6 +160,7 @@ def run_cli(args: argparse.Namespace) -> int:
             method=args.geodesic_method,
             splits=args.splits,
             jobs=args.jobs,
+            rows=args.rows,
         )
     elif args.export_kind == "export-dpfm":
         write_dpfm(bench.records(), out, metadata=bench.metadata, overwrite=args.force, progress=True)
@@ -173,5 +185,9 @@ def run_cli(args: argparse.Namespace) -> int:
     }
     if args.export_kind in ("export-psmal", "export-ulrssm"):
         result["geodesics"] = args.geodesic_method if args.geodesics else None
+    summary = out / "logs" / "geodesics.json"
+    if args.export_kind == "export-ulrssm" and summary.exists():
+        done = json.loads(summary.read_text(encoding="utf-8"))
+        result.update({k: done[k] for k in ("written", "hard_links", "copies", "bytes")})
     print(json.dumps(result))
     return 0
