@@ -875,9 +875,9 @@ def _mesh_blocks(
     (symmetrised, divided by ``scales[key]``, the sqrt-area). The caller writes it before asking for
     the next; only one block is in memory.
 
-    Computed: tasks of :data:`_GEODESIC_TASK_ROWS` source rows, run by ``jobs`` processes with at most
-    ``jobs + 1`` finished or running tasks at a time (bounded memory), each task's (rows, V) result
-    cut to the block's columns as it arrives; no rows file on disk. From ``rows_folders`` (outputs of
+    Computed: tasks of :func:`_task_rows` source rows, run by ``jobs`` processes with at most ``jobs``
+    tasks submitted and not yet consumed (bounded memory), each task's (rows, V) float32 result cut to
+    the block's columns as it arrives; no rows file on disk. From ``rows_folders`` (outputs of
     ``becos geodesic-rows``): each block read (and cut to ``needed``) from its file."""
     import time
     from collections import deque
@@ -924,9 +924,10 @@ def _mesh_blocks(
     from concurrent.futures import ProcessPoolExecutor
 
     tasks = [
-        (key, start, *meshes[key], needed[key][start : start + _GEODESIC_TASK_ROWS], method)
+        (key, start, *meshes[key], needed[key][start : start + step], method)
         for key in order
-        for start in range(0, len(needed[key]), _GEODESIC_TASK_ROWS)
+        for step in [_task_rows(len(meshes[key][0]))]
+        for start in range(0, len(needed[key]), step)
     ]
     total, done = sum(len(needed[k]) for k in order), 0
     pool = ProcessPoolExecutor(max_workers=jobs) if jobs > 1 and len(tasks) > 1 else None
@@ -938,7 +939,7 @@ def _mesh_blocks(
         pending, queue = deque(), iter(tasks)
         for task in queue:
             pending.append(pool.submit(_geodesic_task, task))
-            if len(pending) > jobs:  # jobs running + one finished waiting: bounded memory
+            if len(pending) >= jobs:  # at most `jobs` results in this process: bounded memory
                 yield pending.popleft().result()
         while pending:
             yield pending.popleft().result()
@@ -975,7 +976,9 @@ def _mesh_blocks(
 
 _SOLVER_BYTES_PER_VERTEX = 40_000
 """Peak memory of one heat-method task beyond its result, per mesh vertex (factorisations, (V, B) and
-(2F, B) solve blocks; measured: ~0.4 GB at 10k vertices), for :func:`ulrssm_geodesic_estimate`."""
+(2F, B) solve blocks; measured: 0.34 GB at 9,369 vertices), for :func:`ulrssm_geodesic_estimate`."""
+_PROCESS_BYTES = 150 << 20
+"""Resident memory of a Python process with numpy, scipy and libigl loaded (a worker or this one)."""
 
 
 def ulrssm_geodesic_estimate(
@@ -991,17 +994,21 @@ def ulrssm_geodesic_estimate(
     memory = 0
     for key, sources in needed.items():
         r, v = len(sources), len(meshes[key][0])
-        peak = 4 * r * r + _WRITE_CHUNK_BYTES
+        peak = _PROCESS_BYTES + 4 * r * r + _WRITE_CHUNK_BYTES  # this process: the block, a write chunk
         if computed:
-            task = 4 * min(r, _GEODESIC_TASK_ROWS) * v
-            peak += (jobs + 1) * task + max(jobs, 1) * (task + _SOLVER_BYTES_PER_VERTEX * v)
+            task = 4 * min(r, _task_rows(v)) * v  # one task's (rows, V) float32 result
+            solver = task + _SOLVER_BYTES_PER_VERTEX * v
+            if jobs > 1:  # `jobs` results waiting here + one being cut in; per worker: its solve, the pickled result
+                peak += (jobs + 1) * task + jobs * (_PROCESS_BYTES + solver + task)
+            else:
+                peak += solver
         memory = max(memory, peak)
     return {
         "meshes": len(needed),
         "files": len(distinct),
         "sides": len(shapes),
         "disk_bytes": int(disk),
-        "memory_bytes": int(memory + (150 << 20)),  # + the interpreter and its libraries
+        "memory_bytes": int(memory),
         "largest_mesh_rows": max((len(s) for s in needed.values()), default=0),
     }
 
@@ -1105,6 +1112,15 @@ GEODESIC_FOLDER = "geodesic_dist_matrices"
 """Folder of the loaders' geodesic layout (:func:`write_geodesic_matrices`)."""
 _GEODESIC_TASK_ROWS = 4096
 """Distance rows per parallel task (one solver set-up each: ~0.3 s against ~5 s of rows at 10k vertices)."""
+_GEODESIC_TASK_BYTES = 80 << 20
+"""Bytes of one task's (rows, V) float32 result in :func:`_mesh_blocks` (it crosses a process pipe
+and waits in memory): ~2,000 rows at 10k vertices, one solver set-up (~0.9 s) per ~15 s of rows."""
+
+
+def _task_rows(n_vertices: int) -> int:
+    """Source rows per task of :func:`_mesh_blocks` on a mesh of ``n_vertices``: at most
+    :data:`_GEODESIC_TASK_ROWS`, and at most :data:`_GEODESIC_TASK_BYTES` of result (at least 256)."""
+    return int(max(1, min(_GEODESIC_TASK_ROWS, max(256, _GEODESIC_TASK_BYTES // (4 * max(n_vertices, 1))))))
 
 
 @dataclass(frozen=True)
