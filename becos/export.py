@@ -875,10 +875,12 @@ def _mesh_blocks(
     (symmetrised, divided by ``scales[key]``, the sqrt-area). The caller writes it before asking for
     the next; only one block is in memory.
 
-    Computed: tasks of :func:`_task_rows` source rows, run by ``jobs`` processes with at most ``jobs``
+    Computed: tasks of :func:`_task_rows` source rows, each in a fresh process (``jobs`` at a time,
+    also for ``jobs=1``: the solver library keeps memory until its process ends), at most ``jobs``
     tasks submitted and not yet consumed (bounded memory), each task's (rows, V) float32 result cut to
     the block's columns as it arrives; no rows file on disk. From ``rows_folders`` (outputs of
     ``becos geodesic-rows``): each block read (and cut to ``needed``) from its file."""
+    import multiprocessing
     import time
     from collections import deque
 
@@ -930,16 +932,18 @@ def _mesh_blocks(
         for start in range(0, len(needed[key]), step)
     ]
     total, done = sum(len(needed[k]) for k in order), 0
-    pool = ProcessPoolExecutor(max_workers=jobs) if jobs > 1 and len(tasks) > 1 else None
+    # every task in a fresh process (also with jobs=1): the sparse Cholesky solver behind the heat
+    # method (cholespy) keeps ~V x 447 x 8 bytes per factorisation that has solved, freed only when its
+    # process ends (measured: +67 MB per 9.4k-vertex task; a long-lived process grew to 2 GB)
+    pool = ProcessPoolExecutor(
+        max_workers=max(1, jobs), mp_context=multiprocessing.get_context("spawn"), max_tasks_per_child=1
+    )
 
     def results() -> Iterator[tuple[str, int, np.ndarray]]:
-        if pool is None:
-            yield from map(_geodesic_task, tasks)
-            return
-        pending, queue = deque(), iter(tasks)
-        for task in queue:
+        pending = deque()
+        for task in tasks:
             pending.append(pool.submit(_geodesic_task, task))
-            if len(pending) >= jobs:  # at most `jobs` results in this process: bounded memory
+            if len(pending) >= max(1, jobs):  # at most `jobs` results in this process: bounded memory
                 yield pending.popleft().result()
         while pending:
             yield pending.popleft().result()
@@ -967,8 +971,7 @@ def _mesh_blocks(
                 yield key, sources, _symmetrise_in_place(block, scales[key])
                 block = None
     finally:
-        if pool is not None:
-            pool.shutdown(cancel_futures=True)
+        pool.shutdown(cancel_futures=True)
 
 
 # --------------------------------------------------------------------------------------------------
@@ -995,13 +998,10 @@ def ulrssm_geodesic_estimate(
     for key, sources in needed.items():
         r, v = len(sources), len(meshes[key][0])
         peak = _PROCESS_BYTES + 4 * r * r + _WRITE_CHUNK_BYTES  # this process: the block, a write chunk
-        if computed:
+        if computed:  # `jobs` results waiting here + one being cut in; per worker: its solve and pickled result
             task = 4 * min(r, _task_rows(v)) * v  # one task's (rows, V) float32 result
-            solver = task + _SOLVER_BYTES_PER_VERTEX * v
-            if jobs > 1:  # `jobs` results waiting here + one being cut in; per worker: its solve, the pickled result
-                peak += (jobs + 1) * task + jobs * (_PROCESS_BYTES + solver + task)
-            else:
-                peak += solver
+            workers = max(1, jobs)
+            peak += (workers + 1) * task + workers * (_PROCESS_BYTES + _SOLVER_BYTES_PER_VERTEX * v + 2 * task)
         memory = max(memory, peak)
     return {
         "meshes": len(needed),
