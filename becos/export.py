@@ -743,7 +743,7 @@ def mat_prefix(n: int, name: str = "dist") -> bytes:
     the 128-byte header (fixed text, no date, so the bytes depend on the matrix alone) and the tags of
     the ``miMATRIX`` element (array flags ``mxSINGLE_CLASS``, dimensions (n, n), name, ``miSINGLE``
     data of 4 n² bytes) laid out as ``scipy.io.savemat`` lays them out. The 4 n² data bytes follow in
-    column-major order, then :func:`mat_suffix`'s padding. For a symmetric matrix column-major is
+    column-major order, then zeros up to a multiple of 8 bytes. For a symmetric matrix column-major is
     row-major: the rows of a C-ordered array are written as they are, in as many pieces as wanted."""
     import struct
 
@@ -928,7 +928,7 @@ def _mesh_blocks(
     tasks = [
         (key, start, *meshes[key], needed[key][start : start + step], method)
         for key in order
-        for step in [_task_rows(len(meshes[key][0]))]
+        for step in [_task_rows(len(meshes[key][0]), len(meshes[key][1]))]
         for start in range(0, len(needed[key]), step)
     ]
     total, done = sum(len(needed[k]) for k in order), 0
@@ -999,7 +999,7 @@ def ulrssm_geodesic_estimate(
         r, v = len(sources), len(meshes[key][0])
         peak = _PROCESS_BYTES + 4 * r * r + _WRITE_CHUNK_BYTES  # this process: the block, a write chunk
         if computed:  # `jobs` results waiting here + one being cut in; per worker: its solve and pickled result
-            task = 4 * min(r, _task_rows(v)) * v  # one task's (rows, V) float32 result
+            task = 4 * min(r, _task_rows(v, len(meshes[key][1]))) * v  # one task's (rows, V) float32 result
             workers = max(1, jobs)
             peak += (workers + 1) * task + workers * (_PROCESS_BYTES + _SOLVER_BYTES_PER_VERTEX * v + 2 * task)
         memory = max(memory, peak)
@@ -1117,10 +1117,17 @@ _GEODESIC_TASK_BYTES = 80 << 20
 and waits in memory): ~2,000 rows at 10k vertices, one solver set-up (~0.9 s) per ~15 s of rows."""
 
 
-def _task_rows(n_vertices: int) -> int:
-    """Source rows per task of :func:`_mesh_blocks` on a mesh of ``n_vertices``: at most
-    :data:`_GEODESIC_TASK_ROWS`, and at most :data:`_GEODESIC_TASK_BYTES` of result (at least 256)."""
-    return int(max(1, min(_GEODESIC_TASK_ROWS, max(256, _GEODESIC_TASK_BYTES // (4 * max(n_vertices, 1))))))
+def _task_rows(n_vertices: int, n_faces: int) -> int:
+    """Source rows per task of :func:`_mesh_blocks` on a mesh of ``n_vertices`` and ``n_faces``: at most
+    :data:`_GEODESIC_TASK_ROWS`, and at most :data:`_GEODESIC_TASK_BYTES` of result (at least 256),
+    rounded down to a multiple of the heat solver's batch (:func:`becos.geodesics.heat_block_size`), so
+    the tasks' rows are bitwise those of one :func:`becos.geodesics.distance_rows` call over all sources
+    (``becos geodesic-rows``)."""
+    from becos.geodesics import heat_block_size
+
+    rows = int(max(1, min(_GEODESIC_TASK_ROWS, max(256, _GEODESIC_TASK_BYTES // (4 * max(n_vertices, 1))))))
+    batch = heat_block_size(n_faces)
+    return rows - rows % batch if rows >= batch else rows
 
 
 @dataclass(frozen=True)

@@ -269,6 +269,14 @@ class GeodesicDistances:
         return _adaptive_corner_search(graph, self.n_vertices, sources, corners, radius, interpolate)
 
 
+def heat_block_size(n_faces: int, budget_bytes: int = 1 << 27) -> int:
+    """Sources per solve of :class:`HeatDistanceSolver` on a mesh of ``n_faces`` faces (1..1024), so
+    that its (2F, B) float64 gradient block stays within ``budget_bytes``. :func:`distance_rows` solves
+    its sources in batches starting at multiples of it, and picks float32 or float64 per batch: rows
+    split into tasks at multiples of it give the same bytes as one call."""
+    return int(max(1, min(1024, budget_bytes // (8 * max(2 * int(n_faces), 1)))))
+
+
 class HeatDistanceSolver:
     """The heat method (Crane, Weischedel and Wardetzky 2013) on the intrinsic Delaunay triangulation,
     with both linear systems factored once per mesh and many sources solved together: the export's
@@ -328,7 +336,7 @@ class HeatDistanceSolver:
 
     def block_size(self, budget_bytes: int = 1 << 27) -> int:
         """Sources per solve so that the (2F, B) gradient block stays within ``budget_bytes`` (float64)."""
-        return int(max(1, min(1024, budget_bytes // (8 * max(self.gradient.shape[0], 1)))))
+        return heat_block_size(self.gradient.shape[0] // 2, budget_bytes)
 
     def distances(self, sources: np.ndarray) -> np.ndarray:
         """(len(sources), V) float64 distances from each source vertex (one block of multi-column solves)."""
