@@ -421,7 +421,7 @@ def test_ulrssm_and_dpfm_exports_are_rules_with_cached_outputs(tiny_tosca_run, t
     ``dist/``), and a second call does nothing."""
     import shutil
 
-    from becos.export import IDS_FILE, write_dpfm, write_ulrssm
+    from becos.export import DPFM_NONE_MAPS, IDS_FILE, write_dpfm, write_ulrssm
     from becos.store import open_benchmark
 
     run = tmp_path / "run"  # a copy (modification times kept): other tests read the shared run meanwhile
@@ -451,7 +451,10 @@ def test_ulrssm_and_dpfm_exports_are_rules_with_cached_outputs(tiny_tosca_run, t
                 "off/0.off",
                 "off/1.off",
             ]
-        assert list(dpfm.glob("*/shapes/*.off")) and list(dpfm.glob("*/maps/*.map"))
+        # each pair's two directions are in maps/ (what DPFM reads) or maps_with_none/ (a P2P export's maps/
+        # stays empty: docs/released-layout.md section 6)
+        maps = list(dpfm.glob("*/maps/*.map")) + list(dpfm.glob(f"*/{DPFM_NONE_MAPS}/*.map"))
+        assert list(dpfm.glob("*/shapes/*.off")) and len(maps) == 2 * len(bench)
         by_hand = tmp_path / "by_hand" / setting
         write_ulrssm(bench.records(), by_hand / "ulrssm", metadata=bench.metadata)
         write_dpfm(bench.records(), by_hand / "dpfm", metadata=bench.metadata)
