@@ -63,7 +63,6 @@ from typing import TYPE_CHECKING
 import numpy as np
 import yaml
 
-from becos.download import ARCHIVE_SCHEMES
 from becos.errors import BecosError, ConfigError, InputFileError
 from becos.geometry import surface_area
 from becos.mesh import MeshCache, TriMesh, read_mesh
@@ -221,6 +220,10 @@ def prepare_shape(entry: ShapeEntry, mesh_cache: MeshCache | None = None) -> Pre
 
 
 # --- specs -----------------------------------------------------------------------------------------
+ARCHIVE_SCHEMES = ("http", "https", "file")
+"""URL schemes an archive may be fetched from."""
+
+
 @dataclass(frozen=True)
 class DatasetArchive:
     """A public archive of a dataset that ``becos download-dataset`` fetches (``source.archive`` of its YAML).

@@ -46,6 +46,7 @@ import zipfile
 from pathlib import Path
 
 from becos.atomic import remove_stale_temporaries, write_text
+from becos.datasets import ARCHIVE_SCHEMES, DatasetSpec
 from becos.errors import BecosError, ConfigError
 
 log = logging.getLogger(__name__)
@@ -55,9 +56,6 @@ RECORD_NAME = ".becos-download.json"
 
 CHUNK_BYTES = 1 << 20
 """Largest block read from the network and written to the partial file at a time."""
-
-ARCHIVE_SCHEMES = ("http", "https", "file")
-"""URL schemes an archive may be fetched from."""
 
 TIMEOUT_S = 60.0
 """Seconds without data before a connection counts as broken."""
@@ -382,8 +380,6 @@ def dataset_archive(name: str, config_dir=None):
         ConfigError: unknown dataset, or one that cannot be downloaded automatically (the message says
             where to get it by hand and where to put it).
     """
-    from becos.datasets import DatasetSpec
-
     spec = DatasetSpec.load(name, config_dir)
     if spec.archive is None:
         raise ConfigError(
