@@ -3,7 +3,7 @@
 The workflow's geodesics run in three steps (``workflow/rules/export.smk``):
 
 1. ``becos geodesic-plan STORE... --out PLAN --parts N [--splits test]`` reads the stores of all
-   settings and lists every distinct full mesh (up to rigid motion, :func:`becos.export._full_mesh_key`:
+   settings and lists every distinct full mesh (up to rigid motion, :func:`becos.export.geodesics._full_mesh_key`:
    a remesh variant shared by several pairs or settings is one mesh) with the union of the vertices
    the chosen splits' shapes keep. Meshes are spread over N parts, largest first onto the least loaded
    part (cost ~ rows x vertices), and each part is written as ``PLAN/part_<k>.npz`` (per mesh:
@@ -12,13 +12,13 @@ The workflow's geodesics run in three steps (``workflow/rules/export.smk``):
    area-normalised records), with ``PLAN/plan.json`` listing mesh, part, vertex and row counts.
 2. ``becos geodesic-rows PLAN/part_<k>.npz OUT`` (one job per part) writes ``OUT/<key>.npy``: the
    (R, R) float32 block between the sources of the symmetrised heat-method distances
-   (:func:`becos.geodesics.distance_rows`, :func:`becos.export.symmetric_block`) divided by the
+   (:func:`becos.geodesics.distance_rows`, :func:`becos.export.geodesics.symmetric_block`) divided by the
    sqrt-area: exactly the geo-lora matrix of a shape that keeps those R vertices (a full shape: R = V),
    so the layouts hard-link it instead of writing it again. ``OUT/<key>.sources.npy`` lists the sources;
    ``OUT/timings.json`` gives per mesh the sqrt-area, the CPU seconds of the solve and of the write.
 3. ``becos export-geodesics STORE OUT --rows OUT_0 OUT_1 ...`` (one job per setting) links each shape's
    matrix to its mesh's block where they are the same, cuts it out of the block otherwise, and writes
-   the loaders' layouts (:func:`becos.export.write_geodesic_matrices`). The blocks are temporary: once
+   the loaders' layouts (:func:`becos.export.geodesics.write_geodesic_matrices`). The blocks are temporary: once
    every setting is written, the links are the only names of those files.
 """
 
@@ -34,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
-from becos.errors import BecosError
+from becos.export.geodesics import GeodesicJobError, geodesic_plan, mesh_sqrt_areas, symmetric_block
 
 WORKFLOW_PARTS = 8
 """Parts (``geodesic_rows`` jobs) of the workflow's geodesic plan: enough to keep a few cores or cluster
@@ -43,10 +43,6 @@ nodes busy with the ~10-100 distinct full meshes of a test split, few enough tha
 
 SEPARATOR = "|"
 """Between a mesh key and the array name in a part file (keys are file-name safe, never hold it)."""
-
-
-class GeodesicJobError(BecosError):
-    """A geodesic plan or part file that cannot be used."""
 
 
 def plan_parts(meshes: dict, needed: dict, parts: int) -> list[list[str]]:
@@ -65,12 +61,11 @@ def write_plan(stores: list[Path], out: Path, parts: int, splits=None) -> dict:
     """Write ``out/part_<k>.npz`` (k < ``parts``, some possibly empty) and ``out/plan.json`` for the
     stores' shapes of ``splits`` (None: every split). Returns the plan summary."""
     from becos.atomic import save_npz, write_text
-    from becos.export import _geodesic_plan, mesh_sqrt_areas
     from becos.store import open_benchmark
 
     meshes, needed, scales = {}, {}, {}
     for store in stores:
-        shapes, store_meshes, store_needed, _ = _geodesic_plan(open_benchmark(store).records(), splits)
+        shapes, store_meshes, store_needed, _ = geodesic_plan(open_benchmark(store).records(), splits)
         for key, mesh in store_meshes.items():
             meshes.setdefault(key, mesh)
             needed.setdefault(key, []).append(store_needed[key])
@@ -127,7 +122,6 @@ def solve_part(part: Path, out: Path, method: str = "heat", progress: bool = Fal
     aside, renamed in). Returns ``{key: {n_vertices, n_rows, sqrt_area, cpu_s, write_s, bytes}}`` (also
     ``out/timings.json``; ``write_s``: wall seconds of symmetrising and writing the block)."""
     from becos.atomic import save_npy
-    from becos.export import symmetric_block
     from becos.geodesics import distance_rows
 
     meshes = read_part(part)
@@ -162,30 +156,3 @@ def solve_part(part: Path, out: Path, method: str = "heat", progress: bool = Fal
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     return timings
-
-
-def load_rows(folders) -> dict[str, tuple[np.ndarray, Path, float]]:
-    """``{key: (sources (R,) int64 sorted, block file (R, R) float32, sqrt_area)}`` of every mesh in
-    ``folders`` (outputs of :func:`solve_part`)."""
-    out = {}
-    for folder in folders:
-        folder = Path(folder)
-        if not folder.is_dir():
-            raise GeodesicJobError(f"{folder}: no geodesic rows folder. Fix: run `becos geodesic-rows` for it")
-        try:
-            timings = json.loads((folder / "timings.json").read_text(encoding="utf-8"))
-        except (OSError, ValueError) as exc:
-            raise GeodesicJobError(
-                f"{folder}/timings.json: unreadable ({exc}). Fix: rerun `becos geodesic-rows`"
-            ) from exc
-        for path in sorted(folder.glob("*.sources.npy")):
-            key = path.name[: -len(".sources.npy")]
-            block = np.load(folder / f"{key}.npy", mmap_mode="r")
-            sources = np.load(path)
-            if block.shape != (len(sources), len(sources)) or key not in timings:
-                raise GeodesicJobError(
-                    f"{folder / key}.npy: a {block.shape} block for {len(sources)} sources. "
-                    f"Fix: rerun `becos geodesic-rows`"
-                )
-            out[key] = (sources, folder / f"{key}.npy", float(timings[key]["sqrt_area"]))
-    return out

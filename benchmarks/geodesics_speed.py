@@ -129,7 +129,7 @@ def write_costs(v: np.ndarray, f: np.ndarray, places: int, out: Path, shape: str
     import shutil
 
     from becos.atomic import link_or_copy, save_npy
-    from becos.export import _GeodesicShape, _shape_matrix, symmetric_block
+    from becos.export.geodesics import GeodesicShape, shape_matrix, symmetric_block
     from becos.geodesics import distance_rows
 
     n = len(v)
@@ -138,7 +138,7 @@ def write_costs(v: np.ndarray, f: np.ndarray, places: int, out: Path, shape: str
         np.sqrt(0.5 * np.linalg.norm(np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]), axis=1).sum())
     )
     rows = distance_rows(v, f, sources, "heat")
-    full = _GeodesicShape("test", "p", 0, "tosca", shape, "0_x", "m", "k", sources, sqrt_area)
+    full = GeodesicShape("test", "p", 0, "tosca", shape, "0_x", "m", "k", sources, sqrt_area)
 
     def synced(path: Path) -> None:
         with open(path, "rb+") as fh:
@@ -160,7 +160,7 @@ def write_costs(v: np.ndarray, f: np.ndarray, places: int, out: Path, shape: str
         def before_layouts():
             memmap = np.load(out / "rows.npy", mmap_mode="r")
             for k in range(places):
-                matrix = _shape_matrix(full, sources, memmap)
+                matrix = shape_matrix(full, sources, memmap)
                 np.save(out / f"before_{k}.npy", (matrix / np.float32(sqrt_area)).astype(np.float32, copy=False))
                 synced(out / f"before_{k}.npy")
 

@@ -15,15 +15,8 @@ import scipy.io
 
 from becos.cli import main
 from becos.errors import DiskFullError
-from becos.export import (
-    DiskEstimateError,
-    _compute_geodesic_rows,
-    _geodesic_plan,
-    _shape_matrix,
-    mat_size,
-    write_symmetric_mat,
-    write_ulrssm,
-)
+from becos.export import DiskEstimateError, mat_size, write_symmetric_mat, write_ulrssm
+from becos.export.geodesics import _compute_geodesic_rows, geodesic_plan, shape_matrix
 
 SETTINGS = ("full_full", "partial_full")
 
@@ -56,14 +49,14 @@ def cat_records(cat_pair) -> dict:
 def previous_dist(records, splits, tmp_path: Path) -> dict[tuple[str, int, int], np.ndarray]:
     """``{(split, index, side): matrix}`` as ``write_ulrssm`` computed it per pair side before (commit
     d6b27ce): all rows of every mesh in a memory map, each side's (V, V) float32 matrix symmetrised by
-    ``_shape_matrix`` and divided by the sqrt-area."""
-    shapes, meshes, needed, numbers = _geodesic_plan(records, splits)
+    ``shape_matrix`` and divided by the sqrt-area."""
+    shapes, meshes, needed, numbers = geodesic_plan(records, splits)
     folder = tmp_path / "previous-rows"
     folder.mkdir()
     rows = _compute_geodesic_rows(meshes, needed, "heat", 1, folder, False)
     return {
         (sh.split, numbers[(sh.split, sh.pair_id)], sh.side): (
-            _shape_matrix(sh, needed[sh.key], rows[sh.key]) / np.float32(sh.sqrt_area)
+            shape_matrix(sh, needed[sh.key], rows[sh.key]) / np.float32(sh.sqrt_area)
         ).astype(np.float32, copy=False)
         for sh in shapes
     }
@@ -103,7 +96,7 @@ def test_ulrssm_dist_written_once_linked_and_equal_to_the_per_side_computation(s
         assert np.array_equal(d, expected[side])  # the same float32 values as before, bit for bit
 
     # pair sides showing the same matrix (the same full mesh, the same vertices kept) share one inode
-    shapes, _, _, numbers = _geodesic_plan(recs, ["test"])
+    shapes, _, _, numbers = geodesic_plan(recs, ["test"])
     same = {(sh.split, numbers[(sh.split, sh.pair_id)], sh.side): (sh.key, sh.p2f.tobytes()) for sh in shapes}
     inode = {side: path.stat().st_ino for side, path in files.items()}
     for a in files:
@@ -129,11 +122,11 @@ def test_ulrssm_dist_same_bytes_in_parallel_and_from_the_workflow_rows(
     """jobs=2 with several tasks per mesh (blocks filled across tasks in a bounded window), and the
     blocks of ``becos geodesic-plan`` / ``geodesic-rows`` read through ``export-ulrssm --rows``: the same
     files as one process computing them."""
-    import becos.export
+    import becos.export.geodesics
 
     recs = cat_records["partial_full"]
     one = write_ulrssm(recs, tmp_path / "one", geodesics=True, splits=["test"])
-    monkeypatch.setattr(becos.export, "_GEODESIC_TASK_ROWS", 300)  # ~5 tasks per mesh
+    monkeypatch.setattr(becos.export.geodesics, "_GEODESIC_TASK_ROWS", 300)  # ~5 tasks per mesh
     two = write_ulrssm(recs, tmp_path / "two", geodesics=True, splits=["test"], jobs=2)
 
     store = store_of(recs, "partial_full")

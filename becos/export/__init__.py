@@ -1,0 +1,77 @@
+"""Exports of a benchmark in layouts that existing matching code already reads.
+
+Writers take an iterable of :class:`~becos.record.PairRecord` (a store's ``Benchmark.records()``)
+and stream it: :mod:`.released` (the released BeCoS layout), :mod:`.psmal`, :mod:`.dpfm`,
+:mod:`.ulrssm`, and :mod:`.geodesics` (geodesic matrices where loaders read them). :mod:`.staging`
+holds what they share (folders renamed into place, per-split numbering, ids, logs), :mod:`.text`
+the OFF/VTS text. Layouts, files and keys: ``docs/released-layout.md``.
+"""
+
+from becos.export.dpfm import DPFM_NONE_MAPS, dpfm_shape_id, write_dpfm
+from becos.export.geodesics import (
+    DSMK_FOLDER,
+    GEODESIC_FOLDER,
+    GEODESIC_LAYOUTS,
+    MAT_MAX_VERTICES,
+    dsmk_cache_name,
+    mat_prefix,
+    mat_size,
+    mesh_sqrt_areas,
+    symmetric_block,
+    write_geodesic_matrices,
+    write_geodesics,
+    write_symmetric_mat,
+)
+from becos.export.psmal import psmal_shape_id, write_psmal
+from becos.export.released import (
+    PICKLE_PROTOCOL,
+    info_pickle_bytes,
+    mesh_id,
+    released_file_stem,
+    released_infos,
+    released_stem,
+    write_released,
+)
+from becos.export.staging import IDS_FILE, LAYOUT_VERSION, LOGS_DIR, SIDES, ExportError
+from becos.export.text import off_text, vts_text
+from becos.export.ulrssm import DiskEstimateError, ulrssm_geodesic_estimate, ulrssm_template_vts, write_ulrssm
+from becos.record import full_shape
+
+__all__ = [
+    "DPFM_NONE_MAPS",
+    "DSMK_FOLDER",
+    "GEODESIC_FOLDER",
+    "GEODESIC_LAYOUTS",
+    "IDS_FILE",
+    "LAYOUT_VERSION",
+    "LOGS_DIR",
+    "MAT_MAX_VERTICES",
+    "PICKLE_PROTOCOL",
+    "SIDES",
+    "DiskEstimateError",
+    "ExportError",
+    "dpfm_shape_id",
+    "dsmk_cache_name",
+    "full_shape",
+    "info_pickle_bytes",
+    "mat_prefix",
+    "mat_size",
+    "mesh_id",
+    "mesh_sqrt_areas",
+    "off_text",
+    "psmal_shape_id",
+    "released_file_stem",
+    "released_infos",
+    "released_stem",
+    "symmetric_block",
+    "ulrssm_geodesic_estimate",
+    "ulrssm_template_vts",
+    "vts_text",
+    "write_dpfm",
+    "write_geodesic_matrices",
+    "write_geodesics",
+    "write_psmal",
+    "write_released",
+    "write_symmetric_mat",
+    "write_ulrssm",
+]

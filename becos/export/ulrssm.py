@@ -1,0 +1,245 @@
+"""ULRSSM style layout (:func:`write_ulrssm`): one ``off/``, ``corres/*.vts`` (template convention) and
+optional ``dist/*.mat`` root per pair, with the disk and memory estimate of the geodesic matrices
+(``docs/released-layout.md``, section ULRSSM).
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import sys
+from collections.abc import Iterable, Mapping
+from pathlib import Path
+
+import numpy as np
+
+from becos.errors import DiskFullError, InputFileError
+from becos.export.geodesics import (
+    WRITE_CHUNK_BYTES,
+    GeodesicShape,
+    cut_chunks,
+    geodesic_plan,
+    mat_size,
+    mesh_blocks,
+    mesh_sqrt_areas,
+    task_rows,
+    write_symmetric_mat,
+)
+from becos.export.staging import IDS_FILE, LOGS_DIR, SIDES, Staging, place_by_split, staged_dir, write_ids, write_log
+from becos.export.text import off_text, vts_text
+from becos.record import PairRecord
+
+
+def ulrssm_template_vts(record: PairRecord) -> tuple[str, str]:
+    """The two ``corres/<k>.vts`` texts of a pair in ULRSSM's template convention: line t of each file
+    is the 1-based vertex of that shape at template point t, so that point t pairs vertex
+    ``vts0[t] - 1`` of shape 0 with vertex ``vts1[t] - 1`` of shape 1. The template points are the
+    vertices of shape 1 that have a counterpart (record ``corr_10`` != -1, in vertex order): the pair's
+    ground truth Y -> X, the direction every setting has (P2F: partial Y -> full X). ULRSSM subtracts 1
+    and has no "none" value, hence only matched vertices."""
+    corr = np.asarray(record["corr_10"], dtype=np.int64)
+    matched = np.flatnonzero(corr >= 0)
+    return vts_text(corr[matched] + 1), vts_text(matched + 1)
+
+
+def write_ulrssm(
+    records: Iterable[PairRecord],
+    out_dir: str | Path,
+    *,
+    metadata: Mapping | None = None,
+    overwrite: bool = False,
+    progress: bool = False,
+    geodesics: bool = False,
+    method: str = "heat",
+    splits=None,
+    jobs: int = 1,
+    rows=None,
+    free_bytes: int | None = None,
+) -> Path:
+    """Write the records ULRSSM style (``docs/released-layout.md``, section ULRSSM): one data root per
+    pair, ``<out>/<split>/<i>/`` with ``off/0.off``, ``off/1.off``, ``corres/0.vts``, ``corres/1.vts``
+    (:func:`ulrssm_template_vts`) and, with ``geodesics``, ``dist/0.mat``, ``dist/1.mat``: MATLAB v5
+    files, key ``dist``, (V, V) float32 geodesic distances on the full shape divided by its sqrt-area
+    (the values of :func:`write_geodesic_matrices`; only for ``splits`` when given).
+    ULRSSM's ``PairDataset`` pairs every two shapes of its data root, so one root per pair keeps our
+    pairs. ``ids.csv`` and ``logs/config.yaml`` as :func:`write_released`.
+
+    Geodesics (:func:`_write_ulrssm_dist`): each distinct matrix (a full mesh up to rigid motion, or
+    one cut of it that a scan keeps) is written ONCE, streamed from its mesh's (R, R) block, and every
+    other pair side showing it gets a hard link (a copy only where the file system refuses links,
+    reported on stderr and in ``logs/geodesics.json``). The blocks are computed one mesh at a time by
+    ``jobs`` processes, or read from ``rows`` (folders of ``becos geodesic-rows``: the workflow's one
+    geodesic computation). Before any matrix is written the disk (distinct files × V² × 4 bytes) and
+    the peak memory are estimated and printed; an estimate above the free space of the output's file
+    system (``free_bytes`` when given, else :func:`shutil.disk_usage`) stops the export
+    (:class:`DiskEstimateError`) and leaves ``out`` untouched."""
+    out = Path(out_dir)
+    with staged_dir(out, overwrite) as tmp:
+        staging = Staging(tmp, "export-ulrssm", progress)
+        settings = set()
+
+        def write_pair(record: PairRecord) -> None:
+            settings.add(record.meta["setting"])
+            folder = staging.add(record)
+            (folder / "off").mkdir()
+            (folder / "corres").mkdir()
+            for s, k in SIDES:
+                (folder / "off" / f"{k}.off").write_text(
+                    off_text(record[f"{s}_vertices"], record[f"{s}_faces"]), encoding="utf-8"
+                )
+            for k, text in enumerate(ulrssm_template_vts(record)):
+                (folder / "corres" / f"{k}.vts").write_text(text, encoding="utf-8")
+
+        shapes, meshes, needed, numbers = geodesic_plan(records, splits if geodesics else [], each=write_pair)
+        id_rows, counts = place_by_split(staging, tmp)
+        if geodesics and shapes:
+            summary = _write_ulrssm_dist(
+                tmp, out, shapes, meshes, needed, numbers, method, jobs, progress, rows, free_bytes
+            )
+            (tmp / LOGS_DIR).mkdir(exist_ok=True)
+            (tmp / LOGS_DIR / "geodesics.json").write_text(json.dumps(summary, indent=1) + "\n", encoding="utf-8")
+        write_ids(tmp / IDS_FILE, ["split", "index", "pair_id", "x", "y"], id_rows)
+        setting = settings.pop() if len(settings) == 1 else None
+        write_log(tmp, "becos.export.write_ulrssm", "becos ULRSSM-style layout", counts, setting, metadata)
+    return out
+
+
+class DiskEstimateError(DiskFullError):
+    """An export would not fit: its estimated size exceeds the free space of its file system (raised
+    before anything is written)."""
+
+    def __init__(self, path: str | Path, problem: str, fix: str):
+        InputFileError.__init__(self, path, problem, fix)
+
+
+_SOLVER_BYTES_PER_VERTEX = 40_000
+"""Peak memory of one heat-method task beyond its result, per mesh vertex (factorisations, (V, B) and
+(2F, B) solve blocks; measured: 0.34 GB at 9,369 vertices), for :func:`ulrssm_geodesic_estimate`."""
+
+
+_PROCESS_BYTES = 150 << 20
+"""Resident memory of a Python process with numpy, scipy and libigl loaded (a worker or this one)."""
+
+
+def ulrssm_geodesic_estimate(
+    shapes: list[GeodesicShape], needed: dict, meshes: dict, jobs: int, computed: bool
+) -> dict:
+    """The ULRSSM geodesics export's cost before it starts: ``files`` distinct matrices (one per full
+    mesh, one per distinct cut a scan keeps) for ``sides`` pair sides, ``disk_bytes`` their MAT files
+    (Σ 4 n² + headers; links cost nothing), ``memory_bytes`` the peak resident memory of this process
+    and its ``jobs`` workers together (the largest (R, R) float32 block, a write chunk, and while
+    ``computed``: the tasks in flight, (rows, V) float32 each, plus each worker's solver)."""
+    distinct = {(sh.key, len(sh.p2f), sh.p2f.tobytes()) for sh in shapes}
+    disk = sum(mat_size(n) for _, n, _ in distinct)
+    memory = 0
+    for key, sources in needed.items():
+        r, v = len(sources), len(meshes[key][0])
+        peak = _PROCESS_BYTES + 4 * r * r + WRITE_CHUNK_BYTES  # this process: the block, a write chunk
+        if computed:  # `jobs` results waiting here + one being cut in; per worker: its solve and pickled result
+            task = 4 * min(r, task_rows(v, len(meshes[key][1]))) * v  # one task's (rows, V) float32 result
+            workers = max(1, jobs)
+            peak += (workers + 1) * task + workers * (_PROCESS_BYTES + _SOLVER_BYTES_PER_VERTEX * v + 2 * task)
+        memory = max(memory, peak)
+    return {
+        "meshes": len(needed),
+        "files": len(distinct),
+        "sides": len(shapes),
+        "disk_bytes": int(disk),
+        "memory_bytes": int(memory),
+        "largest_mesh_rows": max((len(s) for s in needed.values()), default=0),
+    }
+
+
+def _gb(n: float) -> str:
+    return f"{n / 1e9:.2f} GB"
+
+
+def _write_ulrssm_dist(
+    tmp: Path,
+    out: Path,
+    shapes: list[GeodesicShape],
+    meshes: dict,
+    needed: dict,
+    numbers: dict,
+    method: str,
+    jobs: int,
+    progress: bool,
+    rows_folders=None,
+    free_bytes: int | None = None,
+) -> dict:
+    """Write ``<tmp>/<split>/<i>/dist/<side>.mat`` of every shape (:func:`write_ulrssm`); returns the
+    summary written to ``logs/geodesics.json`` (estimate, files, links, copies, bytes, seconds)."""
+    import hashlib
+    import time
+
+    from becos.atomic import link_or_copy
+
+    started = time.monotonic()
+    scales = mesh_sqrt_areas(shapes)
+    groups: dict[str, dict[bytes, list[GeodesicShape]]] = {}
+    for sh in shapes:
+        digest = hashlib.sha1(np.ascontiguousarray(sh.p2f, dtype=np.int64).tobytes()).digest()
+        groups.setdefault(sh.key, {}).setdefault(digest, []).append(sh)
+    estimate = ulrssm_geodesic_estimate(shapes, needed, meshes, jobs, rows_folders is None)
+    free = int(shutil.disk_usage(tmp).free if free_bytes is None else free_bytes)
+    print(
+        f"export-ulrssm geodesics: {estimate['files']} distinct dist matrices of {estimate['meshes']} meshes for "
+        f"{estimate['sides']} pair sides (the rest hard links): disk {_gb(estimate['disk_bytes'])}, peak memory "
+        f"~{_gb(estimate['memory_bytes'])} ({jobs} jobs, largest mesh {estimate['largest_mesh_rows']} vertices); "
+        f"free on the output's disk: {_gb(free)}",
+        file=sys.stderr,
+        flush=True,
+    )
+    if estimate["disk_bytes"] > free:
+        raise DiskEstimateError(
+            out,
+            f"the ULRSSM geodesic matrices need about {_gb(estimate['disk_bytes'])} ({estimate['files']} distinct "
+            f"(V, V) float32 .mat files of {estimate['meshes']} meshes) but its file system has {_gb(free)} "
+            f"free; nothing was written",
+            "free disk space, choose another --out on a larger disk, or export geodesics of fewer splits "
+            "(--splits test)",
+        )
+
+    def dist_path(sh: GeodesicShape) -> Path:
+        return tmp / sh.split / str(numbers[(sh.split, sh.pair_id)]) / "dist" / f"{sh.side}.mat"
+
+    written = links = copies = nbytes = 0
+    for key, sources, block in mesh_blocks(
+        meshes, needed, scales, method, jobs, progress, rows_folders, "export-ulrssm geodesics"
+    ):
+        for group in groups[key].values():
+            first = group[0]
+            cut = np.searchsorted(sources, first.p2f)
+            whole = len(cut) == len(sources) and np.array_equal(cut, np.arange(len(sources)))
+            path = dist_path(first)
+            path.parent.mkdir(exist_ok=True)
+            nbytes += write_symmetric_mat(path, len(cut), cut_chunks(block, None if whole else cut))
+            written += 1
+            for sh in group[1:]:
+                dist_path(sh).parent.mkdir(exist_ok=True)
+                if link_or_copy(path, dist_path(sh)):
+                    links += 1
+                else:
+                    copies += 1
+                    nbytes += path.stat().st_size
+        del block
+    if copies:
+        print(
+            f"export-ulrssm geodesics: {out}: the file system refused hard links; {copies} dist files are "
+            f"copies ({_gb(nbytes - estimate['disk_bytes'])} more than estimated)",
+            file=sys.stderr,
+            flush=True,
+        )
+    summary = {
+        "method": method,
+        "estimate": {**estimate, "free_bytes": free},
+        "written": written,
+        "hard_links": links,
+        "copies": copies,
+        "bytes": nbytes,
+        "seconds": round(time.monotonic() - started, 1),
+        "rows_from": [str(p) for p in rows_folders] if rows_folders is not None else None,
+    }
+    if progress:
+        print(f"export-ulrssm geodesics: {json.dumps(summary)}", file=sys.stderr, flush=True)
+    return summary
