@@ -106,6 +106,31 @@ def cat_pair(tosca_entries, tosca_network, mesh_cache):
 
 
 @pytest.fixture(scope="session")
+def small_cat_records(cat_pair) -> dict:
+    """Per setting (all three): two test pairs cat0 -> cat3 (seeds 1, 2: the same two full meshes,
+    different scans) and one train pair, cat0 and cat3 remeshed to ~1,500 vertices; in-memory records."""
+    from becos.pairs import PairOptions, build_pair
+
+    x, y, gt_xy, gt_yx = cat_pair((1500, 1400))
+    return {
+        setting: [
+            build_pair(
+                x,
+                y,
+                gt_xy,
+                gt_yx,
+                pair_id=f"{setting[:1]}{setting.split('_')[1][:1]}{i:014d}",
+                seed=i + 1,
+                split=split,
+                options=PairOptions(setting=setting),
+            )
+            for i, split in enumerate(("test", "test", "train"))
+        ]
+        for setting in ("full_full", "partial_full", "partial_partial")
+    }
+
+
+@pytest.fixture(scope="session")
 def tosca_pair_inputs(cat_pair):
     """Remeshed cat0 (9,200 vertices) and cat3 (9,800): :func:`remeshed_cat_pair`."""
     return cat_pair((9200, 9800))

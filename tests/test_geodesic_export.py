@@ -26,27 +26,9 @@ def small_tosca(cat_pair):
 
 
 @pytest.fixture(scope="module")
-def small_records(small_tosca) -> dict:
-    """Per setting: two test pairs cat0 -> cat3 (seeds 1, 2) and one train pair."""
-    from becos.pairs import PairOptions, build_pair
-
-    x, y, gt_xy, gt_yx = small_tosca
-    out = {}
-    for setting in SETTINGS:
-        out[setting] = [
-            build_pair(
-                x,
-                y,
-                gt_xy,
-                gt_yx,
-                pair_id=f"{setting[:1]}{setting.split('_')[1][:1]}{i:014d}",
-                seed=i + 1,
-                split=split,
-                options=PairOptions(setting=setting),
-            )
-            for i, split in enumerate(("test", "test", "train"))
-        ]
-    return out
+def small_records(small_cat_records) -> dict:
+    """Per setting: two test pairs cat0 -> cat3 (seeds 1, 2) and one train pair (conftest)."""
+    return small_cat_records
 
 
 def test_batched_heat_solver_matches_potpourri3d_and_exact_geodesics(small_tosca):

@@ -22,28 +22,10 @@ SETTINGS = ("full_full", "partial_full")
 
 
 @pytest.fixture(scope="module")
-def cat_records(cat_pair) -> dict:
+def cat_records(small_cat_records) -> dict:
     """Per setting: two test pairs cat0 -> cat3 (seeds 1, 2: the same two full meshes, different scans)
-    and one train pair; cat0 and cat3 remeshed to ~1,500 vertices."""
-    from becos.pairs import PairOptions, build_pair
-
-    x, y, gt_xy, gt_yx = cat_pair((1500, 1400))
-    return {
-        setting: [
-            build_pair(
-                x,
-                y,
-                gt_xy,
-                gt_yx,
-                pair_id=f"{setting[:1]}{setting.split('_')[1][:1]}{i:014d}",
-                seed=i + 1,
-                split=split,
-                options=PairOptions(setting=setting),
-            )
-            for i, split in enumerate(("test", "test", "train"))
-        ]
-        for setting in SETTINGS
-    }
+    and one train pair; cat0 and cat3 remeshed to ~1,500 vertices (conftest)."""
+    return small_cat_records
 
 
 def previous_dist(records, splits, tmp_path: Path) -> dict[tuple[str, int, int], np.ndarray]:
