@@ -31,7 +31,7 @@ from pathlib import Path
 import psutil
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from workflow import REPO, becos_code, write_config  # noqa: E402
+from workflow import REPO, becos_code, snakemake_cmd, write_config  # noqa: E402
 
 # becos sub-command -> rule
 RULES = {
@@ -200,19 +200,7 @@ def main() -> None:
         caps={"train": None, "val": None, "test": None},
         exports={"released": True, "published_pickle": True, "report": True},
     )
-    cmd = [
-        sys.executable,
-        "-m",
-        "snakemake",
-        "-s",
-        str(REPO / "Snakefile"),
-        "-d",
-        str(args.workdir),
-        "--configfile",
-        str(args.workdir / "config.yaml"),
-        "--cores",
-        "2",
-    ]
+    cmd = snakemake_cmd(args.workdir, "--cores", "2")
     started = time.perf_counter()
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     sampler = JobSampler(proc.pid)

@@ -80,7 +80,8 @@ import yaml
 REPO = Path(__file__).resolve().parents[1]
 SHARED = REPO.parent / "shared"
 sys.path.insert(0, str(REPO))
-sys.path.insert(0, str(REPO / "tests"))  # tests/standin.py: the stand-in data root
+sys.path.insert(0, str(REPO / "tests"))  # tests/standin.py: the stand-in data root; tests/snakemake_cmd.py
+from snakemake_cmd import snakemake_cmd  # noqa: E402
 
 
 def becos_code() -> Path:
@@ -144,18 +145,7 @@ def snakemake(
     workdir: Path, *args: str, repo: Path = REPO, hook: Path | None = None, env_extra: dict | None = None
 ) -> tuple[float, str, dict]:
     """Run ``repo``'s Snakefile in ``workdir``; ``hook``: a folder put first on ``PYTHONPATH``."""
-    cmd = [
-        sys.executable,
-        "-m",
-        "snakemake",
-        "-s",
-        str(repo / "Snakefile"),
-        "-d",
-        str(workdir),
-        "--configfile",
-        str(workdir / "config.yaml"),
-        *args,
-    ]
+    cmd = snakemake_cmd(workdir, *args, repo=repo)
     start = time.perf_counter()
     cpu_start = _children_cpu()
     # the jobs' `becos` runs this checkout's code, whatever the environment installed
@@ -248,24 +238,7 @@ def profile_dry_run(run: Path) -> dict:
     import pstats
 
     out = run / "dry_run.prof"
-    cmd = [
-        sys.executable,
-        "-m",
-        "cProfile",
-        "-o",
-        str(out),
-        "-m",
-        "snakemake",
-        "-s",
-        str(REPO / "Snakefile"),
-        "-d",
-        str(run),
-        "--configfile",
-        str(run / "config.yaml"),
-        "-n",
-        "--cores",
-        "2",
-    ]
+    cmd = snakemake_cmd(run, "-n", "--cores", "2", python=(sys.executable, "-m", "cProfile", "-o", str(out)))
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in (str(REPO), os.environ.get("PYTHONPATH")) if p)}
     subprocess.run(cmd, check=True, capture_output=True, env=env)
     stats = pstats.Stats(str(out)).stats

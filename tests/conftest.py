@@ -197,7 +197,7 @@ def tiny_tosca_reference(becos_code, tmp_path_factory) -> TinyReference:
     (the parent of their base temporary folders, new for each pytest run, as pytest-xdist's docs
     advise) under an exclusive ``flock``: the first worker to ask makes it, the other waits and reads
     it. The fingerprint is written after the run; its file marks the run complete."""
-    from test_workflow import snakemake
+    from snakemake_cmd import snakemake
     from tiny_tosca import results_fingerprint, tiny_tosca_config, write_config_file
 
     shared = os.environ.get("PYTEST_XDIST_WORKER") is not None

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from test_workflow import SNAKEMAKE
+from snakemake_cmd import snakemake as run_snakemake
 from tiny_tosca import tosca_config, write_config_file
 
 SHAPES = ["tosca/wolf0", "tosca/wolf1", "tosca/horse0", "tosca/horse5"]  # network path wolf0-dog0-horse0
@@ -29,12 +29,8 @@ OLD = 1_500_000_000  # a modification time long before the run (2017): what `cp 
 
 
 def snakemake(workdir: Path, *args: str) -> subprocess.CompletedProcess:
-    return subprocess.run(
-        [*SNAKEMAKE, "-d", str(workdir), "--configfile", str(workdir / "config.yaml"), "--cores", "2", *args],
-        capture_output=True,
-        text=True,
-        env=dict(os.environ, PYTHONUNBUFFERED="1"),
-    )
+    """Snakemake on ``workdir`` with ``--cores 2``; its result, failed or not."""
+    return run_snakemake(workdir, "--cores", "2", *args, check=False)
 
 
 def _link_tree(source: Path, dest: Path) -> None:

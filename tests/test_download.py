@@ -25,6 +25,7 @@ from pathlib import Path
 import pytest
 import yaml
 from archive_server import ArchiveServer
+from snakemake_cmd import snakemake_cmd
 
 from becos.check import DatasetCheckError, check_datasets
 from becos.cli import main as becos_main
@@ -492,19 +493,7 @@ def test_workflow_downloads_kids_before_the_dataset_check(becos_code, tmp_path):
     env = dict(
         os.environ, PYTHONUNBUFFERED="1", PYTHONPATH=os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")])
     )
-    snakemake = [
-        sys.executable,
-        "-m",
-        "snakemake",
-        "-s",
-        str(REPO / "Snakefile"),
-        "-d",
-        str(workdir),
-        "--configfile",
-        str(workdir / "config.yaml"),
-        "--cores",
-        "1",
-    ]
+    snakemake = snakemake_cmd(workdir, "--cores", "1")
     with ArchiveServer({"mirror/kids.zip": archive}) as server:
         config = {
             "synthetic": {"enabled": False},

@@ -285,7 +285,8 @@ def test_workflow_prepares_catalogs_remeshes_and_pairs_dt4d(becos_code, tmp_path
     Both classes are real DT4D classes with their real template rows (catBG/run043, leopardSLM/roam024,
     both train) and their real network edge, an identity one (the annotation folder lists them as
     sharing a triangulation), so the synthetic classes share one triangulation here too."""
-    from test_workflow import jobs_planned, snakemake
+    from snakemake_cmd import snakemake
+    from test_workflow import jobs_planned
     from tiny_tosca import write_config_file
 
     from becos.store import open_benchmark

@@ -239,7 +239,8 @@ def test_plan_rows_and_layouts_read_by_the_loaders(small_records, store_of, tmp_
 def test_workflow_plans_one_geodesic_plan_parallel_rows_and_one_layout_job_per_setting(becos_code, tmp_path):
     """`exports.geodesics`: the distinct meshes of every setting are planned once and solved by
     WORKFLOW_PARTS parallel jobs; each setting's layouts are a job of their own (dry run)."""
-    from test_workflow import jobs_planned, snakemake, write_config
+    from snakemake_cmd import snakemake
+    from test_workflow import jobs_planned, write_config
     from tiny_tosca import TINY_SHAPES
 
     from becos.geodesic_jobs import WORKFLOW_PARTS

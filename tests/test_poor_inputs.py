@@ -256,31 +256,12 @@ def test_every_path_in_a_rules_shell_command_is_quoted():
 
 def test_a_results_path_with_a_space_is_quoted_in_the_jobs(becos_code, tmp_path):
     import subprocess
-    import sys
 
+    from snakemake_cmd import snakemake_cmd
     from tiny_tosca import tosca_config, write_config_file
 
-    repo = Path(__file__).resolve().parents[1]
     workdir = write_config_file(tmp_path / "run", tosca_config(becos_code, results="my results"))
-    dry = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "snakemake",
-            "-s",
-            str(repo / "Snakefile"),
-            "-d",
-            str(workdir),
-            "--configfile",
-            str(workdir / "config.yaml"),
-            "-n",
-            "-p",
-            "--cores",
-            "1",
-        ],
-        capture_output=True,
-        text=True,
-    )
+    dry = subprocess.run(snakemake_cmd(workdir, "-n", "-p", "--cores", "1"), capture_output=True, text=True)
     assert dry.returncode == 0, dry.stderr[-3000:]
     assert "--out 'my results/checks/datasets.json'" in dry.stdout, dry.stdout[-3000:]
     assert "--out 'my results/config.json'" in dry.stdout

@@ -25,7 +25,7 @@ from pathlib import Path
 
 import psutil
 import pytest
-from test_workflow import SNAKEMAKE, snakemake
+from snakemake_cmd import snakemake, snakemake_cmd
 from tiny_tosca import SETTINGS, fingerprint_differences, results_fingerprint, tiny_tosca_config, write_config_file
 
 
@@ -66,7 +66,7 @@ def run_until(workdir: Path, cores: str, marker, *extra: str, timeout: float = 6
     (a temporary folder a previous kill left can match a marker before the new run has taken the lock).
 
     Returns (killed, processes killed); killed is False when the run ended before the marker."""
-    cmd = [*SNAKEMAKE, "-d", str(workdir), "--configfile", str(workdir / "config.yaml"), "--cores", cores, *extra]
+    cmd = snakemake_cmd(workdir, "--cores", cores, *extra)
     with open(workdir / f"run-{time.monotonic_ns()}.out", "w") as out:
         process = subprocess.Popen(
             cmd,
@@ -197,7 +197,7 @@ def test_a_second_run_on_the_same_results_is_refused(becos_code, tmp_path):
     second run that looks while one of the first run's jobs is finishing stops with "incomplete
     files" and the advice ``--rerun-incomplete``; following that advice must then meet the lock."""
     workdir = small_config(tmp_path / "shared", becos_code)
-    cmd = [*SNAKEMAKE, "-d", str(workdir), "--configfile", str(workdir / "config.yaml"), "--cores", "1"]
+    cmd = snakemake_cmd(workdir, "--cores", "1")
     out = open(workdir / "first-run.out", "w")  # a file, not a pipe nobody reads (it would fill and block)
     first = subprocess.Popen(cmd, stdout=out, stderr=subprocess.STDOUT, start_new_session=True)
     try:

@@ -24,17 +24,16 @@ import os
 import re
 import shutil
 import subprocess
-import sys
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 import pytest
+from snakemake_cmd import snakemake_cmd
 from tiny_tosca import fingerprint_differences, results_fingerprint, tiny_tosca_config, write_config_file
 
 REPO = Path(__file__).resolve().parents[1]
-SNAKEMAKE = [sys.executable, "-m", "snakemake", "-s", str(REPO / "Snakefile")]
 # test-only speed-ups (a real cluster keeps the plugin's defaults: first check after 40 s, then every 10 s+)
 FAST_STATUS = ["--slurm-init-seconds-before-status-checks", "2", "--seconds-between-status-checks", "2"]
 RUN_TIMEOUT_S = 1800
@@ -92,7 +91,7 @@ def _snakemake(workdir: Path, args: list[str], env: dict[str, str]) -> tuple[flo
     start = time.perf_counter()
     try:
         result = subprocess.run(
-            [*SNAKEMAKE, "-d", str(workdir), "--configfile", str(workdir / "config.yaml"), *args],
+            snakemake_cmd(workdir, *args),
             cwd=workdir,
             env=env,
             capture_output=True,

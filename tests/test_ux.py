@@ -10,11 +10,11 @@ import pty
 import re
 import select
 import subprocess
-import sys
 import time
 from pathlib import Path
 
 import pytest
+from snakemake_cmd import snakemake_cmd
 from tiny_tosca import tosca_config, write_config_file
 
 from becos.errors import ConfigError
@@ -22,14 +22,16 @@ from becos.joblog import error_lines, failure_report
 from becos.workflow import check_config_files, resolve_config
 
 REPO = Path(__file__).resolve().parents[1]
-SNAKEMAKE = [sys.executable, "-m", "snakemake", "-s", str(REPO / "Snakefile")]
 NOT_SEEN = ("Traceback", "ConfigError in file", "WorkflowError in file", "Failed validating", 'File "')
 
 
-def run_snakemake(cwd: Path, *args: str, env: dict | None = None) -> subprocess.CompletedProcess:
-    """Snakemake from ``cwd`` (pipes: not a terminal, so plain output)."""
+def run_snakemake(
+    cwd: Path, *args: str, workdir: Path | None = None, env: dict | None = None
+) -> subprocess.CompletedProcess:
+    """Snakemake from ``cwd`` (pipes: not a terminal, so plain output); ``workdir``: ``-d`` and
+    ``--configfile`` of its ``config.yaml`` (else ``args`` name what they need)."""
     return subprocess.run(
-        [*SNAKEMAKE, *args],
+        snakemake_cmd(workdir, *args),
         cwd=cwd,
         capture_output=True,
         text=True,
@@ -42,7 +44,7 @@ def run_in_terminal(cwd: Path, *args: str, env: dict | None = None, timeout: flo
     its exit status and everything it wrote (terminal control sequences removed)."""
     master, slave = pty.openpty()
     full_env = dict(os.environ, PYTHONUNBUFFERED="1", COLUMNS="120", LINES="40", TERM="xterm-256color", **(env or {}))
-    proc = subprocess.Popen([*SNAKEMAKE, *args], cwd=cwd, stdin=slave, stdout=slave, stderr=slave, env=full_env)
+    proc = subprocess.Popen(snakemake_cmd(None, *args), cwd=cwd, stdin=slave, stdout=slave, stderr=slave, env=full_env)
     os.close(slave)
     chunks, deadline = [], time.monotonic() + timeout
     while time.monotonic() < deadline:
@@ -103,9 +105,7 @@ def test_a_bad_config_prints_one_line_per_problem_and_no_traceback(becos_code, t
     ):
         workdir = write_config_file(tmp_path / name, tosca_config(becos_code, **override))
         (workdir / "taken").write_text("a file where the results folder should go\n")
-        result = run_snakemake(
-            tmp_path, "-d", str(workdir), "--configfile", str(workdir / "config.yaml"), "--cores", "1"
-        )
+        result = run_snakemake(tmp_path, "--cores", "1", workdir=workdir)
         text = result.stdout + result.stderr
         assert result.returncode != 0
         lines = problem_lines(text)
@@ -207,16 +207,7 @@ def test_a_failed_job_shows_its_becos_error_line_on_the_console(becos_code, tmp_
     (tosca / "cat0.off").unlink()
     (tosca / "cat0.off").write_bytes((becos_code / "data" / "tosca-off" / "cat0.off").read_bytes()[:5000])
     workdir = write_config_file(tmp_path / "run", tosca_config(becos_code, data_dir=str(tmp_path / "data")))
-    result = run_snakemake(
-        tmp_path,
-        "-d",
-        str(workdir),
-        "--configfile",
-        str(workdir / "config.yaml"),
-        "--cores",
-        "1",
-        "results/checks/datasets.json",
-    )
+    result = run_snakemake(tmp_path, "--cores", "1", "results/checks/datasets.json", workdir=workdir)
     assert result.returncode != 0
     log = (workdir / "logs" / "check_datasets.log").read_text()
     becos_lines = [line for line in log.splitlines() if line.startswith("becos check: ")]
@@ -242,7 +233,7 @@ def test_wrong_mesh_content_stops_the_run_before_any_remesh(becos_code, tmp_path
     (tosca / "wolf2.off").symlink_to(becos_code / "data" / "tosca-off" / "dog0.off")
     config = tosca_config(becos_code, data_dir=str(tmp_path / "data"), shapes=["tosca/wolf*", "tosca/dog*"])
     workdir = write_config_file(tmp_path / "run", config)
-    result = run_snakemake(tmp_path, "-d", str(workdir), "--configfile", str(workdir / "config.yaml"), "--cores", "1")
+    result = run_snakemake(tmp_path, "--cores", "1", workdir=workdir)
     assert result.returncode != 0
     console = result.stderr.split("becos: job check_datasets failed")[-1]
     assert f"{tosca / 'wolf1.off'}: all its 3 vertices lie in one plane" in console, console[-3000:]

@@ -9,39 +9,17 @@ from __future__ import annotations
 
 import csv
 import json
-import os
 import re
-import subprocess
 import sys
 from pathlib import Path
 
 import numpy as np
 import yaml
+from snakemake_cmd import snakemake
 from tiny_tosca import TINY_SHAPES, tosca_config, write_config_file
 
 REPO = Path(__file__).resolve().parents[1]
-SNAKEMAKE = [sys.executable, "-m", "snakemake", "-s", str(REPO / "Snakefile")]
 SETTINGS = ("full_full", "partial_full", "partial_partial")
-
-
-def snakemake(workdir: Path, *args: str, check: bool = True) -> subprocess.CompletedProcess:
-    env = dict(os.environ, PYTHONUNBUFFERED="1")
-    result = subprocess.run(
-        [*SNAKEMAKE, "-d", str(workdir), "--configfile", str(workdir / "config.yaml"), *args],
-        capture_output=True,
-        text=True,
-        env=env,
-    )
-    if check and result.returncode != 0:
-        logs = "\n".join(
-            f"--- {p}\n{p.read_text()[-3000:]}"
-            for p in sorted((workdir / "logs").rglob("*.log"))
-            if "Error" in p.read_text() or "Traceback" in p.read_text()
-        )
-        raise AssertionError(
-            f"snakemake {' '.join(args)} failed:\n{result.stdout[-4000:]}\n{result.stderr[-6000:]}\n{logs}"
-        )
-    return result
 
 
 def write_config(workdir: Path, becos_code: Path, **overrides) -> Path:
