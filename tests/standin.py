@@ -41,6 +41,12 @@ import numpy as np
 PUBLISHED_SETTINGS = ("full_full", "partial_partial")
 DATASETS = ("faust", "scape", "kids", "tosca", "smal", "shrec20", "dt4d_animal", "dt4d_human")
 """The 8 registry entries of the published benchmark (``config/datasets/<name>.yaml``)."""
+SHREC20_MODELS = (
+    *("bison", "camel_a", "cow", "dog", "elephant_a", "pig", "elephant_b"),
+    *("giraffe_b", "leopard", "giraffe_a", "rhino", "bear", "camel_b", "hippo"),
+)
+"""The 14 SHREC'20 models (``SHREC20b_hires/models/<name>.obj``), written out here rather than read from
+``shrec20.yaml``, so the tests check that file's splits against a list of their own."""
 PUBLISHED_SHAPES = 2533
 """Distinct shapes named by the two published pair lists."""
 PUBLISHED_PAIRS = {"train": 10185, "val": 137, "test": 142}

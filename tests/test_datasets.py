@@ -9,6 +9,7 @@ from collections import Counter
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
+from standin import SHREC20_MODELS
 
 from becos.datasets import (
     DatasetSpec,
@@ -260,23 +261,7 @@ def test_shrec20_listing_marks_excluded_shapes(tmp_path):
     spec = DatasetSpec.load("shrec20")
     folder = tmp_path / spec.folder
     folder.mkdir(parents=True)
-    names = [
-        "bison",
-        "camel_a",
-        "cow",
-        "dog",
-        "elephant_a",
-        "pig",
-        "elephant_b",
-        "giraffe_b",
-        "leopard",
-        "giraffe_a",
-        "rhino",
-        "bear",
-        "camel_b",
-        "hippo",
-    ]
-    for n in names:
+    for n in SHREC20_MODELS:
         (folder / f"{n}.obj").touch()
     entries = spec.list_shapes(tmp_path)
     assert len(entries) == 14

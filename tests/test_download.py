@@ -26,6 +26,7 @@ import pytest
 import yaml
 from archive_server import ArchiveServer
 from snakemake_cmd import snakemake_cmd
+from standin import SHREC20_MODELS
 
 from becos.check import DatasetCheckError, check_datasets
 from becos.cli import main as becos_main
@@ -45,22 +46,6 @@ from becos.workflow import resolve_config
 
 REPO = Path(__file__).resolve().parents[1]
 KIDS_NAMES = [f"000{kid}.isometry.{i}" for kid in (1, 2) for i in range(1, 16)] + ["0001.null.0", "0002.null.0"]
-SHREC_NAMES = [
-    "bison",
-    "camel_a",
-    "cow",
-    "dog",
-    "elephant_a",
-    "pig",
-    "elephant_b",
-    "giraffe_b",
-    "leopard",
-    "giraffe_a",
-    "rhino",
-    "bear",
-    "camel_b",
-    "hippo",
-]
 
 
 # --- stand-in archives -----------------------------------------------------------------------------
@@ -79,7 +64,7 @@ def kids_members() -> dict[str, bytes]:
 
 
 def shrec_members() -> dict[str, bytes]:
-    return {f"SHREC20b_hires/models/{n}.obj": _obj(i) for i, n in enumerate(SHREC_NAMES)}
+    return {f"SHREC20b_hires/models/{n}.obj": _obj(i) for i, n in enumerate(SHREC20_MODELS)}
 
 
 def zip_bytes(members: dict[str, bytes], links: dict[str, str] | None = None) -> bytes:
