@@ -64,7 +64,7 @@ DEFAULT_FACES_DIR = Path("corres_comp") / "default_faces"
 CHIRALITY_DIR = Path("precomputed_chirality_templates")
 SMAL_CLASSES = ("big_cats", "cows", "dogs", "hippos", "horses")
 
-_FIX_FOLDER = (
+FIX_ANNOTATION_FOLDER = (
     "point becos at an unmodified BeCoS annotation folder (e.g. the path printed by "
     "`../shared/unpack`, or a fresh clone of github.com/NafieAmrani/becos-code)"
 )
@@ -142,7 +142,7 @@ def file_name_part(dataset: str, template: str) -> str:
     return f"{ds}_{name}"
 
 
-def _user_cache_dir() -> Path:
+def user_cache_dir() -> Path:
     base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
     return Path(base) / "becos"
 
@@ -169,7 +169,7 @@ def parse_edge_file(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
     import pandas as pd
 
     path = Path(path)
-    fix = f"restore the file from the BeCoS annotation folder; {_FIX_FOLDER}"
+    fix = f"restore the file from the BeCoS annotation folder; {FIX_ANNOTATION_FOLDER}"
     if not path.is_file():
         raise InputFileError(path, "edge file not found", fix)
     try:
@@ -294,13 +294,13 @@ class AnnotationSource:
     ):
         self.root = Path(root).expanduser()
         if not self.root.is_dir():
-            raise InputFileError(self.root, "annotation folder not found", _FIX_FOLDER)
+            raise InputFileError(self.root, "annotation folder not found", FIX_ANNOTATION_FOLDER)
         table = Path(template_table)
         self.template_table_path = table if table.is_absolute() else self.root / "config" / table
         if cache_dir is None:
             cache_dir = self.root / ".becos-cache"
             if not _writable_dir(cache_dir):
-                cache_dir = _user_cache_dir()
+                cache_dir = user_cache_dir()
         self.cache_dir = Path(cache_dir) / "edges"
         self.graph: nx.Graph = read_adjacency(self.root / ADJACENCY_CSV)
         self._rows, self.duplicate_keys = read_template_table(self.template_table_path)
@@ -421,7 +421,7 @@ class AnnotationSource:
             return nx.shortest_path(self.graph, node_a, node_b)
         except nx.NetworkXNoPath:
             raise BecosError(
-                f"{self.root / ADJACENCY_CSV}: no path between '{node_a}' and '{node_b}'. Fix: {_FIX_FOLDER}"
+                f"{self.root / ADJACENCY_CSV}: no path between '{node_a}' and '{node_b}'. Fix: {FIX_ANNOTATION_FOLDER}"
             ) from None
 
     def _identity(self) -> set[frozenset[str]]:
@@ -439,7 +439,7 @@ class AnnotationSource:
                         raise InputFileError(
                             path,
                             f"line {i + 1} {line!r} is not 'dt4d_<classA>,dt4d_<classB>'",
-                            f"restore the file; {_FIX_FOLDER}",
+                            f"restore the file; {FIX_ANNOTATION_FOLDER}",
                         )
                     nodes = []
                     for p in parts:
@@ -448,7 +448,7 @@ class AnnotationSource:
                             raise InputFileError(
                                 path,
                                 f"line {i + 1}: class '{cls}' is no DT4D network node",
-                                f"restore the file; {_FIX_FOLDER}",
+                                f"restore the file; {FIX_ANNOTATION_FOLDER}",
                             )
                         nodes.append(dt4d_nodes[cls])
                     pairs.add(frozenset(nodes))
@@ -488,7 +488,7 @@ class AnnotationSource:
                 raise InputFileError(
                     folder / f"{pa}*_{pb}*_corres.txt",
                     f"no edge file for network edge {a} -> {b}",
-                    f"restore the annotation folder's precomputed_corr_templates; {_FIX_FOLDER}",
+                    f"restore the annotation folder's precomputed_corr_templates; {FIX_ANNOTATION_FOLDER}",
                 )
             if len(hits) > 1:
                 raise InputFileError(
@@ -517,7 +517,7 @@ class AnnotationSource:
             self._edges.move_to_end(path)
             return self._edges[path]
         if not path.is_file():
-            raise InputFileError(path, "edge file not found", f"restore it; {_FIX_FOLDER}")
+            raise InputFileError(path, "edge file not found", f"restore it; {FIX_ANNOTATION_FOLDER}")
         cached = self._cache_file(path)
         loaded = None
         if cached.is_file():
@@ -624,13 +624,13 @@ class AnnotationSource:
             faces = np.load(path, allow_pickle=False)
         except Exception as exc:
             raise InputFileError(
-                path, f"cannot be read as a numpy array ({exc})", f"restore it; {_FIX_FOLDER}"
+                path, f"cannot be read as a numpy array ({exc})", f"restore it; {FIX_ANNOTATION_FOLDER}"
             ) from exc
         if faces.ndim != 2 or faces.shape[1] != 3 or not np.issubdtype(faces.dtype, np.integer) or faces.min() < 0:
             raise InputFileError(
                 path,
                 f"is not an (F, 3) array of non-negative integers (shape {faces.shape}, dtype {faces.dtype})",
-                f"restore it; {_FIX_FOLDER}",
+                f"restore it; {FIX_ANNOTATION_FOLDER}",
             )
         return faces.astype(np.int64)
 
@@ -651,7 +651,7 @@ class AnnotationSource:
             raise InputFileError(
                 path,
                 f"no left/right labels for {dataset}/{template}",
-                f"use a template listed in {CHIRALITY_CSV}, or restore the file; {_FIX_FOLDER}",
+                f"use a template listed in {CHIRALITY_CSV}, or restore the file; {FIX_ANNOTATION_FOLDER}",
             )
         import pandas as pd
 
@@ -659,11 +659,13 @@ class AnnotationSource:
             values = pd.read_csv(path, sep=r"\s+", header=None, engine="c").to_numpy()
         except Exception as exc:
             raise InputFileError(
-                path, f"cannot be parsed ({type(exc).__name__}: {exc})", f"restore it; {_FIX_FOLDER}"
+                path, f"cannot be parsed ({type(exc).__name__}: {exc})", f"restore it; {FIX_ANNOTATION_FOLDER}"
             ) from exc
         if values.ndim != 2 or values.shape[1] != 1 or not np.isin(values, (0, 1)).all():
             raise InputFileError(
-                path, "must hold one 0 or 1 per line (one label per template vertex)", f"restore it; {_FIX_FOLDER}"
+                path,
+                "must hold one 0 or 1 per line (one label per template vertex)",
+                f"restore it; {FIX_ANNOTATION_FOLDER}",
             )
         return values[:, 0].astype(np.int8)
 
@@ -671,7 +673,7 @@ class AnnotationSource:
 # --- readers ------------------------------------------------------------------------------------------
 def _read_csv_rows(path: Path, columns: tuple[str, ...]) -> list[dict[str, str]]:
     if not path.is_file():
-        raise InputFileError(path, "file not found", _FIX_FOLDER)
+        raise InputFileError(path, "file not found", FIX_ANNOTATION_FOLDER)
     with open(path, newline="", encoding="utf-8") as fh:
         reader = csv.DictReader(fh)
         header = [h.strip() for h in (reader.fieldnames or [])]
@@ -724,9 +726,9 @@ def read_adjacency(path: str | Path) -> nx.Graph:
     import pandas as pd
 
     path = Path(path)
-    fix = f"restore config/adjacency_matrix.csv; {_FIX_FOLDER}"
+    fix = f"restore config/adjacency_matrix.csv; {FIX_ANNOTATION_FOLDER}"
     if not path.is_file():
-        raise InputFileError(path, "adjacency matrix not found", _FIX_FOLDER)
+        raise InputFileError(path, "adjacency matrix not found", FIX_ANNOTATION_FOLDER)
     try:
         df = pd.read_csv(path, index_col=0)
     except Exception as exc:

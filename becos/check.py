@@ -631,7 +631,7 @@ def require_plausible_edge(path: Path, a: str, b: str, stats: dict) -> None:
     :func:`edge_plausibility` ``stats`` exceed :data:`EDGE_MAX_RESIDUAL` or :data:`EDGE_MAX_STRETCH`
     (the whole map is elsewhere), or when any row exceeds :data:`EDGE_ROW_MAX_JUMP` (rows moved: the
     error names them by line number)."""
-    from becos.annotations import _FIX_FOLDER
+    from becos.annotations import FIX_ANNOTATION_FOLDER
 
     too_far = stats["residual"] is not None and stats["residual"] > EDGE_MAX_RESIDUAL
     too_spread = stats["stretch"] is not None and stats["stretch"] > EDGE_MAX_STRETCH
@@ -649,7 +649,7 @@ def require_plausible_edge(path: Path, a: str, b: str, stats: dict) -> None:
                 f"of {b}) from its template neighbours' mapped points (real BeCoS edge files: at most 0.22; "
                 f"limit {EDGE_ROW_MAX_JUMP}): the rows were edited or corrupted",
                 f"restore the annotation folder's original file (becos refuses the file, it never drops rows); "
-                f"{_FIX_FOLDER}",
+                f"{FIX_ANNOTATION_FOLDER}",
             )
         return
     found = []
@@ -669,7 +669,7 @@ def require_plausible_edge(path: Path, a: str, b: str, stats: dict) -> None:
         "the map does not land where its template belongs: "
         + " and ".join(found)
         + "; the file probably holds another edge's map",
-        f"restore the annotation folder's original file; {_FIX_FOLDER}",
+        f"restore the annotation folder's original file; {FIX_ANNOTATION_FOLDER}",
     )
 
 
@@ -752,7 +752,7 @@ def _check_annotations(
         DEFAULT_FACES_DIR,
         EDGE_DIR,
         AnnotationSource,
-        _user_cache_dir,
+        user_cache_dir,
     )
 
     fix_key = (
@@ -792,7 +792,7 @@ def _check_annotations(
             else:
                 report["notes"].append(f"{rel} is missing (optional)")
     try:
-        source = AnnotationSource(root, cache_dir=_user_cache_dir(), template_table=template_table)
+        source = AnnotationSource(root, cache_dir=user_cache_dir(), template_table=template_table)
     except BecosError as exc:
         if not any("is missing" in p and (str(ADJACENCY_CSV) in p or str(table_rel) in p) for p in problems):
             problems.append(f"annotation folder: {exc}")
@@ -904,7 +904,7 @@ def check_datasets(
     Raises:
         DatasetCheckError (a ConfigError): one message listing every problem; ``.report`` holds the report.
     """
-    from becos.annotations import AnnotationSource, _user_cache_dir
+    from becos.annotations import AnnotationSource, user_cache_dir
     from becos.datasets import DatasetSpec
 
     data_dir = Path(data_dir).expanduser().absolute()
@@ -928,7 +928,7 @@ def check_datasets(
     root = Path(annotations_dir).expanduser().absolute() if annotations_dir is not None else None
     if root is not None and root.is_dir():
         try:
-            source = AnnotationSource(root, cache_dir=_user_cache_dir(), template_table=template_table)
+            source = AnnotationSource(root, cache_dir=user_cache_dir(), template_table=template_table)
         except BecosError:
             source = None  # reported by the annotation check below
     specs = {}

@@ -52,9 +52,9 @@ from becos.sampling import (
     MANIFEST_COLUMNS,
     SETTINGS,
     UNDEFINED,
-    _field,
-    _template_row,
+    find_template_row,
     pair_id_of,
+    row_field,
     shape_key,
     sort_manifest,
 )
@@ -391,7 +391,7 @@ def write_published_pickle(
             raise ConfigError(f"shape {key} of pair {row['pair_id']} is not in the catalog")
         if key not in rot_cache:
             rot_cache[key] = rotation_to_xyz_degrees(frame_rotation(entry))
-        trow = _template_row(template_rows, str(entry["template_key"]))
+        trow = find_template_row(template_rows, str(entry["template_key"]))
         d = {
             "name": str(row[f"{side}_name"]),
             "org_dataset": str(row[f"{side}_dataset"]),
@@ -399,8 +399,8 @@ def write_published_pickle(
             "file_path": file_path(entry),
             "scale": float(entry["scale"]),
             "rot": list(rot_cache[key]),
-            "partial_full_template": _field(trow, "partial_full_template") if trow is not None else UNDEFINED,
-            "partial_full_dataset": _field(trow, "partial_full_dataset") if trow is not None else UNDEFINED,
+            "partial_full_template": row_field(trow, "partial_full_template") if trow is not None else UNDEFINED,
+            "partial_full_dataset": row_field(trow, "partial_full_dataset") if trow is not None else UNDEFINED,
             "desired_n_face_remeshed": int(faces)
             if faces is not None
             else int(face_targets(row[f"{side}_dataset"], row[f"{side}_name"], int(row[f"{side}_variant"]))),

@@ -160,12 +160,12 @@ def exact_maps(original: TriMesh, remeshed: TriMesh):
     Both surfaces may be wound either way (the locator detects a global sign flip).
     """
     from becos.geometry import SurfaceLocator, vertex_normals
-    from becos.remesh import _original_vertex_normals
+    from becos.remesh import original_vertex_normals
     from becos.surface_map import SurfaceMap
 
     face, weights, dist = SurfaceLocator(original).closest(remeshed.vertices, vertex_normals(remeshed))
     to_original = SurfaceMap(face, weights, dist)
-    face, weights, dist = SurfaceLocator(remeshed).closest(original.vertices, _original_vertex_normals(original))
+    face, weights, dist = SurfaceLocator(remeshed).closest(original.vertices, original_vertex_normals(original))
     return to_original, SurfaceMap(face, weights, dist)
 
 

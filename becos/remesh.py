@@ -301,7 +301,7 @@ class RemeshInput:
         """(V_s, 3) unit vertex normals of ``surface`` with its faces oriented consistently."""
         locator = self.locator
         known = locator.face_normals if locator.searches_every_face else None
-        return _original_vertex_normals(self.surface, known)
+        return original_vertex_normals(self.surface, known)
 
 
 def _vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
@@ -311,7 +311,7 @@ def _vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     return vertex_normals(TriMesh(vertices, faces))
 
 
-def _original_vertex_normals(mesh: TriMesh, face_normals: np.ndarray | None = None) -> np.ndarray:
+def original_vertex_normals(mesh: TriMesh, face_normals: np.ndarray | None = None) -> np.ndarray:
     """(V, 3) vertex normals of the input after orienting its faces consistently (on a copy).
 
     ``face_normals``: :func:`becos.geometry.oriented_face_normals` of ``mesh``, if already computed."""

@@ -210,7 +210,7 @@ def n_copies(usage: int, usage_scale: float = 1.0) -> int:
     return int(math.floor(usage * usage_scale + 0.5))
 
 
-def _template_row(template_rows, key: str):
+def find_template_row(template_rows, key: str):
     """The template row for ``key`` from a mapping or an object with ``template_row(key)``; None if absent."""
     if template_rows is None:
         return None
@@ -222,7 +222,7 @@ def _template_row(template_rows, key: str):
         return None
 
 
-def _field(row, name: str) -> str:
+def row_field(row, name: str) -> str:
     value = row[name] if isinstance(row, Mapping) else getattr(row, name)
     return str(value).strip()
 
@@ -325,11 +325,11 @@ def _p2f_pairs(
         if category == JOINER and split != "train":
             skipped["centaur_not_train"] += n
             continue
-        row = _template_row(template_rows, cat["template_key"].iat[i])
+        row = find_template_row(template_rows, cat["template_key"].iat[i])
         if row is None:
             skipped[f"no_template_row:{cat['template_key'].iat[i]}"] += n
             continue
-        t_name, t_ds = _field(row, "partial_full_template"), _field(row, "partial_full_dataset")
+        t_name, t_ds = row_field(row, "partial_full_template"), row_field(row, "partial_full_dataset")
         if UNDEFINED in (t_name, t_ds) or not t_name or t_name == "-":
             skipped["p2f_template_undefined"] += n
             continue

@@ -155,11 +155,11 @@ class ClassPoses:
     def mesh(self, dataset: str, name: str) -> TriMesh:
         """The shape's original mesh in the common frame the workflow remeshes (scaled, centred, rotated)."""
         from becos.datasets import prepare_shape
-        from becos.workflow import _entry
+        from becos.workflow import shape_entry
 
         key = (dataset, name)
         if key not in self._meshes:
-            self._meshes[key] = prepare_shape(_entry(self._rows[key])).mesh
+            self._meshes[key] = prepare_shape(shape_entry(self._rows[key])).mesh
         return self._meshes[key]
 
     def poses(self, dataset: str, shape_class: str) -> np.ndarray:

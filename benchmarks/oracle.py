@@ -400,9 +400,9 @@ def _published_cameras(setup: dict) -> dict:
 
 
 def rotation_identical(row: dict, info_x: dict, info_y: dict) -> bool:
-    from becos.workflow import _published_rotations
+    from becos.workflow import pair_published_rotations
 
-    rx, ry = _published_rotations(row)
+    rx, ry = pair_published_rotations(row)
     return bool(np.array_equal(rx, info_x["random_rotation"]) and np.array_equal(ry, info_y["random_rotation"]))
 
 

@@ -153,7 +153,7 @@ def run_artefacts(results: Path, work: Path, n_random: int) -> dict:
     the released export's format is not this module's and is counted as found), plus read timings on
     the re-encoded files."""
     from becos.atomic import save_npz
-    from becos.workflow import _narrow
+    from becos.workflow import narrow_faces
 
     out, timings = {}, {}
     for setting_dir in sorted(p for p in results.iterdir() if (p / "pairs").is_dir()):
@@ -189,7 +189,7 @@ def run_artefacts(results: Path, work: Path, n_random: int) -> dict:
                 dest / "ground_truth" / path.name,
                 compressed=True,
                 input_key=g["input_key"],
-                **{k: (_narrow(v) if k.endswith("_face") else v) for k, v in g.items() if k != "input_key"},
+                **{k: (narrow_faces(v) if k.endswith("_face") else v) for k, v in g.items() if k != "input_key"},
             )
         write_store(new_pairs, dest / "benchmark.zarr", setting=setting, progress=False)
         after = {

@@ -189,15 +189,15 @@ def test_stored_input_keys(tmp_path):
 
     gt = tmp_path / "gt.npz"
     save_npz(gt, input_key=np.array("abc123"), xy_face=np.zeros(3, dtype=np.int64))
-    assert bw._stored_key(gt, "input_key") == "abc123"
-    assert bw._stored_key(gt, "other") is None  # written before keys existed
+    assert bw.stored_key(gt, "input_key") == "abc123"
+    assert bw.stored_key(gt, "other") is None  # written before keys existed
     record = tmp_path / "record.npz"
     save_npz(record, __meta__=np.array(json.dumps({"pair_id": "p0", "input_key": "def456"})))
-    assert bw._stored_key(record, "__meta__") == "def456"
+    assert bw.stored_key(record, "__meta__") == "def456"
     broken = tmp_path / "broken.npz"
     broken.write_bytes(gt.read_bytes()[:40])  # a killed write
-    assert bw._stored_key(broken, "input_key") is None
-    assert bw._stored_key(tmp_path / "absent.npz", "input_key") is None
+    assert bw.stored_key(broken, "input_key") is None
+    assert bw.stored_key(tmp_path / "absent.npz", "input_key") is None
     # the key is a digest of everything the pair reads: any change gives another key
     parts = {"version": 1, "x": ["tosca", "cat0", "v0"], "sources": ["a", "b"], "options": {"remesh": True}}
     assert bw.digest(parts) == bw.digest(dict(reversed(list(parts.items()))))

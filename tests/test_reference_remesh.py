@@ -275,7 +275,7 @@ def test_pairs_stage_builds_published_p2p_pairs_from_the_published_views(publish
     sides, the published rotations, the try the reference kept; masks are becos's exact ones."""
     from becos.pairs import build_pair
     from becos.reference_views import full_faces_covering
-    from becos.workflow import ShapeStore, _published_rotations, _published_views, pair_options, remesh_token
+    from becos.workflow import ShapeStore, pair_options, pair_published_rotations, pair_published_views, remesh_token
 
     config = published["config"]
     row = oracle.manifest_row(published["manifests"]["partial_partial"], "train", 384)
@@ -284,7 +284,7 @@ def test_pairs_stage_builds_published_p2p_pairs_from_the_published_views(publish
     shapes = ShapeStore(config, published["plan"].catalog)
     x, y = (shapes.instance("tosca", row[f"{s}_name"], remesh_token(row, s, True)) for s in "xy")
     options = pair_options(config, "partial_partial")
-    views = _published_views(config, row, options)
+    views = pair_published_views(config, row, options)
     assert views is not None
     record = build_pair(
         x,
@@ -295,7 +295,7 @@ def test_pairs_stage_builds_published_p2p_pairs_from_the_published_views(publish
         seed=int(row["seed"]),
         split="train",
         options=options,
-        rotations=_published_rotations(row),
+        rotations=pair_published_rotations(row),
         published_views=views,
     )
     sides = [oracle.oracle_side(folder, i) for i in (0, 1)]

@@ -1,5 +1,5 @@
 """Pair record files (``.npz`` of :class:`becos.record.PairRecord`) as the store writer reads them: keys,
-shapes and dtypes from the zip's ``.npy`` headers without loading the arrays (:func:`_read_npz`), and
+shapes and dtypes from the zip's ``.npy`` headers without loading the arrays (:func:`read_npz`), and
 the index files that list a chunk's records (:func:`read_record_index`, :func:`expand_inputs`)."""
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ from becos.record import (
 
 
 @dataclass
-class _RecordInfo:
+class RecordInfo:
     path: Path
     meta: dict
     shapes: dict[str, tuple[tuple[int, ...], np.dtype]]
@@ -58,7 +58,7 @@ def _npy_header(fh) -> tuple[tuple[int, ...], np.dtype, bool]:
     return shape, dtype, fortran
 
 
-def _read_npz(path: Path, load: bool) -> tuple[dict, dict[str, tuple[tuple[int, ...], np.dtype]], dict]:
+def read_npz(path: Path, load: bool) -> tuple[dict, dict[str, tuple[tuple[int, ...], np.dtype]], dict]:
     """``(meta, {key: (shape, dtype)}, {key: array})`` of a record .npz (arrays only when ``load``), as
     :meth:`PairRecord.load` gives them (:func:`becos.record.decode_arrays`: widened, identity maps derived).
 
@@ -114,7 +114,7 @@ def _read_npz(path: Path, load: bool) -> tuple[dict, dict[str, tuple[tuple[int, 
     return meta, shapes, decode_arrays(arrays, identity) if load else arrays
 
 
-def _scan_record(path: Path) -> _RecordInfo:
+def scan_record(path: Path) -> RecordInfo:
     """Meta and the (shape, dtype) of every array of a record .npz, reading only the .npy headers."""
     fix = "give pair records written by becos (PairRecord.save, the workflow's pairs stage)"
     if not path.is_file():
@@ -124,7 +124,7 @@ def _scan_record(path: Path) -> _RecordInfo:
             "check the path (index paths are relative to the current directory) or re-run the pairs stage",
         )
     try:
-        meta, shapes, _ = _read_npz(path, load=False)
+        meta, shapes, _ = read_npz(path, load=False)
     except (zipfile.BadZipFile, ValueError, OSError, KeyError, SyntaxError, struct.error, TypeError) as exc:
         raise InputFileError(path, f"is not a readable pair record .npz ({exc})", fix) from exc
     if meta is None:
@@ -141,7 +141,7 @@ def _scan_record(path: Path) -> _RecordInfo:
             f"stores of version {SCHEMA_VERSION}",
             "rebuild the pair records with this becos",
         )
-    return _RecordInfo(path, meta, shapes)
+    return RecordInfo(path, meta, shapes)
 
 
 def read_record_index(path: str | Path) -> list[Path]:

@@ -34,7 +34,7 @@ from becos.record import (
     PairRecord,
 )
 from becos.store.layout import CHUNK_KEYS, SCHEMA_GROUPS, STORE_FORMAT, TABLE_COLUMNS, store_order_key
-from becos.store.npz import _read_npz, _RecordInfo, _scan_record
+from becos.store.npz import RecordInfo, read_npz, scan_record
 
 CHUNK_BYTES = 64 << 10
 """Uncompressed bytes per inner chunk (the unit a partial read decodes): 64 KiB, so reading one pair
@@ -54,7 +54,7 @@ writer's memory stays flat as stores grow: ~40 arrays x 4 MiB)."""
 VERSION_PACKAGES = ("becos", "numpy", "zarr", "trimesh", "pymeshlab", "embreex", "snakemake")
 
 
-def _plan_layout(infos: list[_RecordInfo]) -> tuple[dict[str, str | None], dict[str, np.ndarray]]:
+def _plan_layout(infos: list[RecordInfo]) -> tuple[dict[str, str | None], dict[str, np.ndarray]]:
     """Key -> group (None = stacked) and group -> per-pair lengths (N,) int64."""
     first = infos[0]
     keys = list(first.shapes)
@@ -317,9 +317,9 @@ def _progress(message: str) -> None:
     print(f"export-zarr: {message}", file=sys.stderr, flush=True)
 
 
-def _add_record(info: _RecordInfo, sinks: dict, layout: dict, metas: list, rows: list, index: int) -> None:
+def _add_record(info: RecordInfo, sinks: dict, layout: dict, metas: list, rows: list, index: int) -> None:
     try:
-        meta, _, arrays = _read_npz(info.path, load=True)
+        meta, _, arrays = read_npz(info.path, load=True)
     except (zipfile.BadZipFile, ValueError, OSError, KeyError, SyntaxError, struct.error, TypeError) as exc:
         raise InputFileError(
             info.path, f"is not a readable pair record .npz ({exc})", "re-run the pairs stage for this pair"
@@ -463,7 +463,7 @@ def write_store(
     infos = []
     seen: dict[str, Path] = {}
     for path in paths:
-        info = _scan_record(path)
+        info = scan_record(path)
         pid = info.meta["pair_id"]
         if pid in seen:
             raise InputFileError(path, f"pair {pid} is also in {seen[pid]}", "give each record once")

@@ -24,7 +24,7 @@ MESHES_KEPT = 12
 """Original meshes a chunk job keeps parsed in memory (:class:`becos.mesh.MeshCache`)."""
 
 
-def _entry(row) -> object:
+def shape_entry(row) -> object:
     from becos.catalog import frame_rotation
     from becos.datasets import ShapeEntry
 
@@ -118,7 +118,7 @@ class ShapeStore:
         self.layout = Layout.of(config)
         self.remeshed_root = self.layout.remeshed_root if remeshed is None else Path(remeshed)
         rows = catalog if isinstance(catalog, list) else catalog.to_dict("records")
-        self.entries = {(r["dataset"], r["name"]): _entry(r) for r in rows}
+        self.entries = {(r["dataset"], r["name"]): shape_entry(r) for r in rows}
         self.mesh_cache = MeshCache(self.layout.cache / "meshes", max_in_memory=MESHES_KEPT)
         self._prepared = _Recent(SHAPES_KEPT)
         self._remeshed = _Recent(SHAPES_KEPT, on_drop=self._forget_remeshed)

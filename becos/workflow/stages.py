@@ -90,7 +90,7 @@ def remesh_stage(config: dict, shape_row: dict, token: str, out: Path, ply: Path
     )
 
 
-def _stored_key(path: Path, member: str) -> str | None:
+def stored_key(path: Path, member: str) -> str | None:
     """The input key stored in an .npz (None if absent or unreadable)."""
     try:
         with np.load(path, allow_pickle=False) as data:
@@ -197,7 +197,7 @@ def ground_truth_stage(
             }
         )
         path = pair_file(folder, row["pair_id"])
-        computed = _stored_key(path, "input_key") != key
+        computed = stored_key(path, "input_key") != key
         if not computed and not ground_truth_intact(path):
             _log(
                 f"{path}: its content no longer matches the digest becos recorded when writing it (edited or "
@@ -234,10 +234,10 @@ def save_ground_truth(path: Path, key: str, gt_xy: SurfaceMap, gt_yx: SurfaceMap
 
     arrays = {
         "input_key": np.array(key),
-        "xy_face": _narrow(gt_xy.face),
+        "xy_face": narrow_faces(gt_xy.face),
         "xy_weights": gt_xy.weights,
         "xy_distance": gt_xy.distance,
-        "yx_face": _narrow(gt_yx.face),
+        "yx_face": narrow_faces(gt_yx.face),
         "yx_weights": gt_yx.weights,
         "yx_distance": gt_yx.distance,
     }
@@ -262,7 +262,7 @@ def ground_truth_intact(path: Path) -> bool:
     return stored is not None and str(stored) == _ground_truth_digest(arrays)
 
 
-def _narrow(face: np.ndarray) -> np.ndarray:
+def narrow_faces(face: np.ndarray) -> np.ndarray:
     """Face indices as int32 on disk when they fit (:class:`SurfaceMap` widens them on load)."""
     return face.astype(np.int32) if len(face) and face.max() <= np.iinfo(np.int32).max else face
 
@@ -343,7 +343,7 @@ def pairs_stage(
             }
         )
         path = pair_file(folder, row["pair_id"])
-        computed = _stored_key(path, "__meta__") != key
+        computed = stored_key(path, "__meta__") != key
         if not computed and not is_intact(path):
             _log(
                 f"{path}: its content no longer matches the digest becos recorded when writing it (edited or "
@@ -368,8 +368,8 @@ def pairs_stage(
                 split=row["split"],
                 options=options,
                 scanners=pair_scanners,
-                rotations=_published_rotations(row),
-                published_views=_published_views(config, row, options, triangle_ids),
+                rotations=pair_published_rotations(row),
+                published_views=pair_published_views(config, row, options, triangle_ids),
             )
             if labels is not None:
                 for side, s, t in (("x", x, tx), ("y", y, ty)):
@@ -417,7 +417,7 @@ def _require_indexed(path: Path, recorded: str, index: Path, shapes: ShapeStore)
         )
 
 
-def _published_views(config: dict, row: dict, options, triangle_ids: Path | None = None):
+def pair_published_views(config: dict, row: dict, options, triangle_ids: Path | None = None):
     """``original_settings`` P2P with the reference remesh: the views of the pair's published cameras
     (:func:`becos.reference_views.published_scan`), else None (the pairs stage draws cameras).
 
@@ -449,7 +449,7 @@ def _published_views(config: dict, row: dict, options, triangle_ids: Path | None
     )
 
 
-def _published_rotations(row: dict):
+def pair_published_rotations(row: dict):
     """The published lists' random rotations of a pair (``original_settings``), else None."""
     if "x_random_rot_0" not in row or math.isnan(float(row["x_random_rot_0"])):
         return None
