@@ -164,6 +164,27 @@ def _read_npy_block(path: Path, pick: np.ndarray | None, out: np.ndarray) -> np.
     return out
 
 
+def rows_covering(rows_folders, needed: Mapping, keys) -> dict[str, tuple[np.ndarray, Path, float]]:
+    """:func:`load_rows` of ``rows_folders`` for the meshes ``keys``: ``{key: (row vertices, block file,
+    sqrt_area)}``, checking that each mesh is there with every row ``needed[key]`` names."""
+    loaded = load_rows(rows_folders)
+    out = {}
+    for key in keys:
+        if key not in loaded:
+            raise ExportError(
+                f"{', '.join(map(str, rows_folders))}: no geodesic rows of mesh {key}. Fix: plan the rows "
+                f"with this store and the same splits (`becos geodesic-plan`), then rerun `becos geodesic-rows`"
+            )
+        have = loaded[key][0]
+        if not np.isin(needed[key], have).all():
+            raise ExportError(
+                f"geodesic rows of mesh {key}: {len(have)} rows, missing some of the {len(needed[key])} this "
+                f"store needs. Fix: rerun `becos geodesic-plan` and `becos geodesic-rows` with this store"
+            )
+        out[key] = loaded[key]
+    return out
+
+
 def mesh_blocks(
     meshes: dict,
     needed: dict,
@@ -191,19 +212,9 @@ def mesh_blocks(
     order = sorted(meshes, key=lambda k: (-len(needed[k]), k))
     started = time.monotonic()
     if rows_folders is not None:
-        loaded = load_rows(rows_folders)
+        loaded = rows_covering(rows_folders, needed, order)
         for key in order:
-            if key not in loaded:
-                raise ExportError(
-                    f"{', '.join(map(str, rows_folders))}: no geodesic rows of mesh {key}. Fix: plan the rows "
-                    f"with this store and the same splits (`becos geodesic-plan`), then rerun `becos geodesic-rows`"
-                )
-            have, path, scale = loaded[key]
-            if not np.isin(needed[key], have).all():
-                raise ExportError(
-                    f"geodesic rows of mesh {key}: {len(have)} rows, missing some of the {len(needed[key])} this "
-                    f"store needs. Fix: rerun `becos geodesic-plan` and `becos geodesic-rows` with this store"
-                )
+            _, path, scale = loaded[key]
             if abs(scale - scales[key]) > 1e-6 * abs(scale):
                 raise ExportError(
                     f"{path}: sqrt-area {scale!r} differs from {scales[key]!r} of this store. Fix: build every "
@@ -590,22 +601,7 @@ def _blocks_for(
             del block
             out[key] = (sources, path, scales[key])
         return out
-    loaded = load_rows(rows_folders)
-    out = {}
-    for key in meshes:
-        if key not in loaded:
-            raise ExportError(
-                f"{', '.join(map(str, rows_folders))}: no geodesic rows of mesh {key}. Fix: plan "
-                f"the rows with this store and the same splits (`becos geodesic-plan`), then "
-                f"rerun `becos geodesic-rows`"
-            )
-        have, path, scale = loaded[key]
-        if not np.isin(needed[key], have).all():
-            raise ExportError(
-                f"geodesic rows of mesh {key}: {len(have)} rows, missing some of the {len(needed[key])} this "
-                f"store needs. Fix: rerun `becos geodesic-plan` and `becos geodesic-rows` with this store"
-            )
-        out[key] = loaded[key]
+    out = rows_covering(rows_folders, needed, meshes)
     mesh_sqrt_areas(shapes, {key: scale for key, (_, _, scale) in out.items()})  # the store agrees with them
     return out
 
