@@ -19,33 +19,20 @@ def _schema() -> dict:
     return yaml.safe_load(SCHEMA_PATH.read_text())
 
 
-def _typed_command_line_values(schema: dict, instance, depth: int = 0):
-    """Nested values given as ``snakemake --config 'caps={train: 2, val: null}'`` arrive as strings
-    (Snakemake reads the values inside such a mapping with YAML's BaseLoader): a string below the top level
-    where the schema admits no string is read as a YAML scalar (:func:`_scalar_from_text`) and kept when
-    the result has a type the schema admits, recursively; anything else is left to the schema (and its
-    one-line error). ``depth`` counts the levels below the whole configuration (1: a top-level key's
-    value): top-level values keep the older typing here (``"4"`` -> 4 for an integer key), as Snakemake
-    types those itself."""
+def _typed_command_line_values(schema: dict, instance):
+    """Values given on the command line arrive as strings where Snakemake does not type them (inside a
+    mapping such as ``--config 'caps={train: 2, val: null}'`` it reads them with YAML's BaseLoader): a
+    string where the schema admits no string is read as a YAML scalar (:func:`_scalar_from_text`) and
+    kept when the result has a type the schema admits, recursively; anything else is left to the schema
+    (and its one-line error)."""
     kind = schema.get("type")
     if isinstance(instance, dict) and kind == "object":
         props = schema.get("properties", {})
-        return {k: _typed_command_line_values(props[k], v, depth + 1) if k in props else v for k, v in instance.items()}
+        return {k: _typed_command_line_values(props[k], v) if k in props else v for k, v in instance.items()}
     if isinstance(instance, list) and kind == "array" and isinstance(schema.get("items"), dict):
-        return [_typed_command_line_values(schema["items"], v, depth + 1) for v in instance]
+        return [_typed_command_line_values(schema["items"], v) for v in instance]
     if isinstance(instance, str):
-        if depth > 1:
-            return _scalar_from_text(schema, instance)
-        text = instance.strip()
-        if kind == "boolean" and text.lower() in ("true", "false"):
-            return text.lower() == "true"
-        try:
-            if kind == "integer" and text.lstrip("+-").isdigit():
-                return int(text)
-            if kind == "number":
-                return float(text)
-        except ValueError:
-            pass
+        return _scalar_from_text(schema, instance)
     return instance
 
 
