@@ -302,8 +302,8 @@ def test_direct_reads_equal_zarr_reads_and_damage_is_named(stores, pair_record_f
 
 def test_export_refuses_a_folder_that_is_not_a_store_and_never_deletes_its_inputs(pair_record_files, tmp_path, capsys):
     """BAD 7 of issue #29: ``--out`` on a folder that is not a becos store (a notes.txt and the input
-    records inside) is refused, also with ``--overwrite`` while the inputs lie inside it; with
-    ``--overwrite`` and only other files inside, the folder is replaced; an empty folder is used."""
+    records inside) is refused, also with ``--force`` while the inputs lie inside it; with
+    ``--force`` and only other files inside, the folder is replaced; an empty folder is used."""
     import shutil
 
     out = tmp_path / "work"
@@ -320,16 +320,16 @@ def test_export_refuses_a_folder_that_is_not_a_store_and_never_deletes_its_input
 
     assert main(args) != 0, "export-zarr replaced a folder that is not a store (and the inputs in it)"
     err = capsys.readouterr().err
-    assert str(out) in err and "not a becos store" in err and "notes.txt" in err and "--overwrite" in err, err
+    assert str(out) in err and "not a becos store" in err and "notes.txt" in err and "--force" in err, err
     assert "Traceback" not in err
     assert sorted(str(p.relative_to(out)) for p in out.rglob("*")) == before
 
-    assert main([*args, "--overwrite"]) != 0, "--overwrite deleted the export's own inputs"
+    assert main([*args, "--force"]) != 0, "--force deleted the export's own inputs"
     err = capsys.readouterr().err
     assert str(out) in err and "chunk_0000.json" in err and "inputs" in err, err
     assert sorted(str(p.relative_to(out)) for p in out.rglob("*")) == before
 
-    # inputs elsewhere, only notes.txt left: --overwrite replaces the folder with the store
+    # inputs elsewhere, only notes.txt left: --force replaces the folder with the store
     moved = tmp_path / "records"
     shutil.move(out / "records", moved)
     index.unlink()
@@ -337,9 +337,9 @@ def test_export_refuses_a_folder_that_is_not_a_store_and_never_deletes_its_input
     plain = ["export-zarr", "--setting", "partial_partial", "--out", str(out), *records]
     assert main(plain) != 0 and (out / "notes.txt").exists()
     capsys.readouterr()
-    assert main([*plain, "--overwrite"]) == 0
+    assert main([*plain, "--force"]) == 0
     assert not (out / "notes.txt").exists() and len(open_benchmark(out)) == 2
-    assert main(plain) == 0  # a becos store is replaced without --overwrite (the workflow rewrites stores)
+    assert main(plain) == 0  # a becos store is replaced without --force (the workflow rewrites stores)
 
     empty = tmp_path / "empty"
     empty.mkdir()

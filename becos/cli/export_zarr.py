@@ -18,10 +18,11 @@ def configure_parser(parser: argparse.ArgumentParser, name: str = "export-zarr")
         "--out",
         required=True,
         type=Path,
-        help="store folder to write: new, empty, or a becos store (replaced); anything else needs --overwrite",
+        help="store folder to write: new, empty, or a becos store (replaced); anything else needs --force",
     )
     parser.add_argument(
-        "--overwrite",
+        "--force",
+        dest="overwrite",
         action="store_true",
         help="replace an --out folder that is not a becos store, deleting what it holds "
         "(refused while an input lies inside it)",

@@ -65,7 +65,7 @@ temporary folder beside ``out`` that replaces ``out`` when complete. Command lin
         [--metadata metadata.json] results/partial_partial/pairs/chunk_*.json
 
 ``--out`` may be new, an empty folder or a becos store (replaced: the workflow rewrites its stores);
-any other folder is refused unless ``--overwrite`` is given, and never replaced while an input (a
+any other folder is refused unless ``--force`` is given, and never replaced while an input (a
 record, an index file, the metadata file) lies inside it (:func:`check_out_folder`).
 """
 

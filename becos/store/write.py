@@ -407,9 +407,9 @@ def check_out_folder(out: str | Path, inputs: Iterable[str | Path], *, overwrite
     held = f"a folder holding {_listing(out)}" if is_dir else "a file or link"
     if inside:
         held += f" (among them inputs of this export: {inside[0]})"
-        fix = f"{elsewhere}; --overwrite replaces such a folder, deleting what it holds, once no input lies inside it"
+        fix = f"{elsewhere}; --force replaces such a folder, deleting what it holds, once no input lies inside it"
     else:
-        fix = f"{elsewhere}, or pass --overwrite to replace it, deleting what it holds"
+        fix = f"{elsewhere}, or pass --force to replace it, deleting what it holds"
     raise InputFileError(
         out, f"is not a becos store but {held}, and export-zarr replaces the --out folder as a whole", fix
     )
