@@ -514,11 +514,11 @@ MAX_LISTED_ROWS = 10
 
 
 def edge_row_jumps(
-    points: np.ndarray, ok: np.ndarray, source_faces: np.ndarray, area: float, trusted: np.ndarray | None = None
+    points: np.ndarray, ok: np.ndarray, edges: np.ndarray, area: float, trusted: np.ndarray | None = None
 ) -> np.ndarray:
     """Per-row locality of an edge map. ``points``: (N, 3) mapped point of each source template vertex on
-    the target (NaN rows allowed), ``ok``: (N,) bool matched rows, ``source_faces``: (F, 3) faces of the
-    source template (indices < N), ``area``: target surface area (> 0, in the target's squared units),
+    the target (NaN rows allowed), ``ok``: (N,) bool matched rows, ``edges``: (E, 2) undirected edges of
+    the source template (:func:`becos.mesh.undirected_edges`, indices < N), ``area``: target surface area (> 0, in the target's squared units),
     ``trusted``: (N,) bool rows that may serve as neighbours (default ``ok``).
 
     Returns (N,) float64: for each matched row ``i``, the median over its trusted neighbours ``j`` (the
@@ -526,12 +526,9 @@ def edge_row_jumps(
     unmatched rows and rows without a trusted neighbour. A real map keeps it small (neighbours stay
     neighbours: about one target edge length); a row moved elsewhere on the target has a large one,
     while its neighbours' medians stay small (one far neighbour among ~6)."""
-    from becos.mesh import undirected_edges
-
     trusted = ok if trusted is None else ok & trusted
     out = np.full(len(points), np.nan)
-    pairs, _ = undirected_edges(source_faces)
-    pairs = np.concatenate([pairs, pairs[:, ::-1]])  # each edge seen from both ends: (row, neighbour)
+    pairs = np.concatenate([edges, edges[:, ::-1]])  # each edge seen from both ends: (row, neighbour)
     pairs = pairs[ok[pairs[:, 0]] & trusted[pairs[:, 1]]]
     if not len(pairs) or area <= 0:
         return out
@@ -603,8 +600,8 @@ def edge_plausibility(
         p /= np.sqrt((p**2).sum(axis=1).mean())
         out["residual"] = float(np.median(np.linalg.norm(procrustes(a, p).apply(a) - p, axis=1)))
     if source_faces is not None and len(source_faces) and source_faces.max() < len(edge.face):
-        pairs, _ = undirected_edges(source_faces)
-        pairs = pairs[ok[pairs[:, 0]] & ok[pairs[:, 1]]]
+        edges, _ = undirected_edges(source_faces)
+        pairs = edges[ok[edges[:, 0]] & ok[edges[:, 1]]]
         tri = target_vertices[target_faces]
         area = float(0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1).sum())
         if len(pairs) and area > 0:
@@ -614,8 +611,8 @@ def edge_plausibility(
             )
             # second pass: rows are measured against neighbours that are no outliers themselves, so a
             # correct row beside moved ones is not named
-            first = edge_row_jumps(points, ok, source_faces, area)
-            jumps = edge_row_jumps(points, ok, source_faces, area, ~(first > EDGE_ROW_MAX_JUMP))
+            first = edge_row_jumps(points, ok, edges, area)
+            jumps = edge_row_jumps(points, ok, edges, area, ~(first > EDGE_ROW_MAX_JUMP))
             jumps = np.where(np.isnan(jumps), first, jumps)
             if np.isfinite(jumps).any():
                 out["max_row_jump"] = float(np.nanmax(jumps))
