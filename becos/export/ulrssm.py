@@ -121,16 +121,29 @@ _PROCESS_BYTES = 150 << 20
 """Resident memory of a Python process with numpy, scipy and libigl loaded (a worker or this one)."""
 
 
+def distinct_matrices(shapes: list[GeodesicShape]) -> dict[str, dict[bytes, list[GeodesicShape]]]:
+    """The pair sides grouped by the distance matrix they show: ``{mesh key: {cut digest: [sides]}}``,
+    one group per full mesh (up to rigid motion) and vertices kept (a scan's cut); each group is one
+    file, the other sides hard links of it."""
+    import hashlib
+
+    groups: dict[str, dict[bytes, list[GeodesicShape]]] = {}
+    for sh in shapes:
+        digest = hashlib.sha1(np.ascontiguousarray(sh.p2f, dtype=np.int64).tobytes()).digest()
+        groups.setdefault(sh.key, {}).setdefault(digest, []).append(sh)
+    return groups
+
+
 def ulrssm_geodesic_estimate(
-    shapes: list[GeodesicShape], needed: dict, meshes: dict, jobs: int, computed: bool
+    groups: dict[str, dict[bytes, list[GeodesicShape]]], needed: dict, meshes: dict, jobs: int, computed: bool
 ) -> dict:
-    """The ULRSSM geodesics export's cost before it starts: ``files`` distinct matrices (one per full
-    mesh, one per distinct cut a scan keeps) for ``sides`` pair sides, ``disk_bytes`` their MAT files
+    """The ULRSSM geodesics export's cost before it starts: ``files`` distinct matrices
+    (:func:`distinct_matrices` ``groups``) for ``sides`` pair sides, ``disk_bytes`` their MAT files
     (Σ 4 n² + headers; links cost nothing), ``memory_bytes`` the peak resident memory of this process
     and its ``jobs`` workers together (the largest (R, R) float32 block, a write chunk, and while
     ``computed``: the tasks in flight, (rows, V) float32 each, plus each worker's solver)."""
-    distinct = {(sh.key, len(sh.p2f), sh.p2f.tobytes()) for sh in shapes}
-    disk = sum(mat_size(n) for _, n, _ in distinct)
+    distinct = [group for by_cut in groups.values() for group in by_cut.values()]
+    disk = sum(mat_size(len(group[0].p2f)) for group in distinct)
     memory = 0
     for key, sources in needed.items():
         r, v = len(sources), len(meshes[key][0])
@@ -143,7 +156,7 @@ def ulrssm_geodesic_estimate(
     return {
         "meshes": len(needed),
         "files": len(distinct),
-        "sides": len(shapes),
+        "sides": sum(len(group) for group in distinct),
         "disk_bytes": int(disk),
         "memory_bytes": int(memory),
         "largest_mesh_rows": max((len(s) for s in needed.values()), default=0),
@@ -169,18 +182,14 @@ def _write_ulrssm_dist(
 ) -> dict:
     """Write ``<tmp>/<split>/<i>/dist/<side>.mat`` of every shape (:func:`write_ulrssm`); returns the
     summary written to ``logs/geodesics.json`` (estimate, files, links, copies, bytes, seconds)."""
-    import hashlib
     import time
 
     from becos.atomic import link_or_copy
 
     started = time.monotonic()
     scales = mesh_sqrt_areas(shapes)
-    groups: dict[str, dict[bytes, list[GeodesicShape]]] = {}
-    for sh in shapes:
-        digest = hashlib.sha1(np.ascontiguousarray(sh.p2f, dtype=np.int64).tobytes()).digest()
-        groups.setdefault(sh.key, {}).setdefault(digest, []).append(sh)
-    estimate = ulrssm_geodesic_estimate(shapes, needed, meshes, jobs, rows_folders is None)
+    groups = distinct_matrices(shapes)
+    estimate = ulrssm_geodesic_estimate(groups, needed, meshes, jobs, rows_folders is None)
     free = int(shutil.disk_usage(tmp).free if free_bytes is None else free_bytes)
     print(
         f"export-ulrssm geodesics: {estimate['files']} distinct dist matrices of {estimate['meshes']} meshes for "
