@@ -18,7 +18,7 @@ from pathlib import Path
 PACKAGE = Path(__file__).resolve().parents[1] / "becos"
 
 
-def _modules(package: Path) -> dict[str, Path]:
+def package_modules(package: Path) -> dict[str, Path]:
     """``{dotted module name: file}`` of every module of the package."""
     out = {}
     for path in sorted(package.rglob("*.py")):
@@ -57,7 +57,7 @@ def _owner(name: str, modules: dict[str, Path]) -> str | None:
 
 def import_graph(package: Path = PACKAGE) -> dict[str, set[str]]:
     """``{module: modules of the package it imports}`` (the docstring's rules)."""
-    modules = _modules(package)
+    modules = package_modules(package)
     graph: dict[str, set[str]] = {name: set() for name in modules}
     for name, path in modules.items():
         parent = name if path.name == "__init__.py" else name.rpartition(".")[0]

@@ -16,6 +16,8 @@ import ast
 import re
 from pathlib import Path
 
+from test_imports import package_modules
+
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / "becos"
 SNAKE_FILES = [ROOT / "Snakefile", *sorted((ROOT / "workflow").rglob("*.smk"))]
@@ -24,13 +26,6 @@ SNAKE_PRIVATE = re.compile(r"\b(?:bw|becos(?:\.\w+)*)\.(_[A-Za-z]\w*)")
 
 def _private(name: str) -> bool:
     return name.startswith("_") and not name.startswith("__")
-
-
-def _module_name(path: Path, package: Path) -> str:
-    parts = list(path.relative_to(package.parent).with_suffix("").parts)
-    if parts[-1] == "__init__":
-        parts.pop()
-    return ".".join(parts)
 
 
 def _dotted(node: ast.expr) -> str | None:
@@ -47,10 +42,9 @@ def _dotted(node: ast.expr) -> str | None:
 def private_uses(package: Path = PACKAGE) -> list[str]:
     """``"module: what"`` for every private name used across modules of the package (the docstring)."""
     root = package.name
-    modules = {_module_name(p, package) for p in package.rglob("*.py")}
+    modules = package_modules(package)
     out = []
-    for path in sorted(package.rglob("*.py")):
-        name = _module_name(path, package)
+    for name, path in sorted(modules.items(), key=lambda item: item[1]):
         parent = name if path.name == "__init__.py" else name.rpartition(".")[0]
         tree = ast.parse(path.read_text(encoding="utf-8"), str(path))
         aliases: set[str] = set()  # local names bound to becos modules
