@@ -34,7 +34,14 @@ from pathlib import Path
 
 import numpy as np
 
-from becos.export.geodesics import GeodesicJobError, geodesic_plan, mesh_sqrt_areas, symmetric_block
+from becos.export.geodesics import (
+    GeodesicJobError,
+    estimate_text,
+    geodesic_disk_estimate,
+    geodesic_plan,
+    mesh_sqrt_areas,
+    symmetric_block,
+)
 
 WORKFLOW_PARTS = 8
 """Parts (``geodesic_rows`` jobs) of the workflow's geodesic plan: enough to keep a few cores or cluster
@@ -63,9 +70,10 @@ def write_plan(stores: list[Path], out: Path, parts: int, splits=None) -> dict:
     from becos.atomic import save_npz, write_text
     from becos.store import open_benchmark
 
-    meshes, needed, scales = {}, {}, {}
+    meshes, needed, scales, every_shape = {}, {}, {}, []
     for store in stores:
         shapes, store_meshes, store_needed, _ = geodesic_plan(open_benchmark(store).records(), splits)
+        every_shape += shapes
         for key, mesh in store_meshes.items():
             meshes.setdefault(key, mesh)
             needed.setdefault(key, []).append(store_needed[key])
@@ -90,6 +98,17 @@ def write_plan(stores: list[Path], out: Path, parts: int, splits=None) -> dict:
             arrays[f"{key}{SEPARATOR}sqrt_area"] = np.float64(scales[key])
             summary["meshes"][key] = {"part": k, "n_vertices": len(vertices), "n_rows": len(needed[key])}
         save_npz(out / f"part_{k}.npz", **arrays)
+    # the disk of every setting's geo-lora layout: blocks (the full shapes' files link them) and scans' cuts
+    summary["estimate"] = geodesic_disk_estimate(every_shape, needed, ("geo-lora",))
+    free = shutil.disk_usage(out).free
+    print(f"geodesic-plan: {estimate_text(summary['estimate'], free)}", file=sys.stderr, flush=True)
+    if summary["estimate"]["disk_bytes"] > free:
+        print(
+            "geodesic-plan: warning: the geodesics export will not fit the free disk. Fix: free disk space, "
+            "or export fewer splits (exports.geodesic_splits)",
+            file=sys.stderr,
+            flush=True,
+        )
     write_text(out / "plan.json", json.dumps(summary, indent=1, sort_keys=True) + "\n")
     return summary
 

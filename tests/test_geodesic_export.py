@@ -9,6 +9,7 @@ import hashlib
 import json
 import os
 import pickle
+import re
 
 import numpy as np
 import pytest
@@ -92,7 +93,10 @@ def dsmk_cached_result(verts_np: np.ndarray, faces_np: np.ndarray, cache_dir: st
             if (not np.array_equal(verts_np, cache_verts)) or (not np.array_equal(faces_np, cache_faces)):
                 i_cache += 1
                 continue
-            return npzfile["result"]
+            result = npzfile["result"]
+            if isinstance(result, np.ndarray) and result.dtype == np.object_:  # deserialize_result
+                result = result.item()
+            return result
         except FileNotFoundError:
             return None
 
@@ -231,6 +235,26 @@ def test_plan_rows_and_layouts_read_by_the_loaders(small_records, store_of, tmp_
         == 0
     )
     assert json.loads(capsys.readouterr().out)["dsmk_files"] == 0 and not (tmp_path / "geo-only" / "dsmk").exists()
+    # DeepShapeMatchingKit's files point at the geo-lora files (no second copy of a matrix); --dsmk-copies
+    # writes self-contained files; the loader gets the same bytes from both
+    pointing, copies = tmp_path / "geo-partial_partial", tmp_path / "dsmk-copies"
+    argv = ["export-geodesics", str(stores[2]), str(copies), "--splits", "test", "--rows", *map(str, rows)]
+    assert main([*argv, "--dsmk-copies"]) == 0
+    capsys.readouterr()
+    files = sorted(p.relative_to(pointing) for p in pointing.glob("dsmk/*/dist/*.npz"))
+    assert files and files == sorted(p.relative_to(copies) for p in copies.glob("dsmk/*/dist/*.npz"))
+    for name in files:
+        with np.load(pointing / name, allow_pickle=True) as a, np.load(copies / name) as b:
+            assert a["result"].dtype == np.float32 and np.array_equal(a["result"], b["result"])
+            assert np.array_equal(a["verts"], b["verts"]) and np.array_equal(a["faces"], b["faces"])
+            matrix_bytes = 4 * len(b["verts"]) ** 2
+        assert (pointing / name).stat().st_size < (copies / name).stat().st_size - matrix_bytes + 1000
+    # the export moved: the pointer is a cache miss for the loader (it computes the matrix itself), never
+    # a wrong matrix
+    moved = tmp_path / "moved"
+    pointing.rename(moved)
+    with np.load(moved / files[0], allow_pickle=True) as a, pytest.raises(FileNotFoundError):
+        a["result"]
     # rows without this store's meshes (the empty part) are refused with a message naming the fix
     assert main(["export-geodesics", str(stores[2]), str(tmp_path / "geo-bad"), "--rows", str(rows[2])]) == 2
     assert "Fix:" in capsys.readouterr().err
@@ -251,6 +275,16 @@ def test_workflow_plans_one_geodesic_plan_parallel_rows_and_one_layout_job_per_s
     planned = jobs_planned(snakemake(workdir, "-n", "--cores", "2").stdout)
     assert planned.get("geodesic_plan") == 1 and planned.get("geodesic_rows") == WORKFLOW_PARTS > 1, planned
     assert planned.get("geodesics") == 3, planned
+    # once the dataset check has run, a dry run states the export's disk (an upper bound from the manifests)
+    snakemake(workdir, "--cores", "2", "results/checks/datasets.json")
+    dry = snakemake(workdir, "-n", "--cores", "2")
+    line = next(x for x in dry.stderr.splitlines() if "the geodesics export (test split) needs at most" in x)
+    meshes, scans = (int(re.search(rf"(\d+) {word}", line).group(1)) for word in ("full meshes", "scans"))
+    assert meshes > 0 and scans > 0 and "of at most 10,000 vertices" in line and "free on disk" in line, line
+    expected = (meshes + scans) * (4 * 10_000**2 + 128)
+    assert f"needs at most {expected / 1e9:.2f} GB" in line, line
+    # the geodesic_plan job's disk_mb resource (a scheduler's disk request) is the same estimate
+    assert f"disk_mb={expected // 10**6}" in dry.stdout, dry.stdout[-3000:]
 
 
 def test_matrix_files_are_written_once_then_linked_or_copied_across_devices(tmp_path):
@@ -274,3 +308,27 @@ def test_matrix_files_are_written_once_then_linked_or_copied_across_devices(tmp_
     with tempfile.TemporaryDirectory(dir=shm) as other:
         assert link_or_copy(block, Path(other) / "0_x.npy") is False
         assert np.array_equal(np.load(Path(other) / "0_x.npy"), matrix) and block.stat().st_nlink == 2
+
+
+def test_the_geodesics_export_estimates_its_disk_first_and_stops_above_the_free_space(small_records, tmp_path, capsys):
+    """export-geodesics prints its disk estimate before computing anything; above the free space it
+    stops with DiskEstimateError and writes nothing; the estimate's matrices are the bytes it writes."""
+    from becos.export import DiskEstimateError, write_geodesic_matrices
+
+    records = small_records["partial_partial"]
+    out = tmp_path / "geo"
+    with pytest.raises(DiskEstimateError) as info:
+        write_geodesic_matrices(records, out, splits=["test"], free_bytes=10_000)
+    assert "nothing was written" in str(info.value) and "Fix:" in str(info.value) and not out.exists()
+    capsys.readouterr()
+    write_geodesic_matrices(records, out, splits=["test"])
+    line = capsys.readouterr().err.splitlines()[0]
+    cut = int(re.search(r"(\d+) cut matrices", line).group(1))
+    # partial_partial: every geo-lora file is a scan's cut (the blocks are the work folder's, gone now)
+    files = list((out / "geodesic_dist_matrices").glob("*.npy"))
+    assert cut == len(files) == 4
+    written = sum(p.stat().st_size for p in files) / 1e9
+    assert f"cut matrices ({written:.2f} GB)" in line, line
+    # DeepShapeMatchingKit's files point at those: a few KB each
+    dsmk = [p.stat().st_size for p in out.glob("dsmk/*/dist/*.npz")]
+    assert len(dsmk) == 4 and max(dsmk) < 200_000

@@ -83,6 +83,12 @@ def configure_parser(parser: argparse.ArgumentParser, name: str) -> argparse.Arg
             help="layouts to write (default: all): geo-lora geodesic_dist_matrices/<stem>.npy, "
             "dsmk dsmk/<split>/dist/<sha1>_0.npz",
         )
+        parser.add_argument(
+            "--dsmk-copies",
+            action="store_true",
+            help="DeepShapeMatchingKit files hold their matrix (a self-contained folder to copy elsewhere); "
+            "default with the geo-lora layout: they read the shape's geo-lora file (no second copy)",
+        )
     if name in ("export-psmal", "export-geodesics", "export-ulrssm"):
         parser.add_argument(
             "--geodesic-method", choices=METHODS, default="heat", help="geodesic estimator (default: heat)"
@@ -120,6 +126,7 @@ def run_cli(args: argparse.Namespace) -> int:
             progress=True,
             rows=args.rows,
             layouts=args.layouts,
+            dsmk_copies=args.dsmk_copies,
         )
         with open(out / GEODESIC_FOLDER / "index.csv", encoding="utf-8", newline="") as fh:
             rows = list(csv.DictReader(fh))

@@ -32,9 +32,9 @@ from becos.export.released import (
     released_stem,
     write_released,
 )
-from becos.export.staging import IDS_FILE, LAYOUT_VERSION, LOGS_DIR, SIDES, ExportError
+from becos.export.staging import IDS_FILE, LAYOUT_VERSION, LOGS_DIR, SIDES, DiskEstimateError, ExportError
 from becos.export.text import off_text, vts_text
-from becos.export.ulrssm import DiskEstimateError, ulrssm_geodesic_estimate, ulrssm_template_vts, write_ulrssm
+from becos.export.ulrssm import ulrssm_geodesic_estimate, ulrssm_template_vts, write_ulrssm
 from becos.record import full_shape
 
 __all__ = [

@@ -21,7 +21,17 @@ import numpy as np
 from becos.errors import BecosError
 from becos.export.psmal import psmal_shape_id
 from becos.export.released import released_file_stem, released_infos
-from becos.export.staging import SIDES, ExportError, check_record, id_field, staged_dir, write_ids, write_log
+from becos.export.staging import (
+    SIDES,
+    DiskEstimateError,
+    ExportError,
+    check_record,
+    gigabytes,
+    id_field,
+    staged_dir,
+    write_ids,
+    write_log,
+)
 from becos.record import PairRecord, full_shape
 
 _MI_INT8, _MI_INT32, _MI_UINT32, _MI_SINGLE, _MI_MATRIX = 1, 5, 6, 7, 14
@@ -539,6 +549,62 @@ def dsmk_cache_name(vertices: np.ndarray, faces: np.ndarray) -> str:
     return f"{digest.hexdigest()}_0.npz"
 
 
+class _NpyFile:
+    """Pickles as ``numpy.load(path)``."""
+
+    def __init__(self, path: str):
+        self.path = path
+
+    def __reduce__(self):
+        return (np.load, (self.path,))
+
+
+class _ScaledNpyFile:
+    """Pickles as ``operator.mul(numpy.load(path), scale)``: the (V, V) float32 file times a Python float
+    (float32 arithmetic, the same bytes as ``array * np.float32(scale)``). Only ``numpy.load`` and
+    ``_operator.mul`` are named, so any numpy version reads it."""
+
+    def __init__(self, path: str, scale: float):
+        self.path, self.scale = path, float(scale)
+
+    def __reduce__(self):
+        import operator
+
+        return (operator.mul, (_NpyFile(self.path), self.scale))
+
+
+def save_dsmk_pointer(path: str | Path, vertices: np.ndarray, faces: np.ndarray, target: Path, scale: float) -> int:
+    """Write DeepShapeMatchingKit's cache file ``path`` (:func:`dsmk_cache_name`) without a copy of the
+    matrix: ``verts`` (V, 3) float32 and ``faces`` (F, 3) int64 as its cache holds them, and ``result``
+    a pickle that reads the geo-lora file ``target`` (absolute; (V, V) float32, divided by the sqrt-area)
+    and multiplies it by ``scale`` (the sqrt-area), so the loader's ``np.load(path,
+    allow_pickle=True)["result"]`` is the (V, V) float32 matrix in the units of the vertices, equal to
+    the copy :func:`write_geodesic_matrices` would write. A few hundred bytes plus the mesh; if
+    ``target`` is gone (the export moved), the lookup raises FileNotFoundError, which the loader's
+    cache treats as a miss: it computes the matrix itself and replaces this file. Atomic; returns the
+    bytes written."""
+    import io
+    import pickle
+    import zipfile
+
+    from becos.atomic import atomic_path
+
+    result = io.BytesIO()
+    np.lib.format.write_array_header_1_0(result, {"descr": "|O", "fortran_order": False, "shape": ()})
+    pickle.dump(_ScaledNpyFile(str(Path(target).resolve()), scale), result, protocol=2)
+    members = {
+        "verts.npy": np.ascontiguousarray(vertices, dtype=np.float32),
+        "faces.npy": np.ascontiguousarray(faces, dtype=np.int64),
+    }
+    with atomic_path(path, suffix=".tmp.npz") as tmp:
+        with zipfile.ZipFile(tmp, "w", compression=zipfile.ZIP_STORED) as z:
+            for name, array in members.items():
+                with z.open(zipfile.ZipInfo(name), "w") as fh:  # default timestamp 1980-01-01, as numpy's
+                    np.lib.format.write_array(fh, array, allow_pickle=False)
+            z.writestr(zipfile.ZipInfo("result.npy"), result.getvalue())
+    return Path(path).stat().st_size
+
+
 def _dsmk_reads(setting: str, side: int) -> bool:
     """Whether DeepShapeMatchingKit's BeCoSDataset asks for the geodesics of this shape: only the first
     shape of each pair it forms is given ``dist``; it forms (0, 1) always and (1, 0) for F2F and P2P."""
@@ -575,6 +641,78 @@ def mesh_sqrt_areas(shapes: list[GeodesicShape], known: Mapping | None = None) -
                 f"(area_normalised) and rerun `becos geodesic-plan`"
             )
     return {sh.key: out[sh.key] for sh in shapes}
+
+
+_NPY_HEADER_BYTES = 128
+"""Bytes of a ``.npy`` file beyond its array (the header numpy writes for a 2-D float32 array)."""
+
+
+_DSMK_FILE_BYTES_PER_VERTEX = 12 + 2 * 24
+"""Bytes per vertex of a DeepShapeMatchingKit file beside its matrix: float32 vertices and int64 faces
+(about two faces per vertex on a closed surface)."""
+
+
+def geodesic_disk_estimate(
+    shapes: list[GeodesicShape],
+    needed: Mapping,
+    layouts=GEODESIC_LAYOUTS,
+    dsmk_points: bool = True,
+    blocks: bool = True,
+) -> dict:
+    """Bytes the geodesic layouts of ``shapes`` put on disk, counted before anything is written:
+    ``blocks_bytes`` one (R, R) float32 block per distinct full mesh (R = ``len(needed[key])``; the
+    full shapes' geo-lora files are hard links of it; with ``blocks`` False, e.g. read from
+    ``becos geodesic-rows`` folders, they are on disk already and not counted in ``disk_bytes``),
+    ``cut_bytes`` one (V_s, V_s) float32 file per other geo-lora shape (a scan), ``dsmk_bytes`` the
+    DeepShapeMatchingKit files (the mesh, and the matrix too unless ``dsmk_points``; counted per pair
+    side it reads, an upper bound where sides share a file). ``disk_bytes`` is their sum."""
+    keys = {sh.key for sh in shapes}
+    blocks_bytes = sum(4 * len(needed[k]) ** 2 + _NPY_HEADER_BYTES for k in keys)
+    cuts, dsmk = {}, {}
+    for sh in shapes:
+        n = len(sh.p2f)
+        if "geo-lora" in layouts and n != len(needed[sh.key]):  # p2f ⊆ needed: equal sets iff equal lengths
+            cuts.setdefault(sh.stem, 4 * n * n + _NPY_HEADER_BYTES)
+        if "dsmk" in layouts and _dsmk_reads(sh.setting, sh.side):
+            matrix = 0 if dsmk_points and "geo-lora" in layouts else 4 * n * n
+            dsmk[(sh.split, sh.pair_id, sh.side)] = matrix + _DSMK_FILE_BYTES_PER_VERTEX * n + 1024
+    out = {
+        "meshes": len(keys),
+        "blocks_bytes": blocks_bytes,
+        "cut_files": len(cuts),
+        "cut_bytes": sum(cuts.values()),
+        "dsmk_files": len(dsmk),
+        "dsmk_bytes": sum(dsmk.values()),
+    }
+    out["disk_bytes"] = (blocks_bytes if blocks else 0) + out["cut_bytes"] + out["dsmk_bytes"]
+    return out
+
+
+def estimate_text(estimate: Mapping, free: int) -> str:
+    """One line for a log: :func:`geodesic_disk_estimate`'s figures and the free space."""
+    return (
+        f"{estimate['meshes']} meshes (blocks {gigabytes(estimate['blocks_bytes'])}), {estimate['cut_files']} cut "
+        f"matrices ({gigabytes(estimate['cut_bytes'])}), {estimate['dsmk_files']} DeepShapeMatchingKit files "
+        f"({gigabytes(estimate['dsmk_bytes'])}): about {gigabytes(estimate['disk_bytes'])} to write; "
+        f"free on the output's disk: {gigabytes(free)}"
+    )
+
+
+def manifest_disk_estimate(manifests: Mapping, splits, n_vertices: int) -> dict:
+    """An upper bound of the workflow's geodesics export from the manifests alone (before any shape is
+    remeshed, e.g. in a dry run): every distinct full mesh ``(dataset, name, variant)`` of the pairs of
+    ``splits`` in all settings as one (V, V) float32 block, every scanned side (x in partial_full, both
+    in partial_partial) as one more, with V = ``n_vertices`` (the remesh's vertex bound). Returns
+    ``{"meshes", "scans", "disk_bytes"}``."""
+    keep = None if splits is None else {str(s) for s in splits}
+    meshes, scans = set(), 0
+    for setting, manifest in manifests.items():
+        rows = manifest if keep is None else manifest[manifest["split"].astype(str).isin(keep)]
+        for s in "xy":
+            meshes.update(zip(rows[f"{s}_dataset"], rows[f"{s}_name"], rows[f"{s}_variant"]))
+        scans += len(rows) * {"full_full": 0, "partial_full": 1, "partial_partial": 2}.get(setting, 2)
+    each = 4 * int(n_vertices) ** 2 + _NPY_HEADER_BYTES
+    return {"meshes": len(meshes), "scans": scans, "disk_bytes": (len(meshes) + scans) * each}
 
 
 def _block_cut(path: Path, cut: np.ndarray, whole: bool) -> np.ndarray:
@@ -618,6 +756,8 @@ def write_geodesic_matrices(
     progress: bool = False,
     rows=None,
     layouts=GEODESIC_LAYOUTS,
+    dsmk_copies: bool = False,
+    free_bytes: int | None = None,
 ) -> Path:
     """Geodesic matrices in the layouts loaders read (``docs/released-layout.md``, section 3):
 
@@ -644,8 +784,16 @@ def write_geodesic_matrices(
     every full shape) is a hard link of the block file (a copy where the file system has no hard
     links), so a full mesh shared by pairs, sides and settings costs its bytes once; other shapes' files
     are cut from the block, in one buffered write each. A DeepShapeMatchingKit file is a zip holding the
-    shape's own vertices, so it is written whole for every shape it needs (its ``result``: the block cut
-    times the sqrt-area, equal to the unnormalised matrix to float32 round-off).
+    shape's own (rotated) vertices, so it cannot be a link: with the geo-lora layout in the same export
+    its ``result`` points at the shape's geo-lora file (:func:`save_dsmk_pointer`: the file holds the
+    mesh and a few hundred bytes, the loader reads the geo-lora matrix times the sqrt-area); with
+    ``dsmk_copies`` (a self-contained folder, e.g. to copy elsewhere) or without the geo-lora layout it
+    holds the matrix itself (the block cut times the sqrt-area, equal to the unnormalised matrix to
+    float32 round-off). Both give the loader the same bytes.
+
+    Before anything is computed the disk the export adds is estimated (:func:`geodesic_disk_estimate`)
+    and printed with the free space of the output's file system (``free_bytes`` when given); an estimate
+    above it stops the export (:class:`DiskEstimateError`) and leaves ``out`` untouched.
     """
     from becos.atomic import link_or_copy, save_npy, save_npz
 
@@ -654,8 +802,20 @@ def write_geodesic_matrices(
         raise ExportError(f"geodesic layouts {unknown or '(none)'}: unknown. Fix: choose from {GEODESIC_LAYOUTS}")
 
     out = Path(out_dir)
+    dsmk_points = "geo-lora" in layouts and not dsmk_copies
     with staged_dir(out, overwrite) as tmp:
         shapes, meshes, needed, numbers = geodesic_plan(records, splits, keep_arrays=True)
+        estimate = geodesic_disk_estimate(shapes, needed, layouts, dsmk_points, blocks=rows is None)
+        free = int(shutil.disk_usage(tmp).free if free_bytes is None else free_bytes)
+        print(f"export-geodesics: {estimate_text(estimate, free)}", file=sys.stderr, flush=True)
+        if estimate["disk_bytes"] > free:
+            raise DiskEstimateError(
+                out,
+                f"the geodesic matrices need about {gigabytes(estimate['disk_bytes'])} but its file system has "
+                f"{gigabytes(free)} free; nothing was written",
+                "free disk space, choose another output folder on a larger disk, or export fewer splits "
+                "(--splits test) or layouts (--layouts geo-lora)",
+            )
         work = tmp / ".rows"
         work.mkdir()
         blocks = _blocks_for(shapes, meshes, needed, rows, method, jobs, work, progress)
@@ -677,7 +837,12 @@ def write_geodesic_matrices(
             dsmk_file = ""
             if "dsmk" in layouts and _dsmk_reads(sh.setting, sh.side):
                 dsmk_file = f"{DSMK_FOLDER}/{sh.split}/dist/{dsmk_cache_name(sh.vertices, sh.faces)}"
-                if dsmk_file not in dsmk_written:
+                if dsmk_file not in dsmk_written and dsmk_points:
+                    dsmk_written.add(dsmk_file)
+                    (tmp / dsmk_file).parent.mkdir(parents=True, exist_ok=True)
+                    target = out.resolve() / GEODESIC_FOLDER / f"{sh.stem}.npy"
+                    save_dsmk_pointer(tmp / dsmk_file, sh.vertices, sh.faces, target, scale)
+                elif dsmk_file not in dsmk_written:
                     dsmk_written.add(dsmk_file)
                     result = _block_cut(path, cut, whole) if matrix is None else matrix
                     result *= np.float32(scale)  # DSMK divides by the info file's sqrt-area itself

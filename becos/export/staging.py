@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from becos.errors import BecosError
+from becos.errors import BecosError, DiskFullError, InputFileError
 from becos.record import PairRecord
 
 LAYOUT_VERSION = 1
@@ -234,3 +234,16 @@ def place_by_split(staging: Staging, tmp: Path) -> tuple[list[list], dict[str, i
         counts[split] = len(entries)
     staging.finish()
     return rows, counts
+
+
+class DiskEstimateError(DiskFullError):
+    """An export would not fit: its estimated size exceeds the free space of its file system (raised
+    before anything is written)."""
+
+    def __init__(self, path: str | Path, problem: str, fix: str):
+        InputFileError.__init__(self, path, problem, fix)
+
+
+def gigabytes(n: float) -> str:
+    """``n`` bytes as text in GB (10⁹ bytes), two decimals."""
+    return f"{n / 1e9:.2f} GB"

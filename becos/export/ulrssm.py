@@ -13,7 +13,6 @@ from pathlib import Path
 
 import numpy as np
 
-from becos.errors import DiskFullError, InputFileError
 from becos.export.geodesics import (
     WRITE_CHUNK_BYTES,
     GeodesicShape,
@@ -25,7 +24,18 @@ from becos.export.geodesics import (
     task_rows,
     write_symmetric_mat,
 )
-from becos.export.staging import IDS_FILE, LOGS_DIR, SIDES, Staging, place_by_split, staged_dir, write_ids, write_log
+from becos.export.staging import (
+    IDS_FILE,
+    LOGS_DIR,
+    SIDES,
+    DiskEstimateError,
+    Staging,
+    gigabytes,
+    place_by_split,
+    staged_dir,
+    write_ids,
+    write_log,
+)
 from becos.export.text import off_text, vts_text
 from becos.record import PairRecord
 
@@ -104,14 +114,6 @@ def write_ulrssm(
     return out
 
 
-class DiskEstimateError(DiskFullError):
-    """An export would not fit: its estimated size exceeds the free space of its file system (raised
-    before anything is written)."""
-
-    def __init__(self, path: str | Path, problem: str, fix: str):
-        InputFileError.__init__(self, path, problem, fix)
-
-
 _SOLVER_BYTES_PER_VERTEX = 40_000
 """Peak memory of one heat-method task beyond its result, per mesh vertex (factorisations, (V, B) and
 (2F, B) solve blocks; measured: 0.34 GB at 9,369 vertices), for :func:`ulrssm_geodesic_estimate`."""
@@ -163,10 +165,6 @@ def ulrssm_geodesic_estimate(
     }
 
 
-def _gb(n: float) -> str:
-    return f"{n / 1e9:.2f} GB"
-
-
 def _write_ulrssm_dist(
     tmp: Path,
     out: Path,
@@ -193,17 +191,17 @@ def _write_ulrssm_dist(
     free = int(shutil.disk_usage(tmp).free if free_bytes is None else free_bytes)
     print(
         f"export-ulrssm geodesics: {estimate['files']} distinct dist matrices of {estimate['meshes']} meshes for "
-        f"{estimate['sides']} pair sides (the rest hard links): disk {_gb(estimate['disk_bytes'])}, peak memory "
-        f"~{_gb(estimate['memory_bytes'])} ({jobs} jobs, largest mesh {estimate['largest_mesh_rows']} vertices); "
-        f"free on the output's disk: {_gb(free)}",
+        f"{estimate['sides']} pair sides (the rest hard links): disk {gigabytes(estimate['disk_bytes'])}, peak memory "
+        f"~{gigabytes(estimate['memory_bytes'])} ({jobs} jobs, largest mesh {estimate['largest_mesh_rows']} vertices); "
+        f"free on the output's disk: {gigabytes(free)}",
         file=sys.stderr,
         flush=True,
     )
     if estimate["disk_bytes"] > free:
         raise DiskEstimateError(
             out,
-            f"the ULRSSM geodesic matrices need about {_gb(estimate['disk_bytes'])} ({estimate['files']} distinct "
-            f"(V, V) float32 .mat files of {estimate['meshes']} meshes) but its file system has {_gb(free)} "
+            f"the ULRSSM geodesic matrices need about {gigabytes(estimate['disk_bytes'])} ({estimate['files']} distinct "
+            f"(V, V) float32 .mat files of {estimate['meshes']} meshes) but its file system has {gigabytes(free)} "
             f"free; nothing was written",
             "free disk space, choose another --out on a larger disk, or export geodesics of fewer splits "
             "(--splits test)",
@@ -235,7 +233,7 @@ def _write_ulrssm_dist(
     if copies:
         print(
             f"export-ulrssm geodesics: {out}: the file system refused hard links; {copies} dist files are "
-            f"copies ({_gb(nbytes - estimate['disk_bytes'])} more than estimated)",
+            f"copies ({gigabytes(nbytes - estimate['disk_bytes'])} more than estimated)",
             file=sys.stderr,
             flush=True,
         )

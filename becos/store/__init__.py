@@ -3,7 +3,8 @@
 Modules: :mod:`becos.store.layout` (what writer and reader share: format, order, table columns,
 offsets groups), :mod:`becos.store.npz` (the pair record .npz files and their index files),
 :mod:`becos.store.write` (:func:`write_store`), :mod:`becos.store.read` (:func:`open_benchmark`,
-:class:`Benchmark`, :class:`TrainingView`); every name is importable from ``becos.store``.
+:class:`Benchmark`, :class:`TrainingView`), :mod:`becos.store.geodesics` (:class:`GeodesicView`: geodesic
+distances of the pairs on demand); every name is importable from ``becos.store``.
 
 Layout (one global table of pairs in *store order*: split train, val, test, then other splits
 alphabetically; inside a split by ``pair_id``; row ``i`` of every array below is pair ``i``)::
@@ -71,6 +72,7 @@ record, an index file, the metadata file) lies inside it (:func:`check_out_folde
 
 from __future__ import annotations
 
+from becos.store.geodesics import GeodesicView
 from becos.store.layout import (
     CHUNK_KEYS,
     SCHEMA_GROUPS,
@@ -118,6 +120,7 @@ __all__ = [
     "ContentDigests",
     "DAMAGED_STORE_FIX",
     "DamagedStoreError",
+    "GeodesicView",
     "PairKeyError",
     "READ_BLOCK_BYTES",
     "SCHEMA_GROUPS",
