@@ -4,6 +4,7 @@ shape's matrix rows on demand, equal to the geodesics export's files, with no ma
 from __future__ import annotations
 
 import csv
+import pickle
 
 import numpy as np
 import psutil
@@ -51,6 +52,9 @@ def test_the_lazy_route_gives_the_exported_distances_on_demand(small_cat_records
             computed = view.n_computed
             view.to_truth(i, predicted)  # the same rows again: read from the mesh's cache, none solved
             assert view.n_computed == computed
+        # a DataLoader worker gets a copy without the solvers, which starts its own
+        copy = pickle.loads(pickle.dumps(view))
+        assert copy.n_computed == 0 and len(copy) == len(view)
         workers = [p for p in psutil.Process().children() if "spawn_main" in " ".join(p.cmdline())]
         assert workers  # one solver process per full mesh kept
     gone, alive = psutil.wait_procs(workers, timeout=30)

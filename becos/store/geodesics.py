@@ -96,7 +96,8 @@ class GeodesicView:
 
     ``view.to_truth(i, predicted)`` and ``view.rows(i, side, vertices)`` for pair ``i`` in the order of
     :class:`becos.store.TrainingView` (same ``path`` and ``split``). Use as a context manager, or call
-    :meth:`close`, to end the worker processes.
+    :meth:`close`, to end the worker processes. Pickling it (a ``DataLoader`` worker) carries the path
+    and settings, not the solvers: each process starts its own.
 
     Args:
         path: the store folder.
@@ -113,6 +114,10 @@ class GeodesicView:
 
     def __len__(self) -> int:
         return len(self.pairs)
+
+    def __getstate__(self) -> dict:
+        # a DataLoader worker gets the path and settings, and starts its own solvers
+        return {**self.__dict__, "_meshes": OrderedDict()}
 
     def __enter__(self) -> GeodesicView:
         return self
