@@ -18,9 +18,15 @@ two variants of a shape and between poses of a class (0 expected), and the trian
 shape (longest edge / median edge, 99.9th percentile edge / median, smallest angle, faces with an
 angle under 10 degrees). ``--before PATH`` runs another
 checkout's code (e.g. ``git archive main | tar -x -C /tmp/before``) on the same variants,
-interleaved, so the ratio is measured in one run on a loaded machine::
+interleaved, so the ratio is measured in one run on a loaded machine. ``--decimators
+pymeshlab,fast-simplification`` runs this checkout's jobs once per decimator (config ``decimator``),
+interleaved in the same way, labelled ``after:<decimator>`` (one decimator: ``after``); each label
+also counts the variants whose fast-simplification result failed a check and was made with
+pymeshlab (``decimator_fallbacks``, from the job logs). Variants are compared byte for byte with the
+first label's (``variants_byte_identical``)::
 
-    python benchmarks/remesh.py --steps [--before PATH] [--shapes cat0,michael0] [--variants 2]
+    python benchmarks/remesh.py --steps [--before PATH] [--decimators pymeshlab,fast-simplification]
+        [--shapes cat0,michael0] [--variants 2]
 """
 
 from __future__ import annotations
@@ -232,7 +238,9 @@ def _run_job(tree: Path, config: dict, row: dict, token: str, out: Path) -> str:
     return proc.stderr
 
 
-def _job_cpu(tree: Path, config: dict, row: dict, token: str, out: Path) -> dict:
+def _job_cpu(tree: Path, config: dict, row: dict, token: str, out: Path) -> tuple[dict, list[str]]:
+    """The job's CPU seconds by step (:data:`STEPS`) and its decimator fallbacks (empty if none or
+    not logged)."""
     import resource
 
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
@@ -245,7 +253,9 @@ def _job_cpu(tree: Path, config: dict, row: dict, token: str, out: Path) -> dict
     steps["startup"] = steps.pop("job_start")
     steps["other"] = total - sum(steps.values())
     steps["total"] = total
-    return steps
+    decimator = [ln for ln in stderr.splitlines() if ln.startswith("remesh decimator: ")]
+    fallbacks = json.loads(decimator[-1].split(": ", 1)[1])["decimator_fallbacks"] if decimator else []
+    return steps, fallbacks
 
 
 def _triangle_quality(mesh) -> dict:
@@ -292,8 +302,15 @@ def _guarantees(original, r, target: int) -> dict:
     }
 
 
-def step_benchmark(trees: dict[str, Path], names: list[str], variants: int, workdir: Path) -> dict:
-    """The ``--steps`` figures (module docstring) for each code tree, jobs interleaved over trees."""
+def step_benchmark(
+    trees: dict[str, Path],
+    names: list[str],
+    variants: int,
+    workdir: Path,
+    decimators: dict[str, str] | None = None,
+) -> dict:
+    """The ``--steps`` figures (module docstring) for each label's code tree (``trees``: label -> tree),
+    jobs interleaved over labels; ``decimators``: label -> config ``decimator`` (absent: the default)."""
     import tempfile
 
     from becos.remesh import intrinsic_coincidence, load_remeshed, shared_vertex_share
@@ -312,6 +329,7 @@ def step_benchmark(trees: dict[str, Path], names: list[str], variants: int, work
                 "remesh_variants": variants,
                 "store_vis": False,
                 "results": str(work / label / "results"),
+                **({"decimator": decimators[label]} if label in (decimators or {}) else {}),
             }
         )
         for label in trees
@@ -324,6 +342,7 @@ def step_benchmark(trees: dict[str, Path], names: list[str], variants: int, work
     jobs: dict[str, list[dict]] = {label: [] for label in trees}
     guarantees: dict[str, dict] = {label: {} for label in trees}
     files: dict[str, dict] = {label: {} for label in trees}
+    fallbacks: dict[str, dict] = {label: {} for label in trees}
     # the job remeshes the PREPARED mesh (common frame, dataset scale): the guarantees compare with it
     # (with its own mesh cache: the jobs' caches stay empty, so each shape's first variant parses its file)
     config = {**configs[next(iter(trees))], "results": str(work / "prepared" / "results")}
@@ -334,8 +353,11 @@ def step_benchmark(trees: dict[str, Path], names: list[str], variants: int, work
             token = f"v{v}"
             for label, tree in trees.items():
                 config = configs[label]
-                out = work / label / f"{name}_{token}.npz"
-                steps = _job_cpu(tree, config, rows[name], token, out)
+                out = work / label.replace(":", "_") / f"{name}_{token}.npz"
+                out.parent.mkdir(parents=True, exist_ok=True)
+                steps, fell_back = _job_cpu(tree, config, rows[name], token, out)
+                if fell_back:
+                    fallbacks[label][f"{name}/{token}"] = fell_back
                 jobs[label].append({"variant": f"{name}/{token}", **{k: round(steps.get(k, 0.0), 3) for k in STEPS}})
                 r = load_remeshed(out)
                 target = remesh_target(config, "tosca", name, token)["target_vertices"]
@@ -380,6 +402,8 @@ def step_benchmark(trees: dict[str, Path], names: list[str], variants: int, work
             for a, b in pose_pairs
         ]
         out["guarantees"][label] = {
+            "decimator": configs[label].get("decimator"),
+            "decimator_fallbacks": fallbacks[label],
             "all_exact_vertex_target": all(x["exact_vertex_target"] for x in g.values()),
             "all_single_component": all(x["single_component"] for x in g.values()),
             "all_manifold_oriented_euler_kept": all(x["manifold_oriented"] and x["euler_kept"] for x in g.values()),
@@ -402,8 +426,8 @@ def step_benchmark(trees: dict[str, Path], names: list[str], variants: int, work
                 for k in g
             },
         }
-    if len(trees) == 2:
-        a, b = list(trees)
+    if len(trees) >= 2:
+        a, *others = list(trees)
 
         def same(x, y) -> bool:
             pairs = [(x.mesh.vertices, y.mesh.vertices), (x.mesh.faces, y.mesh.faces)]
@@ -411,9 +435,13 @@ def step_benchmark(trees: dict[str, Path], names: list[str], variants: int, work
                 pairs += [(m.face, n.face), (m.weights, n.weights), (m.distance, n.distance)]
             return all(np.array_equal(p, q, equal_nan=True) for p, q in pairs)
 
-        out["variants_byte_identical"] = f"{sum(same(files[a][k], files[b][k]) for k in files[a])}/{len(files[a])}"
-        ma, mb = out["cpu_seconds_per_variant"][a]["median"], out["cpu_seconds_per_variant"][b]["median"]
-        out["median_total_ratio"] = {f"{b}/{a}": round(mb["total"] / ma["total"], 3)}
+        ma = out["cpu_seconds_per_variant"][a]["median"]
+        out["variants_byte_identical"], out["median_total_ratio"] = {}, {}
+        for b in others:
+            identical = sum(same(files[a][k], files[b][k]) for k in files[a])
+            out["variants_byte_identical"][f"{b} vs {a}"] = f"{identical}/{len(files[a])}"
+            mb = out["cpu_seconds_per_variant"][b]["median"]
+            out["median_total_ratio"][f"{b}/{a}"] = round(mb["total"] / ma["total"], 3)
     out["load_average"] = [round(x, 2) for x in __import__("os").getloadavg()]
     return out
 
@@ -428,11 +456,21 @@ if __name__ == "__main__":
     parser.add_argument("--shapes", help="with --steps: comma-separated TOSCA names (default: STEP_SAMPLE)")
     parser.add_argument("--variants", type=int, default=2, help="with --steps: variants per shape")
     parser.add_argument("--workdir", type=Path, default=Path("/tmp"), help="with --steps: where jobs write")
+    parser.add_argument(
+        "--decimators",
+        help="with --steps: comma-separated config `decimator` values this checkout runs with (default: its default)",
+    )
     args = parser.parse_args()
     if args.steps:
         trees = {"before": args.before.resolve()} if args.before else {}
-        trees["after"] = REPO
+        decimators = {}
+        chosen = args.decimators.split(",") if args.decimators else [None]
+        for decimator in chosen:
+            label = "after" if len(chosen) == 1 else f"after:{decimator}"
+            trees[label] = REPO
+            if decimator is not None:
+                decimators[label] = decimator
         names = args.shapes.split(",") if args.shapes else STEP_SAMPLE
-        print(json.dumps(step_benchmark(trees, names, args.variants, args.workdir), indent=1))
+        print(json.dumps(step_benchmark(trees, names, args.variants, args.workdir, decimators), indent=1))
     else:
         print(json.dumps(remesh_benchmark(SAMPLE if args.sample else None), indent=1))

@@ -77,6 +77,7 @@ def test_job_options_are_the_stage_keys_results_and_version(config):
                 *((stage, s) for s in SETTINGS for stage in ("manifest", "pairs")),
             },
         ),
+        ({"decimator": "fast-simplification"}, {("remesh", None)}),
         ({"n_renders": 1}, set()),
         ({"store_vis": False}, set()),
         ({"exports": {"psmal": True}}, set()),

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import logging
+
 import numpy as np
 import pytest
 
@@ -61,7 +63,13 @@ def remeshes(tosca):
 @pytest.mark.parametrize("name", SAMPLE)
 def test_remesh_counts_topology_and_maps(remeshes, name):
     original, r, stats = remeshes(name)
-    target = variant_target_vertices(SEED, "tosca", name, 0)
+    assert_remesh_guarantees(original, r, stats, variant_target_vertices(SEED, "tosca", name, 0))
+
+
+def assert_remesh_guarantees(original: TriMesh, r: Remeshed, stats: dict, target: int) -> None:
+    """The remesh's documented guarantees (module docstring of becos.remesh): exact vertex target, one
+    manifold oriented component with the input's Euler characteristic, maps complete both ways and
+    within the ground-truth error bounds."""
     assert r.target_vertices == target and r.target_faces is None
     # documented guarantee: exactly the drawn target
     assert r.mesh.n_vertices == target
@@ -105,6 +113,81 @@ def test_remesh_counts_topology_and_maps(remeshes, name):
     round_trip = np.linalg.norm(back_points - original.vertices, axis=1)
     assert round_trip.mean() <= 6e-4 * d, round_trip.mean() / d
     assert np.percentile(round_trip, 99) <= 3e-3 * d
+
+
+@pytest.mark.parametrize("name", ["michael0", "horse5"])
+def test_fast_simplification_decimator_keeps_the_guarantees(tosca, name):
+    """``decimator: fast-simplification`` (issue #31) on real TOSCA meshes: michael0 (a large original,
+    so the pre-decimation is fast-simplification's too; boundaries; inconsistently wound) and horse5
+    (closed): the same guarantees as pymeshlab's, checked fast-simplification results (no fallback
+    needed on these), a different remesh from pymeshlab's, deterministic."""
+    original = tosca(name)
+    target = variant_target_vertices(SEED, "tosca", name, 0)
+    r, stats = remesh_with_stats(original, target, decimator="fast-simplification")
+    assert stats["decimator"] == "fast-simplification" and stats["decimator_fallbacks"] == []
+    assert_remesh_guarantees(original, r, stats, target)
+    assert stats["attempts"] == 1
+    again = remesh(original, target, decimator="fast-simplification")
+    assert again.mesh.vertices.tobytes() == r.mesh.vertices.tobytes()
+    assert again.from_original.weights.tobytes() == r.from_original.weights.tobytes()
+
+
+def test_fast_simplification_variants_do_not_share_samples(tosca, remeshes):
+    original, pymeshlab_r0, _ = remeshes("horse5", 0)
+    r0, r1 = (
+        remesh(original, variant_target_vertices(SEED, "tosca", "horse5", v), decimator="fast-simplification")
+        for v in (0, 1)
+    )
+    assert r1.mesh.n_vertices == variant_target_vertices(SEED, "tosca", "horse5", 1) != r0.mesh.n_vertices
+    assert shared_vertex_share(r0, original.faces, r1, original.faces) <= 0.05
+    assert intrinsic_coincidence(r0, original.faces, r1, original) <= 0.05
+    assert not np.array_equal(r0.mesh.vertices, pymeshlab_r0.mesh.vertices)  # the option changes the remesh
+
+
+def test_a_fast_simplification_result_that_breaks_a_guarantee_is_made_with_pymeshlab(tosca, monkeypatch, caplog):
+    """The documented fallback: a fast-simplification result with a speck (a second component) is
+    dropped and that call is made with pymeshlab; the stats and a warning say so, the guarantees hold."""
+    import fast_simplification
+
+    real = fast_simplification.simplify
+
+    def with_a_speck(points, triangles, **kwargs):
+        v, f = real(points, triangles, **kwargs)
+        speck = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]) + v.max(axis=0) + 1.0
+        return np.vstack([v, speck]), np.vstack([f, np.arange(len(v), len(v) + 3)[None]])
+
+    monkeypatch.setattr(fast_simplification, "simplify", with_a_speck)
+    original = tosca("wolf0")
+    target = variant_target_vertices(SEED, "tosca", "wolf0", 0)
+    with caplog.at_level(logging.WARNING, logger="becos.remesh"):
+        r, stats = remesh_with_stats(original, target, decimator="fast-simplification")
+    assert stats["decimator_fallbacks"] == ["decimation: 1 components beyond the first"]
+    assert "made it with pymeshlab" in caplog.text
+    assert_remesh_guarantees(original, r, stats, target)
+    with pytest.raises(ValueError, match="decimator must be one of pymeshlab, fast-simplification"):
+        remesh(original, target, decimator="meshlab")
+
+
+def test_the_decimator_key_reaches_the_remesh_job(tosca_entries, tmp_path, capsys):
+    """Config ``decimator`` -> the remesh job's options (its Snakemake params: a change reruns it) ->
+    :func:`becos.remesh.remesh_with_stats`; face-target mode with fast-simplification."""
+    import json
+
+    from becos.catalog import catalog_table
+    from becos.workflow import job_options, remesh_stage, resolve_config
+
+    base = {"synthetic": {"enabled": False}, "data_dir": "data", "annotations": "ann", "datasets": ["tosca"]}
+    assert resolve_config(base)["decimator"] == "pymeshlab"
+    config = resolve_config({**base, "decimator": "fast-simplification", "results": str(tmp_path / "results")})
+    options = json.loads(job_options(config, "remesh"))
+    assert options["decimator"] == "fast-simplification"
+    row = catalog_table([tosca_entries["wolf0"]]).iloc[0].to_dict()
+    out = tmp_path / "wolf0-f2000.npz"
+    remesh_stage(options, row, "f2000", out)
+    logged = [ln for ln in capsys.readouterr().err.splitlines() if ln.startswith("remesh decimator: ")]
+    assert json.loads(logged[0].split(": ", 1)[1]) == {"decimator": "fast-simplification", "decimator_fallbacks": []}
+    r = load_remeshed(out)
+    assert r.mesh.n_faces in (1999, 2000) and mesh_checks(r.mesh)["components"] == 1
 
 
 def test_orientation_follows_the_input(remeshes):

@@ -30,7 +30,7 @@ STAGE_KEYS: dict[str, tuple[str, ...]] = {
         "pairs_per_chunk",
         "original_settings",
     ),
-    "remesh": ("seed", "remesh", "remesher"),
+    "remesh": ("seed", "remesh", "remesher", "decimator"),
     "export": ("data_dir",),
     "ground_truth": ("annotations", "template_file", "remesh"),
     "pairs": (

@@ -54,7 +54,8 @@ def remesh_stage(config: dict, shape_row: dict, token: str, out: Path, ply: Path
 
     ``shape_row`` is the shape's catalog row (:mod:`becos.catalog` columns). With ``remesher:
     reference`` the reference's remesh of the file coordinates (:mod:`becos.reference_remesh`; a vertex
-    target n becomes the face target 2n).
+    target n becomes the face target 2n). Else becos's remesh, with the quadric decimator of config
+    ``decimator`` (:data:`becos.remesh.DECIMATORS`; its fallbacks to pymeshlab are logged).
     """
     from becos.remesh import remesh_with_stats, save_remeshed, write_ply
 
@@ -75,8 +76,10 @@ def remesh_stage(config: dict, shape_row: dict, token: str, out: Path, ply: Path
         result, _ = remesh_like_reference(shapes.mesh(dataset, name), prepared, faces, source=prepared.entry.path)
         cpu["remesh"] = time.process_time() - lap
     else:
-        result, stats = remesh_with_stats(prepared.mesh, **target, source=prepared.entry.path)
+        decimator = config.get("decimator") or "pymeshlab"
+        result, stats = remesh_with_stats(prepared.mesh, **target, source=prepared.entry.path, decimator=decimator)
         cpu.update(stats["cpu_seconds"])
+        _log(f"remesh decimator: {json.dumps({k: stats[k] for k in ('decimator', 'decimator_fallbacks')})}")
     lap = time.process_time()
     _remove_killed_writes([Path(p) for p in (out, ply) if p is not None])
     save_remeshed(Path(out), result)
