@@ -273,3 +273,33 @@ def test_a_terminal_shows_the_progress_panel_and_plain_output_stays_available(tm
     )
     assert code == 0, screen[-3000:]
     assert "Workflow Progress" not in screen and "1 of 1 steps (100%) done" in screen, screen[-3000:]
+
+
+def test_the_published_benchmark_config_is_one_valid_configfile(becos_code, tmp_path):
+    """config/becos.yaml (issue #30): the published benchmark's settings in one --configfile, valid
+    against the schema and planned by a dry run: all eight datasets, the published lists and template
+    table, and no partial_full (the reference publishes no list for it)."""
+    import yaml
+
+    repo = Path(__file__).resolve().parents[1]
+    raw = yaml.safe_load((repo / "config" / "becos.yaml").read_text())
+    assert raw["original_settings"] is True and raw["template_file"] == "templates_all.csv"
+    assert sorted(raw["datasets"]) == sorted(
+        p.stem for p in (repo / "becos" / "data" / "datasets").glob("*.yaml") if not p.stem.startswith("synth")
+    )
+    cmd = snakemake_cmd(
+        None,
+        "-d",
+        str(tmp_path),
+        "--configfile",
+        str(repo / "config" / "becos.yaml"),
+        "-n",
+        "--cores",
+        "2",
+        "--config",
+        f"data_dir={becos_code / 'data'}",
+        f"annotations={becos_code}",
+    )
+    result = subprocess.run(cmd, capture_output=True, text=True)
+    assert result.returncode == 0, result.stdout[-2000:] + result.stderr[-2000:]
+    assert "check_datasets" in result.stdout + result.stderr
