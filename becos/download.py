@@ -20,7 +20,11 @@ into place, so a folder under the final name is always complete. While the YAML'
 the first download records its digest and warns (saying what to pin); once it is pinned a different
 archive, or a folder recorded from a different archive, is an error.
 
-Every failure is a :class:`DownloadError` (a :class:`~becos.errors.ConfigError`) naming the URL or
+:func:`fetch_annotations` installs a pinned BeCoS annotation archive (``.tar.gz``/``.tgz``/``.tar``/``.zip``,
+``http(s)://`` or ``file://``) the same way: downloaded with :func:`fetch`, extracted safely, the record
+written (URL, SHA-256), moved into place atomically; a second call with the same digest does nothing.
+
+Every failure of a dataset download is a :class:`DownloadError` (a :class:`~becos.errors.ConfigError`) naming the URL or
 file, the problem and the fix.
 """
 
@@ -52,7 +56,8 @@ from becos.errors import BecosError, ConfigError
 log = logging.getLogger(__name__)
 
 RECORD_NAME = ".becos-download.json"
-"""Record written into a downloaded folder: ``{"url", "sha256", "sha256_pinned", ...}``."""
+"""Record written into a downloaded folder: ``{"url", "sha256", "sha256_pinned", ...}`` for a dataset,
+``{"url", "sha256", "fetched_at"}`` for the annotation folder (:func:`fetch_annotations`)."""
 
 CHUNK_BYTES = 1 << 20
 """Largest block read from the network and written to the partial file at a time."""
@@ -565,3 +570,86 @@ def download_dataset(
             digest,
         )
     return result
+
+
+# --- the annotation folder ------------------------------------------------------------------------
+def fetch_annotations(url: str, sha256: str, dest: str | Path) -> Path:
+    """Download the pinned annotation archive ``url`` and install it as folder ``dest``.
+
+    Steps: stream to a partial file beside ``dest`` (:func:`becos.download.fetch`: progress bar, an
+    interrupted download resumes), compare its SHA-256 with
+    ``sha256``, extract it (tar, tar.gz/tgz, tar.bz2/xz or zip; absolute paths, ``..`` members, links
+    leaving the archive and device files are rejected), drop a single top-level folder, write
+    ``dest/.becos-download.json`` (url, digest) and rename the result to ``dest``. If ``dest`` already
+    holds a download with this digest, nothing is done. A previous download with another digest is
+    replaced; a folder without the marker is never overwritten.
+
+    Returns:
+        ``dest`` (resolved).
+
+    Raises:
+        ConfigError: bad digest text, download failure, checksum mismatch (names both digests;
+            ``dest`` is left untouched), unsafe or unreadable archive, ``dest`` is someone else's folder.
+    """
+    dest = Path(dest).expanduser().resolve()
+    expected = str(sha256).strip().lower()
+    if not re.fullmatch(r"[0-9a-f]{64}", expected):
+        raise ConfigError(
+            f"'{sha256}' is not a SHA-256 digest (64 hex digits). Fix: pin the archive's digest (sha256sum ARCHIVE)"
+        )
+    marker = _record(dest) if dest.is_dir() else None
+    if marker is not None and marker.get("sha256") == expected:
+        print(f"fetch-annotations: {dest} already holds {expected[:12]}...; nothing to do", file=sys.stderr)
+        return dest
+    if dest.exists() and marker is None and (not dest.is_dir() or any(dest.iterdir())):
+        raise ConfigError(
+            f"{dest} already exists and was not made by `becos fetch-annotations` (no {RECORD_NAME}). "
+            f"Fix: choose another --dest, or remove {dest} yourself"
+        )
+    dest.parent.mkdir(parents=True, exist_ok=True)
+    part = partial_path(dest.parent / f"{dest.name}.{Path(urllib.parse.urlparse(url).path).name or 'archive'}")
+    fetch(
+        url,
+        part,
+        expected,
+        label="annotations",
+        fix="check the URL and the network connection, or download it by hand and pass a file:// URL",
+        pinned_in="the annotations_archive config / --sha256",
+    )
+    remove_stale_temporaries(dest.parent, [dest.name])  # extraction folders of killed fetches
+    work = Path(tempfile.mkdtemp(dir=dest.parent, prefix=f".{dest.name}.", suffix=".tmp-fetch"))
+    try:
+        out = work / "extract"
+        out.mkdir()
+        label = f"annotation archive {url}"
+        try:
+            extract_archive(part, out, label)
+        except (UnsafeArchiveError, CorruptArchiveError):
+            discard_partial(part)  # complete but unusable: a rerun must fetch it again
+            raise
+        discard_partial(part)
+        entries = [p for p in out.iterdir() if p.name != "__MACOSX"]
+        if not entries:
+            raise ConfigError(f"{label} is empty. Fix: check the URL")
+        root = entries[0] if len(entries) == 1 and entries[0].is_dir() and not entries[0].is_symlink() else out
+        write_text(
+            root / RECORD_NAME,
+            json.dumps({"url": url, "sha256": expected, "fetched_at": time.strftime("%Y-%m-%dT%H:%M:%S%z")}, indent=2)
+            + "\n",
+        )
+        os.chmod(root, 0o755)
+        old = None
+        if dest.exists():  # a previous download (other digest) or an empty folder: swap it out
+            old = work / "previous"
+            os.rename(dest, old)
+        try:
+            os.rename(root, dest)
+        except OSError:
+            done = _record(dest) if dest.is_dir() else None
+            if done is not None and done.get("sha256") == expected:  # a parallel fetch won
+                return dest
+            raise
+        print(f"fetch-annotations: installed {dest}", file=sys.stderr)
+        return dest
+    finally:
+        shutil.rmtree(work, ignore_errors=True)

@@ -19,9 +19,10 @@ import pytest
 import yaml
 
 from becos.annotations import AnnotationSource
-from becos.check import MARKER_NAME, DatasetCheckError, check_datasets, check_mesh_file, fetch_annotations
+from becos.check import DatasetCheckError, check_datasets, check_mesh_file
 from becos.cli import main as becos_main
 from becos.datasets import CONFIG_DIR
+from becos.download import RECORD_NAME, fetch_annotations
 from becos.errors import ConfigError, InputFileError
 
 # what AnnotationSource needs (plus a few small files), copied into the served archive
@@ -201,7 +202,7 @@ def test_fetch_annotations_from_loopback_server(becos_code, served, tmp_path):
     got = fetch_annotations(url, digest.upper(), dest)
     assert got == dest.resolve() and len(requests) == 2
     assert (dest / "config" / "adjacency_matrix.csv").is_file()  # the top-level folder was stripped
-    assert json.loads((dest / MARKER_NAME).read_text())["sha256"] == digest
+    assert json.loads((dest / RECORD_NAME).read_text())["sha256"] == digest
     fetched = AnnotationSource(dest, cache_dir=tmp_path / "edge-cache")
     original = AnnotationSource(becos_code, cache_dir=tmp_path / "edge-cache")
     assert sorted(fetched.graph.edges) == sorted(original.graph.edges)
@@ -210,9 +211,9 @@ def test_fetch_annotations_from_loopback_server(becos_code, served, tmp_path):
     assert fetched.path("tosca_cat0", "tosca_horse0") == ["tosca_cat0", "tosca_dog0", "tosca_horse0"]
 
     # second fetch: no request, nothing rewritten
-    stamp = (dest / MARKER_NAME).stat().st_mtime_ns
+    stamp = (dest / RECORD_NAME).stat().st_mtime_ns
     assert fetch_annotations(url, digest, dest) == dest.resolve()
-    assert len(requests) == 2 and (dest / MARKER_NAME).stat().st_mtime_ns == stamp
+    assert len(requests) == 2 and (dest / RECORD_NAME).stat().st_mtime_ns == stamp
 
     # the fetched folder lacks the edge files: the check lists the missing ones for TOSCA
     with pytest.raises(DatasetCheckError, match="no edge file for network edge tosca_cat0 -> tosca_dog0") as info:

@@ -1,4 +1,4 @@
-"""``becos check`` and ``becos fetch-annotations`` (:mod:`becos.check`)."""
+"""``becos check`` (:mod:`becos.check`) and ``becos fetch-annotations`` (:func:`becos.download.fetch_annotations`)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,8 @@ import time
 from pathlib import Path
 
 from becos.atomic import write_text
-from becos.check import DatasetCheckError, check_datasets, fetch_annotations
+from becos.check import DatasetCheckError, check_datasets
+from becos.download import fetch_annotations
 
 
 def configure_parser(parser: argparse.ArgumentParser, name: str = "check") -> argparse.ArgumentParser:

@@ -209,9 +209,9 @@ class ShapeStore:
     def edge_digests(self, x, y) -> list[str]:
         """Digests of the edge files the ground truth between entries ``x`` and ``y`` reads (both ways),
         for its input key. Each file is checked once per job for geometric plausibility where its
-        target template's mesh is available (:func:`becos.check.edge_plausibility`, whole map and row
+        target template's mesh is available (:func:`becos.check.edges.edge_plausibility`, whole map and row
         by row), since a file changed after the dataset check is only seen here."""
-        from becos.check import edge_plausibility, require_plausible_edge
+        from becos.check.edges import edge_plausibility, require_plausible_edge
 
         annotations = self.network.annotations
         out = []
