@@ -34,7 +34,7 @@ import numpy as np
 from becos.atomic import save_npz as atomic_save_npz
 from becos.errors import InputFileError
 from becos.formats import check_file, not_a_mesh_file
-from becos.formats.off import off_data_lines, read_off
+from becos.formats.off import off_data_lines, read_plain_off
 from becos.formats.problems import TRUNCATED_FIX
 
 MESH_SUFFIXES = (".off", ".ply", ".obj")
@@ -133,7 +133,7 @@ def read_mesh(path: str | Path) -> TriMesh:
     if path.suffix.lower() not in MESH_SUFFIXES:
         raise InputFileError(path, f"unknown mesh type '{path.suffix}'", f"convert it to one of {MESH_SUFFIXES}")
     if path.suffix.lower() == ".off":
-        plain = _read_plain_triangle_off(path)
+        plain = read_plain_off(path.read_bytes())  # without trimesh (~1 s of a remesh job) and its header check
         if plain is not None:
             check_mesh_arrays(path, *plain)
             return TriMesh(*plain)
@@ -156,27 +156,6 @@ def read_mesh(path: str | Path) -> TriMesh:
     return TriMesh(vertices, faces)
 
 
-def _read_plain_triangle_off(path: Path) -> tuple[np.ndarray, np.ndarray] | None:
-    """(V, 3) float64 vertices and (F, 3) int64 faces of a PLAIN triangle OFF file, else None.
-
-    Plain: ASCII, no comment, an ``OFF`` line, a line of three counts, exactly the announced number
-    of vertex lines (three numbers each) and face lines (``3 i j k``), nothing else. The arrays are
-    read by :func:`becos.formats.off.read_off`, without importing trimesh (~1 s of a remesh job) and
-    without its second pass over the file for the header check (the counts are checked there). Anything
-    else returns None: :func:`read_mesh` then parses it with trimesh and reports faults precisely.
-    """
-    data = path.read_bytes()
-    if b"#" in data or not data.isascii():
-        return None
-    head = [line.strip() for line in data.split(b"\n", 8)[:8] if line.strip()]
-    if len(head) < 2 or head[0] != b"OFF":
-        return None
-    counts = head[1].split()
-    if len(counts) != 3 or not all(c.isdigit() for c in counts):
-        return None
-    return read_off(data)
-
-
 def _raise_precise(path: Path, exc: Exception) -> None:
     """When the cheap check of :func:`becos.formats.check_file` names a line at fault that is not a
     cut file (a vertex line with 2 values, a quad face), raise its error instead of the parser's."""
@@ -188,16 +167,10 @@ def _raise_precise(path: Path, exc: Exception) -> None:
 
 
 def _check_off_header(path: Path, n_vertices: int, n_faces: int) -> None:
-    """A truncated OFF can still parse (face lines read as vertices): compare with the header's counts."""
-    with open(path, "rb") as fh:
-        words: list[bytes] = []
-        for line in fh:
-            words += line.split(b"#")[0].split()
-            if (len(words) >= 3 and words[0].upper().endswith(b"OFF")) or len(words) >= 4:
-                break
-    counts = words[1:3] if words and words[0].upper().endswith(b"OFF") else words[0:2]
+    """A truncated OFF can still parse (face lines read as vertices): compare with the header's counts
+    (:func:`becos.formats.off.off_data_lines`), and the data lines with the counts."""
     try:
-        header_vertices, header_faces = (int(c) for c in counts)
+        header_vertices, header_faces, have = off_data_lines(path.read_bytes())
     except ValueError:
         raise InputFileError(
             path, "the OFF header has no vertex and face counts", "the file is corrupt: re-download or re-extract it"
@@ -210,7 +183,6 @@ def _check_off_header(path: Path, n_vertices: int, n_faces: int) -> None:
             f"but {n_vertices} and {n_faces} were read (truncated or corrupt file)",
             "re-download or re-extract the file",
         )
-    _, _, have = off_data_lines(path.read_bytes())
     if have > n_vertices + n_faces:  # trimesh stops at the announced counts: the rest would be dropped silently
         raise InputFileError(
             path,

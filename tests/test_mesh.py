@@ -63,11 +63,11 @@ def test_plain_off_reader_gives_trimeshs_arrays_and_other_files_fall_back(name, 
     the bytes trimesh reads; a file with a comment, a quad or a ragged vertex line goes to trimesh."""
     import trimesh
 
-    from becos.mesh import _read_plain_triangle_off
+    from becos.formats.off import read_plain_off
 
     path = tosca_dir / f"{name}.off"
     loaded = trimesh.load(path, process=False, maintain_order=True, force="mesh", skip_materials=True)
-    plain = _read_plain_triangle_off(path)
+    plain = read_plain_off(path.read_bytes())
     assert plain is not None
     assert plain[0].dtype == np.float64 and plain[0].tobytes() == np.asarray(loaded.vertices, np.float64).tobytes()
     assert plain[1].dtype == np.int64 and plain[1].tobytes() == np.asarray(loaded.faces, np.int64).tobytes()
@@ -85,7 +85,7 @@ def test_plain_off_reader_gives_trimeshs_arrays_and_other_files_fall_back(name, 
     for label, text in variants.items():
         other = tmp_path / f"{label}.off"
         other.write_text("\n".join(text) + "\n")
-        assert _read_plain_triangle_off(other) is None, label
+        assert read_plain_off(other.read_bytes()) is None, label
     # the commented file is still read (by trimesh), with the same arrays
     again = read_mesh(tmp_path / "comment.off")
     assert np.array_equal(again.vertices, mesh.vertices) and np.array_equal(again.faces, mesh.faces)

@@ -316,14 +316,14 @@ def check_datasets(
     config_dir: str | Path | None = None,
     compare_geometry: bool = True,
 ) -> dict:
-    """Check the enabled datasets and the annotation folder; return the report (module docstring).
+    """Check the enabled datasets and the annotation folder; return the report (:mod:`becos.check`).
 
     Args:
         datasets: enabled dataset names (registry: :func:`becos.datasets.available_datasets`).
         data_dir: the data root holding each dataset's ``folder``.
         annotations_dir: the BeCoS annotation folder; None skips its checks (DT4D and SMAL listings
             then fail, as they read files from it).
-        read_meshes: check every listed mesh file (cheap header/size check, see module docstring);
+        read_meshes: check every listed mesh file (cheap header/size check, see :mod:`becos.check`);
             False checks folders and counts only.
         full_parse: also parse every mesh completely with :func:`becos.mesh.read_mesh` and report the
             repairs remeshing will apply (``<dataset>["repairs"]``; slow).

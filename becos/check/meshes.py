@@ -17,7 +17,7 @@ from becos.formats.off import read_off
 
 
 def check_mesh_file(path: str | Path, full_parse: bool = False) -> tuple[int, int]:
-    """Cheap check that a mesh file is complete (see the module docstring; :func:`becos.formats.check_file`);
+    """Cheap check that a mesh file is complete (see :mod:`becos.check`; :func:`becos.formats.check_file`);
     returns (V, F) counts.
 
     For OBJ the counts are the numbers of ``v`` and ``f`` lines. ``full_parse`` also reads the mesh

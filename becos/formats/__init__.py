@@ -2,7 +2,8 @@
 of a file, and for OFF the one reader of becos.
 
 - :mod:`becos.formats.off`: the OFF header, :func:`~becos.formats.off.check_off` and
-  :func:`~becos.formats.off.read_off` (plain triangle OFF, numpy; :func:`becos.mesh.read_mesh` uses it);
+  :func:`~becos.formats.off.read_off` (triangle OFF, numpy; :func:`becos.mesh.read_mesh` reads plain
+  ones with :func:`~becos.formats.off.read_plain_off` and checks the header of the others);
 - :mod:`becos.formats.ply`: :func:`~becos.formats.ply.check_ply` (ASCII and binary, from the header
   and the file size);
 - :mod:`becos.formats.obj`: :func:`~becos.formats.obj.check_obj`;
@@ -10,7 +11,7 @@ of a file, and for OFF the one reader of becos.
   checks of vertex and face lines that OFF and ASCII PLY share.
 
 PLY, OBJ and irregular OFF files are read by trimesh (:func:`becos.mesh.read_mesh`). The checks are
-what :func:`becos.check.check_mesh_file` runs on every mesh of a dataset (~10 ms per 5 MB file);
+what :func:`becos.check.meshes.check_mesh_file` runs on every mesh of a dataset (~10 ms per 5 MB file);
 :func:`check_file` dispatches on the suffix. :func:`not_a_regular_file` says what an entry that is no
 file is (a folder, a named pipe, a link to a device, ...), from ``stat`` alone.
 """
@@ -85,7 +86,7 @@ def not_a_mesh_file(path: str | Path) -> tuple[str, str] | None:
 
 
 def check_file(path: str | Path) -> tuple[int, int]:
-    """Cheap check that a mesh file is complete (see :mod:`becos.check`); returns (V, F) counts.
+    """Cheap check that a mesh file is complete (see :mod:`becos.check.meshes`); returns (V, F) counts.
 
     For OBJ the counts are the numbers of ``v`` and ``f`` lines.
 

@@ -1,4 +1,6 @@
-"""OFF files: the header, the cheap structure check, and the one OFF reader of becos (:func:`read_off`)."""
+"""OFF files: the one header parser (:func:`off_header`), the cheap structure check, and the one OFF reader
+of becos (:func:`read_off`; :func:`read_plain_off` for the files :func:`becos.mesh.read_mesh` reads
+without trimesh)."""
 
 from __future__ import annotations
 
@@ -54,7 +56,30 @@ def read_off(data: bytes) -> tuple[np.ndarray, np.ndarray] | None:
     (polygons, colours, normals, counts that disagree, a non-number) returns None: :func:`becos.mesh.read_mesh`
     then parses the file with trimesh, and :func:`check_off` names what is wrong.
     """
+    return _triangle_arrays(data, TextLines(data))
+
+
+def read_plain_off(data: bytes) -> tuple[np.ndarray, np.ndarray] | None:
+    """:func:`read_off` of a PLAIN triangle OFF file's bytes, else None (what :func:`becos.mesh.read_mesh`
+    reads without trimesh).
+
+    Plain: ASCII, no comment, an ``OFF`` line, a line of three counts, exactly the announced number of
+    vertex lines (three numbers each) and face lines (``3 i j k``), nothing else. Anything else returns
+    None: :func:`becos.mesh.read_mesh` then parses it with trimesh and reports faults precisely.
+    """
+    if b"#" in data or not data.isascii():
+        return None
     lines = TextLines(data)
+    if len(lines) < 2 or lines.tokens(0) != [b"OFF"]:
+        return None
+    counts = lines.tokens(1)
+    if len(counts) != 3 or not all(c.isdigit() for c in counts):
+        return None
+    return _triangle_arrays(data, lines)
+
+
+def _triangle_arrays(data: bytes, lines: TextLines) -> tuple[np.ndarray, np.ndarray] | None:
+    """The arrays of :func:`read_off`, from the data ``lines`` of ``data``."""
     try:
         n_vertices, n_faces, first = off_header(lines)
     except (ValueError, IndexError):
