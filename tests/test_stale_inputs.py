@@ -186,7 +186,7 @@ def test_a_hand_edited_ground_truth_file_is_recomputed_and_never_reaches_a_recor
 def test_an_edge_file_with_moved_rows_after_the_check_is_refused_by_the_ground_truth_job(built, becos_code):
     """Issue #29, BAD 5 after a finished run: three rows of tosca_dog0_tosca_wolf0_corres.txt moved to the
     wolf0 face farthest from their mapped point. The ground-truth job checks each edge file it reads row by
-    row (``becos.check.edge_plausibility``) and refuses it, naming the lines; restored, it runs again."""
+    row (``becos.check.edges.edge_plausibility``) and refuses it, naming the lines; restored, it runs again."""
     from becos.mesh import read_mesh
 
     work, config = built
