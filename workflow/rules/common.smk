@@ -78,6 +78,43 @@ def setting_pairs(wildcards):
         return 0
 
 
+@functools.cache
+def geodesics_disk_mb():
+    """The geodesics export's disk in MB, an upper bound from the manifests (becos.export.geodesics.
+    manifest_disk_estimate), printed once per Snakemake call with the free space, a dry run included,
+    and a warning above it; 0 before the dataset check, and where no vertex bound is known before
+    remeshing (the geodesic_plan job's log then has the estimate)."""
+    import shutil
+
+    from becos.export.geodesics import manifest_disk_estimate
+    from becos.export.staging import gigabytes
+    from becos.remesh import VERTEX_TARGET_RANGE
+
+    if not LAYOUT.checks.exists() or not (config["remesh"] and config["remesher"] == "becos"):
+        return 0
+    try:
+        manifests = plan().manifests
+    except IncompleteCheckpointException:  # as setting_pairs
+        return 0
+    estimate = manifest_disk_estimate(manifests, EXPORTS["geodesic_splits"], VERTEX_TARGET_RANGE[1])
+    free = shutil.disk_usage(LAYOUT.results).free
+    print(
+        f"becos: the geodesics export ({' '.join(EXPORTS['geodesic_splits'] or ['every'])} split) needs at most "
+        f"{gigabytes(estimate['disk_bytes'])}: {estimate['meshes']} full meshes and {estimate['scans']} scans of at "
+        f"most {VERTEX_TARGET_RANGE[1]:,} vertices, (V, V) float32 each; free on disk: {gigabytes(free)}",
+        file=sys.stderr,
+        flush=True,
+    )
+    if estimate["disk_bytes"] > free:
+        print(
+            "becos: warning: the geodesics export may not fit the free disk. Fix: free disk space, or export "
+            "fewer splits (exports.geodesic_splits: [test])",
+            file=sys.stderr,
+            flush=True,
+        )
+    return estimate["disk_bytes"] // 10**6
+
+
 def chunk_files(setting, kind):
     """Index files of every chunk of a setting (kind: ground_truth or pairs)."""
     p = plan()

@@ -132,43 +132,6 @@ from becos.geodesic_jobs import WORKFLOW_PARTS as GEODESIC_PARTS
 GEODESIC_SPLITS = " ".join(["--splits", *EXPORTS["geodesic_splits"]]) if EXPORTS["geodesic_splits"] else ""
 
 
-@functools.cache
-def geodesics_disk_mb():
-    """The geodesics export's disk in MB, an upper bound from the manifests (becos.export.geodesics.
-    manifest_disk_estimate), printed once per Snakemake call with the free space, a dry run included,
-    and a warning above it; 0 before the dataset check, and where no vertex bound is known before
-    remeshing (the geodesic_plan job's log then has the estimate)."""
-    import shutil
-
-    from becos.export.geodesics import manifest_disk_estimate
-    from becos.export.staging import gigabytes
-    from becos.remesh import VERTEX_TARGET_RANGE
-
-    if not LAYOUT.checks.exists() or not (config["remesh"] and config["remesher"] == "becos"):
-        return 0
-    try:
-        manifests = plan().manifests
-    except IncompleteCheckpointException:  # as setting_pairs
-        return 0
-    estimate = manifest_disk_estimate(manifests, EXPORTS["geodesic_splits"], VERTEX_TARGET_RANGE[1])
-    free = shutil.disk_usage(LAYOUT.results).free
-    print(
-        f"becos: the geodesics export ({' '.join(EXPORTS['geodesic_splits'] or ['every'])} split) needs at most "
-        f"{gigabytes(estimate['disk_bytes'])}: {estimate['meshes']} full meshes and {estimate['scans']} scans of at "
-        f"most {VERTEX_TARGET_RANGE[1]:,} vertices, (V, V) float32 each; free on disk: {gigabytes(free)}",
-        file=sys.stderr,
-        flush=True,
-    )
-    if estimate["disk_bytes"] > free:
-        print(
-            "becos: warning: the geodesics export may not fit the free disk. Fix: free disk space, or export "
-            "fewer splits (exports.geodesic_splits: [test])",
-            file=sys.stderr,
-            flush=True,
-        )
-    return estimate["disk_bytes"] // 10**6
-
-
 # Geodesics (docs/released-layout.md section 3): one plan over every setting's store, so that a full mesh
 # shared by pairs and settings is solved once; GEODESIC_PARTS jobs solve its meshes; one job per setting
 # writes the loaders' layouts from their rows (the rows are temporary).
