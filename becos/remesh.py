@@ -16,23 +16,39 @@ both:
 1. the copy is re-oriented coherently (pymeshlab ``meshing_re_orient_faces_coherently``;
    TOSCA michael0/david0/horse5/6/centaur3/4 have inconsistently wound faces). The input's vertex
    order and face rows are never touched: both maps are computed against the input as given.
-2. seeded jitter: every non-boundary vertex of the copy moves to a random point of one of its own
-   incident triangles, at most :data:`DEFAULT_JITTER` of the way to the triangle's other corners.
-   Each vertex therefore stays exactly ON the original surface; only the triangulation between them
-   is perturbed (by less than the local edge length), which changes the quadric errors and the
-   collapse order. The seed is derived from the mesh content and the target, so the same input and
-   target give byte-identical output, and different targets (the remesh variants of one shape) or
-   different poses of one class give unrelated samplings.
-3. a large input (more than ``PRE_DECIMATION_FACTOR`` × the face target faces) is first decimated to
-   that size — a speed measure: the final remesh is as good, in 40 % of the time on TOSCA humans.
-4. ONE Loop subdivision with threshold 0 (every edge split; every old vertex moved by the Loop
-   smoothing), then quadric edge-collapse decimation with optimal placement and topology
-   preservation to the target; the vertex target is reached by continuing the decimation
-   (each interior collapse removes one vertex and two faces).
+2. seeded jitter: every interior vertex of the copy moves to a random point of one of its own
+   incident triangles, every boundary vertex to a random point of one of its boundary edges, at most
+   :data:`DEFAULT_JITTER` of the way to the other corners. Each vertex therefore stays exactly ON the
+   original surface (and the boundary where it is); only the triangulation between them is perturbed
+   (by less than the local edge length), which changes the quadric errors and the collapse order,
+   and no vertex keeps its input position, also where no collapse touches it. The seed is derived
+   from the mesh content and the target, so the same input and target give byte-identical output,
+   and different targets (the remesh variants of one shape) or different poses of one class give
+   unrelated samplings.
+3. a large input (more than :data:`PRE_DECIMATION_FACTOR` × the face target faces; TOSCA's cats,
+   dogs, horses and humans) is decimated directly to the target (step 4 without the subdivision):
+   on the jittered input, whose every vertex has moved, the subdivision is not needed to break the
+   sharing (no original vertex shared between variants). Decimating the 4× larger subdivided mesh
+   (after a pre-decimation to this size) took 3-5× the CPU (``benchmarks/remesh.py --steps``, 8
+   shapes × 2 variants: decimation median 2.09 -> 0.73 CPU-s, pre-decimation + subdivision 0.32 ->
+   0.04), and the direct remesh is as close to the original (largest ``from_original`` distance
+   6.2e-3 -> 5.6e-3 of the bounding-box diagonal) with fewer thin triangles (faces with an angle
+   under 10 degrees: median 825 -> 378 per remesh). An input between 1× and this × the face target
+   (TOSCA's centaurs: 1.6×) is still subdivided: decimated directly, its remesh keeps much of the
+   input's uneven triangulation (centaur3: 99.9th-percentile edge 6.1-6.3× the median instead of
+   3.9-4.1×). With fast-simplification a large input is instead first decimated to that size and
+   goes on to step 4.
+4. a smaller input gets ONE Loop subdivision with threshold 0 (every edge split; every old vertex
+   moved by the Loop smoothing), then quadric edge-collapse decimation with optimal placement and
+   topology preservation to the target; the vertex target is reached by continuing the decimation
+   with the boundary kept (each interior collapse removes one vertex and two faces:
+   :func:`_to_vertex_target`).
    The decimator of steps 3-4 (``decimator``, config key of the same name, :data:`DECIMATORS`):
    ``pymeshlab`` (default) or ``fast-simplification`` (the Fast-Quadric-Mesh-Simplification
-   package: ~6x less decimation CPU on TOSCA, less even triangles: no quality threshold, longest
-   edge up to 13x the median instead of 7x). fast-simplification does not preserve topology: each
+   package: on 8 TOSCA shapes × 2 variants, pre-decimation, subdivision and decimation take a median
+   0.56 CPU-s instead of pymeshlab's 0.75 (the whole remesh job 2.01 instead of 2.15); less even
+   triangles: no quality threshold, longest edge up to 13x the median instead of 8x, about four
+   times as many faces with an angle under 10 degrees). fast-simplification does not preserve topology: each
    of its results (the pre-decimation, the decimation to ~the target) is checked (one component, no non-manifold
    edge or vertex, oriented, Euler characteristic and boundary loops of the input kept,
    :func:`_decimation_problem`); a result that fails is thrown away and that call is made with
@@ -101,7 +117,9 @@ DEFAULT_JITTER = 0.3
 """Largest fraction of the way towards the other two corners of an incident triangle a vertex moves."""
 
 PRE_DECIMATION_FACTOR = 2.0
-"""Inputs with more faces than this × the face target are decimated to that size before subdividing."""
+"""Inputs with more faces than this × the face target are not Loop-subdivided: pymeshlab decimates
+them directly to the target; fast-simplification first decimates them to this × the face target
+(module docstring, steps 3-4)."""
 
 VERTEX_TARGET_RANGE = (9000, 10000)
 """The paper's vertex-count rule: a remesh has a count drawn uniformly in this range (inclusive)."""
@@ -225,18 +243,26 @@ def _largest_component(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndar
 
 
 def _jitter_on_surface(vertices: np.ndarray, faces: np.ndarray, amount: float, rng: np.random.Generator) -> np.ndarray:
-    """Move each non-boundary vertex to a random point of one of its incident triangles.
+    """Move each vertex to a random point of the surface near it: an interior vertex into one of its
+    incident triangles, a boundary vertex along one of its boundary edges (the boundary stays where
+    it is).
 
     Vertex p of a randomly chosen incident face (p, q, r) goes to p + a (q - p) + b (r - p) with
-    a, b ~ U(0, amount / 2): a point of that triangle, hence of the surface. Boundary vertices stay.
-    Returns new (V, 3) positions.
+    a, b ~ U(0, amount / 2): a point of that triangle, hence of the surface. A boundary vertex p of a
+    randomly chosen boundary edge (p, q) goes to p + a (q - p). So no vertex keeps its input position
+    (the decimation leaves the vertices no collapse touched where they are). ``vertices``: (V, 3)
+    float; ``faces``: (F, 3) int. Returns new (V, 3) positions (unreferenced vertices stay).
     """
     n = len(vertices)
     flat = faces.ravel()
     slot_order = np.argsort(rng.random(len(flat)), kind="stable")
     incident_slot = np.full(n, -1, dtype=np.int64)
     incident_slot[flat[slot_order]] = slot_order  # last write wins: a random incident slot
-    move = (incident_slot >= 0) & ~boundary_vertices(faces, n)
+    edges, counts = undirected_edges(faces)
+    rim = edges[counts == 1]
+    on_rim = np.zeros(n, dtype=bool)
+    on_rim[rim.ravel()] = True
+    move = (incident_slot >= 0) & ~on_rim
     idx = np.flatnonzero(move)
     slot = incident_slot[idx]
     face, corner = slot // 3, slot % 3
@@ -246,6 +272,15 @@ def _jitter_on_surface(vertices: np.ndarray, faces: np.ndarray, amount: float, r
     out = vertices.copy()
     p = vertices[idx]
     out[idx] = p + ab[:, :1] * (vertices[q] - p) + ab[:, 1:] * (vertices[r] - p)
+    # boundary vertices: along a random one of their boundary edges (ends: (2 E_b,) slots of `rim`)
+    ends = rim.ravel()
+    end_order = np.argsort(rng.random(len(ends)), kind="stable")
+    rim_slot = np.full(n, -1, dtype=np.int64)
+    rim_slot[ends[end_order]] = end_order
+    b_idx = np.flatnonzero(rim_slot >= 0)
+    other = rim[rim_slot[b_idx] // 2, 1 - rim_slot[b_idx] % 2]
+    t = rng.random(len(b_idx))[:, None] * (amount / 2.0)
+    out[b_idx] = vertices[b_idx] + t * (vertices[other] - vertices[b_idx])
     return out
 
 
@@ -639,12 +674,19 @@ def _to_vertex_target(
 
     The first decimation of each attempt is made by ``decimator`` (fast-simplification's result is
     checked against ``topology``, :func:`_fast_decimate`); the continuation to the exact count is
-    always pymeshlab's (topology-preserving; cheap: the mesh is already small). After
-    fast-simplification it keeps the boundary (interior collapses only), so one call usually removes
-    the exact excess; the pymeshlab path halves the excess per call, as it always did."""
-    # Euler: V - E + F = chi and 2E = 3F + B  =>  F = 2 (V - chi) - B. Start a little above, so that
-    # the continuation (cheap: the mesh is already small) only ever removes vertices.
-    first_faces = 2 * target_vertices + 16
+    always pymeshlab's (topology-preserving; cheap: the mesh is already small). The first decimation
+    asks for a face count that leaves a few vertices more than the target whatever the boundary
+    (``topology``: the input's Euler characteristic, :func:`_surface_topology`; 2 if None); the
+    continuation keeps the boundary (interior collapses only), so one call removes the exact excess
+    (two pymeshlab calls in all on the 8 benchmark shapes × 2 variants, instead of 5-8 when the
+    continuation also collapsed boundary edges: those remove one face each, so a face target
+    removed between half and all of the excess per call)."""
+    # Euler: V - E + F = chi and 2E = 3F + B  =>  V = (F + B) / 2 + chi. Ask for F = 2 (target - chi)
+    # + 16 faces: the vertex count lands at target + 8 + B / 2 (B: boundary edges left), just above
+    # the target whatever the boundary, and the continuation (cheap: the mesh is already small) only
+    # ever removes vertices
+    chi = int(topology[0]) if topology is not None else 2
+    first_faces = 2 * (target_vertices - chi) + 16
     best = None
     for attempt in range(6):  # noqa: B007 (read after the loop)
         if decimator == "fast-simplification":
@@ -652,7 +694,7 @@ def _to_vertex_target(
         else:
             ms = _meshset(sub_v, sub_f)
             _decimate(ms, first_faces)
-        keep_boundary = decimator == "fast-simplification"
+        keep_boundary = True
         for _ in range(40):
             m = ms.current_mesh()
             excess = m.vertex_number() - target_vertices
@@ -669,7 +711,7 @@ def _to_vertex_target(
                 # fewer faces removes between excess/2 and excess vertices, so the target is never passed
                 _decimate(ms, m.face_number() - excess)
             if (ms.current_mesh().vertex_number(), ms.current_mesh().face_number()) == before:
-                if keep_boundary:  # stalled with the boundary kept: continue as pymeshlab's own path does
+                if keep_boundary:  # stalled with the boundary kept: continue with boundary collapses too
                     keep_boundary = False
                     continue
                 break  # stalled
@@ -717,8 +759,7 @@ def remesh_with_stats(
     from the mesh content and the target) control step 2 of the pipeline. ``source`` (the mesh's
     file) is named in the repair warning and in errors. ``shape``: the per-shape part of ``mesh``
     (:class:`RemeshInput`) when the caller remeshes several variants of it (built here if None).
-    ``decimator``: one of :data:`DECIMATORS`, the quadric decimator of steps 3-4 (module docstring);
-    ``pymeshlab`` gives the same bytes as before the option existed."""
+    ``decimator``: one of :data:`DECIMATORS`, the quadric decimator of steps 3-4 (module docstring)."""
     if decimator not in DECIMATORS:
         raise ValueError(f"remesh: decimator must be one of {', '.join(DECIMATORS)}, got {decimator!r}")
     if (target_vertices is None) == (target_faces is None):
@@ -849,13 +890,13 @@ def _remesh_surface(
     import pymeshlab
 
     fast = decimator == "fast-simplification"
-    topology = shape.topology if fast else None
-    if fast and len(f) > PRE_DECIMATION_FACTOR * face_goal:
+    topology = shape.topology
+    large = len(f) > PRE_DECIMATION_FACTOR * face_goal
+    if fast and large:
         v, f = _fast_decimate(v, f, int(PRE_DECIMATION_FACTOR * face_goal), topology, stats, "pre-decimation")
     ms = _meshset(v, f)
-    if not fast and len(f) > PRE_DECIMATION_FACTOR * face_goal:
-        _decimate(ms, int(PRE_DECIMATION_FACTOR * face_goal))
-    ms.meshing_surface_subdivision_loop(iterations=1, threshold=pymeshlab.PercentageValue(0))
+    if fast or not large:  # pymeshlab decimates a large input directly (module docstring, step 3)
+        ms.meshing_surface_subdivision_loop(iterations=1, threshold=pymeshlab.PercentageValue(0))
     stats["seconds_prepare"] = time.perf_counter() - t0
     cpu.lap("subdivide")
     # decimation to the target
