@@ -191,14 +191,6 @@ agreeing normal may be (:data:`FROM_ORIGINAL_MIN_COS`); beyond it the closest fa
 # small mesh utilities (numpy)
 
 
-def boundary_vertices(faces: np.ndarray, n_vertices: int) -> np.ndarray:
-    """(V,) bool: the vertex lies on an edge used by exactly one face."""
-    edges, counts = undirected_edges(faces)
-    out = np.zeros(n_vertices, dtype=bool)
-    out[edges[counts == 1].ravel()] = True
-    return out
-
-
 def mesh_checks(mesh: TriMesh) -> dict:
     """Topology facts of a triangle mesh, all computed with numpy/scipy.
 
