@@ -93,11 +93,12 @@ def test_an_edit_reaches_exactly_the_stages_that_read_the_key(config, edit, reru
         assert changed == reruns, edit
 
 
-def test_a_stage_version_bump_reruns_only_that_stage(config, monkeypatch):
+@pytest.mark.parametrize("stage", ["remesh", "ground_truth"])
+def test_a_stage_version_bump_reruns_only_that_stage(config, monkeypatch, stage):
     before = _jobs(config)
-    monkeypatch.setitem(bw.STAGE_VERSIONS, "ground_truth", bw.STAGE_VERSIONS["ground_truth"] + 1)
+    monkeypatch.setitem(bw.STAGE_VERSIONS, stage, bw.STAGE_VERSIONS[stage] + 1)
     after = _jobs(config)
-    assert {job for job in before if before[job] != after[job]} == {("ground_truth", None)}
+    assert {job for job in before if before[job] != after[job]} == {(stage, None)}
 
 
 @pytest.mark.parametrize(
