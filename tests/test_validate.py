@@ -260,11 +260,15 @@ def c_vertex_map(store, bench):
 
 def c_connectivity(store, bench):
     """Pair 0's X: the only face of a boundary 'ear' vertex replaced by a copy of another face (with its
-    full face id, so the face map stays right): the ear vertex is on no face any more."""
+    full face id, so the face map stays right): the ear vertex is on no face any more. The ear face is
+    one that no point of Y's ground truth lies on (``corr_10_face``), so only this check can fail."""
     f0, f1 = _rows(bench, "x_faces", 0)
     faces = np.asarray(bench.array("x_faces")[f0:f1])
     uses = np.bincount(faces.ravel())
-    ear_face = int(np.flatnonzero((uses[faces] == 1).any(axis=1))[0])
+    c0, c1 = _rows(bench, "corr_10_face", 0)
+    held = np.asarray(bench.array("corr_10_face")[c0:c1])
+    ears = np.flatnonzero((uses[faces] == 1).any(axis=1))
+    ear_face = int(ears[~np.isin(ears, held)][0])
     other = (ear_face + 1) % len(faces)
     for key in ("x_faces", "x_full_face_ids"):
         arr = _array(store, key)
