@@ -250,6 +250,8 @@ class BlockChecker:
             self.report("camera", f"{s}_camera not finite for a scanned {s} shape", ~np.isfinite(camera).all(axis=1))
 
     def partial_side(self, s: str, partial: np.ndarray) -> None:
+        """``face_map``, ``vertex_map`` and ``connectivity`` of side ``s`` for the pairs whose shape is
+        partial (``partial``: (n,) bool per pair)."""
         a, cnt = self.a, self.cnt
         gv, gf, gfv, gff = f"{s}_vertex", f"{s}_face", f"{s}_full_vertex", f"{s}_full_face"
         faces, ptf, ids = a[f"{s}_faces"], a[f"{s}_partial_to_full"], a[f"{s}_full_face_ids"]
@@ -282,11 +284,17 @@ class BlockChecker:
             f"{s}_vertices != {s}_full_vertices[{s}_partial_to_full]",
             np.unique(self.pair_of[gv][rows_v[bad]]),
         )
+        self.partial_connectivity(s, partial)
 
-        # one edge-connected component, no vertex off the faces
+    def partial_connectivity(self, s: str, partial: np.ndarray) -> None:
+        """``connectivity``: a partial shape (``partial``: (n,) bool per pair) is one edge-connected
+        component and every vertex lies on a face."""
+        a, cnt, gv, gf = self.a, self.cnt, f"{s}_vertex", f"{s}_face"
+        faces, ptf, V = a[f"{s}_faces"], a[f"{s}_partial_to_full"], cnt[gv]
         from scipy.sparse import coo_matrix
         from scipy.sparse.csgraph import connected_components
 
+        rows_f = self.rep(partial, gf)
         frows = np.flatnonzero(rows_f & (faces >= 0).all(axis=1) & (faces < self.rep(V, gf)[:, None]).all(axis=1))
         if not len(frows):
             return

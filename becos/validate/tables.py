@@ -149,7 +149,6 @@ def check_metadata(bench, problems: list[str]) -> None:
 
 ARRAY_COLUMNS = ("index", "x_n_vertices", "y_n_vertices", "x_overlap", "y_overlap")
 """Store table columns that follow from the arrays (checked against them), not from a pair's meta."""
-"""Table columns :func:`becos.store.table_row` derives from a pair's meta alone."""
 
 
 def check_metas(block, setting: str, table, found: Problems) -> None:
