@@ -23,11 +23,12 @@ from becos.export.psmal import psmal_shape_id
 from becos.export.released import released_file_stem, released_infos
 from becos.export.staging import (
     SIDES,
-    DiskEstimateError,
     ExportError,
     check_record,
+    free_space,
     gigabytes,
     id_field,
+    require_room,
     staged_dir,
     write_ids,
     write_log,
@@ -806,16 +807,16 @@ def write_geodesic_matrices(
     with staged_dir(out, overwrite) as tmp:
         shapes, meshes, needed, numbers = geodesic_plan(records, splits, keep_arrays=True)
         estimate = geodesic_disk_estimate(shapes, needed, layouts, dsmk_points, blocks=rows is None)
-        free = int(shutil.disk_usage(tmp).free if free_bytes is None else free_bytes)
+        free = free_space(tmp, free_bytes)
         print(f"export-geodesics: {estimate_text(estimate, free)}", file=sys.stderr, flush=True)
-        if estimate["disk_bytes"] > free:
-            raise DiskEstimateError(
-                out,
-                f"the geodesic matrices need about {gigabytes(estimate['disk_bytes'])} but its file system has "
-                f"{gigabytes(free)} free; nothing was written",
-                "free disk space, choose another output folder on a larger disk, or export fewer splits "
-                "(--splits test) or layouts (--layouts geo-lora)",
-            )
+        require_room(
+            out,
+            estimate["disk_bytes"],
+            free,
+            "the geodesic matrices",
+            "free disk space, choose another output folder on a larger disk, or export fewer splits "
+            "(--splits test) or layouts (--layouts geo-lora)",
+        )
         work = tmp / ".rows"
         work.mkdir()
         blocks = _blocks_for(shapes, meshes, needed, rows, method, jobs, work, progress)
@@ -837,18 +838,18 @@ def write_geodesic_matrices(
             dsmk_file = ""
             if "dsmk" in layouts and _dsmk_reads(sh.setting, sh.side):
                 dsmk_file = f"{DSMK_FOLDER}/{sh.split}/dist/{dsmk_cache_name(sh.vertices, sh.faces)}"
-                if dsmk_file not in dsmk_written and dsmk_points:
+                if dsmk_file not in dsmk_written:
                     dsmk_written.add(dsmk_file)
                     (tmp / dsmk_file).parent.mkdir(parents=True, exist_ok=True)
-                    target = out.resolve() / GEODESIC_FOLDER / f"{sh.stem}.npy"
-                    save_dsmk_pointer(tmp / dsmk_file, sh.vertices, sh.faces, target, scale)
-                elif dsmk_file not in dsmk_written:
-                    dsmk_written.add(dsmk_file)
-                    result = _block_cut(path, cut, whole) if matrix is None else matrix
-                    result *= np.float32(scale)  # DSMK divides by the info file's sqrt-area itself
-                    (tmp / dsmk_file).parent.mkdir(parents=True, exist_ok=True)
-                    save_npz(tmp / dsmk_file, verts=sh.vertices.astype(np.float32), faces=sh.faces, result=result)
-                    del result
+                    if dsmk_points:
+                        target = out.resolve() / GEODESIC_FOLDER / f"{sh.stem}.npy"
+                        save_dsmk_pointer(tmp / dsmk_file, sh.vertices, sh.faces, target, scale)
+                    else:
+                        result = _block_cut(path, cut, whole) if matrix is None else matrix
+                        result *= np.float32(scale)  # DSMK divides by the info file's sqrt-area itself
+                        verts = sh.vertices.astype(np.float32)
+                        save_npz(tmp / dsmk_file, verts=verts, faces=sh.faces, result=result)
+                        del result
             del matrix
             table.append(
                 [

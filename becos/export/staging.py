@@ -247,3 +247,21 @@ class DiskEstimateError(DiskFullError):
 def gigabytes(n: float) -> str:
     """``n`` bytes as text in GB (10⁹ bytes), two decimals."""
     return f"{n / 1e9:.2f} GB"
+
+
+def free_space(folder: Path, free_bytes: int | None = None) -> int:
+    """Free bytes on ``folder``'s file system (``free_bytes`` instead, when given: tests)."""
+    return int(shutil.disk_usage(folder).free if free_bytes is None else free_bytes)
+
+
+def require_room(out: Path, need: int, free: int, what: str, fix: str, detail: str = "") -> None:
+    """Raise :class:`DiskEstimateError` naming ``out`` when ``need`` bytes (the estimate of ``what``,
+    ``detail`` in brackets) exceed ``free``; an export calls it before writing anything."""
+    if need > free:
+        detail = f" ({detail})" if detail else ""
+        raise DiskEstimateError(
+            out,
+            f"{what} need about {gigabytes(need)}{detail} but its file system has {gigabytes(free)} free; "
+            "nothing was written",
+            fix,
+        )

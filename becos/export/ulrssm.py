@@ -6,7 +6,6 @@ optional ``dist/*.mat`` root per pair, with the disk and memory estimate of the 
 from __future__ import annotations
 
 import json
-import shutil
 import sys
 from collections.abc import Iterable, Mapping
 from pathlib import Path
@@ -28,10 +27,11 @@ from becos.export.staging import (
     IDS_FILE,
     LOGS_DIR,
     SIDES,
-    DiskEstimateError,
     Staging,
+    free_space,
     gigabytes,
     place_by_split,
+    require_room,
     staged_dir,
     write_ids,
     write_log,
@@ -188,7 +188,7 @@ def _write_ulrssm_dist(
     scales = mesh_sqrt_areas(shapes)
     groups = distinct_matrices(shapes)
     estimate = ulrssm_geodesic_estimate(groups, needed, meshes, jobs, rows_folders is None)
-    free = int(shutil.disk_usage(tmp).free if free_bytes is None else free_bytes)
+    free = free_space(tmp, free_bytes)
     print(
         f"export-ulrssm geodesics: {estimate['files']} distinct dist matrices of {estimate['meshes']} meshes for "
         f"{estimate['sides']} pair sides (the rest hard links): disk {gigabytes(estimate['disk_bytes'])}, peak memory "
@@ -197,15 +197,14 @@ def _write_ulrssm_dist(
         file=sys.stderr,
         flush=True,
     )
-    if estimate["disk_bytes"] > free:
-        raise DiskEstimateError(
-            out,
-            f"the ULRSSM geodesic matrices need about {gigabytes(estimate['disk_bytes'])} ({estimate['files']} distinct "
-            f"(V, V) float32 .mat files of {estimate['meshes']} meshes) but its file system has {gigabytes(free)} "
-            f"free; nothing was written",
-            "free disk space, choose another --out on a larger disk, or export geodesics of fewer splits "
-            "(--splits test)",
-        )
+    require_room(
+        out,
+        estimate["disk_bytes"],
+        free,
+        "the ULRSSM geodesic matrices",
+        "free disk space, choose another --out on a larger disk, or export geodesics of fewer splits (--splits test)",
+        f"{estimate['files']} distinct (V, V) float32 .mat files of {estimate['meshes']} meshes",
+    )
 
     def dist_path(sh: GeodesicShape) -> Path:
         return tmp / sh.split / str(numbers[(sh.split, sh.pair_id)]) / "dist" / f"{sh.side}.mat"
