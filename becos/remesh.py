@@ -605,14 +605,13 @@ def _decimation_problem(vertices: np.ndarray, faces: np.ndarray, topology: tuple
     n = len(vertices)
     if not len(faces):
         return "no face left"
-    referenced = np.zeros(n, dtype=bool)
-    referenced[faces.ravel()] = True
+    checks = mesh_checks(TriMesh(vertices, faces))
     problems = {
-        "unreferenced vertices": int((~referenced).sum()),
-        "components beyond the first": face_components(faces, n)[1] - 1,
-        "non-manifold edges": int((undirected_edges(faces)[1] > 2).sum()),
+        "unreferenced vertices": checks["unreferenced_vertices"],
+        "components beyond the first": checks["components"] - 1,
+        "non-manifold edges": checks["non_manifold_edges"],
         "non-manifold vertices": len(non_manifold_vertices(faces, n)),
-        "misoriented edges": misoriented_edge_count(faces),
+        "misoriented edges": checks["misoriented_edges"],
     }
     for what, count in problems.items():
         if count:
