@@ -50,7 +50,7 @@ import zipfile
 from pathlib import Path
 
 from becos.atomic import remove_stale_temporaries, write_text
-from becos.datasets import ARCHIVE_SCHEMES, DatasetSpec
+from becos.datasets import ARCHIVE_SCHEMES, DatasetArchive, DatasetSpec
 from becos.errors import BecosError, ConfigError
 
 log = logging.getLogger(__name__)
@@ -213,15 +213,12 @@ def fetch(
         DownloadError: unreachable server, HTTP error, broken or short transfer (``part`` kept).
         ChecksumMismatchError: the complete file's digest differs from ``sha256`` (``part`` removed).
     """
-    from tqdm import tqdm
-
     part = Path(part)
     scheme = urllib.parse.urlparse(url).scheme.lower()
     if scheme not in ARCHIVE_SCHEMES:
         raise DownloadError(url, "is not an http(s):// or file:// URL", "give the full URL")
     part.parent.mkdir(parents=True, exist_ok=True)
-    sidecar = _sidecar(part)
-    meta = _read_json(sidecar) or {}
+    meta = _read_json(_sidecar(part)) or {}
     offset = part.stat().st_size if part.is_file() else 0
     if offset and meta.get("url") != url:
         print(
@@ -234,54 +231,7 @@ def fetch(
         response, offset, total = _start(url, offset, meta, fix)
         mode = "ab" if offset else "wb"
     if response is not None:
-        with response:
-            headers = response.headers
-            write_text(
-                sidecar,
-                json.dumps(
-                    {
-                        "url": url,
-                        "etag": headers.get("ETag"),
-                        "last_modified": headers.get("Last-Modified"),
-                        "total": total,
-                    }
-                )
-                + "\n",
-            )
-            read = getattr(response, "read1", response.read)
-            done = offset
-            tty = sys.stderr.isatty()
-            with (
-                open(part, mode) as fh,
-                tqdm(
-                    total=total,
-                    initial=offset,
-                    unit="B",
-                    unit_scale=True,
-                    unit_divisor=1024,
-                    desc=label or Path(url).name,
-                    file=sys.stderr,
-                    disable=not progress,
-                    mininterval=0.5 if tty else 10.0,
-                    ascii=not tty,
-                ) as bar,
-            ):
-                try:
-                    for block in iter(lambda: read(CHUNK_BYTES), b""):
-                        fh.write(block)
-                        fh.flush()  # what arrived stays on disk if the process is killed
-                        done += len(block)
-                        bar.update(len(block))
-                except (urllib.error.URLError, http.client.HTTPException, OSError, ValueError) as exc:
-                    raise DownloadError(
-                        url,
-                        f"the download broke off after {done} of {total or '?'} bytes ({exc})",
-                        f"run again: it resumes from {part}",
-                    ) from None
-            if total is not None and done != total:
-                raise DownloadError(
-                    url, f"the download ended after {done} of {total} bytes", f"run again: it resumes from {part}"
-                )
+        _transfer(response, url, part, mode, offset, total, label or Path(url).name, progress)
     h = hashlib.sha256()
     _hash_file(part, h)
     actual = h.hexdigest()
@@ -295,6 +245,69 @@ def fetch(
             "changed upstream, or a mirror serves another file)",
         )
     return actual
+
+
+def _transfer(
+    response, url: str, part: Path, mode: str, offset: int, total: int | None, label: str, progress: bool
+) -> None:
+    """Stream ``response`` (of ``url``, from byte ``offset`` of ``total`` or None) into ``part``
+    (``mode`` ``"ab"`` to append, ``"wb"`` to start again), after writing its sidecar (URL, ``ETag``,
+    ``Last-Modified``, total); a progress bar named ``label`` on stderr when ``progress``. Every block
+    is flushed, so what arrived stays on disk if the process is killed.
+
+    Raises:
+        DownloadError: the transfer broke off or ended short (``part`` kept: a rerun resumes it).
+    """
+    from tqdm import tqdm
+
+    with response:
+        headers = response.headers
+        write_text(
+            _sidecar(part),
+            json.dumps(
+                {
+                    "url": url,
+                    "etag": headers.get("ETag"),
+                    "last_modified": headers.get("Last-Modified"),
+                    "total": total,
+                }
+            )
+            + "\n",
+        )
+        read = getattr(response, "read1", response.read)
+        done = offset
+        tty = sys.stderr.isatty()
+        with (
+            open(part, mode) as fh,
+            tqdm(
+                total=total,
+                initial=offset,
+                unit="B",
+                unit_scale=True,
+                unit_divisor=1024,
+                desc=label,
+                file=sys.stderr,
+                disable=not progress,
+                mininterval=0.5 if tty else 10.0,
+                ascii=not tty,
+            ) as bar,
+        ):
+            try:
+                for block in iter(lambda: read(CHUNK_BYTES), b""):
+                    fh.write(block)
+                    fh.flush()  # what arrived stays on disk if the process is killed
+                    done += len(block)
+                    bar.update(len(block))
+            except (urllib.error.URLError, http.client.HTTPException, OSError, ValueError) as exc:
+                raise DownloadError(
+                    url,
+                    f"the download broke off after {done} of {total or '?'} bytes ({exc})",
+                    f"run again: it resumes from {part}",
+                ) from None
+        if total is not None and done != total:
+            raise DownloadError(
+                url, f"the download ended after {done} of {total} bytes", f"run again: it resumes from {part}"
+            )
 
 
 # --- extraction ------------------------------------------------------------------------------------
@@ -478,9 +491,45 @@ def download_dataset(
     url = url or archive.url
     data_dir = Path(data_dir).expanduser().absolute()
     dest = data_dir / archive.extract_to
-    expected = archive.expected
-    pinned = archive.sha256
     yaml_key = f"source.archive.sha256 in {spec.path}"
+    installed = _installed(name, spec, archive, dest, yaml_key)
+    if installed is not None:
+        return installed
+    fix = (
+        f"check the URL and the network connection; behind a mirror or proxy set `download_urls: {{{name}: URL}}` "
+        f"in the config (or --url); or get it by hand: {spec.source.get('instructions', spec.title)}"
+    )
+    part = partial_path(data_dir / f"{archive.extract_to}.{Path(urllib.parse.urlparse(url).path).name or 'archive'}")
+    pinned = archive.sha256
+    digest = fetch(url, part, pinned, label=f"{name} {Path(url).name}", fix=fix, pinned_in=yaml_key, progress=progress)
+    result = _install(part, url, digest, name, spec, archive, dest)
+    discard_partial(part)
+    print(
+        f"download-dataset: {name}: installed {dest} ({result['files']} files {archive.expected}, SHA-256 {digest})",
+        file=sys.stderr,
+    )
+    if pinned is None:
+        log.warning(
+            "download-dataset: %s: the archive's SHA-256 is not pinned; this download has SHA-256 %s "
+            "(recorded in %s). Pin it so that later downloads are checked: set %s to %s",
+            name,
+            digest,
+            dest / RECORD_NAME,
+            yaml_key,
+            digest,
+        )
+    return result
+
+
+def _installed(name: str, spec: DatasetSpec, archive: DatasetArchive, dest: Path, yaml_key: str) -> dict | None:
+    """:func:`download_dataset`'s result when ``dest`` already yields the dataset's files (nothing to
+    download; url and sha256 from its record, or None), else None when it may be installed there.
+
+    Raises:
+        ChecksumMismatchError: ``dest`` was recorded from another archive than the pinned one.
+        ArchiveLayoutError: ``dest`` holds other things and was not made by becos.
+    """
+    expected, pinned = archive.expected, archive.sha256
     record = _record(dest) if dest.is_dir() else None
     if pinned is not None and record is not None and record.get("sha256") not in (None, pinned):
         raise ChecksumMismatchError(
@@ -511,13 +560,22 @@ def download_dataset(
             f"move {dest} away (becos never overwrites a folder it did not "
             f"make), or extract the {spec.title} archive there yourself",
         )
+    return None
 
-    fix = (
-        f"check the URL and the network connection; behind a mirror or proxy set `download_urls: {{{name}: URL}}` "
-        f"in the config (or --url); or get it by hand: {spec.source.get('instructions', spec.title)}"
-    )
-    part = partial_path(data_dir / f"{archive.extract_to}.{Path(urllib.parse.urlparse(url).path).name or 'archive'}")
-    digest = fetch(url, part, pinned, label=f"{name} {Path(url).name}", fix=fix, pinned_in=yaml_key, progress=progress)
+
+def _install(
+    part: Path, url: str, digest: str, name: str, spec: DatasetSpec, archive: DatasetArchive, dest: Path
+) -> dict:
+    """Extract the downloaded archive ``part`` (of ``url``, SHA-256 ``digest``) into a temporary folder
+    beside ``dest``, check that it yields the dataset's files, write the record and rename the folder
+    into place (a folder under the final name is always complete). Returns :func:`download_dataset`'s
+    result.
+
+    Raises:
+        UnsafeArchiveError, CorruptArchiveError, ArchiveLayoutError: ``part`` is discarded (complete but
+            unusable: a rerun must fetch it again); nothing is installed.
+    """
+    expected = archive.expected
     remove_stale_temporaries(dest.parent, [dest.name])  # extraction folders of killed runs
     work = Path(tempfile.mkdtemp(dir=dest.parent, prefix=f".{dest.name}.", suffix=".tmp-extract"))
     try:
@@ -543,7 +601,7 @@ def download_dataset(
             "folder": str(dest),
             "url": url,
             "sha256": digest,
-            "sha256_pinned": pinned is not None,
+            "sha256_pinned": archive.sha256 is not None,
             "downloaded": True,
             "files": len(found),
             "bytes": part.stat().st_size,
@@ -555,20 +613,6 @@ def download_dataset(
         os.rename(out, dest)
     finally:
         shutil.rmtree(work, ignore_errors=True)
-    discard_partial(part)
-    print(
-        f"download-dataset: {name}: installed {dest} ({len(found)} files {expected}, SHA-256 {digest})", file=sys.stderr
-    )
-    if pinned is None:
-        log.warning(
-            "download-dataset: %s: the archive's SHA-256 is not pinned; this download has SHA-256 %s "
-            "(recorded in %s). Pin it so that later downloads are checked: set %s to %s",
-            name,
-            digest,
-            dest / RECORD_NAME,
-            yaml_key,
-            digest,
-        )
     return result
 
 

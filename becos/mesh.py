@@ -534,53 +534,11 @@ def surface_for_remeshing(
         )
     referenced = np.zeros(n, dtype=bool)
     referenced[faces.ravel()] = True
-    kept_faces = faces[keep]
     clean_used = np.zeros(n, dtype=bool)
-    clean_used[kept_faces.ravel()] = True
-    face_label, n_surface_components = face_components(kept_faces, n)
-    dropped_faces = 0
-    share = 0.0
-    if n_surface_components > 1:
-        tri = mesh.vertices[kept_faces]
-        area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
-        per_comp = np.bincount(face_label, weights=area, minlength=n_surface_components)
-        main = int(per_comp.argmax())
-        share = float(1.0 - per_comp[main] / per_comp.sum())
-        if share > max_dropped_area_share:
-            sizes = ", ".join(f"{100 * a / per_comp.sum():.1f}%" for a in sorted(per_comp, reverse=True)[:5])
-            raise InputFileError(
-                where,
-                f"has {n_surface_components} connected components; besides the largest "
-                f"they hold {100 * share:.1f}% of the area (shares: {sizes}), more than the "
-                f"{100 * max_dropped_area_share:.0f}% becos drops as specks",
-                "a shape must be one connected surface: remove the extra pieces (e.g. MeshLab: "
-                "Filters > Cleaning and Repairing > Remove Isolated pieces) or split the file "
-                "into separate shapes",
-            )
-        in_main = face_label == main
-        rows = np.flatnonzero(keep)
-        dropped_faces = int((~in_main).sum())
-        keep[rows[~in_main]] = False
+    clean_used[faces[keep].ravel()] = True
+    n_surface_components, dropped_faces, share = _keep_largest_component(mesh, keep, where, max_dropped_area_share)
     kept = faces[keep]
-    non_manifold = int((undirected_edges(kept)[1] > 2).sum())
-    if non_manifold:
-        raise InputFileError(
-            where,
-            f"{non_manifold} edges are shared by more than two faces (non-manifold) after "
-            f"dropping duplicate and repeated-index faces; becos cannot remesh such a surface",
-            "repair the mesh (e.g. MeshLab: Filters > Cleaning and Repairing > Repair non Manifold "
-            "Edges) or leave the shape out",
-        )
-    bow_ties = non_manifold_vertices(kept, n)
-    if len(bow_ties):
-        raise InputFileError(
-            where,
-            f"{len(bow_ties)} vertices are non-manifold (their faces form several fans that "
-            f"touch only at the vertex, e.g. vertex {int(bow_ties[0])} of the file) after dropping "
-            f"duplicate and repeated-index faces; becos cannot remesh such a surface",
-            "use the dataset's original mesh (re-download it), or repair it (e.g. MeshLab: Filters > "
-            "Cleaning and Repairing > Repair non Manifold Vertices) or leave the shape out",
-        )
+    _require_manifold(kept, n, where)
     used = np.zeros(n, dtype=bool)
     used[kept.ravel()] = True
     dropped_vertices = int((clean_used & ~used).sum())
@@ -606,3 +564,62 @@ def surface_for_remeshing(
     face_index = np.flatnonzero(keep)
     copy = TriMesh(mesh.vertices[vertex_index], new_index[faces[face_index]])
     return copy, MeshRepair(vertex_index, face_index, **report_kw)
+
+
+def _keep_largest_component(
+    mesh: TriMesh, keep: np.ndarray, where: Path, max_dropped_area_share: float
+) -> tuple[int, int, float]:
+    """Clear in ``keep`` ((F,) bool, the faces kept so far) the faces outside the vertex-connected
+    component of largest area. Returns (components, faces dropped, dropped area share 0..1).
+
+    Raises:
+        InputFileError: the dropped components hold more than ``max_dropped_area_share`` of the area.
+    """
+    kept_faces = mesh.faces[keep]
+    face_label, n_surface_components = face_components(kept_faces, mesh.n_vertices)
+    if n_surface_components <= 1:
+        return n_surface_components, 0, 0.0
+    tri = mesh.vertices[kept_faces]
+    area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    per_comp = np.bincount(face_label, weights=area, minlength=n_surface_components)
+    main = int(per_comp.argmax())
+    share = float(1.0 - per_comp[main] / per_comp.sum())
+    if share > max_dropped_area_share:
+        sizes = ", ".join(f"{100 * a / per_comp.sum():.1f}%" for a in sorted(per_comp, reverse=True)[:5])
+        raise InputFileError(
+            where,
+            f"has {n_surface_components} connected components; besides the largest "
+            f"they hold {100 * share:.1f}% of the area (shares: {sizes}), more than the "
+            f"{100 * max_dropped_area_share:.0f}% becos drops as specks",
+            "a shape must be one connected surface: remove the extra pieces (e.g. MeshLab: "
+            "Filters > Cleaning and Repairing > Remove Isolated pieces) or split the file "
+            "into separate shapes",
+        )
+    in_main = face_label == main
+    rows = np.flatnonzero(keep)
+    keep[rows[~in_main]] = False
+    return n_surface_components, int((~in_main).sum()), share
+
+
+def _require_manifold(faces: np.ndarray, n_vertices: int, where: Path) -> None:
+    """Raise :class:`InputFileError` (naming ``where``) when an edge of (F, 3) ``faces`` is shared by more
+    than two faces, or a vertex joins several fans of faces: the remesher cannot orient such a surface."""
+    non_manifold = int((undirected_edges(faces)[1] > 2).sum())
+    if non_manifold:
+        raise InputFileError(
+            where,
+            f"{non_manifold} edges are shared by more than two faces (non-manifold) after "
+            f"dropping duplicate and repeated-index faces; becos cannot remesh such a surface",
+            "repair the mesh (e.g. MeshLab: Filters > Cleaning and Repairing > Repair non Manifold "
+            "Edges) or leave the shape out",
+        )
+    bow_ties = non_manifold_vertices(faces, n_vertices)
+    if len(bow_ties):
+        raise InputFileError(
+            where,
+            f"{len(bow_ties)} vertices are non-manifold (their faces form several fans that "
+            f"touch only at the vertex, e.g. vertex {int(bow_ties[0])} of the file) after dropping "
+            f"duplicate and repeated-index faces; becos cannot remesh such a surface",
+            "use the dataset's original mesh (re-download it), or repair it (e.g. MeshLab: Filters > "
+            "Cleaning and Repairing > Repair non Manifold Vertices) or leave the shape out",
+        )
