@@ -4,8 +4,9 @@ Every sub-command prints progress to stderr and a short result to stdout; errors
 print the message (file, problem, fix) and exit with status 2 instead of a traceback.
 
 The command line lives in this package only: one module per sub-command group (``becos.cli.check``,
-``becos.cli.workflow`` for the workflow's stages, ...), each with ``configure_parser(parser[, name])``
-and ``run_cli(args) -> int``; the science modules it calls know nothing of argparse.
+``becos.cli.workflow`` for the workflow's stages, ...). Each module's ``COMMANDS`` maps each of its
+sub-commands to one pair: a function that adds the sub-command's arguments to its parser, and the
+handler ``run(args) -> int`` (exit status); the science modules they call know nothing of argparse.
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ import sys
 from becos.errors import BecosError
 
 SUBCOMMANDS: tuple[tuple[str, str, str], ...] = (
-    # (name, module exposing configure_parser(parser) and run_cli(args) -> int, help)
+    # (name, module whose COMMANDS[name] is (add arguments to a parser, run(args) -> int), help)
     ("info", "becos.cli.info", "summarise a BeCoS annotation folder"),
     ("synthetic", "becos.cli.synthetic", "generate the built-in synthetic shape collection"),
     ("check", "becos.cli.check", "check that the enabled datasets and the annotation folder are present"),
@@ -54,25 +55,12 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True)
 
     for name, module_name, help_text in SUBCOMMANDS:
-        if name != only:
-            sub.add_parser(name, help=help_text)
-            continue
-        module = importlib.import_module(module_name)
-        configure = module.configure_parser
-        command = sub.add_parser(name, help=help_text)
-        if _takes_name(configure):
-            configure(command, name)
-        else:
-            configure(command)
-        command.set_defaults(func=module.run_cli)
+        command = sub.add_parser(name, help=help_text, description=help_text[:1].upper() + help_text[1:] + ".")
+        if name == only:
+            arguments, run = importlib.import_module(module_name).COMMANDS[name]
+            arguments(command)
+            command.set_defaults(func=run)
     return parser
-
-
-def _takes_name(function) -> bool:
-    """Whether ``configure_parser`` takes the sub-command name (modules serving several commands)."""
-    import inspect
-
-    return len(inspect.signature(function).parameters) >= 2
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -36,3 +36,7 @@ def run_cli(args: argparse.Namespace) -> int:
     facts = run_baseline(args.name, records, args.out, progress=True)
     print(json.dumps(facts))
     return 0
+
+
+COMMANDS = {"baseline": (configure_parser, run_cli)}
+"""The sub-command's (arguments, handler) pair (:mod:`becos.cli`)."""

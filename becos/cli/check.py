@@ -13,63 +13,61 @@ from becos.check import DatasetCheckError, check_datasets
 from becos.download import fetch_annotations
 
 
-def configure_parser(parser: argparse.ArgumentParser, name: str = "check") -> argparse.ArgumentParser:
-    """Arguments of ``becos check`` or ``becos fetch-annotations`` (``name``)."""
-    if name == "check":
-        parser.add_argument(
-            "--datasets",
-            nargs="+",
-            required=True,
-            metavar="NAME",
-            help="enabled datasets (config key `datasets`), e.g. tosca faust",
-        )
-        parser.add_argument("--data-dir", type=Path, required=True, help="data root (config key `data_dir`)")
-        parser.add_argument(
-            "--annotations", type=Path, required=True, help="BeCoS annotation folder (config key `annotations`)"
-        )
-        parser.add_argument(
-            "--template-table",
-            default="templates_all.csv",
-            help="template table in <annotations>/config (default templates_all.csv)",
-        )
-        parser.add_argument("--out", type=Path, help="write the JSON report here (also on failure)")
-        parser.add_argument(
-            "--no-mesh-check",
-            dest="read_meshes",
-            action="store_false",
-            help="only check folders and counts, not the mesh files",
-        )
-        parser.add_argument(
-            "--no-geometry-check",
-            dest="compare_geometry",
-            action="store_false",
-            help="do not compare shapes with their class template nor check edge files for "
-            "plausibility (only for stand-in meshes; config key `check_geometry`)",
-        )
-        parser.add_argument(
-            "--full-parse",
-            action="store_true",
-            help="also parse every mesh completely with read_mesh and list the repairs remeshing "
-            "applies to a copy (slow: ~35 s for TOSCA)",
-        )
-    elif name == "fetch-annotations":
-        parser.add_argument("--url", required=True, help="archive URL (http, https or file://)")
-        parser.add_argument("--sha256", required=True, help="pinned SHA-256 of the archive")
-        parser.add_argument("--dest", type=Path, required=True, help="folder to create (the annotation folder)")
-    else:
-        raise ValueError(f"becos.check serves 'check' and 'fetch-annotations', not {name!r}")
-    parser.set_defaults(check_command=name)
-    return parser
+def check_arguments(parser: argparse.ArgumentParser) -> None:
+    """Arguments of ``becos check``."""
+    parser.add_argument(
+        "--datasets",
+        nargs="+",
+        required=True,
+        metavar="NAME",
+        help="enabled datasets (config key `datasets`), e.g. tosca faust",
+    )
+    parser.add_argument("--data-dir", type=Path, required=True, help="data root (config key `data_dir`)")
+    parser.add_argument(
+        "--annotations", type=Path, required=True, help="BeCoS annotation folder (config key `annotations`)"
+    )
+    parser.add_argument(
+        "--template-table",
+        default="templates_all.csv",
+        help="template table in <annotations>/config (default templates_all.csv)",
+    )
+    parser.add_argument("--out", type=Path, help="write the JSON report here (also on failure)")
+    parser.add_argument(
+        "--no-mesh-check",
+        dest="read_meshes",
+        action="store_false",
+        help="only check folders and counts, not the mesh files",
+    )
+    parser.add_argument(
+        "--no-geometry-check",
+        dest="compare_geometry",
+        action="store_false",
+        help="do not compare shapes with their class template nor check edge files for "
+        "plausibility (only for stand-in meshes; config key `check_geometry`)",
+    )
+    parser.add_argument(
+        "--full-parse",
+        action="store_true",
+        help="also parse every mesh completely with read_mesh and list the repairs remeshing "
+        "applies to a copy (slow: ~35 s for TOSCA)",
+    )
 
 
-def run_cli(args: argparse.Namespace) -> int:
-    """Run ``becos check`` / ``becos fetch-annotations``; BecosError propagates (the CLI exits 2)."""
-    command = getattr(args, "command", None) or getattr(args, "check_command", None)
-    if command == "fetch-annotations":
-        print(fetch_annotations(args.url, args.sha256, args.dest))
-        return 0
-    if command != "check":
-        raise ValueError(f"becos.check cannot run command {command!r}")
+def fetch_annotations_arguments(parser: argparse.ArgumentParser) -> None:
+    """Arguments of ``becos fetch-annotations``."""
+    parser.add_argument("--url", required=True, help="archive URL (http, https or file://)")
+    parser.add_argument("--sha256", required=True, help="pinned SHA-256 of the archive")
+    parser.add_argument("--dest", type=Path, required=True, help="folder to create (the annotation folder)")
+
+
+def run_fetch_annotations(args: argparse.Namespace) -> int:
+    """Run ``becos fetch-annotations``: print the installed folder."""
+    print(fetch_annotations(args.url, args.sha256, args.dest))
+    return 0
+
+
+def run_check(args: argparse.Namespace) -> int:
+    """Run ``becos check``; BecosError propagates (the CLI exits 2)."""
     start = time.perf_counter()
     try:
         report = check_datasets(
@@ -104,3 +102,10 @@ def run_cli(args: argparse.Namespace) -> int:
     else:
         sys.stdout.write(text)
     return 0
+
+
+COMMANDS = {
+    "check": (check_arguments, run_check),
+    "fetch-annotations": (fetch_annotations_arguments, run_fetch_annotations),
+}
+"""Each sub-command's (arguments, handler) pair (:mod:`becos.cli`)."""

@@ -30,3 +30,7 @@ def run_cli(args: argparse.Namespace) -> int:
         write_text(args.out, text)
     print(result["folder"])
     return 0
+
+
+COMMANDS = {"download-dataset": (configure_parser, run_cli)}
+"""The sub-command's (arguments, handler) pair (:mod:`becos.cli`)."""

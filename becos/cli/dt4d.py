@@ -35,3 +35,7 @@ def run_cli(args: argparse.Namespace) -> int:
     total = prepare_dt4d(args.data_dir, args.info, args.kind, args.classes, log=log)
     print(json.dumps({"out": str(output_folder(args.data_dir, args.kind)), **total}))
     return 0
+
+
+COMMANDS = {"prepare-dt4d": (configure_parser, run_cli)}
+"""The sub-command's (arguments, handler) pair (:mod:`becos.cli`)."""

@@ -107,3 +107,7 @@ def _open_store(path: Path):
     from becos.store import open_benchmark
 
     return open_benchmark(path)
+
+
+COMMANDS = {"evaluate": (configure_parser, run_cli)}
+"""The sub-command's (arguments, handler) pair (:mod:`becos.cli`)."""

@@ -12,7 +12,7 @@ from becos.settings import SETTINGS
 from becos.store import count_files, expand_inputs, open_benchmark, write_store
 
 
-def configure_parser(parser: argparse.ArgumentParser, name: str = "export-zarr") -> None:
+def configure_parser(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--setting", required=True, choices=SETTINGS)
     parser.add_argument(
         "--out",
@@ -71,3 +71,7 @@ def run_cli(args: argparse.Namespace) -> int:
         )
     )
     return 0
+
+
+COMMANDS = {"export-zarr": (configure_parser, run_cli)}
+"""The sub-command's (arguments, handler) pair (:mod:`becos.cli`)."""

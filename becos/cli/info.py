@@ -35,3 +35,7 @@ def run_cli(args: argparse.Namespace) -> int:
         info["zero_weight_rows"] = zero_rows
     print(json.dumps(info, indent=2))
     return 0
+
+
+COMMANDS = {"info": (configure_parser, run_cli)}
+"""The sub-command's (arguments, handler) pair (:mod:`becos.cli`)."""

@@ -56,3 +56,7 @@ def run_cli(args: argparse.Namespace) -> int:
         )
     )
     return 0
+
+
+COMMANDS = {"report": (configure_parser, run_cli)}
+"""The sub-command's (arguments, handler) pair (:mod:`becos.cli`)."""

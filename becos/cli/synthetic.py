@@ -45,3 +45,7 @@ def run_cli(args: argparse.Namespace) -> int:
     )
     print(out)
     return 0
+
+
+COMMANDS = {"synthetic": (configure_parser, run_cli)}
+"""The sub-command's (arguments, handler) pair (:mod:`becos.cli`)."""

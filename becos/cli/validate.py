@@ -67,3 +67,7 @@ def run_cli(args: argparse.Namespace) -> int:
     if args.json is not None:
         write_text(args.json, json.dumps(out, indent=1) + "\n")
     return status
+
+
+COMMANDS = {"validate": (configure_parser, run_cli)}
+"""The sub-command's (arguments, handler) pair (:mod:`becos.cli`)."""

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 from pathlib import Path
 
@@ -20,39 +21,6 @@ from becos.workflow import (
     write_catalog_stage,
     write_manifest_stage,
 )
-
-
-def configure_parser(parser: argparse.ArgumentParser, name: str) -> None:
-    parser.add_argument(
-        "--options",
-        required=True,
-        help="JSON: the job's options (becos.workflow.job_options), or the whole config for write-config and metadata",
-    )
-    if name in ("manifest", "ground-truth", "pairs", "metadata", "export-pairings"):
-        parser.add_argument("--setting", required=True, choices=SETTINGS)
-    if name in ("ground-truth", "pairs"):
-        parser.add_argument("--chunk", required=True, type=int)
-        parser.add_argument(
-            "--remeshed", required=True, type=Path, help="the folder of the remesh variants (results/remeshed)"
-        )
-    if name == "pairs":
-        parser.add_argument("--ground-truth", required=True, type=Path, help="the chunk's ground-truth index")
-        parser.add_argument(
-            "--triangle-ids",
-            type=Path,
-            help="the folder of the published views' triangle ids (original_settings P2P; default: cast every view)",
-        )
-    if name in ("ground-truth", "pairs", "export-pairings"):
-        parser.add_argument("--manifest", required=True, type=Path, help="the setting's pair manifest")
-    if name in ("manifest", "ground-truth", "pairs", "export-pairings"):
-        parser.add_argument("--catalog", required=True, type=Path)
-    if name == "export-pairings":
-        parser.add_argument("--store", required=True, type=Path, help="the setting's benchmark store")
-    if name == "remesh":
-        parser.add_argument("--shape", required=True, help="JSON: the shape's catalog row")
-        parser.add_argument("--token", required=True, help="v<k> (variant k) or f<n> (target faces n)")
-        parser.add_argument("--ply", type=Path, help="also write the remeshed mesh as PLY")
-    parser.add_argument("--out", required=True, type=Path)
 
 
 def parse_json_option(text: str, option: str, command: str) -> dict:
@@ -79,51 +47,191 @@ def parse_json_option(text: str, option: str, command: str) -> dict:
     return value
 
 
-def run_cli(args: argparse.Namespace) -> int:
-    config = parse_json_option(args.options, "--options", args.command)
-    try:
-        return _run_stage(args, config)
-    except KeyError as exc:
-        raise ConfigError(
-            f"--options: lacks the key {exc} (given keys: {sorted(config)}). Fix: "
-            f"pass the JSON the workflow's rule writes (becos.workflow.job_options)"
-        ) from None
-    except TypeError as exc:
-        raise ConfigError(
-            f"--options: a value has the wrong type ({exc}). Fix: check the "
-            f"values against becos/data/schema.yaml, or pass the JSON the workflow's rule writes"
-        ) from None
-    except FileNotFoundError as exc:
-        raise InputFileError(
-            exc.filename or "?",
-            "not found (an input of this stage)",
-            f"run the stages before `becos {args.command}` (the workflow does), or check the paths given "
-            f"to it (its input options; `results` in --options: {config.get('results', 'results')!r})",
-        ) from None
+def _stage(run):
+    """The handler of a stage sub-command from ``run(args, config)``: ``--options`` parsed
+    (:func:`parse_json_option`), exit status 0; an options dict that lacks a key or holds a value of
+    the wrong type is a :class:`ConfigError`, a missing input an :class:`InputFileError` naming it."""
 
-
-def _run_stage(args: argparse.Namespace, config: dict) -> int:
-    if args.command == "write-config":
-        write_text(args.out, json.dumps(resolve_config(config), indent=1, sort_keys=True) + "\n")
+    @functools.wraps(run)
+    def handler(args: argparse.Namespace) -> int:
+        config = parse_json_option(args.options, "--options", args.command)
+        try:
+            run(args, config)
+        except KeyError as exc:
+            raise ConfigError(
+                f"--options: lacks the key {exc} (given keys: {sorted(config)}). Fix: "
+                f"pass the JSON the workflow's rule writes (becos.workflow.job_options)"
+            ) from None
+        except TypeError as exc:
+            raise ConfigError(
+                f"--options: a value has the wrong type ({exc}). Fix: check the "
+                f"values against becos/data/schema.yaml, or pass the JSON the workflow's rule writes"
+            ) from None
+        except FileNotFoundError as exc:
+            raise InputFileError(
+                exc.filename or "?",
+                "not found (an input of this stage)",
+                f"run the stages before `becos {args.command}` (the workflow does), or check the paths given "
+                f"to it (its input options; `results` in --options: {config.get('results', 'results')!r})",
+            ) from None
         return 0
-    if args.command == "catalog":
-        write_catalog_stage(config, args.out)
-    elif args.command == "manifest":
-        write_manifest_stage(config, args.setting, args.catalog, args.out)
-    elif args.command == "remesh":
-        remesh_stage(config, parse_json_option(args.shape, "--shape", args.command), args.token, args.out, args.ply)
-    elif args.command in ("ground-truth", "pairs"):
-        inputs = {"manifest": args.manifest, "catalog": args.catalog, "remeshed": args.remeshed}  # the rule's
-        if args.command == "ground-truth":
-            ground_truth_stage(config, args.setting, args.chunk, args.out, **inputs)
-        else:
-            pairs_stage(
-                config, args.setting, args.chunk, args.ground_truth, args.out, triangle_ids=args.triangle_ids, **inputs
-            )
-    elif args.command == "metadata":
-        write_text(
-            args.out, json.dumps(store_metadata(config, args.setting), indent=1, sort_keys=True, default=str) + "\n"
-        )
-    elif args.command == "export-pairings":
-        export_pairings_stage(config, args.setting, args.out, args.store, manifest=args.manifest, catalog=args.catalog)
-    return 0
+
+    return handler
+
+
+# --- arguments several stages share, in the order they appear on a command line ----------------------
+
+
+def _options(parser: argparse.ArgumentParser, whole_config: bool = False) -> None:
+    what = "the whole config" if whole_config else "the job's options (becos.workflow.job_options)"
+    parser.add_argument("--options", required=True, help=f"JSON: {what}")
+
+
+def _setting(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--setting", required=True, choices=SETTINGS)
+
+
+def _chunk(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--chunk", required=True, type=int)
+    parser.add_argument(
+        "--remeshed", required=True, type=Path, help="the folder of the remesh variants (results/remeshed)"
+    )
+
+
+def _manifest_catalog(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--manifest", required=True, type=Path, help="the setting's pair manifest")
+    parser.add_argument("--catalog", required=True, type=Path)
+
+
+def _out(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--out", required=True, type=Path)
+
+
+# --- one pair per sub-command: its arguments, its handler -----------------------------------------------
+
+
+def write_config_arguments(parser: argparse.ArgumentParser) -> None:
+    _options(parser, whole_config=True)
+    _out(parser)
+
+
+@_stage
+def run_write_config(args: argparse.Namespace, config: dict) -> None:
+    write_text(args.out, json.dumps(resolve_config(config), indent=1, sort_keys=True) + "\n")
+
+
+def catalog_arguments(parser: argparse.ArgumentParser) -> None:
+    _options(parser)
+    _out(parser)
+
+
+@_stage
+def run_catalog(args: argparse.Namespace, config: dict) -> None:
+    write_catalog_stage(config, args.out)
+
+
+def manifest_arguments(parser: argparse.ArgumentParser) -> None:
+    _options(parser)
+    _setting(parser)
+    parser.add_argument("--catalog", required=True, type=Path)
+    _out(parser)
+
+
+@_stage
+def run_manifest(args: argparse.Namespace, config: dict) -> None:
+    write_manifest_stage(config, args.setting, args.catalog, args.out)
+
+
+def remesh_arguments(parser: argparse.ArgumentParser) -> None:
+    _options(parser)
+    parser.add_argument("--shape", required=True, help="JSON: the shape's catalog row")
+    parser.add_argument("--token", required=True, help="v<k> (variant k) or f<n> (target faces n)")
+    parser.add_argument("--ply", type=Path, help="also write the remeshed mesh as PLY")
+    _out(parser)
+
+
+@_stage
+def run_remesh(args: argparse.Namespace, config: dict) -> None:
+    remesh_stage(config, parse_json_option(args.shape, "--shape", args.command), args.token, args.out, args.ply)
+
+
+def ground_truth_arguments(parser: argparse.ArgumentParser) -> None:
+    _options(parser)
+    _setting(parser)
+    _chunk(parser)
+    _manifest_catalog(parser)
+    _out(parser)
+
+
+@_stage
+def run_ground_truth(args: argparse.Namespace, config: dict) -> None:
+    ground_truth_stage(
+        config, args.setting, args.chunk, args.out, manifest=args.manifest, catalog=args.catalog, remeshed=args.remeshed
+    )
+
+
+def pairs_arguments(parser: argparse.ArgumentParser) -> None:
+    _options(parser)
+    _setting(parser)
+    _chunk(parser)
+    parser.add_argument("--ground-truth", required=True, type=Path, help="the chunk's ground-truth index")
+    parser.add_argument(
+        "--triangle-ids",
+        type=Path,
+        help="the folder of the published views' triangle ids (original_settings P2P; default: cast every view)",
+    )
+    _manifest_catalog(parser)
+    _out(parser)
+
+
+@_stage
+def run_pairs(args: argparse.Namespace, config: dict) -> None:
+    pairs_stage(
+        config,
+        args.setting,
+        args.chunk,
+        args.ground_truth,
+        args.out,
+        triangle_ids=args.triangle_ids,
+        manifest=args.manifest,
+        catalog=args.catalog,
+        remeshed=args.remeshed,
+    )
+
+
+def metadata_arguments(parser: argparse.ArgumentParser) -> None:
+    _options(parser, whole_config=True)
+    _setting(parser)
+    _out(parser)
+
+
+@_stage
+def run_metadata(args: argparse.Namespace, config: dict) -> None:
+    metadata = store_metadata(config, args.setting)
+    write_text(args.out, json.dumps(metadata, indent=1, sort_keys=True, default=str) + "\n")
+
+
+def export_pairings_arguments(parser: argparse.ArgumentParser) -> None:
+    _options(parser)
+    _setting(parser)
+    _manifest_catalog(parser)
+    parser.add_argument("--store", required=True, type=Path, help="the setting's benchmark store")
+    _out(parser)
+
+
+@_stage
+def run_export_pairings(args: argparse.Namespace, config: dict) -> None:
+    export_pairings_stage(config, args.setting, args.out, args.store, manifest=args.manifest, catalog=args.catalog)
+
+
+COMMANDS = {
+    "write-config": (write_config_arguments, run_write_config),
+    "catalog": (catalog_arguments, run_catalog),
+    "manifest": (manifest_arguments, run_manifest),
+    "remesh": (remesh_arguments, run_remesh),
+    "ground-truth": (ground_truth_arguments, run_ground_truth),
+    "pairs": (pairs_arguments, run_pairs),
+    "metadata": (metadata_arguments, run_metadata),
+    "export-pairings": (export_pairings_arguments, run_export_pairings),
+}
+"""Each sub-command's (arguments, handler) pair (:mod:`becos.cli`)."""
