@@ -303,3 +303,27 @@ def test_the_published_benchmark_config_is_one_valid_configfile(becos_code, tmp_
     result = subprocess.run(cmd, capture_output=True, text=True)
     assert result.returncode == 0, result.stdout[-2000:] + result.stderr[-2000:]
     assert "check_datasets" in result.stdout + result.stderr
+
+
+def test_every_sub_command_is_one_arguments_and_handler_pair(monkeypatch, capsys):
+    """Each ``becos`` sub-command is one (arguments, handler) pair of its module's ``COMMANDS`` (issue #32,
+    item 4): ``becos <name> --help`` prints its usage and its one-line description, and no module holds
+    a pair that ``becos.cli.SUBCOMMANDS`` does not list."""
+    import importlib
+
+    from becos.cli import SUBCOMMANDS, main
+
+    monkeypatch.setenv("COLUMNS", "250")  # argparse wraps at the terminal width: one line per description
+    listed: dict[str, set[str]] = {}
+    for name, module, help_text in SUBCOMMANDS:
+        listed.setdefault(module, set()).add(name)
+        arguments, run = importlib.import_module(module).COMMANDS[name]
+        assert callable(arguments) and callable(run), name
+        with pytest.raises(SystemExit) as exited:
+            main([name, "--help"])
+        out = capsys.readouterr().out
+        assert exited.value.code == 0 and out.startswith(f"usage: becos {name} "), out
+        if module not in ("becos.cli.baselines", "becos.cli.evaluate"):  # these two write a longer one
+            assert f"\n{help_text[:1].upper()}{help_text[1:]}.\n" in out, out
+    for module, names in listed.items():
+        assert set(importlib.import_module(module).COMMANDS) == names, module
