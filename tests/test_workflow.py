@@ -147,6 +147,26 @@ def test_another_working_directory_keeps_the_default_config(tmp_path):
     assert resolved["n_chunks"] == default["n_chunks"] and resolved["store_vis"] == default["store_vis"]
 
 
+def test_one_key_switches_off_every_export(tmp_path):
+    """Issue #31, decision 2: ``exports: {enabled: false}`` over the default config (whose released
+    layout, pickle and report are on) plans no export job, still the store and its validation; the
+    resolved config says every export is off (a dry run: no job runs)."""
+    from becos.workflow import resolve_config
+
+    default = yaml.safe_load((REPO / "config" / "config.yaml").read_text())
+    on = {"released_layout", "published_pairings", "report"}
+    assert on <= set(jobs_planned(snakemake(write_config_file(tmp_path / "on", {}), "-n").stdout))
+    planned = jobs_planned(snakemake(write_config_file(tmp_path / "off", {"exports": {"enabled": False}}), "-n").stdout)
+    assert planned.get("zarr_store") == 3 and planned.get("validate_store") == 3, planned
+    exports = {"released_layout", "psmal_layout", "ulrssm_layout", "dpfm_layout", "geodesic_plan", "geodesics"}
+    assert not (exports | on) & set(planned), planned
+    resolved = resolve_config({**default, "exports": {**default["exports"], "enabled": False, "psmal": True}})
+    assert resolved["exports"]["zarr"] is True
+    assert not any(v for k, v in resolved["exports"].items() if isinstance(v, bool) and k != "zarr"), resolved
+    kept = resolve_config(default)["exports"]  # the default: every export as config/config.yaml says
+    assert kept["enabled"] is True and all(kept[k] == v for k, v in default["exports"].items()), kept
+
+
 def test_a_bad_config_fails_before_any_job(becos_code, tmp_path):
     cases = {
         "unknown key": {"min_overlapp": 0.2},

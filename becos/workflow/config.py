@@ -89,8 +89,21 @@ def resolve_config(raw: dict) -> dict:
     errors = sorted(validator.iter_errors(config), key=lambda e: [str(k) for k in e.absolute_path])
     if errors:
         raise ConfigError("\n".join(line for e in errors for line in schema_problems(e)))
+    switch_off_exports(config, schema)
     check_config(config)
     return config
+
+
+def switch_off_exports(config: dict, schema: dict) -> None:
+    """``exports.enabled: false``: every on/off export key of the schema (all but ``enabled`` and ``zarr``,
+    the store, which is always built) set to false in ``config``, in place, so the resolved config says
+    what is built."""
+    exports = config["exports"]
+    if exports["enabled"]:
+        return
+    for key, spec in schema["properties"]["exports"]["properties"].items():
+        if spec.get("type") == "boolean" and key not in ("enabled", "zarr"):
+            exports[key] = False
 
 
 CONFIG_DOCS = "config/README.md"
