@@ -300,10 +300,10 @@ class BlockChecker:
             return
         gfaces = faces[frows] + self.rep(self.start[gv], gf)[frows, None]  # block-wide vertex ids
         n_v = int(len(ptf))
-        edges = np.sort(np.concatenate([gfaces[:, [0, 1]], gfaces[:, [1, 2]], gfaces[:, [2, 0]]]), axis=1)
-        edge_key = edges[:, 0] * n_v + edges[:, 1]
+        ends = gfaces[:, [1, 2, 0]]  # edge k of a face runs from corner k to corner k + 1
+        edge_key = (np.minimum(gfaces, ends) * n_v + np.maximum(gfaces, ends)).T.ravel()  # edges 0, then 1, then 2
         edge_face = np.tile(np.arange(len(frows)), 3)
-        order = np.argsort(edge_key, kind="stable")
+        order = np.argsort(edge_key)  # any order of a shared edge's faces links them all
         k, f = edge_key[order], edge_face[order]
         same = k[1:] == k[:-1]
         graph = coo_matrix((np.ones(int(same.sum())), (f[:-1][same], f[1:][same])), shape=(len(frows), len(frows)))
