@@ -184,13 +184,22 @@ class VertexRounding:
     Args:
         vertices: (V, 3) float64 positions (any frame: only distances are compared).
         faces: (F, 3) int64 faces.
+        only: optional (K,) int64 distinct face ids: the per-face data is computed for these faces
+            alone (the same values), and :meth:`candidates` may then be asked about points on them only;
+            for a caller that knows its points' faces in advance and needs few of them.
     """
 
-    def __init__(self, vertices: np.ndarray, faces: np.ndarray):
+    def __init__(self, vertices: np.ndarray, faces: np.ndarray, only: np.ndarray | None = None):
         self.vertices = np.asarray(vertices, dtype=np.float64)
         self.faces = np.asarray(faces, dtype=np.int64)
         neighbour, far = edge_neighbours(self.faces)
-        start = self.vertices[self.faces]  # (F, 3, 3): edge k runs from corner k ...
+        used = self.faces
+        self._row = None  # face id -> row of the per-face data (None: the identity)
+        if only is not None:
+            self._row = np.full(len(self.faces), -1, dtype=np.int64)
+            self._row[only] = np.arange(len(only))
+            used, neighbour, far = used[only], neighbour[only], far[only]
+        start = self.vertices[used]  # (F, 3, 3): edge k runs from corner k ...
         edge = start[:, [1, 2, 0]] - start  # ... to corner k + 1
         to_far = self.vertices[far] - start  # rows with far == -1 are never used
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -203,7 +212,7 @@ class VertexRounding:
             far_y = -np.sqrt(np.maximum(far2 - far_x**2, 0.0))
             # (F, 3, 6) per face and edge: unit direction (3), length, far corner x, y; one gather per query
             self._edges = np.concatenate([edge / length[..., None], np.stack([length, far_x, far_y], axis=2)], axis=2)
-        self._indices = np.stack([self.faces, far, neighbour], axis=2)  # (F, 3, 3)
+        self._indices = np.stack([used, far, neighbour], axis=2)  # (F, 3, 3)
 
     def candidates(
         self, face: np.ndarray, weights: np.ndarray, kept_faces: np.ndarray | None = None
@@ -224,13 +233,14 @@ class VertexRounding:
                 shortest path then runs through a corner of that edge, which is nearer), where there is
                 no far corner, or on a degenerate face: inf.
         """
-        indices = np.take(self._indices, face, axis=0)  # (M, 3, 3): corner, far corner, neighbour per edge
+        row = face if self._row is None else self._row[face]
+        indices = np.take(self._indices, row, axis=0)  # (M, 3, 3): corner, far corner, neighbour per edge
         corners, across = indices[..., 0], indices[..., 1]
         if kept_faces is not None:
             across = np.where(kept_faces[np.maximum(indices[..., 2], 0)], across, -1)
         start = np.take(self.vertices, corners, axis=0)  # (M, 3, 3)
         to_point = np.einsum("mk,mkd->md", weights, start)[:, None] - start
-        edges = np.take(self._edges, face, axis=0)  # (M, 3, 6)
+        edges = np.take(self._edges, row, axis=0)  # (M, 3, 6)
         length, qx, qy = edges[..., 3], edges[..., 4], edges[..., 5]
         with np.errstate(divide="ignore", invalid="ignore"):
             corner2 = np.einsum("mkd,mkd->mk", to_point, to_point)

@@ -54,6 +54,9 @@ def test_rounding_distances_are_along_the_surface():
     chord = np.linalg.norm(mesh.vertices[cand] - point[:, None], axis=2)
     finite = np.isfinite(along)
     assert finite[:, :3].all() and finite[:, 3:].any()
+    # the per-face data of the points' faces alone (the validator's way): the same candidates and distances
+    some = VertexRounding(mesh.vertices, mesh.faces, only=np.unique(face)).candidates(face, weights)
+    assert np.array_equal(some[0], cand) and np.array_equal(some[1], along)
     np.testing.assert_allclose(along[finite], chord[finite], rtol=1e-12, atol=1e-12)
     # a large face beside a small one: the neighbour's far corner is nearer than every corner
     big = TriMesh(np.array([[0, 0, 0], [4, 0, 0], [2, 4, 0], [2, -0.5, 0]], float), np.array([[0, 1, 2], [1, 0, 3]]))

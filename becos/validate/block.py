@@ -140,7 +140,9 @@ class BlockChecker:
             block_faces = local_faces + vertex_start[:, None]
             wr = np.nan_to_num(w[rows])
             wr = wr / np.where(np.abs(wr.sum(axis=1)) > 0, wr.sum(axis=1), 1.0)[:, None]  # sums: the weights check
-            candidates, along = VertexRounding(a[f"{o}_vertices"], block_faces).candidates(gface, wr)
+            # the per-face data of the faces holding a point only (a full shape's points hold under half)
+            rounding_mesh = VertexRounding(a[f"{o}_vertices"], block_faces, only=np.unique(gface))
+            candidates, along = rounding_mesh.candidates(gface, wr)
             corners = candidates[:, :3] - vertex_start[gface, None]  # (R, 3) vertices of the other shape, per pair
             target = c[rows, None] + vertex_start[gface, None]
             dist = along[:, :3]  # to the corners: the straight line, as the nearest-corner rule measures
