@@ -35,9 +35,34 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     )
 
 
+MALLOC_KEEP_BYTES = 32 << 20
+"""glibc malloc settings of a ``becos validate`` process: blocks up to this size come from the heap, not
+their own mmap, and freed heap memory up to 32 times this is kept for reuse instead of being returned to
+the system."""
+
+
+def keep_freed_memory() -> None:
+    """Let glibc reuse the memory of the validator's large per-block temporaries (tens of MB, freed and
+    allocated again for every block) instead of unmapping and faulting it in again: about a sixth of
+    ``becos validate``'s CPU on 450 TOSCA pairs was the kernel zeroing those pages, at the same peak RSS.
+    Does nothing where the C library is not glibc."""
+    import ctypes
+    import ctypes.util
+
+    try:
+        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
+        mallopt = libc.mallopt
+    except (OSError, AttributeError):
+        return
+    m_trim_threshold, m_mmap_threshold = -1, -3  # glibc's malloc.h
+    mallopt(m_mmap_threshold, MALLOC_KEEP_BYTES)
+    mallopt(m_trim_threshold, 32 * MALLOC_KEEP_BYTES)
+
+
 def run_cli(args: argparse.Namespace) -> int:
     from becos.atomic import write_text
 
+    keep_freed_memory()
     report = validate(args.store, progress=True)
     summary = report.summary()
     out = {**summary, "problems": report.problems}
