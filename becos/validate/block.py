@@ -141,7 +141,9 @@ class BlockChecker:
             wr = np.nan_to_num(w[rows])
             wr = wr / np.where(np.abs(wr.sum(axis=1)) > 0, wr.sum(axis=1), 1.0)[:, None]  # sums: the weights check
             # the per-face data of the faces holding a point only (a full shape's points hold under half)
-            rounding_mesh = VertexRounding(a[f"{o}_vertices"], block_faces, only=np.unique(gface))
+            held = np.zeros(len(block_faces), dtype=bool)
+            held[gface] = True
+            rounding_mesh = VertexRounding(a[f"{o}_vertices"], block_faces, only=np.flatnonzero(held))
             candidates, along = rounding_mesh.candidates(gface, wr)
             corners = candidates[:, :3] - vertex_start[gface, None]  # (R, 3) vertices of the other shape, per pair
             target = c[rows, None] + vertex_start[gface, None]
