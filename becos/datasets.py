@@ -27,8 +27,10 @@ YAML keys (all datasets):
                        folder's ``data/``; files ``<folder>/<class>/<action><frame:03d>.obj``, written
                        by :mod:`becos.dt4d` from ``DeformingThings4D/<kind>``; folder ``dt4d_<kind>``)
 ``file_glob``          optional glob of the files to list (flat/class_folders), default ``*.<type>``
-``expected_count``     number of used shapes (excluded ones not counted)
-``expected_per_class`` optional ``{class: count}``
+``expected_count``     number of used shapes (excluded ones not counted), or ``generated``: a collection
+                       written by ``becos synthetic``, whose counts (total and per class) are those of
+                       the files its manifest (``<data root>/../synthetic.json``) lists, at any size
+``expected_per_class`` optional ``{class: count}`` (not with ``generated``)
 ``scale``              factor applied to file coordinates
 ``rotation_deg``       ``[rx, ry, rz]`` in degrees (Open3D xyz convention)
 ``rotation_per_shape`` optional: per-shape rotations ``{values: {...}}`` inline, or
@@ -56,6 +58,7 @@ from __future__ import annotations
 import json
 import logging
 import re
+from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -77,6 +80,8 @@ log = logging.getLogger(__name__)
 CATEGORIES = ("human", "four-legged", "centaur")
 EXCLUDED = "excluded"
 LAYOUTS = ("flat", "class_folders", "dt4d")
+GENERATED = "generated"
+"""``expected_count`` of a registry entry whose shapes ``becos synthetic`` writes: counted from its manifest."""
 SPLIT_RULES = ("by_class", "by_name", "slices", "template_table")
 REQUIRED_KEYS = (
     "name",
@@ -277,7 +282,10 @@ class DatasetSpec:
         self.info_file = raw.get("info_file")
         if self.layout == "dt4d" and not self.info_file:
             self._fail("layout dt4d needs info_file", "name the annotation folder's data/info_dt4d_*.json")
-        self.expected_count = int(raw["expected_count"])
+        self.generated = raw["expected_count"] == GENERATED
+        if self.generated and raw.get("expected_per_class"):
+            self._fail("has expected_per_class with expected_count: generated", "remove expected_per_class")
+        self.expected_count = None if self.generated else int(raw["expected_count"])
         self.expected_per_class = {str(k): int(v) for k, v in (raw.get("expected_per_class") or {}).items()}
         self.scale = float(raw["scale"])
         if not self.scale > 0:
@@ -595,6 +603,33 @@ class DatasetSpec:
                 )
         return sorted(names, key=natural_key)
 
+    def expected_counts(self, data_root: str | Path) -> tuple[int, dict[str, int]]:
+        """The used shapes expected below ``data_root``: (total, ``{class: count}``, empty if the registry
+        has none). ``expected_count: generated``: the files of this dataset's folder that the collection's
+        manifest lists (``<data_root>/../synthetic.json``, :mod:`becos.synthetic`), per class.
+
+        Raises:
+            InputFileError: a generated dataset whose manifest is missing or unreadable.
+        """
+        if not self.generated:
+            return self.expected_count, dict(self.expected_per_class)
+        from becos.synthetic.collection import MANIFEST
+
+        path = Path(data_root).parent / MANIFEST
+        fix = "generate the collection with `becos synthetic OUT` and use OUT/data as data_dir (synthetic.enabled)"
+        try:
+            listed = json.loads(path.read_text(encoding="utf-8"))["files"]
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            raise InputFileError(
+                path,
+                f"is missing or not a synthetic collection manifest ({exc}); {self.name} counts its shapes there",
+                fix,
+            ) from exc
+        prefix, suffix = f"data/{self.folder}/", f".{self.file_type}"
+        names = [self.name_of(f) for f in listed if f.startswith(prefix) and f.endswith(suffix)]
+        per_class = Counter(self.class_of(n) for n in names if n not in self.excluded)
+        return sum(per_class.values()), dict(sorted(per_class.items()))
+
     def list_shapes(self, data_root: str | Path, annotations: AnnotationSource | None = None) -> list[ShapeEntry]:
         """Every shape of the dataset below ``data_root`` as :class:`ShapeEntry` (natural name order).
 
@@ -608,21 +643,22 @@ class DatasetSpec:
         folder = data_root / self.folder
         names = self.list_names(data_root, annotations)
         used = [n for n in names if n not in self.excluded]
-        if len(used) != self.expected_count:
+        expected_count, expected_per_class = self.expected_counts(data_root)
+        if len(used) != expected_count:
             raise InputFileError(
                 folder,
-                f"found {len(used)} {self.name} shapes ({self.file_glob}), expected {self.expected_count}",
+                f"found {len(used)} {self.name} shapes ({self.file_glob}), expected {expected_count}",
                 f"complete or re-extract the download. {self.download_help()}",
             )
-        if self.expected_per_class:
+        if expected_per_class:
             counts: dict[str, int] = {}
             for n in used:
                 counts[self.class_of(n)] = counts.get(self.class_of(n), 0) + 1
-            if counts != self.expected_per_class:
+            if counts != expected_per_class:
                 diff = {
-                    c: (counts.get(c, 0), self.expected_per_class.get(c, 0))
-                    for c in set(counts) | set(self.expected_per_class)
-                    if counts.get(c, 0) != self.expected_per_class.get(c, 0)
+                    c: (counts.get(c, 0), expected_per_class.get(c, 0))
+                    for c in set(counts) | set(expected_per_class)
+                    if counts.get(c, 0) != expected_per_class.get(c, 0)
                 }
                 raise InputFileError(
                     folder,

@@ -107,10 +107,12 @@ def write_config(workdir: Path, code: Path, **overrides) -> None:
 
 
 class PeakRss:
-    """Largest RSS of any single process in the tree under ``pid``, sampled every 0.2 s."""
+    """Largest RSS of any single process in the tree under ``pid``, sampled every 0.2 s; also per process
+    kind (:func:`_process_kind` of its command line: ``snakemake``, a ``becos`` sub-command, ...)."""
 
     def __init__(self, pid: int):
         self.root, self.peak, self.peak_cmd = psutil.Process(pid), 0, ""
+        self.by_kind: dict[str, int] = {}
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, daemon=True)
         self._thread.start()
@@ -124,8 +126,11 @@ class PeakRss:
             for p in procs:
                 try:
                     rss = p.memory_info().rss
+                    cmdline = p.cmdline()
                     if rss > self.peak:
-                        self.peak, self.peak_cmd = rss, " ".join(p.cmdline()[:6])
+                        self.peak, self.peak_cmd = rss, " ".join(cmdline[:6])
+                    kind = _process_kind(_python_argv(cmdline))
+                    self.by_kind[kind] = max(self.by_kind.get(kind, 0), rss)
                 except (psutil.NoSuchProcess, psutil.AccessDenied):
                     pass
             time.sleep(0.2)
@@ -133,7 +138,22 @@ class PeakRss:
     def stop(self) -> dict:
         self._stop.set()
         self._thread.join()
-        return {"peak_rss_mb": round(self.peak / 2**20, 1), "peak_process": self.peak_cmd}
+        return {
+            "peak_rss_mb": round(self.peak / 2**20, 1),
+            "peak_process": self.peak_cmd,
+            "peak_rss_mb_by_kind": {k: round(v / 2**20, 1) for k, v in sorted(self.by_kind.items())},
+        }
+
+
+def _python_argv(cmdline: list[str]) -> list[str]:
+    """A process's command line as its ``sys.argv`` would be: without the interpreter and its options
+    (``python -m snakemake ...`` -> ``[snakemake, ...]``; ``python .../bin/becos remesh`` -> ``[.../becos, remesh]``)."""
+    if cmdline and Path(cmdline[0]).name.startswith("python"):
+        rest = cmdline[1:]
+        while rest and rest[0].startswith("-") and rest[0] != "-m":
+            rest = rest[1:]
+        return rest[1:] if rest[:1] == ["-m"] else rest
+    return cmdline
 
 
 def _children_cpu() -> float:
@@ -339,9 +359,34 @@ def _process_kind(argv: list[str]) -> str:
     program = Path(argv[0]).name if argv else "?"
     if program == "becos" and len(argv) > 1:
         return argv[1]
-    if "snakemake" in argv[0]:
+    if argv and "snakemake" in argv[0]:
         return "snakemake"
     return program
+
+
+def install_cpu_hook(workdir: Path) -> tuple[Path, Path]:
+    """Write :data:`CPU_HOOK` as ``workdir/cpu-hook/sitecustomize.py``; return (hook folder, an emptied
+    log path). Pass them to :func:`snakemake` as ``hook=`` and ``env_extra={"BECOS_BENCH_CPU_LOG": log}``."""
+    hook = workdir / "cpu-hook"
+    hook.mkdir(parents=True, exist_ok=True)
+    (hook / "sitecustomize.py").write_text(CPU_HOOK)
+    log = workdir / "cpu-by-process.jsonl"
+    log.unlink(missing_ok=True)
+    return hook, log
+
+
+def cpu_by_process(log: Path) -> dict[str, dict]:
+    """The hook's log summed per process kind: processes, CPU seconds, CPU seconds per process (largest first)."""
+    by_kind: dict[str, dict] = {}
+    for line in log.read_text().splitlines() if log.is_file() else ():
+        entry = json.loads(line)
+        kind = by_kind.setdefault(_process_kind(entry["argv"]), {"processes": 0, "cpu_seconds": 0.0})
+        kind["processes"] += 1
+        kind["cpu_seconds"] += entry["cpu"]
+    for kind in by_kind.values():
+        kind["cpu_seconds"] = round(kind["cpu_seconds"], 1)
+        kind["cpu_seconds_per_process"] = round(kind["cpu_seconds"] / kind["processes"], 2)
+    return dict(sorted(by_kind.items(), key=lambda kv: -kv[1]["cpu_seconds"]))
 
 
 def measured_run(workdir: Path, run: Path, repo: Path, remeshed: Path | None = None) -> dict:
@@ -352,23 +397,10 @@ def measured_run(workdir: Path, run: Path, repo: Path, remeshed: Path | None = N
         parsed = remeshed.parent / "cache" / "meshes"  # what the remesh jobs would have written
         if parsed.is_dir() and not (run / "results" / "cache" / "meshes").exists():
             shutil.copytree(parsed, run / "results" / "cache" / "meshes")
-    hook = workdir / "cpu-hook"
-    hook.mkdir(parents=True, exist_ok=True)
-    (hook / "sitecustomize.py").write_text(CPU_HOOK)
-    log = workdir / "cpu-by-process.jsonl"
-    log.unlink(missing_ok=True)
+    hook, log = install_cpu_hook(workdir)
     seconds, out, memory = snakemake(
         run, "--cores", "2", repo=repo, hook=hook, env_extra={"BECOS_BENCH_CPU_LOG": str(log)}
     )
-    by_kind: dict[str, dict] = {}
-    for line in log.read_text().splitlines():
-        entry = json.loads(line)
-        kind = by_kind.setdefault(_process_kind(entry["argv"]), {"processes": 0, "cpu_seconds": 0.0})
-        kind["processes"] += 1
-        kind["cpu_seconds"] += entry["cpu"]
-    for kind in by_kind.values():
-        kind["cpu_seconds"] = round(kind["cpu_seconds"], 1)
-        kind["cpu_seconds_per_process"] = round(kind["cpu_seconds"] / kind["processes"], 2)
     return {
         "repo": str(repo),
         "commit": subprocess.run(
@@ -379,7 +411,7 @@ def measured_run(workdir: Path, run: Path, repo: Path, remeshed: Path | None = N
         "cpu_seconds_total": memory["cpu_seconds"],
         "peak_rss_mb": memory["peak_rss_mb"],
         "jobs": job_counts(out),
-        "cpu_by_process": dict(sorted(by_kind.items(), key=lambda kv: -kv[1]["cpu_seconds"])),
+        "cpu_by_process": cpu_by_process(log),
     }
 
 

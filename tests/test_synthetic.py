@@ -34,11 +34,12 @@ from becos.synthetic import (
     CHIRALITY_TEMPLATES,
     CLASSES,
     DATASETS,
-    REGISTRY_POSES,
+    FULL_SCALE_POSES,
     TREE_EDGES,
     body_part_labels,
     build_class,
     generate_collection,
+    poses_at_fraction,
 )
 from becos.synthetic.bodies import semantic_part
 
@@ -185,6 +186,46 @@ def test_refuses_to_overwrite_foreign_folder(tmp_path):
     assert (foreign / "thesis.tex").read_text() == "precious"
     with pytest.raises(ConfigError, match="poses_per_class"):
         generate_collection(tmp_path / "x", poses_per_class=0)
+
+
+def test_fraction_scales_the_collection_and_the_registry_counts_its_manifest(tmp_path):
+    """``synthetic.fraction`` (config/scale.yaml): one knob sets every class's shapes, modelled on the
+    published benchmark; the registry counts the shapes a collection's manifest lists, at any size
+    (a manifest listing 1/16's files is enough here: no meshes are generated)."""
+    from becos.datasets import DatasetSpec
+    from becos.errors import InputFileError
+
+    split_of = {}
+    for name in DATASETS:
+        spec = DatasetSpec.load(name)
+        assert spec.generated and spec.expected_count is None
+        split_of |= {f"{name}_{c}": s for s in ("train", "val", "test") for c in spec.split[s]}
+    assert set(split_of) == set(FULL_SCALE_POSES) == {f"{c.dataset}_{c.name}" for c in CLASSES}
+    per_split = Counter()
+    for key, n in FULL_SCALE_POSES.items():
+        per_split[split_of[key]] += n
+    # the published benchmark: 2,537 shapes, one per val / test pair (137 / 142)
+    assert per_split == {"train": 2258, "val": 137, "test": 142}
+    assert poses_at_fraction(1.0) == FULL_SCALE_POSES
+    assert [sum(poses_at_fraction(f).values()) for f in (1 / 16, 1 / 8, 1 / 4)] == [161, 319, 637]
+    assert min(poses_at_fraction(1 / 1000).values()) == 1  # every class keeps its template
+    for bad in (0, 1.5, "1/16"):
+        with pytest.raises(ConfigError, match="fraction"):
+            poses_at_fraction(bad)
+
+    poses = poses_at_fraction(1 / 16)
+    files = {
+        f"data/{DATASETS[c.dataset].folder_name}/{c.name}{k}.off": "-"
+        for c in CLASSES
+        for k in range(poses[f"{c.dataset}_{c.name}"])
+    }
+    files["annotations/config/templates_all.csv"] = "-"
+    (tmp_path / "synthetic.json").write_text(json.dumps({"generator": "becos.synthetic", "files": files}))
+    for name in DATASETS:
+        expected = {c.name: poses[f"{name}_{c.name}"] for c in CLASSES if c.dataset == name}
+        assert DatasetSpec.load(name).expected_counts(tmp_path / "data") == (sum(expected.values()), expected)
+    with pytest.raises(InputFileError, match="synthetic.json.*synthy counts its shapes there"):
+        DatasetSpec.load("synthy").expected_counts(tmp_path / "elsewhere" / "data")
 
 
 # --- meshes ------------------------------------------------------------------------------------
@@ -494,7 +535,6 @@ def entries(collection, annotation_source):
 def test_dataset_registry_lists_the_collection_with_class_held_out_splits(entries):
     from becos.datasets import DatasetSpec, frame_rotation_matrix
 
-    assert POSES == REGISTRY_POSES  # the YAMLs' expected_count assumes the default poses
     splits_of_class: dict[tuple[str, str], set] = {}
     per_category: dict[str, set] = {}
     for name, ds in DATASETS.items():

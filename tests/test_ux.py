@@ -139,11 +139,19 @@ def test_nested_command_line_values_are_typed_by_the_schema(tmp_path):
     import json
 
     workdir = write_config_file(tmp_path / "run", {"seed": 7})
-    given = ("caps={train: 2, val: null, test: 0}", "exports={psmal: true}")
+    given = ("caps={train: 2, val: null, test: 0}", "exports={psmal: true}", "synthetic={fraction: 0.0625}")
     result = run_snakemake(tmp_path, "-d", str(workdir), "--cores", "1", "results/config.json", "--config", *given)
     assert result.returncode == 0, result.stderr[-3000:]
     resolved = json.loads((workdir / "results" / "config.json").read_text())
     assert resolved["caps"] == {"train": 2, "val": None, "test": 0} and resolved["exports"]["psmal"] is True
+    # config/scale.yaml's size knob (issue #30): a number, merged into the synthetic block key by key
+    assert resolved["synthetic"] == {
+        "enabled": True,
+        "out": "resources/synthetic",
+        "seed": 0,
+        "poses": 4,
+        "fraction": 0.0625,
+    }
 
     result = run_snakemake(tmp_path, "-d", str(workdir), "-n", "--cores", "1", "--config", "caps={train: two}")
     assert result.returncode != 0

@@ -149,11 +149,16 @@ def _check_one_dataset(
     except BecosError as exc:
         return stop(f"{exc} (config key `datasets`)")
     folder = data_dir / spec.folder
-    entry.update(path=str(folder), folder=spec.folder, expected=spec.expected_count)
-    if spec.expected_per_class:
-        entry["expected_per_class"] = dict(spec.expected_per_class)
+    entry.update(path=str(folder), folder=spec.folder)
     if not folder.is_dir():
+        entry["expected"] = spec.expected_count  # None for a generated collection (counted from its manifest)
         return stop(_missing_dataset_text(spec, folder, data_dir))
+    try:
+        entry["expected"], expected_per_class = spec.expected_counts(data_dir)
+    except BecosError as exc:
+        return stop(f"dataset '{name}': {exc}")
+    if expected_per_class:
+        entry["expected_per_class"] = expected_per_class
     try:
         names = spec.list_names(data_dir, annotations)
     except BecosError as exc:
@@ -216,17 +221,18 @@ def _check_counts(
     from becos.catalog import natural_key
 
     name = spec.name
+    expected_count, expected_per_class = entry["expected"], entry.get("expected_per_class", {})
     used = [n for n in names if n not in spec.excluded]
     entry.update(found=len(used), excluded_found=len(names) - len(used))
     counts_ok = not not_files  # named above; counted below as present, so that they are not called missing
     there = [*used, *(n for n in not_files if n not in spec.excluded and _classified(spec, n))]
-    if len(there) != spec.expected_count:
+    if len(there) != expected_count:
         counts_ok = False
         published = _published_names(getattr(annotations, "root", None)).get(name, set())
         # the published lists name every shape of the reference's datasets; a registry that expects
         # another count (a subset, a newer release) gets no names
         present = set(names) | set(not_files)
-        absent = sorted(published - present, key=natural_key) if len(published) == spec.expected_count else []
+        absent = sorted(published - present, key=natural_key) if len(published) == expected_count else []
         entry["missing_published"] = absent
         named = ""
         if absent:
@@ -235,19 +241,19 @@ def _check_counts(
             named = f"; missing files named by the published BeCoS pair lists: {shown}{more}"
         problems.append(
             f"dataset '{name}': found {len(there)} shapes ({spec.file_glob}) in {folder}, expected "
-            f"{spec.expected_count}{named}. Fix: complete or re-extract the download "
+            f"{expected_count}{named}. Fix: complete or re-extract the download "
             f"({spec.download_help()}), or check `data_dir`"
         )
-    if spec.expected_per_class:
+    if expected_per_class:
         per_class: dict[str, int] = {}
         for n in there:
             c = spec.class_of(n)
             per_class[c] = per_class.get(c, 0) + 1
         entry["found_per_class"] = per_class
         diff = {
-            c: (per_class.get(c, 0), spec.expected_per_class.get(c, 0))
-            for c in sorted(set(per_class) | set(spec.expected_per_class))
-            if per_class.get(c, 0) != spec.expected_per_class.get(c, 0)
+            c: (per_class.get(c, 0), expected_per_class.get(c, 0))
+            for c in sorted(set(per_class) | set(expected_per_class))
+            if per_class.get(c, 0) != expected_per_class.get(c, 0)
         }
         if diff:
             counts_ok = False

@@ -3,43 +3,50 @@
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
-from becos.synthetic import CLASSES, REGISTRY_POSES, generate_collection
+from becos.synthetic import CLASSES, DEFAULT_POSES, generate_collection
 
 
 def configure_parser(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
     """Add the ``synthetic`` sub-command's arguments to ``parser`` (for ``becos synthetic``)."""
     parser.add_argument("out_dir", type=Path, help="folder to write (replaced if it holds a previous collection)")
     parser.add_argument("--seed", type=int, default=0, help="pose seed (default 0)")
-    parser.add_argument(
+    size = parser.add_mutually_exclusive_group()
+    size.add_argument(
         "--poses",
         type=int,
-        default=REGISTRY_POSES,
+        default=DEFAULT_POSES,
         dest="poses_per_class",
-        help=f"shapes per class, 1-20 (default {REGISTRY_POSES}; 13 classes). The dataset registry "
-        f"(config/datasets/synthy.yaml, synthz.yaml: expected_count, expected_per_class) "
-        f"expects {REGISTRY_POSES}",
+        help=f"shapes per class, 1-20 (default {DEFAULT_POSES}; 13 classes)",
+    )
+    size.add_argument(
+        "--fraction",
+        type=float,
+        default=None,
+        help="instead of --poses: this fraction (0, 1] of the BeCoS-size collection (2,537 shapes at 1; "
+        "per-class counts: becos.synthetic.FULL_SCALE_POSES), e.g. 0.0625 for 1/16",
     )
     return parser
 
 
 def run_cli(args: argparse.Namespace) -> int:
     """Generate the collection from parsed arguments; print its folder on stdout."""
+    import json
+    import sys
     import time
 
+    from becos.synthetic import MANIFEST
+
     start = time.perf_counter()
-    out = generate_collection(args.out_dir, seed=args.seed, poses_per_class=args.poses_per_class)
-    if args.poses_per_class != REGISTRY_POSES:
-        print(
-            f"becos synthetic: warning: {args.poses_per_class} poses per class, but config/datasets/synthy.yaml and "
-            f"synthz.yaml expect {REGISTRY_POSES} (expected_count, expected_per_class); update them before listing "
-            f"the shapes",
-            file=sys.stderr,
-        )
+    out = generate_collection(
+        args.out_dir, seed=args.seed, poses_per_class=args.poses_per_class, fraction=args.fraction
+    )
+    manifest = json.loads((out / MANIFEST).read_text())
+    n_shapes = sum(1 for f in manifest["files"] if f.startswith("data/"))
+    size = f"{args.poses_per_class} poses" if args.fraction is None else f"fraction {args.fraction} of BeCoS size"
     print(
-        f"synthetic collection: {len(CLASSES)} classes x {args.poses_per_class} poses in "
+        f"synthetic collection: {len(CLASSES)} classes, {n_shapes} shapes ({size}) in "
         f"{time.perf_counter() - start:.1f} s",
         file=sys.stderr,
     )

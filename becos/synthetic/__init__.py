@@ -16,6 +16,7 @@ Command line (:mod:`becos.cli.synthetic`; the workflow's rule runs the first for
 
     becos synthetic OUT_DIR --seed 0 --poses 4
     python -m becos.synthetic OUT_DIR --seed 0 --poses 4
+    becos synthetic OUT_DIR --fraction 0.0625     # 1/16 of the BeCoS-size collection (161 shapes)
 
 Deterministic (byte-identical files for the same seed and poses, any process, any PYTHONHASHSEED)
 and fast: about 5-10 s for the default 13 classes x 4 poses on 2 cores.
@@ -27,6 +28,7 @@ from becos.synthetic.bodies import CLASSES, ClassSpec, class_spec, semantic_part
 from becos.synthetic.collection import (
     CHIRALITY_TEMPLATES,
     DATASETS,
+    FULL_SCALE_POSES,
     MANIFEST,
     TREE_EDGES,
     ClassModel,
@@ -35,18 +37,22 @@ from becos.synthetic.collection import (
     build_class,
     edge_edits,
     generate_collection,
+    poses_at_fraction,
     template_correspondence,
 )
 
-REGISTRY_POSES = 4
-"""Poses per class that the registry YAMLs (config/datasets/synthy.yaml, synthz.yaml) count on."""
+DEFAULT_POSES = 4
+"""Poses per class of ``becos synthetic`` without ``--poses`` (the workflow passes ``synthetic.poses``,
+whose default is in becos/data/schema.yaml). The registry entries (config/datasets/synthy.yaml,
+synthz.yaml) count the shapes the collection's manifest lists, at any pose count."""
 
 __all__ = [
     "CLASSES",
     "CHIRALITY_TEMPLATES",
     "DATASETS",
+    "DEFAULT_POSES",
+    "FULL_SCALE_POSES",
     "MANIFEST",
-    "REGISTRY_POSES",
     "TREE_EDGES",
     "ClassModel",
     "ClassSpec",
@@ -56,6 +62,7 @@ __all__ = [
     "class_spec",
     "edge_edits",
     "generate_collection",
+    "poses_at_fraction",
     "semantic_part",
     "template_correspondence",
 ]

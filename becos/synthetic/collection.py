@@ -3,7 +3,7 @@
 Layout written by :func:`generate_collection` (``OUT`` = its ``out_dir``)::
 
     OUT/synthetic.json                       what was generated (seed, poses, datasets, sha256 of every file)
-    OUT/data/<folder_name>/<class><k>.off    shapes, k = 0 .. poses_per_class-1 (k = 0 is the template)
+    OUT/data/<folder_name>/<class><k>.off    shapes, k = 0 .. (the class's poses)-1 (k = 0 is the template)
     OUT/annotations/                          a folder shaped like the BeCoS reference checkout:
         config/adjacency_matrix.csv           the template network (a tree over <dataset>_<class>0)
         config/templates_all.csv              one row per class, key <dataset>_<class>
@@ -50,6 +50,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 import os
 import shutil
 import tempfile
@@ -169,6 +170,31 @@ TREE_EDGES: tuple[tuple[str, str], ...] = (
 )
 """The template network: undirected edges of a tree over all class templates (humanoids and
 four-legged classes are connected only through the centaur, as in BeCoS)."""
+
+FULL_SCALE_POSES: dict[str, int] = {
+    "synthy_alba": 218,
+    "synthz_elin": 218,
+    "synthy_hound": 908,
+    "synthz_pony": 908,
+    "synthz_centaur": 6,
+    "synthy_brute": 14,
+    "synthz_dario": 13,
+    "synthy_goat": 55,
+    "synthz_lynx": 55,
+    "synthy_cyra": 14,
+    "synthz_faun": 14,
+    "synthy_tapir": 57,
+    "synthz_ram": 57,
+}
+"""Shapes per class (key ``<dataset>_<class>``) of the BeCoS-size collection (``fraction`` 1 of
+:func:`generate_collection`), modelled on the published benchmark: 2,537 distinct shapes, of them 496
+humanoid (with the 6 centaurs) and 2,047 four-legged (with the centaurs), and one shape per val/test
+pair, i.e. 137 val and 142 test shapes (the published 137 / 142 val / test pairs per setting). Val and
+test shapes are split between the categories by their share of the shapes (about 1 in 5 humanoid) and
+evenly between each split's two classes; the train classes take the rest (436 humanoid, 1,816
+four-legged, 6 centaurs: 2,258 train shapes). With usage 10 (config/datasets/synthy.yaml, synthz.yaml)
+and ``usage_scale`` 0.5 every train shape anchors 5 pairs: 11,290 train pairs per setting, 11 % more
+than the published 10,185 (whose usage counts differ by dataset)."""
 
 CHIRALITY_TEMPLATES: tuple[str, ...] = ("synthy_alba0", "synthy_hound0", "synthz_centaur0")
 """Templates that carry left/right labels (1 = anatomical left = +x in the common frame)."""
@@ -595,18 +621,35 @@ def _is_collection(path: Path) -> bool:
         return False
 
 
-def generate_collection(out_dir: str | Path, seed: int = 0, poses_per_class: int = 4) -> Path:
+def poses_at_fraction(fraction: float) -> dict[str, int]:
+    """Shapes per class (key ``<dataset>_<class>``) at ``fraction`` of the BeCoS-size collection:
+    ``max(1, floor(fraction * FULL_SCALE_POSES[key] + 0.5))`` (half rounds up; every class keeps its
+    template). ``fraction`` in (0, 1]; 1/16 gives 161 shapes, 1 gives 2,537."""
+    if not (isinstance(fraction, (int, float, np.integer, np.floating)) and 0 < fraction <= 1):
+        raise ConfigError(
+            f"synthetic collection: fraction must be a number in (0, 1] (e.g. 0.0625 for 1/16), got {fraction!r}"
+        )
+    return {key: max(1, int(math.floor(fraction * n + 0.5))) for key, n in FULL_SCALE_POSES.items()}
+
+
+def generate_collection(
+    out_dir: str | Path, seed: int = 0, poses_per_class: int = 4, fraction: float | None = None
+) -> Path:
     """Generate the synthetic collection into ``out_dir`` (see the module docstring for the layout).
 
-    Deterministic: the same (seed, poses_per_class) gives byte-identical files. The seed changes the
-    poses only (templates, annotations and pose 0 are seed-independent). Atomic: everything is
-    written to a temporary folder beside ``out_dir`` and renamed into place; an existing synthetic
-    collection at ``out_dir`` is replaced, any other non-empty folder is refused.
+    Deterministic: the same (seed, poses_per_class, fraction) gives byte-identical files. The seed
+    changes the poses only (templates, annotations and pose 0 are seed-independent), and a class's
+    pose k is the same at every pose count. Atomic: everything is written to a temporary folder
+    beside ``out_dir`` and renamed into place; an existing synthetic collection at ``out_dir`` is
+    replaced, any other non-empty folder is refused.
 
     Args:
         out_dir: destination folder.
         seed: pose seed (non-negative integer).
         poses_per_class: shapes per class (1-20); 13 classes, so 52 shapes at the default 4.
+        fraction: instead of ``poses_per_class``, that fraction of the BeCoS-size collection
+            (:data:`FULL_SCALE_POSES`, :func:`poses_at_fraction`), in (0, 1]. The manifest then
+            records ``fraction`` and ``poses_per_class`` as ``{<dataset>_<class>: count}``.
 
     Returns:
         ``out_dir`` as a resolved Path.
@@ -617,8 +660,14 @@ def generate_collection(out_dir: str | Path, seed: int = 0, poses_per_class: int
     out_dir = Path(out_dir).resolve()
     if not (isinstance(seed, (int, np.integer)) and seed >= 0):
         raise ConfigError(f"synthetic collection: seed must be a non-negative integer, got {seed!r}")
-    if not (isinstance(poses_per_class, (int, np.integer)) and 1 <= poses_per_class <= 20):
-        raise ConfigError(f"synthetic collection: poses_per_class must be an integer in 1..20, got {poses_per_class!r}")
+    if fraction is None:
+        if not (isinstance(poses_per_class, (int, np.integer)) and 1 <= poses_per_class <= 20):
+            raise ConfigError(
+                f"synthetic collection: poses_per_class must be an integer in 1..20, got {poses_per_class!r}"
+            )
+        poses = {f"{s.dataset}_{s.name}": int(poses_per_class) for s in CLASSES}
+    else:
+        poses = poses_at_fraction(fraction)
     if out_dir.exists() and (not out_dir.is_dir() or (any(out_dir.iterdir()) and not _is_collection(out_dir))):
         raise ConfigError(
             f"{out_dir} exists and is not a synthetic collection (no {MANIFEST}); refusing to "
@@ -631,7 +680,7 @@ def generate_collection(out_dir: str | Path, seed: int = 0, poses_per_class: int
         for spec in CLASSES:
             ds = DATASETS[spec.dataset]
             model = models[spec.node]
-            for k in range(poses_per_class):
+            for k in range(poses[f"{spec.dataset}_{spec.name}"]):
                 verts = ds.to_file_frame(model.pose(int(seed), k))
                 _write(tmp / "data" / ds.folder_name / f"{spec.name}{k}.off", format_off(verts, model.mesh.faces))
         _write_annotations(tmp / "annotations", models)
@@ -640,7 +689,7 @@ def generate_collection(out_dir: str | Path, seed: int = 0, poses_per_class: int
             "generator": "becos.synthetic",
             "format_version": FORMAT_VERSION,
             "seed": int(seed),
-            "poses_per_class": int(poses_per_class),
+            "poses_per_class": int(poses_per_class) if fraction is None else poses,
             "datasets": {
                 n: {"folder_name": d.folder_name, "scale": d.scale, "rot": list(d.rot)} for n, d in DATASETS.items()
             },
@@ -656,6 +705,8 @@ def generate_collection(out_dir: str | Path, seed: int = 0, poses_per_class: int
             ],
             "files": {p.relative_to(tmp).as_posix(): _sha256(p) for p in files},
         }
+        if fraction is not None:
+            manifest["fraction"] = float(fraction)
         _write(tmp / MANIFEST, json.dumps(manifest, indent=1, sort_keys=True) + "\n")
         os.chmod(tmp, 0o755)
         if out_dir.exists():

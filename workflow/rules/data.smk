@@ -28,9 +28,13 @@ if config["synthetic"]["enabled"]:
             runtime=RESOURCES.runtime("synthetic_collection"),
         params:
             seed=config["synthetic"]["seed"],
-            poses=config["synthetic"]["poses"],
+            size=(
+                f"--poses {config['synthetic']['poses']}"
+                if config["synthetic"]["fraction"] is None
+                else f"--fraction {config['synthetic']['fraction']}"
+            ),
         shell:
-            "becos synthetic {output:q} --seed {params.seed} --poses {params.poses} > {log:q} 2>&1"
+            "becos synthetic {output:q} --seed {params.seed} {params.size} > {log:q} 2>&1"
 
 
 if config["annotations_archive"]:
