@@ -37,6 +37,7 @@ Usage::
 
     python benchmarks/scale.py --fractions 1/16,1/8 [--workdir /work/runs-scale] [--gt-sample 500]
     python benchmarks/scale.py --fractions 1/16,1/8 --reuse   # runs already measured: analysis only
+    python benchmarks/scale.py --fractions 1/16 --gt-only --gt-settings partial_full   # GT error only
 """
 
 from __future__ import annotations
@@ -225,17 +226,25 @@ def growth(results: list[dict]) -> dict:
     return out
 
 
-def ground_truth_error(run: Path, config: dict, sample: int, seed: int = 0) -> dict:
-    """GT error against the construction over a seeded sample of same-class pairs per setting."""
+def ground_truth_error(
+    run: Path, config: dict, sample: int, settings=SETTINGS, reuse: bool = False, seed: int = 0
+) -> dict:
+    """GT error against the construction over a seeded sample of same-class pairs per setting (each
+    setting's figures saved as ``<run>/gt_error_<setting>.json``; ``reuse``: read them from there)."""
     import pandas as pd
     from gt_error import Run, audit_setting, distribution_table
 
-    results = run / config["results"]
+    results = (run / config["results"]).resolve()
+    os.chdir(run)  # the catalog's mesh paths are relative to the run's folder
     gt_run = Run(results)
     catalog = pd.read_csv(results / "catalog.csv")
     class_of = {(d, n): c for d, n, c in zip(catalog["dataset"], catalog["name"], catalog["class"])}
     out: dict = {"run": str(run), "bound": 0.04}
-    for setting in SETTINGS:
+    for setting in settings:
+        saved = run / f"gt_error_{setting}.json"
+        if reuse and saved.is_file():
+            out[setting] = json.loads(saved.read_text())
+            continue
         manifest = pd.read_csv(results / setting / "manifest.csv")
         x = [class_of[(d, n)] for d, n in zip(manifest["x_dataset"], manifest["x_name"])]
         y = [class_of[(d, n)] for d, n in zip(manifest["y_dataset"], manifest["y_name"])]
@@ -243,7 +252,8 @@ def ground_truth_error(run: Path, config: dict, sample: int, seed: int = 0) -> d
         ids = sorted(manifest.loc[same, "pair_id"])
         chosen = set(random.Random(seed).sample(ids, min(sample, len(ids))))
         started = time.process_time()
-        directions = [r.summary() for r in audit_setting(gt_run, setting, chosen)]
+        log = lambda m: print(m, file=sys.stderr, flush=True)  # noqa: E731
+        directions = [r.summary() for r in audit_setting(gt_run, setting, chosen, log)]
         table = distribution_table(directions)
         maxima = np.array([d["max"] for d in directions])
         means = np.array([d["mean"] for d in directions])
@@ -264,6 +274,7 @@ def ground_truth_error(run: Path, config: dict, sample: int, seed: int = 0) -> d
             "table": json.loads(table.to_json(orient="index")) if len(table) else {},
             "cpu_seconds": round(time.process_time() - started, 1),
         }
+        saved.write_text(json.dumps(out[setting], indent=1))
         print(f"ground truth error, {setting}: {out[setting]['max']} max", file=sys.stderr, flush=True)
     return out
 
@@ -283,8 +294,19 @@ def main() -> None:
         "--reuse", action="store_true", help="use a fraction's measure.json where a run left one (no rerun)"
     )
     parser.add_argument("--gt-sample", type=int, default=500, help="pairs per setting for the GT error (0: none)")
+    parser.add_argument(
+        "--gt-fraction", default=None, help="the run whose GT error is measured (default: the largest fraction)"
+    )
+    parser.add_argument("--gt-settings", default=",".join(SETTINGS), help="settings of the GT error (comma-separated)")
+    parser.add_argument("--gt-only", action="store_true", help="only the GT error of --gt-fraction's finished run")
     args = parser.parse_args()
     fractions = sorted(parse_fraction(f) for f in args.fractions.split(","))
+    gt_run = args.workdir / run_name(parse_fraction(args.gt_fraction) if args.gt_fraction else fractions[-1])
+    gt_settings = tuple(args.gt_settings.split(","))
+    if args.gt_only:
+        config = yaml.safe_load((gt_run / "config.yaml").read_text())
+        print(json.dumps(ground_truth_error(gt_run, config, args.gt_sample, gt_settings, args.reuse), indent=1))
+        return
     results = []
     for fraction in fractions:
         saved = args.workdir / run_name(fraction) / "measure.json"
@@ -295,9 +317,8 @@ def main() -> None:
         print(json.dumps({"fraction": str(fraction), "wall_seconds": results[-1]["wall_seconds"]}), file=sys.stderr)
     out = {"machine_cores": os.cpu_count(), "config": "config/scale.yaml", "runs": results, "growth": growth(results)}
     if args.gt_sample > 0:
-        largest = args.workdir / run_name(fractions[-1])
-        config = yaml.safe_load((largest / "config.yaml").read_text())
-        out["ground_truth_error"] = ground_truth_error(largest, config, args.gt_sample)
+        config = yaml.safe_load((gt_run / "config.yaml").read_text())
+        out["ground_truth_error"] = ground_truth_error(gt_run, config, args.gt_sample, gt_settings, args.reuse)
     print(json.dumps(out, indent=1))
 
 
