@@ -30,6 +30,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 from snakemake_cmd import snakemake_cmd
 from tiny_tosca import fingerprint_differences, results_fingerprint, tiny_tosca_config, write_config_file
 
@@ -149,8 +150,10 @@ def test_workflow_on_slurm_equals_local_run(slurm_cluster, tiny_tosca_reference,
         i: (j["State"], j["ExitCode"]) for i, j in jobs.items() if (j["State"], j["ExitCode"]) != ("COMPLETED", "0:0")
     }
     assert not bad, f"SLURM jobs not COMPLETED 0:0: {bad}\n{listing}"
-    rules = {re.match(r"rule_([a-z_]+?)(_wildcards_.*)?$", j["Comment"]).group(1) for j in jobs.values()}
-    assert {"remesh", "ground_truth", "pairs", "zarr_store", "validate_store"} <= rules, rules
+    # a single job's comment names its rule, a group job's its group and rules (remesh_remesh, chunk_ground_truth_pairs)
+    kinds = [re.match(r"rule_([a-z_]+?)(_wildcards_.*)?$", j["Comment"]).group(1) for j in jobs.values()]
+    rules = set(kinds)
+    assert {"remesh_remesh", "chunk_ground_truth_pairs", "zarr_store", "validate_store"} <= rules, rules
     local_rules = {
         "all",
         "resolved_config",
@@ -160,8 +163,21 @@ def test_workflow_on_slurm_equals_local_run(slurm_cluster, tiny_tosca_reference,
         "store_metadata",
         "published_pairings",
     }
-    print(f"{len(jobs)} SLURM jobs, all COMPLETED 0:0; rules on SLURM: {sorted(rules)}")
+    print(f"{len(jobs)} SLURM jobs, all COMPLETED 0:0; rules and groups on SLURM: {sorted(rules)}")
     assert not rules & local_rules, rules & local_rules
+
+    # grouping: the remesh jobs go in batches of the profile's group size, a chunk's ground_truth and pairs
+    # jobs in one SLURM job; without groups each would be its own submission
+    sizes = yaml.safe_load((REPO / "profiles" / "slurm" / "config.yaml").read_text())["group-components"]
+    n_remesh = len(list((remote / "results" / "remeshed").rglob("*.npz")))
+    n_chunks = len(list((remote / "results").glob("*/ground_truth/chunk_*.json")))
+    assert kinds.count("remesh_remesh") == -(-n_remesh // sizes["remesh"]), (n_remesh, kinds)
+    assert kinds.count("chunk_ground_truth_pairs") == n_chunks and sizes["chunk"] == 1, (n_chunks, kinds)
+    ungrouped = (
+        len(jobs) - kinds.count("remesh_remesh") - kinds.count("chunk_ground_truth_pairs") + n_remesh + 2 * n_chunks
+    )
+    print(f"grouping: {len(jobs)} submissions instead of {ungrouped} ({n_remesh} remesh jobs, {n_chunks} chunks)")
+    assert len(jobs) < ungrouped, (len(jobs), ungrouped)
 
     # 4. identical outputs
     expected, got = tiny_tosca_reference.fingerprint, results_fingerprint(remote)

@@ -73,6 +73,8 @@ if DT4D_JOBS:
         wildcard_constraints:
             kind="animals|humanoids",
             cls="[^/]+",
+        group:
+            "dt4d"
         conda:
             "../envs/becos.yaml"
         resources:

@@ -33,6 +33,8 @@ rule remesh:
         dataset="[a-z0-9_]+",
         name=".+",
         token="v[0-9]+|f[0-9]+",
+    group:
+        "remesh"
     conda:
         "../envs/becos.yaml"
     resources:
@@ -66,6 +68,8 @@ rule ground_truth:
         "logs/ground_truth/{setting}/{chunk}.log",
     wildcard_constraints:
         chunk="[0-9]{4}",
+    group:
+        "chunk"
     conda:
         "../envs/becos.yaml"
     resources:
@@ -94,6 +98,8 @@ rule pairs:
         "logs/pairs/{setting}/{chunk}.log",
     wildcard_constraints:
         chunk="[0-9]{4}",
+    group:
+        "chunk"
     conda:
         "../envs/becos.yaml"
     resources:
