@@ -16,9 +16,12 @@ end; ``--state DIR`` uses one already running). Per SLURM run: the sbatch submis
 ``has been submitted with SLURM jobid`` lines, checked against ``sacct --name <run id>``), the SLURM jobs
 by group or rule (their comment), the Snakemake jobs they ran, wall seconds, the overhead per
 submission ((SLURM wall - local wall) / submissions), the start latency (sacct ``Start - Submit``:
-median, mean, max), the jobs' summed ``Elapsed``, and whether every digest of
+median, mean, max), the jobs' summed ``Elapsed``, the CPU seconds of the SLURM jobs (sacct ``TotalCPU``:
+batch scripts and steps) and of the login-node Snakemake, the extra CPU over the local run (Snakemake
+and its jobs) in all and per submission (load-independent, unlike wall), and whether every digest of
 ``tests/tiny_tosca.py::results_fingerprint`` (result files, remeshes, ground truth, pair files, store
-arrays, offsets, metas, tables, metadata) equals the local run's. Wall times on a shared machine count
+arrays, offsets, metas, tables, metadata) equals the local run's (:func:`compare`: the few files that
+quote the working directory's path are compared by content or skipped). Wall times on a shared machine count
 other users' load: compare runs made back to back. Status checks every ``--status-seconds`` (the
 plugin's defaults, 40 s before the first and 10 s between, add up to 10 s per dependent step).
 
@@ -35,6 +38,7 @@ import importlib.util
 import json
 import os
 import re
+import resource
 import shutil
 import statistics
 import subprocess
@@ -64,6 +68,31 @@ UNGROUPED = [
 """Command-line options that make every job of the shipped profile its own SLURM job."""
 
 
+PATH_DEPENDENT = ("checks/datasets.json", "cache/input_digests.json")
+"""Result files that quote the working directory's absolute paths (its data and annotation folders)."""
+
+
+def compare(reference: dict[str, str], got: dict[str, str]) -> dict:
+    """Two :func:`results_fingerprint` results of runs in different working directories: every digest
+    equal, except :data:`PATH_DEPENDENT` (skipped) and the files under ``cache/``, whose names carry a
+    hash of their source's path (compared by content, as a multiset)."""
+
+    def exact(fp):
+        return {k: v for k, v in fp.items() if not k.startswith("cache/") and k not in PATH_DEPENDENT}
+
+    def cache(fp):
+        return sorted(v for k, v in fp.items() if k.startswith("cache/") and k not in PATH_DEPENDENT)
+
+    differ = fingerprint_differences(exact(reference), exact(got))
+    return {
+        "digests_compared": len(exact(reference)),
+        "identical_to_local": not differ,
+        "differing": differ[:20],
+        "cache_files_compared": len(cache(reference)),
+        "cache_contents_identical": cache(reference) == cache(got),
+    }
+
+
 def load_harness():
     spec = importlib.util.spec_from_file_location("slurm_harness", REPO / "cluster" / "slurm_harness.py")
     module = importlib.util.module_from_spec(spec)
@@ -72,8 +101,9 @@ def load_harness():
 
 
 def run_snakemake(workdir: Path, args: list[str], env: dict[str, str], repo: Path) -> dict:
-    """Run ``repo``'s Snakefile in ``workdir`` (its config.yaml); wall seconds and the output."""
-    start = time.perf_counter()
+    """Run ``repo``'s Snakefile in ``workdir`` (its config.yaml); wall and CPU seconds (Snakemake and
+    its child processes: all jobs of a local run, only the login-node side of a SLURM run) and the output."""
+    start, cpu_start = time.perf_counter(), _children_cpu()
     result = subprocess.run(
         snakemake_cmd(workdir, *args, repo=repo), cwd=workdir, env=env, capture_output=True, text=True
     )
@@ -84,7 +114,12 @@ def run_snakemake(workdir: Path, args: list[str], env: dict[str, str], repo: Pat
         raise SystemExit(
             f"snakemake {' '.join(args)} failed in {workdir} (exit {result.returncode}):\n{output[-6000:]}"
         )
-    return {"wall_s": round(seconds, 1), "output": output}
+    return {"wall_s": round(seconds, 1), "cpu_s": round(_children_cpu() - cpu_start, 1), "output": output}
+
+
+def _children_cpu() -> float:
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return usage.ru_utime + usage.ru_stime
 
 
 def snakemake_jobs(output: str) -> int:
@@ -110,17 +145,29 @@ def sacct_jobs(harness, run_id: str) -> list[dict[str, str]]:
     out = harness.run(
         "sacct", "-a", "-X", "-n", "-P", "-S", "now-1days", "--name", run_id, f"--format={','.join(fields)}"
     ).stdout
-    return [dict(zip(fields, line.split("|"))) for line in out.splitlines() if line.strip()]
+    jobs = [dict(zip(fields, line.split("|"))) for line in out.splitlines() if line.strip()]
+    # TotalCPU of an allocation is 0 with -X; without it the allocation line sums its batch script and steps
+    ids = ",".join(j["JobID"] for j in jobs)
+    out = harness.run("sacct", "-a", "-n", "-P", "-j", ids, "--format=JobID,TotalCPU").stdout if jobs else ""
+    total = dict(line.split("|") for line in out.splitlines() if line.strip() and "." not in line.split("|")[0])
+    for job in jobs:
+        job["TotalCPU"] = total.get(job["JobID"], "0:00")
+    return jobs
 
 
-def _seconds(text: str) -> int:
-    """sacct's ``[D-]HH:MM:SS`` as seconds."""
+def _seconds(text: str) -> float:
+    """sacct's ``[D-][HH:]MM:SS[.mmm]`` as seconds."""
     days, _, hms = text.rpartition("-")
-    h, m, s = (int(x) for x in hms.split(":"))
-    return int(days or 0) * 86400 + h * 3600 + m * 60 + s
+    parts = [float(x) for x in hms.split(":")]
+    while len(parts) < 3:
+        parts.insert(0, 0.0)
+    return int(days or 0) * 86400 + parts[0] * 3600 + parts[1] * 60 + parts[2]
 
 
-def slurm_figures(harness, output: str, wall_s: float, local_wall_s: float | None) -> dict:
+def slurm_figures(harness, run: dict, local: dict) -> dict:
+    """Submissions, requests, latency, wall and CPU of one SLURM run against the local run (``local``:
+    its ``wall_s`` and ``cpu_s``, or None when not measured here)."""
+    output, wall_s = run["output"], run["wall_s"]
     run_id = re.search(r"SLURM run ID: (\S+)", output).group(1)
     submitted = re.findall(r"has been submitted with SLURM jobid (\d+)", output)
     jobs = sacct_jobs(harness, run_id)
@@ -139,6 +186,9 @@ def slurm_figures(harness, output: str, wall_s: float, local_wall_s: float | Non
         (datetime.strptime(j["Start"], stamp) - datetime.strptime(j["Submit"], stamp)).total_seconds() for j in jobs
     ]
     n = len(submitted)
+    jobs_cpu = sum(_seconds(j["TotalCPU"]) for j in jobs)  # batch script and every srun step of every job
+    local_wall_s, local_cpu_s = local.get("wall_s"), local.get("cpu_s")
+    extra_cpu = jobs_cpu + run["cpu_s"] - local_cpu_s if local_cpu_s else None
     return {
         "run_id": run_id,
         "sbatch_submissions": n,
@@ -157,6 +207,9 @@ def slurm_figures(harness, output: str, wall_s: float, local_wall_s: float | Non
         if latency
         else None,
         "sum_elapsed_s": sum(_seconds(j["Elapsed"]) for j in jobs),
+        "cpu_s": {"slurm_jobs": round(jobs_cpu, 1), "login_node_snakemake": run["cpu_s"]},
+        "extra_cpu_s": round(extra_cpu, 1) if extra_cpu is not None else None,
+        "extra_cpu_per_submission_s": round(extra_cpu / n, 2) if extra_cpu is not None and n else None,
     }
 
 
@@ -167,6 +220,8 @@ def main() -> None:
     parser.add_argument("--config", nargs="*", default=[], help="extra --config KEY=VALUE for every run")
     parser.add_argument("--modes", default="local,grouped,ungrouped")
     parser.add_argument("--local", type=Path, help="an earlier local run's working directory (skips mode local)")
+    parser.add_argument("--local-wall", type=float, help="that run's wall seconds, for the overhead per submission")
+    parser.add_argument("--local-cpu", type=float, help="that run's CPU seconds (Snakemake and all its jobs)")
     parser.add_argument("--repo", type=Path, default=REPO, help="the checkout whose Snakefile and profile run")
     parser.add_argument("--state", type=Path, help="state folder of a running harness cluster (else one is started)")
     parser.add_argument("--status-seconds", default="2", help="seconds before the first and between status checks")
@@ -192,16 +247,23 @@ def main() -> None:
         (path / "config.yaml").write_text(yaml.safe_dump(config, sort_keys=False))
         return path
 
-    local_dir, local_wall = args.local, None
+    local_dir = args.local
     if "local" in modes and local_dir is None:
         local_dir = workdir("local")
         run = run_snakemake(local_dir, ["--cores", "2", *extra], env, repo)
-        local_wall = run["wall_s"]
-        report["local"] = {"wall_s": local_wall, "snakemake_jobs": snakemake_jobs(run["output"])}
+        report["local"] = {
+            "wall_s": run["wall_s"],
+            "cpu_s": run["cpu_s"],
+            "snakemake_jobs": snakemake_jobs(run["output"]),
+        }
     elif local_dir is not None:
-        report["local"] = {"workdir": str(local_dir), "wall_s": None, "note": "earlier run, not timed here"}
+        report["local"] = {
+            "workdir": str(local_dir),
+            "wall_s": args.local_wall,
+            "cpu_s": args.local_cpu,
+            "note": "an earlier run, not timed here",
+        }
     settings = config.get("setting", ["full_full", "partial_full", "partial_partial"])
-    reference = results_fingerprint(local_dir, settings) if local_dir else None
 
     harness_module = load_harness()
     own_state = args.state is None
@@ -232,18 +294,17 @@ def main() -> None:
                 *(UNGROUPED if mode == "ungrouped" else []),
             ]
             run = run_snakemake(path, [*options, *extra], slurm_env, repo)
-            figures = slurm_figures(harness, run["output"], run["wall_s"], local_wall)
-            if reference is not None:
-                got = results_fingerprint(path, settings)
-                differ = fingerprint_differences(reference, got)
-                figures["digests_compared"] = len(reference)
-                figures["identical_to_local"] = not differ
-                figures["differing"] = differ[:20]
+            figures = slurm_figures(harness, run, report.get("local", {}))
             report[mode] = figures
     finally:
         if own_state:
             harness.stop()
             shutil.rmtree(state, ignore_errors=True)
+    if local_dir is not None:  # read last: --local may name a run that was still going when this started
+        reference = results_fingerprint(local_dir, settings)
+        for mode in ("grouped", "ungrouped"):
+            if mode in report:
+                report[mode].update(compare(reference, results_fingerprint(args.workdir / mode, settings)))
     print(json.dumps(report, indent=2))
 
 

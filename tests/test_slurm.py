@@ -5,8 +5,9 @@ slurmctld and slurmd on localhost with all state in a temporary folder. The tiny
 of ``tests/test_workflow.py`` (``tests/tiny_tosca.py``; one chunk job per setting and stage) then runs
 with ``--profile profiles/slurm`` and is compared with the local ``--cores 2`` run (conftest's
 ``tiny_tosca_reference``, which the workflow tests share); manifests, catalog and every array,
-offset table, pair meta and table of the three Zarr stores must hash equal, and every SLURM job of
-the run must be COMPLETED in ``sacct``. ``profiles/cluster-generic`` submits one remesh job to the same cluster.
+offset table, pair meta and table of the three Zarr stores must hash equal, every SLURM job of the
+run must be COMPLETED in ``sacct``, and the profile's groups must hold: one SLURM job per 50 remesh
+variants and per chunk (its ground_truth and pairs jobs), fewer submissions than jobs. ``profiles/cluster-generic`` submits one remesh job to the same cluster.
 
 Everything happens in ONE test: under ``pytest -n 2`` a module fixture is built once per worker
 that runs a test of the module, and one machine holds one harness cluster. Skipped (with the exact
