@@ -140,7 +140,8 @@ def test_workflow_on_slurm_equals_local_run(slurm_cluster, tiny_tosca_reference,
 
     # 3. every job Snakemake submitted is a COMPLETED SLURM job of this run, with its rule in the comment
     run_id = re.search(r"SLURM run ID: (\S+)", out).group(1)
-    submitted = dict(re.findall(r"Job (\d+) has been submitted with SLURM jobid (\d+)", out))
+    # "Job <id> has been submitted with SLURM jobid N": a group job's Snakemake id is a uuid, not a number
+    submitted = dict(re.findall(r"Job (\S+) has been submitted with SLURM jobid (\d+)", out))
     listing = harness.sacct(
         fmt="JobID,JobName%45,Comment%55,State,ExitCode,Elapsed,MaxRSS", all_steps=True, extra=("--name", run_id)
     )
@@ -202,7 +203,7 @@ def test_workflow_on_slurm_equals_local_run(slurm_cluster, tiny_tosca_reference,
         ["--profile", str(REPO / "profiles" / "cluster-generic"), "--seconds-between-status-checks", "2", target],
         env,
     )
-    job = re.search(r"Submitted job \d+ with external jobid '(\d+)'", out)
+    job = re.search(r"Submitted (?:group )?job \S+ with external jobid '(\d+)'", out)  # remesh is a group
     assert job, out[-3000:]
     state = harness.run("sacct", "-j", job.group(1), "-X", "-n", "-P", "-o", "JobName,State,ExitCode").stdout.strip()
     assert state == "becos-remesh|COMPLETED|0:0", state
