@@ -42,6 +42,10 @@ def _geodesic_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--jobs", type=int, default=1, help="processes computing distance rows (default 1)")
 
 
+def _rows(parser: argparse.ArgumentParser, help: str) -> None:
+    parser.add_argument("--rows", type=Path, nargs="+", metavar="DIR", help=help)
+
+
 def _force(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--force", action="store_true", help="replace OUT if it exists")
 
@@ -149,12 +153,9 @@ def ulrssm_arguments(parser: argparse.ArgumentParser) -> None:
         help="also write dist/<k>.mat (key dist: (V, V) float32 geodesics divided by the sqrt-area; each "
         "distinct matrix once, hard links for the other pair sides; disk and memory estimated first)",
     )
-    parser.add_argument(
-        "--rows",
-        type=Path,
-        nargs="+",
-        metavar="DIR",
-        help="with --geodesics: read each mesh's matrix from these `becos geodesic-rows` folders (the "
+    _rows(
+        parser,
+        "with --geodesics: read each mesh's matrix from these `becos geodesic-rows` folders (the "
         "workflow's one geodesic computation) instead of computing it",
     )
     _geodesic_options(parser)
@@ -192,13 +193,7 @@ def geodesics_arguments(parser: argparse.ArgumentParser) -> None:
         type=Path,
         help="output folder (<out>/geodesic_dist_matrices/<stem>.npy, <out>/dsmk/<split>/dist/<hash>_0.npz)",
     )
-    parser.add_argument(
-        "--rows",
-        type=Path,
-        nargs="+",
-        metavar="DIR",
-        help="read the distance rows from these `becos geodesic-rows` folders instead of computing them",
-    )
+    _rows(parser, "read the distance rows from these `becos geodesic-rows` folders instead of computing them")
     parser.add_argument(
         "--layouts",
         nargs="+",
