@@ -335,3 +335,17 @@ def test_every_sub_command_is_one_arguments_and_handler_pair(monkeypatch, capsys
             assert f"\n{help_text[:1].upper()}{help_text[1:]}.\n" in out, out
     for module, names in listed.items():
         assert set(importlib.import_module(module).COMMANDS) == names, module
+
+
+@pytest.mark.parametrize("profile", [None, "profiles/local", "profiles/slurm", "profiles/cluster-generic"])
+def test_every_run_selects_jobs_greedily(profile, monkeypatch):
+    """Snakemake's ILP job selector made Snakemake's own CPU grow faster than the job count at scale
+    (issue #30; benchmarks/scheduler.py): the workflow profile, read beside any --profile, selects the
+    greedy one."""
+    monkeypatch.chdir(REPO)
+    from snakemake.cli import parse_args
+
+    _, args = parse_args(["--cores", "2", "-n", *(("--profile", profile) if profile else ())])
+    assert args.scheduler == "greedy"
+    _, args = parse_args(["--cores", "2", "-n", "--workflow-profile", "none"])
+    assert args.scheduler == "ilp"  # Snakemake's own default: the profile's line is what changes it

@@ -1,0 +1,73 @@
+"""Snakemake's own CPU per job selector, ILP against greedy, as the job count grows (issue #30): prints JSON.
+
+A workflow of ``--jobs`` independent one-line ``shell:`` jobs (all ready at once, as becos's remesh
+variants are after the manifests) runs from scratch with ``--cores 2 --scheduler S`` for each selector
+and size, alternating. Per run: wall and the Snakemake process tree's CPU seconds (user + system, the
+jobs' ``echo`` included, the same for both selectors). ``growth``: the log-log slope of CPU in the job
+count per selector (1: linear). becos's workflow profile (profiles/default) selects ``greedy``.
+
+Usage::
+
+    python benchmarks/scheduler.py [--jobs 100,400,800] [--workdir /tmp/becos-scheduler]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+SNAKEFILE = """\
+import os
+N = int(os.environ["BENCH_JOBS"])
+rule all:
+    input: expand("out/{i}.txt", i=range(N))
+rule one:
+    output: "out/{i}.txt"
+    shell: "echo {wildcards.i} > {output}"
+"""
+
+
+def run(workdir: Path, scheduler: str, jobs: int) -> dict:
+    """One run from scratch; CPU from the children's rusage difference (Snakemake and its jobs)."""
+    shutil.rmtree(workdir, ignore_errors=True)
+    workdir.mkdir(parents=True)
+    (workdir / "Snakefile").write_text(SNAKEFILE)
+    command = [sys.executable, "-m", "snakemake", "--cores", "2", "--scheduler", scheduler, "--quiet", "all"]
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    start = time.perf_counter()
+    subprocess.run(command, cwd=workdir, env={**os.environ, "BENCH_JOBS": str(jobs)}, check=True, capture_output=True)
+    wall = time.perf_counter() - start
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    assert len(list((workdir / "out").iterdir())) == jobs
+    return {"scheduler": scheduler, "jobs": jobs, "wall_seconds": round(wall, 2), "cpu_seconds": round(cpu, 2)}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--jobs", default="100,400,800", help="job counts, comma-separated")
+    parser.add_argument("--workdir", type=Path, default=Path("/tmp/becos-scheduler"))
+    args = parser.parse_args()
+    sizes = [int(n) for n in args.jobs.split(",")]
+    runs = [run(args.workdir, scheduler, n) for n in sizes for scheduler in ("ilp", "greedy")]
+    growth = {}
+    for scheduler in ("ilp", "greedy"):
+        cpu = [r["cpu_seconds"] for r in runs if r["scheduler"] == scheduler]
+        slope = np.polyfit(np.log(sizes), np.log(cpu), 1)[0] if len(sizes) > 1 else float("nan")
+        growth[scheduler] = {"cpu_seconds": cpu, "slope": round(float(slope), 3)}
+    ratio = {str(n): round(runs[2 * i]["cpu_seconds"] / runs[2 * i + 1]["cpu_seconds"], 2) for i, n in enumerate(sizes)}
+    shutil.rmtree(args.workdir, ignore_errors=True)
+    print(json.dumps({"runs": runs, "growth": growth, "cpu_ratio_ilp_over_greedy": ratio}, indent=1))
+
+
+if __name__ == "__main__":
+    main()
