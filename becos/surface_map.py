@@ -187,12 +187,20 @@ class VertexRounding:
         only: optional (K,) int64 distinct face ids: the per-face data is computed for these faces
             alone (the same values), and :meth:`candidates` may then be asked about points on them only;
             for a caller that knows its points' faces in advance and needs few of them.
+        neighbours: optional ``edge_neighbours(faces)`` when the caller has it (e.g. from
+            :func:`becos.mesh.edge_neighbours_by_part` for meshes stacked into one array).
     """
 
-    def __init__(self, vertices: np.ndarray, faces: np.ndarray, only: np.ndarray | None = None):
+    def __init__(
+        self,
+        vertices: np.ndarray,
+        faces: np.ndarray,
+        only: np.ndarray | None = None,
+        neighbours: tuple[np.ndarray, np.ndarray] | None = None,
+    ):
         self.vertices = np.asarray(vertices, dtype=np.float64)
         self.faces = np.asarray(faces, dtype=np.int64)
-        neighbour, far = edge_neighbours(self.faces)
+        neighbour, far = edge_neighbours(self.faces) if neighbours is None else neighbours
         used = self.faces
         self._row = None  # face id -> row of the per-face data (None: the identity)
         if only is not None:

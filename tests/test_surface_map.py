@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from becos.geometry import SurfaceLocator
-from becos.mesh import TriMesh, edge_neighbours
+from becos.mesh import TriMesh, edge_neighbours, edge_neighbours_by_part
 from becos.surface_map import SurfaceMap, VertexRounding, compose, compose_path
 
 
@@ -41,6 +41,27 @@ def test_edge_neighbours_pair_each_inner_edge_and_mark_boundaries():
     n_boundary = 4 * 3  # the 4 x 4 grid's outline
     assert (far >= 0).sum() == 2 * (n_edges - n_boundary) and (far < 0).sum() == n_boundary
     assert ((far < 0) == (neighbour < 0)).all()
+
+
+def test_edge_neighbours_are_the_same_by_either_sort_and_part_by_part(tosca_dir, mesh_cache):
+    # cat0 (~28k vertices) sorts by two 16-bit radix passes, the same faces numbered past 65,536 by
+    # one int64 argsort; a non-manifold edge (a face used three times) is -1 either way
+    cat = mesh_cache.load(tosca_dir / "cat0.off").faces
+    faces = np.concatenate([cat, cat[:1], cat[:1]])
+    neighbour, far = edge_neighbours(faces)
+    shifted = edge_neighbours(faces + 70_000)
+    assert np.array_equal(shifted[0], neighbour) and np.array_equal(shifted[1] - 70_000 * (far >= 0), far)
+    assert (neighbour[0] < 0).all() and (neighbour >= 0).sum() > 2.9 * len(cat)
+    # meshes stacked as a store block stacks them: part by part gives the whole stack's result
+    michael = mesh_cache.load(tosca_dir / "michael0.off")
+    parts = [faces, michael.faces, cat[:5000]]
+    n_vertices = [int(p.max()) + 1 for p in parts]
+    vertex_offsets = np.concatenate([[0], np.cumsum(n_vertices)])
+    face_offsets = np.concatenate([[0], np.cumsum([len(p) for p in parts])])
+    stack = np.concatenate([p + start for p, start in zip(parts, vertex_offsets[:-1])])
+    by_part = edge_neighbours_by_part(stack, face_offsets, vertex_offsets)
+    whole = edge_neighbours(stack)
+    assert np.array_equal(by_part[0], whole[0]) and np.array_equal(by_part[1], whole[1])
 
 
 def test_rounding_distances_are_along_the_surface():

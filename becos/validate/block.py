@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from becos.mesh import edge_neighbours_by_part
 from becos.record import LEGACY_VERTEX_MAP_ROUNDING, NEAREST_CORNER_VERTEX_MAP_ROUNDING, VERTEX_MAP_ROUNDING
 from becos.surface_map import VertexRounding
 from becos.validate.report import Problems
@@ -143,7 +144,10 @@ class BlockChecker:
             # the per-face data of the faces holding a point only (a full shape's points hold under half)
             held = np.zeros(len(block_faces), dtype=bool)
             held[gface] = True
-            rounding_mesh = VertexRounding(a[f"{o}_vertices"], block_faces, only=np.flatnonzero(held))
+            neighbours = edge_neighbours_by_part(block_faces, self.b.offsets[go_f], self.b.offsets[go_v])
+            rounding_mesh = VertexRounding(
+                a[f"{o}_vertices"], block_faces, only=np.flatnonzero(held), neighbours=neighbours
+            )
             candidates, along = rounding_mesh.candidates(gface, wr)
             corners = candidates[:, :3] - vertex_start[gface, None]  # (R, 3) vertices of the other shape, per pair
             target = c[rows, None] + vertex_start[gface, None]
