@@ -1,7 +1,7 @@
 """Snakemake's own CPU per job selector, ILP against greedy, as the job count grows (issue #30): prints JSON.
 
 A workflow of ``--jobs`` independent one-line ``shell:`` jobs (all ready at once, as becos's remesh
-variants are after the manifests) runs from scratch with ``--cores 2 --scheduler S`` for each selector
+variants are after the manifests; with ``--own-input`` each reads a file of its own) runs from scratch with ``--cores 2 --scheduler S`` for each selector
 and size, alternating. Per run: wall and the Snakemake process tree's CPU seconds (user + system, the
 jobs' ``echo`` included, the same for both selectors). ``growth``: the log-log slope of CPU in the job
 count per selector (1: linear). becos's workflow profile (profiles/default) selects ``greedy``.
@@ -28,37 +28,59 @@ import numpy as np
 SNAKEFILE = """\
 import os
 N = int(os.environ["BENCH_JOBS"])
+OWN_INPUT = os.environ["BENCH_OWN_INPUT"] == "1"
 rule all:
     input: expand("out/{i}.txt", i=range(N))
 rule one:
+    input: "in/{i}.txt" if OWN_INPUT else []
     output: "out/{i}.txt"
     shell: "echo {wildcards.i} > {output}"
 """
 
 
-def run(workdir: Path, scheduler: str, jobs: int) -> dict:
+def run(workdir: Path, scheduler: str, jobs: int, own_input: bool) -> dict:
     """One run from scratch; CPU from the children's rusage difference (Snakemake and its jobs)."""
     shutil.rmtree(workdir, ignore_errors=True)
-    workdir.mkdir(parents=True)
+    (workdir / "in").mkdir(parents=True)
     (workdir / "Snakefile").write_text(SNAKEFILE)
+    for i in range(jobs if own_input else 0):
+        (workdir / "in" / f"{i}.txt").write_text(str(i))
     command = [sys.executable, "-m", "snakemake", "--cores", "2", "--scheduler", scheduler, "--quiet", "all"]
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     start = time.perf_counter()
-    subprocess.run(command, cwd=workdir, env={**os.environ, "BENCH_JOBS": str(jobs)}, check=True, capture_output=True)
+    subprocess.run(
+        command,
+        cwd=workdir,
+        env={**os.environ, "BENCH_JOBS": str(jobs), "BENCH_OWN_INPUT": str(int(own_input))},
+        check=True,
+        capture_output=True,
+    )
     wall = time.perf_counter() - start
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
     assert len(list((workdir / "out").iterdir())) == jobs
-    return {"scheduler": scheduler, "jobs": jobs, "wall_seconds": round(wall, 2), "cpu_seconds": round(cpu, 2)}
+    return {
+        "scheduler": scheduler,
+        "jobs": jobs,
+        "own_input": own_input,
+        "wall_seconds": round(wall, 2),
+        "cpu_seconds": round(cpu, 2),
+    }
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--jobs", default="100,400,800", help="job counts, comma-separated")
     parser.add_argument("--workdir", type=Path, default=Path("/tmp/becos-scheduler"))
+    parser.add_argument(
+        "--own-input",
+        action="store_true",
+        help="each job reads its own input file, as each remesh job reads its shape's mesh (Snakemake checks "
+        "the size of every ready job's inputs in every scheduling round)",
+    )
     args = parser.parse_args()
     sizes = [int(n) for n in args.jobs.split(",")]
-    runs = [run(args.workdir, scheduler, n) for n in sizes for scheduler in ("ilp", "greedy")]
+    runs = [run(args.workdir, scheduler, n, args.own_input) for n in sizes for scheduler in ("ilp", "greedy")]
     growth = {}
     for scheduler in ("ilp", "greedy"):
         cpu = [r["cpu_seconds"] for r in runs if r["scheduler"] == scheduler]
