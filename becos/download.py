@@ -418,11 +418,14 @@ def archive_url(name: str, overrides: dict | None = None, config_dir=None) -> st
     return dataset_archive(name, config_dir)[1].url
 
 
-def download_config_problems(config: dict, config_dir=None) -> list[str]:
-    """Problems of the workflow keys ``download`` and ``download_urls`` (checked with the config)."""
-    wanted = list(config.get("download") or [])
-    urls = dict(config.get("download_urls") or {})
-    enabled = set(config.get("datasets") or [])
+def download_config_problems(
+    download: list[str], download_urls: dict, datasets: list[str], config_dir=None
+) -> list[str]:
+    """Problems of the workflow keys ``download`` (dataset names) and ``download_urls`` (name -> URL), given
+    the enabled ``datasets`` (checked with the config)."""
+    wanted = list(download or [])
+    urls = dict(download_urls or {})
+    enabled = set(datasets or [])
     problems = []
     for name in wanted:
         if name not in enabled:

@@ -393,15 +393,16 @@ def dataset_kind(spec) -> str | None:
     return kind
 
 
-def preparation_plan(config: dict) -> list[PreparationJob]:
-    """The preparation jobs of a workflow config: one per class of each enabled ``dt4d`` dataset whose
-    ``DATA/DeformingThings4D/<kind>`` folder and info file exist when the workflow is planned (without
-    them the dataset check explains what to get). Class order as in the info file."""
+def preparation_plan(data_dir: str | Path, datasets: list[str], annotations: str | Path | None) -> list[PreparationJob]:
+    """The preparation jobs of a workflow config (keys ``data_dir``, ``datasets``, ``annotations``): one per
+    class of each enabled ``dt4d`` dataset whose ``DATA/DeformingThings4D/<kind>`` folder and info file
+    exist when the workflow is planned (without them the dataset check explains what to get). Class order
+    as in the info file."""
     from becos.datasets import DatasetSpec
 
-    data_dir = Path(config["data_dir"])
+    data_dir = Path(data_dir)
     jobs = []
-    for name in config["datasets"]:
+    for name in datasets:
         try:
             spec = DatasetSpec.load(name)
             kind = dataset_kind(spec)
@@ -409,9 +410,7 @@ def preparation_plan(config: dict) -> list[PreparationJob]:
             continue  # the dataset check reports it
         if kind is None or not source_folder(data_dir, kind).is_dir():
             continue
-        info_path = next(
-            (p for p in spec.info_file_candidates(config.get("annotations"), data_dir) if p.is_file()), None
-        )
+        info_path = next((p for p in spec.info_file_candidates(annotations, data_dir) if p.is_file()), None)
         try:
             info = read_info(info_path) if info_path is not None else {}
         except BecosError:

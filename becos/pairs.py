@@ -23,11 +23,12 @@ from functools import cached_property
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from becos.defaults import config_default
 from becos.mesh import TriMesh
 from becos.partiality import Partial, Scanner, align_to, cast_p2f, cast_p2p, whole
 from becos.record import VERTEX_MAP_ROUNDING, PairRecord
 from becos.seeding import rng_for
-from becos.settings import MAX_OVERLAP, MIN_OVERLAP, SETTINGS, overlap_range_problem
+from becos.settings import SETTINGS, overlap_range_problem
 from becos.surface_map import SurfaceMap
 
 _UP = {"x": np.array([1.0, 0, 0]), "y": np.array([0, 1.0, 0]), "z": np.array([0, 0, 1.0])}
@@ -35,17 +36,18 @@ _UP = {"x": np.array([1.0, 0, 0]), "y": np.array([0, 1.0, 0]), "z": np.array([0,
 
 @dataclass(frozen=True)
 class PairOptions:
-    """Options of one setting (defaults = the published benchmark's)."""
+    """Options of one setting (defaults: the config's, ``becos/data/schema.yaml``, the published
+    benchmark's)."""
 
     setting: str = "full_full"
-    cam_pos_regime: str = "high"
-    up_axis: str = "y"
-    camera_distance: float = 1.0
-    n_cam_pos: int = 10
-    min_overlap: float = MIN_OVERLAP
-    max_overlap: float = MAX_OVERLAP
-    one_axis_rotation: bool = True
-    area_normalised: bool = False
+    cam_pos_regime: str = config_default("cam_pos_regime")
+    up_axis: str = config_default("up_axis")
+    camera_distance: float = config_default("camera_distance")
+    n_cam_pos: int = config_default("n_cam_pos")
+    min_overlap: float = config_default("min_overlap")
+    max_overlap: float = config_default("max_overlap")
+    one_axis_rotation: bool = config_default("one_axis_rotation")
+    area_normalised: bool = config_default("area_normalised")
 
     def __post_init__(self):
         if self.setting not in SETTINGS:

@@ -360,7 +360,7 @@ def step_benchmark(
                     fallbacks[label][f"{name}/{token}"] = fell_back
                 jobs[label].append({"variant": f"{name}/{token}", **{k: round(steps.get(k, 0.0), 3) for k in STEPS}})
                 r = load_remeshed(out)
-                target = remesh_target(config, "tosca", name, token)["target_vertices"]
+                target = remesh_target(config["seed"], "tosca", name, token)["target_vertices"]
                 guarantees[label][f"{name}/{token}"] = _guarantees(original, r, target)
                 files[label][(name, v)] = r
                 print(f"{label} {name} {token}: {steps['total']:.2f} CPU-s", file=sys.stderr, flush=True)

@@ -394,10 +394,10 @@ def test_the_plan_has_one_job_per_class_and_leaves_a_missing_anime_to_the_job(tm
     info = {"catBG": {"run": [1, 2]}, "leopardSLM": {"roam": [3], "walk": [4]}}
     (annotations / "data").mkdir(parents=True)
     (annotations / "data" / "info_dt4d_animals.json").write_text(json.dumps(info))
-    config = {"data_dir": str(data), "annotations": str(annotations), "datasets": ["tosca", "dt4d_animal"]}
-    assert preparation_plan(config) == []  # no DeformingThings4D: the check explains
+    config = (data, ["tosca", "dt4d_animal"], annotations)
+    assert preparation_plan(*config) == []  # no DeformingThings4D: the check explains
     make_download(data, "animals", {"catBG": {"run": 5}, "leopardSLM": {"roam": 5}})  # leopardSLM_walk missing
-    jobs = {job.cls: job for job in preparation_plan(config)}
+    jobs = {job.cls: job for job in preparation_plan(*config)}
     assert sorted(jobs) == ["catBG", "leopardSLM"]
     assert [p.name for p in jobs["leopardSLM"].anime] == ["leopardSLM_roam.anime"]
     assert jobs["catBG"].stamp == data / "dt4d_animals" / "catBG" / ".becos-dt4d.json"

@@ -246,7 +246,7 @@ def test_messy_download_through_the_workflow_remesh_stage(
     from becos.catalog import catalog_table
     from becos.datasets import prepare_shape
     from becos.remesh import load_remeshed
-    from becos.workflow import remesh_stage
+    from becos.workflow import RemeshOptions, remesh_stage
 
     v, f = wolves["wolf1"].vertices.copy(), wolves["wolf1"].faces.copy()
     f[::5] = f[::5, ::-1]  # flipped
@@ -263,7 +263,10 @@ def test_messy_download_through_the_workflow_remesh_stage(
     row = catalog_table([entry]).iloc[0].to_dict()
     out = tmp_path / "results" / "wolf1-f2000.npz"
     with caplog.at_level(logging.WARNING, logger="becos.remesh"):
-        remesh_stage({"results": str(tmp_path / "results"), "seed": 42}, row, "f2000", out)
+        options = RemeshOptions(
+            results=str(tmp_path / "results"), seed=42, remesh=True, remesher="becos", decimator="pymeshlab"
+        )
+        remesh_stage(options, row, "f2000", out)
     assert path.read_bytes() == written
     message = " ".join(rec.getMessage() for rec in caplog.records)
     for words in (

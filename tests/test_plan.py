@@ -27,10 +27,18 @@ def config() -> dict:
     return bw.resolve_config(dict(BASE))
 
 
+JOB_STAGES = ("catalog", "manifest", "remesh", "export", "ground_truth", "pairs")
+"""The stages whose rules pass ``job_options`` (the dataset check passes its paths one by one)."""
+
+
+def _options_class(stage: str, setting: str | None) -> type:
+    return bw.PAIRS_OPTIONS[setting] if stage == "pairs" else bw.STAGE_OPTIONS[stage]
+
+
 def _jobs(config: dict) -> dict[tuple[str, str | None], dict]:
     """The options JSON of every stage (and setting, for pairs) as dicts."""
     out = {}
-    for stage in bw.STAGE_KEYS:
+    for stage in JOB_STAGES:
         settings = SETTINGS if stage in ("pairs", "manifest") else (None,)
         for setting in settings:
             out[(stage, setting)] = json.loads(bw.job_options(config, stage, setting))
@@ -43,17 +51,27 @@ def _rerun(config: dict, **edit) -> set[tuple[str, str | None]]:
     return {job for job in before if before[job] != after[job]}
 
 
-def test_job_options_are_the_stage_keys_results_and_version(config):
+def test_job_options_are_the_stage_options_fields_and_version(config):
     for (stage, setting), options in _jobs(config).items():
-        expected = set(bw.STAGE_KEYS[stage]) | {"results"}
-        if stage == "pairs":
-            expected |= set(bw.SETTING_KEYS[setting])
-        if stage in bw.STAGE_VERSIONS:
-            expected.add("version")
+        cls = _options_class(stage, setting)
+        expected = set(cls.keys()) | ({"version"} if cls.version is not None else set())
         assert set(options) == expected, (stage, setting)
         assert options["results"] == "results"
-        for key in expected - {"results", "version"}:
-            assert options[key] == config.get(key), (stage, key)
+        for key in expected - {"version"}:
+            assert options[key] == config[key], (stage, key)
+    # each stage's keys, as the rules passed them before the options were typed (a change reruns jobs)
+    assert set(_jobs(config)[("pairs", "partial_partial")]) - set(_jobs(config)[("pairs", "full_full")]) == {
+        "camera_distance",
+        "cam_pos_regime",
+        "n_cam_pos",
+        "min_overlap",
+        "max_overlap",
+    }
+    assert set(_jobs(config)[("remesh", None)]) == {"results", "version", "seed", "remesh", "remesher", "decimator"}
+    # the store's metadata reruns for every key but those that say what is built from a store, or how the
+    # data arrived
+    store_blind = {"setting", "n_renders", "store_vis", "exports", "evaluation", "download", "download_urls"}
+    assert set(json.loads(bw.store_keys(config))) == set(config) - store_blind
     # sorted keys: the same config gives the same parameter text, whatever the key order it was written in
     text = bw.job_options(config, "pairs", "partial_partial")
     assert text == json.dumps(json.loads(text), sort_keys=True)
@@ -96,7 +114,8 @@ def test_an_edit_reaches_exactly_the_stages_that_read_the_key(config, edit, reru
 @pytest.mark.parametrize("stage", ["remesh", "ground_truth"])
 def test_a_stage_version_bump_reruns_only_that_stage(config, monkeypatch, stage):
     before = _jobs(config)
-    monkeypatch.setitem(bw.STAGE_VERSIONS, stage, bw.STAGE_VERSIONS[stage] + 1)
+    cls = bw.STAGE_OPTIONS[stage]
+    monkeypatch.setattr(cls, "version", cls.version + 1)
     after = _jobs(config)
     assert {job for job in before if before[job] != after[job]} == {(stage, None)}
 
@@ -117,12 +136,12 @@ def test_remesh_tokens(row, remesh, token):
 
 
 def test_remesh_targets_follow_the_token(config):
-    assert bw.remesh_target(config, "tosca", "cat0", "f9000") == {"target_faces": 9000}
-    v0 = bw.remesh_target(config, "tosca", "cat0", "v0")["target_vertices"]
-    assert v0 == bw.remesh_target(config, "tosca", "cat0", "v0")["target_vertices"]  # seeded, stable
-    assert {bw.remesh_target(config, "tosca", n, "v0")["target_vertices"] for n in ("cat0", "cat1", "dog0")} <= set(
-        range(9000, 10001)
-    )
+    assert bw.remesh_target(config["seed"], "tosca", "cat0", "f9000") == {"target_faces": 9000}
+    v0 = bw.remesh_target(config["seed"], "tosca", "cat0", "v0")["target_vertices"]
+    assert v0 == bw.remesh_target(config["seed"], "tosca", "cat0", "v0")["target_vertices"]  # seeded, stable
+    assert {
+        bw.remesh_target(config["seed"], "tosca", n, "v0")["target_vertices"] for n in ("cat0", "cat1", "dog0")
+    } <= set(range(9000, 10001))
 
 
 def _plan(config: dict) -> bw.Plan:

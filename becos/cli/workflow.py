@@ -54,12 +54,12 @@ def _stage(run):
 
     @functools.wraps(run)
     def handler(args: argparse.Namespace) -> int:
-        config = parse_json_option(args.options, "--options", args.command)
+        options = parse_json_option(args.options, "--options", args.command)
         try:
-            run(args, config)
+            run(args, options)
         except KeyError as exc:
             raise ConfigError(
-                f"--options: lacks the key {exc} (given keys: {sorted(config)}). Fix: "
+                f"--options: lacks the key {exc} (given keys: {sorted(options)}). Fix: "
                 f"pass the JSON the workflow's rule writes (becos.workflow.job_options)"
             ) from None
         except TypeError as exc:
@@ -72,7 +72,7 @@ def _stage(run):
                 exc.filename or "?",
                 "not found (an input of this stage)",
                 f"run the stages before `becos {args.command}` (the workflow does), or check the paths given "
-                f"to it (its input options; `results` in --options: {config.get('results', 'results')!r})",
+                f"to it (its input options; `results` in --options: {options.get('results')!r})",
             ) from None
         return 0
 

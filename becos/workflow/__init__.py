@@ -4,9 +4,11 @@ Snakemake (``Snakefile``, ``workflow/rules/*.smk``) only names files; every job 
 sub-command, which calls one function of :mod:`becos.workflow.stages` (or of :mod:`becos.store`,
 :mod:`becos.export`, :mod:`becos.validate`, :mod:`becos.report`). One idea per module:
 
-    config    the schema (``becos/data/schema.yaml``), defaults, the checks across keys, config files
+    config    the schema (``becos/data/schema.yaml``, the only statement of the defaults), config files
     digests   content digests of the input files (what reruns the dataset check and a remesh)
-    options   the config keys each stage depends on, the options JSON a job receives, digests
+    options   the options builder, the one reader of the resolved config: one frozen dataclass per
+              stage (its fields are the keys that rerun it), the options JSON a job receives, the
+              checks across keys, ``remesher: auto`` resolved
     layout    where every file under ``results`` lives, which remesh file a pair side uses
     plan      catalog, manifests and the jobs they imply (what Snakemake needs to build the job graph)
     shapes    a chunk job's shapes, kept while its pairs use them
@@ -41,13 +43,11 @@ re-partnered pairs, and changing ``min_overlap`` recomputes records but no remes
 from becos.workflow.config import (
     CONFIG_DOCS,
     SCHEMA_PATH,
-    check_config,
     check_config_files,
     load_config,
     read_config_file,
     resolve_config,
     schema_problems,
-    settings_of,
 )
 from becos.workflow.digests import (
     DigestCache,
@@ -64,13 +64,30 @@ from becos.workflow.layout import (
 )
 from becos.workflow.options import (
     GROUND_TRUTH_VERSION,
+    PAIRS_OPTIONS,
     RECORD_VERSION,
-    SETTING_KEYS,
-    STAGE_KEYS,
-    STAGE_VERSIONS,
+    REMESH_VERSION,
+    STAGE_OPTIONS,
+    STORE_STAGES,
+    AnnotationOptions,
+    CatalogOptions,
+    CheckOptions,
+    ExportOptions,
+    GroundTruthOptions,
+    ManifestOptions,
+    PairsOptions,
+    PartialFullPairsOptions,
+    PartialPartialPairsOptions,
+    RemeshOptions,
+    SourceOptions,
+    StageOptions,
+    check_config,
     digest,
     job_options,
+    pairs_options,
+    settings_of,
     stage_options,
+    store_keys,
 )
 from becos.workflow.plan import (
     Plan,
@@ -122,12 +139,27 @@ __all__ = [
     "uses_published_views",
     "GROUND_TRUTH_VERSION",
     "RECORD_VERSION",
-    "STAGE_VERSIONS",
-    "STAGE_KEYS",
-    "SETTING_KEYS",
+    "REMESH_VERSION",
+    "STAGE_OPTIONS",
+    "PAIRS_OPTIONS",
+    "STORE_STAGES",
+    "StageOptions",
+    "AnnotationOptions",
+    "CheckOptions",
+    "CatalogOptions",
+    "ManifestOptions",
+    "RemeshOptions",
+    "ExportOptions",
+    "GroundTruthOptions",
+    "PairsOptions",
+    "PartialFullPairsOptions",
+    "PartialPartialPairsOptions",
+    "SourceOptions",
     "digest",
     "stage_options",
+    "pairs_options",
     "job_options",
+    "store_keys",
     "SCHEMA_PATH",
     "resolve_config",
     "CONFIG_DOCS",

@@ -6,17 +6,10 @@ from __future__ import annotations
 from copy import deepcopy
 from pathlib import Path
 
+from becos.defaults import SCHEMA_PATH, config_schema
 from becos.errors import ConfigError
-from becos.settings import SETTINGS, overlap_range_problem
 
-SCHEMA_PATH = Path(__file__).resolve().parents[1] / "data" / "schema.yaml"
-"""The config schema, shipped inside the package (config/README.md documents every key)."""
-
-
-def _schema() -> dict:
-    import yaml
-
-    return yaml.safe_load(SCHEMA_PATH.read_text())
+__all__ = ["SCHEMA_PATH", "resolve_config", "schema_problems", "load_config", "read_config_file", "check_config_files"]
 
 
 def _typed_command_line_values(schema: dict, instance):
@@ -76,15 +69,16 @@ def resolve_config(raw: dict) -> dict:
     """Validate ``raw`` against ``becos/data/schema.yaml``, fill defaults, check what a schema cannot.
 
     Raises:
-        ConfigError: one line per problem (:func:`schema_problems`, :func:`check_config`), each
+        ConfigError: one line per problem (:func:`schema_problems`, :func:`becos.workflow.options.check_config`), each
             ``<key>: <what is wrong>. Fix: <fix>`` (unknown key, wrong type, reversed overlap range, ...).
     """
     import jsonschema
 
-    schema = _schema()
+    from becos.workflow.options import check_config, resolve_remesher, switch_off_exports
+
+    schema = config_schema()
     config = _fill_defaults(schema, _typed_command_line_values(schema, deepcopy(dict(raw))))
-    if config.get("remesher") == "auto":  # the published targets, rotations and views refer to the reference's remesh
-        config["remesher"] = "reference" if config.get("original_settings") else "becos"
+    resolve_remesher(config)
     validator = jsonschema.Draft202012Validator(schema)
     errors = sorted(validator.iter_errors(config), key=lambda e: [str(k) for k in e.absolute_path])
     if errors:
@@ -92,18 +86,6 @@ def resolve_config(raw: dict) -> dict:
     switch_off_exports(config, schema)
     check_config(config)
     return config
-
-
-def switch_off_exports(config: dict, schema: dict) -> None:
-    """``exports.enabled: false``: every on/off export key of the schema (all but ``enabled`` and ``zarr``,
-    the store, which is always built) set to false in ``config``, in place, so the resolved config says
-    what is built."""
-    exports = config["exports"]
-    if exports["enabled"]:
-        return
-    for key, spec in schema["properties"]["exports"]["properties"].items():
-        if spec.get("type") == "boolean" and key not in ("enabled", "zarr"):
-            exports[key] = False
 
 
 CONFIG_DOCS = "config/README.md"
@@ -219,69 +201,6 @@ def schema_problems(error) -> list[str]:
         return [f"{key}: {value!r} is {_TYPE_NAMES.get(_type_of(value), _type_of(value))}. Fix: give {forms} ({docs})"]
     message = " ".join(str(error.message).split())
     return [f"{key}: {message}. Fix: {docs}"]
-
-
-def check_config(config: dict) -> None:
-    """Checks across keys, run right after the schema (so a bad config fails before any job).
-
-    Raises:
-        ConfigError: one line per problem, ``<key>: <what is wrong>. Fix: <fix>``.
-    """
-    import difflib
-
-    from becos.datasets import available_datasets
-
-    problems = []
-    if config["exports"].get("zarr") is False:
-        problems.append(
-            "exports.zarr: false is not supported: the Zarr store is always built (validation, the report "
-            "and every other export read it). Fix: remove exports.zarr from the configuration"
-        )
-    overlap = overlap_range_problem(config["min_overlap"], config["max_overlap"])
-    if overlap:
-        problems.append(overlap)
-    known = sorted(available_datasets())
-    for name in config["datasets"]:
-        if name not in known:
-            close = difflib.get_close_matches(name, known, n=1)
-            hint = f"did you mean '{close[0]}'? " if close else ""
-            problems.append(
-                f"datasets: '{name}' is not in the registry (config/datasets/*.yaml). "
-                f"Fix: {hint}use one of {', '.join(known)}"
-            )
-    if config.get("download") or config.get("download_urls"):
-        from becos.download import download_config_problems
-
-        problems += download_config_problems(config)
-    if config.get("original_settings") and "partial_full" in settings_of(config):
-        problems.append(
-            "original_settings: the reference publishes no partial_full pair list. "
-            "Fix: use setting full_full / partial_partial or original_settings: false"
-        )
-    synthetic = config.get("synthetic") or {}
-    if synthetic.get("enabled"):
-        out = Path(synthetic.get("out", "resources/synthetic"))
-        for key, expected in (("data_dir", out / "data"), ("annotations", out / "annotations")):
-            if Path(config[key]) != expected:
-                problems.append(
-                    f"{key}: {config[key]!r}, but the synthetic collection is generated into "
-                    f"{str(expected)!r}. Fix: set {key}: {expected} (or synthetic.enabled: false)"
-                )
-    results = Path(config.get("results", "results"))
-    if results.exists() and not results.is_dir():
-        problems.append(
-            f"results: {str(results)!r} ({results.absolute()}) is a file, not a folder. "
-            "Fix: set results to a folder path, or move the file away"
-        )
-    if problems:
-        raise ConfigError("\n".join(" ".join(p.split()) for p in problems))  # one line per problem
-
-
-def settings_of(config: dict) -> list[str]:
-    """The configured settings as a list, in the canonical order."""
-    value = config.get("setting", list(SETTINGS))
-    wanted = {value} if isinstance(value, str) else set(value)
-    return [s for s in SETTINGS if s in wanted]
 
 
 def load_config(path: str | Path) -> dict:

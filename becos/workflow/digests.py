@@ -39,6 +39,7 @@ from pathlib import Path
 
 from becos.atomic import write_text
 from becos.errors import DiskFullError
+from becos.workflow.options import SourceOptions
 
 DIGEST_CACHE_VERSION = 1
 """Bumped when the cache file's layout changes (an older cache is then ignored)."""
@@ -124,18 +125,20 @@ class DigestCache:
             pass  # a read-only or full results folder: hash again next time
 
 
-def generated_folders(config: dict) -> list[Path]:
+def generated_folders(config) -> list[Path]:
     """Folders whose files a rule of the run writes: the synthetic collection, a fetched annotation
-    folder, the class folders of the DeformingThings4D preparation jobs and downloaded dataset folders."""
+    folder, the class folders of the DeformingThings4D preparation jobs and downloaded dataset folders.
+    ``config``: a resolved config or its :class:`SourceOptions` (so for the functions below)."""
     from becos.datasets import DatasetSpec
     from becos.dt4d import preparation_plan
 
-    folders = [Path(config["synthetic"]["out"])] if config["synthetic"]["enabled"] else []
-    if config.get("annotations_archive"):
-        folders.append(Path(config["annotations"]))
-    folders += [Path(job.stamp).parent for job in preparation_plan(config)]
-    for name in config.get("download") or ():
-        folders.append(Path(config["data_dir"]) / DatasetSpec.load(name).folder)
+    src = SourceOptions.of(config)
+    folders = [Path(src.synthetic["out"])] if src.synthetic["enabled"] else []
+    if src.annotations_archive:
+        folders.append(Path(src.annotations))
+    folders += [Path(job.stamp).parent for job in preparation_plan(src.data_dir, src.datasets, src.annotations)]
+    for name in src.download:
+        folders.append(Path(src.data_dir) / DatasetSpec.load(name).folder)
     return folders
 
 
@@ -150,7 +153,7 @@ def _outside(folders: list[Path]):
     return outside
 
 
-def dataset_input_files(config: dict) -> list[Path]:
+def dataset_input_files(config) -> list[Path]:
     """Each enabled dataset's mesh files that no job of the run writes (:func:`generated_folders`), as
     :meth:`becos.datasets.DatasetSpec.list_names` finds them, non-regular entries included (so that the
     check runs again and names them). A dataset folder that does not exist contributes nothing (the
@@ -158,10 +161,11 @@ def dataset_input_files(config: dict) -> list[Path]:
     from becos.datasets import DatasetSpec
     from becos.errors import BecosError
 
-    outside = _outside(generated_folders(config))
+    src = SourceOptions.of(config)
+    outside = _outside(generated_folders(src))
     out: list[Path] = []
-    data_dir = Path(config["data_dir"])
-    for name in config["datasets"]:
+    data_dir = Path(src.data_dir)
+    for name in src.datasets:
         try:
             spec = DatasetSpec.load(name)
         except BecosError:  # an unknown or broken registry entry: the check names it
@@ -172,19 +176,21 @@ def dataset_input_files(config: dict) -> list[Path]:
     return sorted(set(out))
 
 
-def annotation_input_files(config: dict) -> list[Path]:
+def annotation_input_files(config) -> list[Path]:
     """The annotation folder's :data:`ANNOTATION_INPUTS` (none when a job of the run fetches the folder
     or the synthetic collection writes it)."""
-    root = Path(config["annotations"])
-    if not _outside(generated_folders(config))(root):
+    src = SourceOptions.of(config)
+    root = Path(src.annotations)
+    if not _outside(generated_folders(src))(root):
         return []
     patterns = list(ANNOTATION_INPUTS)
-    if config.get("original_settings"):
+    if src.original_settings:
         patterns.append("precomputed_triangle_ids/*/*")
     return sorted({p for pattern in patterns for p in root.glob(pattern) if not p.is_dir()})
 
 
-def check_input_files(config: dict) -> list[Path]:
+def check_input_files(config) -> list[Path]:
     """Every file the dataset check reads that no job of the run writes: :func:`dataset_input_files` and
     :func:`annotation_input_files`."""
-    return sorted({*dataset_input_files(config), *annotation_input_files(config)})
+    src = SourceOptions.of(config)
+    return sorted({*dataset_input_files(src), *annotation_input_files(src)})

@@ -22,8 +22,11 @@ class Layout:
     results: Path
 
     @classmethod
-    def of(cls, config: dict) -> Layout:
-        return cls(Path(config.get("results", "results")))
+    def of(cls, config) -> Layout:
+        """The layout of a resolved config, a job's options or an options object (their ``results``)."""
+        from becos.workflow.options import results_of
+
+        return cls(results_of(config))
 
     @property
     def config(self) -> Path:

@@ -13,94 +13,107 @@ import numpy as np
 
 from becos.errors import ConfigError
 from becos.settings import SPLITS
-from becos.workflow.config import settings_of
 from becos.workflow.layout import Layout, remesh_token
+from becos.workflow.options import (
+    AnnotationOptions,
+    CatalogOptions,
+    ManifestOptions,
+    PairsOptions,
+    pairs_options,
+    settings_of,
+)
 
 if TYPE_CHECKING:
     import pandas as pd  # imported where used: write-config, metadata and remesh jobs start without it
 
 
-def annotation_source(config: dict):
+def annotation_source(options):
+    """The annotation folder of ``options`` (a resolved config or any options with ``annotations``,
+    ``template_file`` and ``results``), its parsed edge files cached under ``results/cache``."""
     from becos.annotations import AnnotationSource
 
+    options = AnnotationOptions.of(options)
     return AnnotationSource(
-        config["annotations"],
-        cache_dir=Layout.of(config).cache / "annotations",
-        template_table=config.get("template_file", "templates_all.csv"),
+        options.annotations,
+        cache_dir=Layout.of(options).cache / "annotations",
+        template_table=options.template_file,
     )
 
 
-def build_catalog(config: dict, annotations=None) -> pd.DataFrame:
-    """The catalog of every enabled dataset's shapes (:mod:`becos.catalog`)."""
+def build_catalog(options, annotations=None) -> pd.DataFrame:
+    """The catalog of every enabled dataset's shapes (:mod:`becos.catalog`); ``options``: the catalog's
+    (:class:`CatalogOptions`, or a resolved config)."""
     from becos.catalog import catalog_table
     from becos.datasets import DatasetSpec
 
-    annotations = annotations or annotation_source(config)
+    options = CatalogOptions.of(options)
+    annotations = annotations or annotation_source(options)
     entries = []
-    for name in config["datasets"]:
-        entries.extend(DatasetSpec.load(name).list_shapes(config["data_dir"], annotations))
-    patterns = config.get("shapes")
+    for name in options.datasets:
+        entries.extend(DatasetSpec.load(name).list_shapes(options.data_dir, annotations))
+    patterns = options.shapes
     if patterns:
         from fnmatch import fnmatchcase
 
         entries = [e for e in entries if any(fnmatchcase(f"{e.dataset}/{e.name}", p) for p in patterns)]
         if not entries:
             raise ConfigError(
-                f"shapes: no shape of datasets {config['datasets']} matches {patterns}. Fix: give "
+                f"shapes: no shape of datasets {options.datasets} matches {patterns}. Fix: give "
                 "<dataset>/<name> patterns of shapes in those datasets (globs allowed, e.g. tosca/cat*), "
                 "or add their dataset to `datasets`"
             )
     return catalog_table(entries)
 
 
-def build_manifest(config: dict, setting: str, catalog: pd.DataFrame, annotations=None) -> pd.DataFrame:
-    """The pair manifest of ``setting`` (:mod:`becos.sampling`, or the published lists)."""
-    import pandas as pd
+def build_manifest(options, setting: str, catalog: pd.DataFrame, annotations=None) -> pd.DataFrame:
+    """The pair manifest of ``setting`` (:mod:`becos.sampling`, or the published lists); ``options``: the
+    manifest's (:class:`ManifestOptions`, or a resolved config)."""
+    from becos.sampling import sample_pairs
 
-    from becos.sampling import assign_chunks, sample_pairs
-
-    if config.get("original_settings"):
-        from becos.published import import_published
-
-        path = Path(config["annotations"]) / "config" / f"pairings_original_{setting}.pkl"
-        imported = import_published(
-            path,
-            setting=setting,
-            seed=config["seed"],
-            n_variants=config["remesh_variants"],
-            n_chunks=config["n_chunks"],
-            datasets=config["datasets"],
-        )
-        manifest = imported.manifest
-        if imported.cameras:  # P2P: the published cameras travel with their pair (x_cam_pos_0..29, y_...)
-            cams = np.stack([imported.cameras[p] for p in manifest["pair_id"]]).reshape(len(manifest), 2, -1)
-            columns = {
-                f"{side}_cam_pos_{i}": cams[:, s, i] for s, side in enumerate("xy") for i in range(cams.shape[2])
-            }
-            manifest = pd.concat([manifest, pd.DataFrame(columns, index=manifest.index)], axis=1)
-            manifest.attrs = imported.manifest.attrs
-        manifest = _restrict_published(manifest, catalog, config, setting)
-        manifest["chunk"] = assign_chunks(
-            manifest["pair_id"], n_chunks=config["n_chunks"], pairs_per_chunk=config["pairs_per_chunk"]
-        )
-        return manifest
-    annotations = annotations or annotation_source(config)
-    caps = {k: v for k, v in (config.get("caps") or {}).items() if v is not None}
+    o = ManifestOptions.of(options)
+    if o.original_settings:
+        return _published_manifest(o, setting, catalog)
+    annotations = annotations or annotation_source(o)
+    caps = {k: v for k, v in o.caps.items() if v is not None}
     return sample_pairs(
         catalog,
         setting,
-        seed=config["seed"],
-        combinations=config["combinations"],
+        seed=o.seed,
+        combinations=o.combinations,
         template_rows=annotations,
-        n_variants=config["remesh_variants"],
-        n_chunks=config["n_chunks"],
-        pairs_per_chunk=config["pairs_per_chunk"],
+        n_variants=o.remesh_variants,
+        n_chunks=o.n_chunks,
+        pairs_per_chunk=o.pairs_per_chunk,
         caps=caps or None,
-        usage_scale=config["usage_scale"],
+        usage_scale=o.usage_scale,
     )
 
 
-def _restrict_published(manifest: pd.DataFrame, catalog: pd.DataFrame, config: dict, setting: str) -> pd.DataFrame:
+def _published_manifest(o: ManifestOptions, setting: str, catalog: pd.DataFrame) -> pd.DataFrame:
+    """The published pair list of ``setting`` (with its cameras), restricted to the catalog and the caps."""
+    import pandas as pd
+
+    from becos.published import import_published
+    from becos.sampling import assign_chunks
+
+    path = Path(o.annotations) / "config" / f"pairings_original_{setting}.pkl"
+    imported = import_published(
+        path, setting=setting, seed=o.seed, n_variants=o.remesh_variants, n_chunks=o.n_chunks, datasets=o.datasets
+    )
+    manifest = imported.manifest
+    if imported.cameras:  # P2P: the published cameras travel with their pair (x_cam_pos_0..29, y_...)
+        cams = np.stack([imported.cameras[p] for p in manifest["pair_id"]]).reshape(len(manifest), 2, -1)
+        columns = {f"{side}_cam_pos_{i}": cams[:, s, i] for s, side in enumerate("xy") for i in range(cams.shape[2])}
+        manifest = pd.concat([manifest, pd.DataFrame(columns, index=manifest.index)], axis=1)
+        manifest.attrs = imported.manifest.attrs
+    manifest = _restrict_published(manifest, catalog, o, setting)
+    manifest["chunk"] = assign_chunks(manifest["pair_id"], n_chunks=o.n_chunks, pairs_per_chunk=o.pairs_per_chunk)
+    return manifest
+
+
+def _restrict_published(
+    manifest: pd.DataFrame, catalog: pd.DataFrame, o: ManifestOptions, setting: str
+) -> pd.DataFrame:
     """Published pairs whose two shapes are in the catalog (``shapes`` filter), then the per-split caps
     (pairs ranked by a keyed hash of their id, as for sampled pairs)."""
     from becos.sampling import sort_manifest
@@ -112,10 +125,10 @@ def _restrict_published(manifest: pd.DataFrame, catalog: pd.DataFrame, config: d
         for xd, xn, yd, yn in zip(manifest["x_dataset"], manifest["x_name"], manifest["y_dataset"], manifest["y_name"])
     ]
     out = manifest[np.asarray(keep, dtype=bool)]
-    for split, cap in (config.get("caps") or {}).items():
+    for split, cap in o.caps.items():
         rows = out[out["split"] == split]
         if cap is not None and len(rows) > cap:
-            rank = sorted(rows["pair_id"], key=lambda p: stable_hash(config["seed"], setting, "cap", p))
+            rank = sorted(rows["pair_id"], key=lambda p: stable_hash(o.seed, setting, "cap", p))
             out = out[(out["split"] != split) | out["pair_id"].isin(rank[:cap])]
     report = dict(manifest.attrs.get("report", {}))
     report["n_pairs"] = {s: int((out["split"] == s).sum()) for s in SPLITS}
@@ -132,28 +145,31 @@ class Plan:
     that write the catalog and manifests.
     """
 
-    config: dict
+    options: ManifestOptions
     catalog: pd.DataFrame
     manifests: dict[str, pd.DataFrame]
     layout: Layout = field(init=False)
     _chunk_inputs: dict[tuple[str, int], list[str]] = field(init=False, default_factory=dict, repr=False)
 
     def __post_init__(self):
-        self.layout = Layout.of(self.config)
+        self.options = ManifestOptions.of(self.options)  # a resolved config is accepted too
+        self.layout = Layout.of(self.options)
 
     @classmethod
     def build(cls, config: dict) -> Plan:
-        annotations = annotation_source(config)
-        catalog = build_catalog(config, annotations)
-        manifests = {s: build_manifest(config, s, catalog, annotations) for s in settings_of(config)}
-        return cls(config, catalog, manifests)
+        """The plan of a resolved config (its manifest options, every configured setting)."""
+        options = ManifestOptions.of(config)
+        annotations = annotation_source(options)
+        catalog = build_catalog(options, annotations)
+        manifests = {s: build_manifest(options, s, catalog, annotations) for s in settings_of(config)}
+        return cls(options, catalog, manifests)
 
     @cached_property
     def files(self) -> dict[tuple[str, str], str]:
         return {(d, n): f for d, n, f in zip(self.catalog["dataset"], self.catalog["name"], self.catalog["file"])}
 
     def _side_files(self, rows: pd.DataFrame) -> list[tuple[str, str, str]]:
-        remesh = bool(self.config.get("remesh", True))
+        remesh = self.options.remesh
         out = set()
         for row in rows.to_dict("records"):
             for side in ("x", "y"):
@@ -163,7 +179,7 @@ class Plan:
     @cached_property
     def remesh_jobs(self) -> list[tuple[str, str, str]]:
         """Every (dataset, name, token) some pair uses, remeshing only (not ``original``)."""
-        if not self.config.get("remesh", True):
+        if not self.options.remesh:
             return []
         jobs = set()
         for manifest in self.manifests.values():
@@ -184,7 +200,7 @@ class Plan:
 
     def chunk_inputs(self, setting: str, chunk: int) -> list[str]:
         """Remesh files the chunk reads (none without remeshing); computed once per chunk."""
-        if not self.config.get("remesh", True):
+        if not self.options.remesh:
             return []
         key = (setting, int(chunk))
         if key not in self._chunk_inputs:
@@ -206,11 +222,11 @@ class Plan:
         return json.dumps(self._catalog_rows[(dataset, name)], sort_keys=True)
 
     def remesh_target(self, dataset: str, name: str, token: str) -> dict:
-        return remesh_target(self.config, dataset, name, token)
+        return remesh_target(self.options.seed, dataset, name, token)
 
     @cached_property
     def _annotations(self):
-        return annotation_source(self.config)
+        return annotation_source(self.options)
 
     def chunk_edge_files(self, setting: str, chunk: int) -> list[str]:
         """The annotation folder's edge files the chunk's ground truth reads (both directions), so that
@@ -224,24 +240,22 @@ class Plan:
         return sorted({str(p) for kx, ky in pairs for p in edge_files_between(self._annotations, kx, ky)})
 
 
-def remesh_target(config: dict, dataset: str, name: str, token: str) -> dict:
-    """Arguments of :func:`becos.remesh.remesh` for a token."""
+def remesh_target(seed: int, dataset: str, name: str, token: str) -> dict:
+    """Arguments of :func:`becos.remesh.remesh` for a token (``seed``: config ``seed``)."""
     from becos.remesh import variant_target_vertices
 
     if token.startswith("f"):
         return {"target_faces": int(token[1:])}
-    return {"target_vertices": int(variant_target_vertices(config["seed"], dataset, name, int(token[1:])))}
+    return {"target_vertices": int(variant_target_vertices(seed, dataset, name, int(token[1:])))}
 
 
-def uses_published_views(config: dict, setting: str) -> bool:
+def uses_published_views(config, setting: str) -> bool:
     """Whether the pairs stage of ``setting`` takes its views from the published cameras
-    (``original_settings`` P2P with the reference remesh: the shipped triangle ids index its faces)."""
-    return (
-        setting == "partial_partial" and bool(config.get("original_settings")) and config.get("remesher") == "reference"
-    )
+    (:attr:`PairsOptions.published_views`; ``config``: a resolved config or the stage's options)."""
+    return pairs_options(config, setting).published_views
 
 
-def published_views_folder(config: dict, setting: str) -> Path | None:
+def published_views_folder(config, setting: str) -> Path | None:
     """The folder of shipped triangle-id files the pairs stage of ``setting`` reads
     (:func:`becos.reference_views.triangle_ids_folder`), or None: the stage reads none (it draws its
     cameras, or the annotation folder ships no views and every published view is cast)."""
@@ -249,7 +263,7 @@ def published_views_folder(config: dict, setting: str) -> Path | None:
         return None
     from becos.reference_views import triangle_ids_folder
 
-    folder = triangle_ids_folder(config["annotations"], setting)
+    folder = triangle_ids_folder(PairsOptions.of(config).annotations, setting)
     return folder if folder.is_dir() else None
 
 

@@ -108,14 +108,15 @@ class ShapeStore:
     grow with the number of pairs in a chunk.
     """
 
-    def __init__(self, config: dict, catalog: pd.DataFrame | list[dict], remeshed: str | Path | None = None):
-        """``catalog``: the catalog table, or some of its rows as dicts. ``remeshed``: the folder of the
-        remesh variants (a chunk job's declared remesh root; default: the config's
-        :attr:`Layout.remeshed_root`)."""
+    def __init__(self, options, catalog: pd.DataFrame | list[dict], remeshed: str | Path | None = None):
+        """``options``: the job's stage options (:mod:`becos.workflow.options`; or a resolved config): its
+        ``results`` and, for the shape network, its annotation folder. ``catalog``: the catalog table, or
+        some of its rows as dicts. ``remeshed``: the folder of the remesh variants (a chunk job's declared
+        remesh root; default: :attr:`Layout.remeshed_root`)."""
         from becos.mesh import MeshCache
 
-        self.config = config
-        self.layout = Layout.of(config)
+        self.layout = Layout.of(options)
+        self._annotation_options = options
         self.remeshed_root = self.layout.remeshed_root if remeshed is None else Path(remeshed)
         rows = catalog if isinstance(catalog, list) else catalog.to_dict("records")
         self.entries = {(r["dataset"], r["name"]): shape_entry(r) for r in rows}
@@ -250,7 +251,7 @@ class ShapeStore:
         from becos.network import ShapeNetwork
 
         if self._network is None:
-            self._network = ShapeNetwork(annotation_source(self.config), self.mesh)
+            self._network = ShapeNetwork(annotation_source(self._annotation_options), self.mesh)
         return self._network
 
     def instance(self, dataset: str, name: str, token: str):

@@ -14,7 +14,19 @@ import numpy as np
 from becos.atomic import remove_stale_temporaries, write_text
 from becos.errors import ConfigError
 from becos.workflow.layout import pair_file, remesh_token
-from becos.workflow.options import GROUND_TRUTH_VERSION, RECORD_VERSION, digest, stage_options
+from becos.workflow.options import (
+    GROUND_TRUTH_VERSION,
+    RECORD_VERSION,
+    CatalogOptions,
+    ExportOptions,
+    GroundTruthOptions,
+    ManifestOptions,
+    PairsOptions,
+    RemeshOptions,
+    SourceOptions,
+    digest,
+    pairs_options,
+)
 from becos.workflow.plan import build_catalog, build_manifest, remesh_target, uses_published_views
 from becos.workflow.shapes import ShapeKey, ShapeStore, visit_order
 
@@ -28,56 +40,63 @@ def _log(message: str) -> None:
     print(message, file=sys.stderr, flush=True)
 
 
-def write_catalog_stage(config: dict, out: Path) -> pd.DataFrame:
+def write_catalog_stage(options: CatalogOptions | dict, out: Path) -> pd.DataFrame:
+    """Write the catalog (``options``: the catalog's, or a resolved config) to ``out``."""
     from becos.catalog import write_catalog
 
-    catalog = build_catalog(config)
+    catalog = build_catalog(CatalogOptions.of(options))
     write_catalog(catalog, out)
     counts = catalog.groupby(["dataset", "split"]).size().to_dict()
     _log(f"catalog: {len(catalog)} shapes -> {out}; per dataset/split: {counts}")
     return catalog
 
 
-def write_manifest_stage(config: dict, setting: str, catalog_path: Path, out: Path) -> pd.DataFrame:
+def write_manifest_stage(options: ManifestOptions | dict, setting: str, catalog_path: Path, out: Path) -> pd.DataFrame:
+    """Write the pair manifest of ``setting`` (``options``: the manifest's, or a resolved config) to ``out``."""
     from becos.catalog import read_catalog
     from becos.sampling import write_manifest
 
-    manifest = build_manifest(config, setting, read_catalog(catalog_path))
+    manifest = build_manifest(ManifestOptions.of(options), setting, read_catalog(catalog_path))
     write_manifest(manifest, out)
     report = manifest.attrs.get("report", {})
     _log(f"manifest {setting}: {len(manifest)} pairs -> {out}; {json.dumps(report, sort_keys=True)}")
     return manifest
 
 
-def remesh_stage(config: dict, shape_row: dict, token: str, out: Path, ply: Path | None = None) -> None:
+def remesh_stage(
+    options: RemeshOptions | dict, shape_row: dict, token: str, out: Path, ply: Path | None = None
+) -> None:
     """Remesh one shape variant (prepared, common-frame mesh) and write the maps (+ a PLY to look at).
 
     ``shape_row`` is the shape's catalog row (:mod:`becos.catalog` columns). With ``remesher:
     reference`` the reference's remesh of the file coordinates (:mod:`becos.reference_remesh`; a vertex
     target n becomes the face target 2n). Else becos's remesh, with the quadric decimator of config
-    ``decimator`` (:data:`becos.remesh.DECIMATORS`; its fallbacks to pymeshlab are logged).
+    ``decimator`` (:data:`becos.remesh.DECIMATORS`; its fallbacks to pymeshlab are logged). ``options``:
+    the remesh stage's (or a resolved config).
     """
     from becos.remesh import remesh_with_stats, save_remeshed, write_ply
 
+    options = RemeshOptions.of(options)
     cpu = {"job_start": time.process_time()}  # CPU seconds by step, logged for benchmarks/remesh.py
     dataset, name = shape_row["dataset"], shape_row["name"]
-    shapes = ShapeStore(config, [shape_row])
-    target = remesh_target(config, dataset, name, token)
+    shapes = ShapeStore(options, [shape_row])
+    target = remesh_target(options.seed, dataset, name, token)
     lap = time.process_time()
     shapes.mesh(dataset, name)
     cpu["load"], lap = time.process_time() - lap, time.process_time()
     prepared = shapes.prepared(dataset, name)
     cpu["prepare"], lap = time.process_time() - lap, time.process_time()
     start = time.perf_counter()
-    if config.get("remesher") == "reference":
+    if options.remesher == "reference":
         from becos.reference_remesh import remesh_like_reference
 
         faces = target.get("target_faces") or 2 * int(target["target_vertices"])
         result, _ = remesh_like_reference(shapes.mesh(dataset, name), prepared, faces, source=prepared.entry.path)
         cpu["remesh"] = time.process_time() - lap
     else:
-        decimator = config.get("decimator") or "pymeshlab"
-        result, stats = remesh_with_stats(prepared.mesh, **target, source=prepared.entry.path, decimator=decimator)
+        result, stats = remesh_with_stats(
+            prepared.mesh, **target, source=prepared.entry.path, decimator=options.decimator
+        )
         cpu.update(stats["cpu_seconds"])
         _log(f"remesh decimator: {json.dumps({k: stats[k] for k in ('decimator', 'decimator_fallbacks')})}")
     lap = time.process_time()
@@ -88,7 +107,7 @@ def remesh_stage(config: dict, shape_row: dict, token: str, out: Path, ply: Path
     cpu["save"] = time.process_time() - lap
     _log(f"remesh cpu seconds: {json.dumps({k: round(v, 4) for k, v in cpu.items()})}")
     _log(
-        f"remesh {dataset}/{name} {token} ({config.get('remesher', 'becos')}): {prepared.mesh.n_vertices} -> "
+        f"remesh {dataset}/{name} {token} ({options.remesher}): {prepared.mesh.n_vertices} -> "
         f"{result.mesh.n_vertices} vertices ({target}) in {time.perf_counter() - start:.1f} s"
     )
 
@@ -162,18 +181,27 @@ def missing_indexed_files(index: Path) -> list[Path]:
 
 
 def ground_truth_stage(
-    config: dict, setting: str, chunk: int, out_index: Path, *, manifest: Path, catalog: Path, remeshed: Path
+    options: GroundTruthOptions | dict,
+    setting: str,
+    chunk: int,
+    out_index: Path,
+    *,
+    manifest: Path,
+    catalog: Path,
+    remeshed: Path,
 ) -> dict:
     """Ground truth both ways for every pair of a chunk; files already up to date are kept.
 
     Reads the setting's ``manifest``, the ``catalog`` and the remesh variants of the chunk's pairs under
     the folder ``remeshed`` (the paths its rule declares); writes ``<pair_id>.npz`` beside ``out_index``.
+    ``options``: the ground-truth stage's (or a resolved config).
     """
     from becos.catalog import read_catalog
 
     started = time.perf_counter()
-    remesh = bool(config.get("remesh", True))
-    shapes = ShapeStore(config, read_catalog(catalog), remeshed=remeshed)
+    options = GroundTruthOptions.of(options)
+    remesh = options.remesh
+    shapes = ShapeStore(options, read_catalog(catalog), remeshed=remeshed)
     rows = _chunk_rows(manifest, chunk)
     folder = Path(out_index).parent
     _remove_killed_writes([*(pair_file(folder, pid) for pid in rows["pair_id"]), Path(out_index)])
@@ -196,7 +224,7 @@ def ground_truth_stage(
                 "edges": shapes.edge_digests(
                     shapes.entry(row["x_dataset"], row["x_name"]), shapes.entry(row["y_dataset"], row["y_name"])
                 ),
-                "options": stage_options(config, "ground_truth"),
+                "options": options.key_options(),
             }
         )
         path = pair_file(folder, row["pair_id"])
@@ -285,15 +313,14 @@ def load_ground_truth(path: Path):
         )
 
 
-def pair_options(config: dict, setting: str):
-    from becos.pairs import PairOptions
-
-    fields = {k: config[k] for k in PairOptions.__dataclass_fields__ if k in config and k != "setting"}
-    return PairOptions(setting=setting, **fields)  # keys a setting does not use keep their defaults
+def pair_options(config, setting: str):
+    """:class:`becos.pairs.PairOptions` of ``setting`` (:meth:`PairsOptions.pair_options`; ``config``: a
+    resolved config or the pairs stage's options)."""
+    return pairs_options(config, setting).pair_options()
 
 
 def pairs_stage(
-    config: dict,
+    options: PairsOptions | dict,
     setting: str,
     chunk: int,
     gt_index: Path,
@@ -309,42 +336,29 @@ def pairs_stage(
     Reads the setting's ``manifest``, the ``catalog``, the ground-truth files listed in ``gt_index``, the
     remesh variants under ``remeshed`` and, for published P2P views, the shipped triangle ids in the
     folder ``triangle_ids`` (None: every view is cast); writes ``<pair_id>.npz`` beside ``out_index``.
+    ``options``: the pairs stage's of ``setting`` (or a resolved config).
     """
     from becos.catalog import read_catalog
-    from becos.pairs import build_pair
     from becos.record import is_intact
 
     started = time.perf_counter()
-    remesh = bool(config.get("remesh", True))
-    shapes = ShapeStore(config, read_catalog(catalog), remeshed=remeshed)
-    options = pair_options(config, setting)
+    stage = pairs_options(options, setting)
+    shapes = ShapeStore(stage, read_catalog(catalog), remeshed=remeshed)
     gt_files = {e["pair_id"]: e for e in json.loads(Path(gt_index).read_text())["pairs"]}
     rows = _chunk_rows(manifest, chunk)
     folder = Path(out_index).parent
     _remove_killed_writes([*(pair_file(folder, pid) for pid in rows["pair_id"]), Path(out_index)])
-    labels = _labeller(config, shapes) if config.get("propagate_annotations", True) else None
+    build = _RecordBuilder(stage, shapes, gt_index, triangle_ids)
     entries = []
-    ordered, last_used = visit_order(rows.to_dict("records"), remesh)
+    ordered, last_used = visit_order(rows.to_dict("records"), stage.remesh)
     for row, done in zip(ordered, last_used):
-        tx, ty = remesh_token(row, "x", remesh), remesh_token(row, "y", remesh)
         gt = gt_files.get(row["pair_id"])
         if gt is None:
             raise ConfigError(
                 f"{gt_index}: no ground truth for pair {row['pair_id']}; re-run the workflow "
                 "(the ground-truth index is older than the manifest)"
             )
-        key = digest(
-            {
-                "version": RECORD_VERSION,
-                "row": {k: row[k] for k in sorted(row) if k != "chunk"},
-                "options": stage_options(config, "pairs", setting),
-                "ground_truth": gt["digest"],
-                "sources": [
-                    shapes.source_digest(row["x_dataset"], row["x_name"], tx),
-                    shapes.source_digest(row["y_dataset"], row["y_name"], ty),
-                ],
-            }
-        )
+        key = build.input_key(row, gt)
         path = pair_file(folder, row["pair_id"])
         computed = stored_key(path, "__meta__") != key
         if not computed and not is_intact(path):
@@ -354,35 +368,7 @@ def pairs_stage(
             )
             computed = True
         if computed:
-            x = shapes.instance(row["x_dataset"], row["x_name"], tx)
-            y = shapes.instance(row["y_dataset"], row["y_name"], ty)
-            _require_indexed(Path(gt["path"]), gt["digest"], gt_index, shapes)
-            gt_xy, gt_yx = load_ground_truth(Path(gt["path"]))
-            pair_scanners = (None, None)
-            if setting != "full_full":
-                pair_scanners = tuple(shapes.scanner(s.dataset, s.name, t, s.mesh) for s, t in ((x, tx), (y, ty)))
-            record = build_pair(
-                x,
-                y,
-                gt_xy,
-                gt_yx,
-                pair_id=row["pair_id"],
-                seed=int(row["seed"]),
-                split=row["split"],
-                options=options,
-                scanners=pair_scanners,
-                rotations=pair_published_rotations(row),
-                published_views=pair_published_views(config, row, options, triangle_ids),
-            )
-            if labels is not None:
-                for side, s, t in (("x", x, tx), ("y", y, ty)):
-                    full = labels(s.dataset, s.name, t)
-                    if full is not None:
-                        record.arrays[f"{side}_annotation"] = full[record[f"{side}_partial_to_full"]]
-            record.meta.update(
-                input_key=key, category=row["category"], copy=int(row["copy"]), x_token=tx, y_token=ty
-            )  # no chunk: regrouping keeps the record
-            record.save(path)
+            build.record(row, gt, key).save(path)
         entries.append(
             {
                 "pair_id": row["pair_id"],
@@ -396,6 +382,70 @@ def pairs_stage(
         shapes.release(done)
         _progress("pairs", setting, chunk, entries, len(rows), started)
     return _write_index(Path(out_index), setting, chunk, entries, started)
+
+
+class _RecordBuilder:
+    """The pair records of a pairs job: each pair's input key and, when it changed, its record."""
+
+    def __init__(self, stage: PairsOptions, shapes: ShapeStore, gt_index: Path, triangle_ids: Path | None):
+        self.stage, self.shapes, self.gt_index, self.triangle_ids = stage, shapes, gt_index, triangle_ids
+        self.options = stage.pair_options()
+        self.labels = _labeller(shapes) if stage.propagate_annotations else None
+
+    def tokens(self, row: dict) -> tuple[str, str]:
+        return remesh_token(row, "x", self.stage.remesh), remesh_token(row, "y", self.stage.remesh)
+
+    def input_key(self, row: dict, gt: dict) -> str:
+        """The digest of what the pair's record is made from: its manifest row (but its chunk), the stage's
+        options, its ground-truth file and the shape files it reads."""
+        tx, ty = self.tokens(row)
+        return digest(
+            {
+                "version": RECORD_VERSION,
+                "row": {k: row[k] for k in sorted(row) if k != "chunk"},
+                "options": self.stage.key_options(),
+                "ground_truth": gt["digest"],
+                "sources": [
+                    self.shapes.source_digest(row["x_dataset"], row["x_name"], tx),
+                    self.shapes.source_digest(row["y_dataset"], row["y_name"], ty),
+                ],
+            }
+        )
+
+    def record(self, row: dict, gt: dict, key: str):
+        """The pair's :class:`becos.record.PairRecord` (ground truth from the file ``gt`` indexes)."""
+        from becos.pairs import build_pair
+
+        shapes, (tx, ty) = self.shapes, self.tokens(row)
+        x = shapes.instance(row["x_dataset"], row["x_name"], tx)
+        y = shapes.instance(row["y_dataset"], row["y_name"], ty)
+        _require_indexed(Path(gt["path"]), gt["digest"], self.gt_index, shapes)
+        gt_xy, gt_yx = load_ground_truth(Path(gt["path"]))
+        pair_scanners = (None, None)
+        if self.stage.setting != "full_full":
+            pair_scanners = tuple(shapes.scanner(s.dataset, s.name, t, s.mesh) for s, t in ((x, tx), (y, ty)))
+        record = build_pair(
+            x,
+            y,
+            gt_xy,
+            gt_yx,
+            pair_id=row["pair_id"],
+            seed=int(row["seed"]),
+            split=row["split"],
+            options=self.options,
+            scanners=pair_scanners,
+            rotations=pair_published_rotations(row),
+            published_views=pair_published_views(self.stage, row, self.options, self.triangle_ids),
+        )
+        if self.labels is not None:
+            for side, s, t in (("x", x, tx), ("y", y, ty)):
+                full = self.labels(s.dataset, s.name, t)
+                if full is not None:
+                    record.arrays[f"{side}_annotation"] = full[record[f"{side}_partial_to_full"]]
+        record.meta.update(
+            input_key=key, category=row["category"], copy=int(row["copy"]), x_token=tx, y_token=ty
+        )  # no chunk: regrouping keeps the record
+        return record
 
 
 def _require_indexed(path: Path, recorded: str, index: Path, shapes: ShapeStore) -> None:
@@ -420,7 +470,7 @@ def _require_indexed(path: Path, recorded: str, index: Path, shapes: ShapeStore)
         )
 
 
-def pair_published_views(config: dict, row: dict, options, triangle_ids: Path | None = None):
+def pair_published_views(config, row: dict, options, triangle_ids: Path | None = None):
     """``original_settings`` P2P with the reference remesh: the views of the pair's published cameras
     (:func:`becos.reference_views.published_scan`), else None (the pairs stage draws cameras).
 
@@ -436,7 +486,7 @@ def pair_published_views(config: dict, row: dict, options, triangle_ids: Path | 
         2, -1, 3
     )
     # published_scan names each file under the annotation folder: <root>/precomputed_triangle_ids/<setting>/
-    root = config["annotations"] if triangle_ids is None else Path(triangle_ids).parents[1]
+    root = PairsOptions.of(config).annotations if triangle_ids is None else Path(triangle_ids).parents[1]
     return lambda x, y, gt_xy, gt_yx: published_scan(
         x,
         y,
@@ -462,7 +512,7 @@ def pair_published_rotations(row: dict):
     )
 
 
-def _labeller(config: dict, shapes: ShapeStore):
+def _labeller(shapes: ShapeStore):
     """``labels(dataset, name, token) -> (V,) int8 or None``: propagated left/right labels of a full shape."""
     from becos.propagation import labels_for_instance
 
@@ -484,7 +534,7 @@ def store_metadata(config: dict, setting: str) -> dict:
     from becos.datasets import DatasetSpec
 
     datasets = {}
-    for name in config["datasets"]:
+    for name in SourceOptions.of(config).datasets:
         spec = DatasetSpec.load(name)
         datasets[name] = {"title": spec.title, **{k: spec.source.get(k) for k in ("url", "licence", "citation")}}
     return {
@@ -497,13 +547,14 @@ def store_metadata(config: dict, setting: str) -> dict:
     }
 
 
-def published_parts(config: dict, setting: str) -> dict[str, bool | None]:
+def published_parts(config, setting: str) -> dict[str, bool | None]:
     """Per part of a setting's benchmark, whether it follows the published pair lists (None: the
     setting has no such part). P2P views follow them with the reference remesh (their triangle ids
-    index its faces; :mod:`becos.reference_views`); P2F has no published list."""
-    original = bool(config.get("original_settings"))
-    remesh = bool(config.get("remesh", True))
-    reference = original and remesh and config.get("remesher") == "reference"
+    index its faces; :mod:`becos.reference_views`); P2F has no published list. ``config``: a resolved
+    config or the pairs stage's options."""
+    options = PairsOptions.of(config)
+    original, remesh = options.original_settings, options.remesh
+    reference = original and remesh and options.remesher == "reference"
     return {
         "pairs": original,
         "rotations": original,
@@ -513,7 +564,9 @@ def published_parts(config: dict, setting: str) -> dict[str, bool | None]:
     }
 
 
-def export_pairings_stage(config: dict, setting: str, out: Path, store: Path, *, manifest: Path, catalog: Path) -> None:
+def export_pairings_stage(
+    options: ExportOptions | dict, setting: str, out: Path, store: Path, *, manifest: Path, catalog: Path
+) -> None:
     """The manifest in the published pickle schema (share a benchmark as pair lists + code), with the
     random rotations, cameras and face counts the store's records actually used (docs/released-layout.md,
     section "Published pair lists"). Reads the setting's ``manifest``, the ``catalog`` and ``store``."""
@@ -530,5 +583,5 @@ def export_pairings_stage(config: dict, setting: str, out: Path, store: Path, *,
         random_rotations=facts["random_rotations"],
         cameras=facts["cameras"],
         pair_face_targets=facts["face_targets"],
-        data_root=config.get("data_dir"),
+        data_root=ExportOptions.of(options).data_dir,
     )

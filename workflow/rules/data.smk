@@ -58,7 +58,10 @@ if config["annotations_archive"]:
 # records each .anime's size, mtime and sha256 (update(): Snakemake must not delete it before the job,
 # so the job rewrites only the OBJs whose .anime changed). The info file is ancient() and the class's
 # own entry a parameter: editing one class's entry (or adding a class) reruns that class only.
-DT4D_JOBS = {(job.kind, job.cls): job for job in bdt4d.preparation_plan(config)}
+DT4D_JOBS = {
+    (job.kind, job.cls): job
+    for job in bdt4d.preparation_plan(config["data_dir"], config["datasets"], config["annotations"])
+}
 
 if DT4D_JOBS:
 

@@ -1,11 +1,6 @@
 # Stage 5-7: the Zarr store per setting, its validation, the other export formats, the report.
 
 
-# Keys that say which outputs are built from a store, or how the data arrived, not what a store holds: an
-# edit to one of them (e.g. n_renders) reruns the report, not every store.
-STORE_BLIND_KEYS = ("setting", "n_renders", "store_vis", "exports", "evaluation", "download", "download_urls")
-
-
 rule store_metadata:
     output:
         LAYOUT.metadata("{setting}"),
@@ -14,8 +9,9 @@ rule store_metadata:
     conda:
         "../envs/becos.yaml"
     params:
-        # the rerun trigger: every key but STORE_BLIND_KEYS
-        store_keys=json.dumps({k: v for k, v in config.items() if k not in STORE_BLIND_KEYS}, sort_keys=True),
+        # the rerun trigger: the keys of the stages whose output a store holds (becos.workflow.store_keys); an
+        # edit to another (e.g. n_renders) reruns the report, not every store
+        store_keys=bw.store_keys(config),
         # what the metadata records: the whole config. A param computed from the output is "derived", and
         # Snakemake leaves derived params out of its params trigger
         config=lambda wildcards, output: json.dumps(config, sort_keys=True),
