@@ -1,5 +1,6 @@
-"""The configuration: ``becos/data/schema.yaml`` checked and defaults filled in, the checks across keys,
-config files read with errors that name the file, line and fix."""
+"""The configuration: ``becos/data/schema.yaml`` checked and defaults filled in (then ``remesher: auto``
+resolved and the checks across keys run by :mod:`becos.workflow.options`), config files read with errors
+that name the file, line and fix."""
 
 from __future__ import annotations
 
