@@ -12,8 +12,11 @@ import dataclasses
 import re
 from pathlib import Path
 
+import pytest
+
 import becos.workflow as bw
 from becos.defaults import config_defaults
+from becos.errors import ConfigError
 
 PACKAGE = Path(bw.__file__).resolve().parents[1]
 OPTIONS_BUILDER = PACKAGE / "workflow" / "options.py"
@@ -74,3 +77,16 @@ def _config(**overrides) -> dict:
         "datasets": ["tosca"],
         **overrides,
     }
+
+
+def test_the_overlap_range_is_checked_where_the_pairs_options_are_built():
+    for edit, message in (
+        ({"max_overlap": 1.5}, "max_overlap: 1.5 is outside [0, 1]"),
+        ({"min_overlap": 0.8, "max_overlap": 0.2}, "min_overlap: 0.8 is above max_overlap 0.2"),
+    ):
+        with pytest.raises(ConfigError, match=re.escape(message)):
+            bw.resolve_config(_config(**edit))
+        options = {**bw.resolve_config(_config()), **edit}
+        with pytest.raises(ConfigError, match=re.escape(message)):  # a job's options JSON edited by hand
+            bw.pairs_options(options, "partial_partial")
+        assert bw.pairs_options(options, "full_full").setting == "full_full"  # a setting that reads no range
