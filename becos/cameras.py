@@ -1,83 +1,12 @@
 """Virtual scanner cameras: pinhole cameras on a sphere around a shape normalised to a unit box.
 
-Frame and units
----------------
-A shape is first normalised by :func:`normalise_to_unit_box`: centred on the centre of its
-axis-aligned bounding box and divided by the box's largest side, so it fits in
-``[-0.5, 0.5]^3`` with one side exactly 1. Cameras live in that normalised frame, on the sphere of
-radius ``distance`` (default 1, i.e. one box side from the centre) around the origin, and look at
-the origin. They are pinhole cameras with a square 90° field of view (horizontal = vertical, like
-the reference's square 5000×5000 image with a 90° horizontal FOV).
-
-Spherical coordinates
----------------------
-``up_axis`` (``'x'``, ``'y'`` (default) or ``'z'``) is the shape's up direction ``u``. Two further
-axes ``(e1, e2)`` complete it cyclically (y-up: ``e1 = z``, ``e2 = x``; z-up: ``x, y``; x-up:
-``y, z``). A camera at azimuth ``θ`` (about ``u``, from ``e1`` towards ``e2``) and elevation ``φ``
-(from the equator towards ``+u``) sits at::
-
-    position = distance · (cos φ · (cos θ · e1 + sin θ · e2) + sin φ · u)
-
-and its up vector is ``∂position/∂φ`` normalised, ``-sin φ · (cos θ · e1 + sin θ · e2) + cos φ · u``:
-exactly orthogonal to the viewing direction and of unit length for every ``θ, φ``, so it never
-degenerates, not even for a camera on the up axis (``φ = ±π/2``), where it becomes the azimuth
-direction.
-
-How cameras are drawn
----------------------
-*First camera*: azimuth uniform on ``[0, 2π)``; elevation in the band
-``[ELEVATION_MIN, ELEVATION_MAX] = [-π/12, π/3]`` (−15° to +60°), with density ∝ ``cos φ`` (the
-camera *direction* is uniform in area over that zone of the sphere, so no direction of the band is
-favoured). Why this band: a scanner (a person with a depth camera, a turntable rig) looks at an
-object standing on the floor from around it, from slightly below its centre up to well above it,
-but never from under the floor. With the shape's box centred at the origin the floor lies at
-``-h/2`` (h = height / largest side ≤ 1), i.e. at height ≥ -0.5; TOSCA's humans have h ≈ 1 and
-its four-legged shapes h ≈ 0.6–0.8, so the floor is at ≈ -0.3 to -0.5 and a camera at distance 1
-is above it while ``sin φ > -0.3`` (φ > -17°). The lower bound −15° keeps every camera of either
-shape above the floor; the upper bound +60° keeps views that still show the sides of the shape
-(a top-down view sees only a back or the top of a head, which no real scan of a standing body is).
-
-*Pairs* (P2P: one camera per shape, in a shared frame): the pair ``(θ1, φ1), (θ2, φ2)`` is drawn
-uniformly (directions area-uniform as above, both elevations inside the band) among the pairs
-that satisfy the regime's bounds on the azimuth difference (wrapped to ``[0, π]``) and on the
-elevation difference — by rejection from independent draws. The two cameras are therefore
-exchangeable (neither shape is favoured), each is marginally close to the first-camera
-distribution, and the bounds hold exactly:
-
-========  ==========================  ============================
-regime    |θ1 - θ2| (wrapped) ≤        |φ1 - φ2| ≤
-========  ==========================  ============================
-high      π/4                          π/8
-medium    π/2                          π/4
-low       π (independent)              band width (independent)
-========  ==========================  ============================
-
-In practice the pair is drawn as: ``θ1`` uniform, ``θ2 = θ1 + U(-Δθ, Δθ)`` (exactly the uniform
-distribution on the allowed set, since azimuth wraps), and ``(φ1, φ2)`` by rejection from
-independent band draws until ``|φ1 - φ2| ≤ Δφ``. Every draw comes from the generator passed in;
-callers derive it from the pair's id (``becos.seeding.rng_for(seed, pair_id, "cameras", k)``), never
-from a shared stream.
-
-Reference-like regimes (``reference-high``, ``reference-medium``)
------------------------------------------------------------------
-The reference generator's ``cam_generator`` (reference-facts §7.7), reproduced formula for formula
-with our generator. Per pair, 7 uniform draws in this order: ``a`` (2,), ``b`` (2,), ``c``, coin
-``s``, ``d``; with ``r = π/8`` (high) or ``π/4`` (medium)::
-
-    α_i = clip(a_i · 2r + c · 2(π − r), 0, 2π)
-    φ_i = clip(b_i · r − r/2 + (±1 by s < 0.5) · d · (π − r)/2, −π/2, π/2)
-    point_i = (cos φ_i sin α_i, cos φ_i cos α_i, sin φ_i)
-
-in the reference's frame, where shapes are y-up: its elevation φ is measured towards **z** (a
-horizontal axis), so its "azimuth" α turns about z and the camera circle passes over the top and
-under the bottom of the shape. α_i share the offset ``c`` and differ by ``(a_1 − a_2) · 2r``
-(triangular on ``[−2r, 2r]``); φ_i differ by ``(b_1 − b_2) · r`` (triangular on ``[−r, r]``). Each
-camera alone covers the whole sphere (uniform in α and nearly so in φ, so denser near ±z).
-Measured pair angles (2000 draws, facts §7.7): high median 13.3°, max 47°; medium median 28°, max 92°.
-
-The reference's axes ``(x, y, z)`` map to ours as ``(e2, u, e1)`` (y-up: the identity), the camera
-sits at ``distance · point`` and its up vector is ``u`` (the reference's +y) made orthogonal to the
-viewing direction.
+Frame: :func:`normalise_to_unit_box` centres a shape on its bounding box and divides by the box's
+largest side; cameras sit on the sphere of radius ``distance`` (default 1) around the origin, look at
+it, and have a square 90° field of view. ``up_axis`` ('x', 'y' (default), 'z') is the shape's up.
+Regimes ``high``/``medium``/``low`` bound the azimuth and elevation differences of a P2P pair's two
+cameras (elevations −15° to +60°); ``reference-high``/``-medium`` reproduce the reference's
+``cam_generator``. Every draw comes from the generator passed in. Formulas, bounds and why:
+docs/design/partiality.md.
 """
 
 from __future__ import annotations

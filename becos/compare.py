@@ -1,50 +1,11 @@
 """Comparison of two benchmark stores (:mod:`becos.store`) of one setting: which pairs differ, and why.
 
-Typical use: a benchmark rebuilt after a library upgrade (pymeshlab, embreex ...) or on another
-machine, checked against the original. :func:`compare_stores` matches the pairs of store A and
-store B by ``pair_id`` (store order may differ) and reports
-
-- pairs only in A, pairs only in B;
-- per common pair, which arrays differ (number of differing values; for float arrays the largest
-  absolute difference; a different row count marks the whole array), sorted into *reasons* by key
-  group (side ``s`` in X, Y; ``S`` its capital):
-
-  ==============================  ==============================================================
-  ``remeshing of S differs``      s_full_vertices, s_full_faces, s_remesh_variant; s_vertices and
-                                  s_faces when the shape is full (in both stores)
-  ``partial view of S differs``   s_vertices and s_faces of a partial shape (partial in either
-                                  store), s_overlap_mask, s_overlap, s_partial_to_full,
-                                  s_full_to_partial, s_full_face_ids, s_camera
-  ``ground truth differs``        corr_01, corr_10 and their ``_face`` / ``_weights``
-  ``rotations of S differ``       s_frame_rotation, s_centre, s_align_rotation,
-                                  s_align_translation, s_random_rotation
-  ``annotations differ``          s_annotation
-  ``scalars differ``              s_full_area, s_full_sqrt_area, s_dataset_scale
-  ``meta differs``                the pair's meta (seed, split, names, options ...), by key
-  ``other arrays differ``         keys outside the record schema
-  ==============================  ==============================================================
-
-  A pair can have several reasons (a remeshing change also moves the partial view and the ground
-  truth); the summary counts pairs per reason. Coordinates (s_vertices, s_full_vertices) are stored
-  in the pair's final frame, so a new random rotation or alignment moves them all: where the pair's
-  transforms differ, the coordinates are also compared in the shape's common frame (transforms
-  undone, to :data:`CANONICAL_RTOL` of the extent), and if they agree there the difference counts
-  as ``rotations of S differ`` only, not as remeshing or partial view.
-- store-level differences that explain them: the root attributes (``versions`` of python, becos,
-  numpy, zarr, trimesh, pymeshlab, embreex, snakemake; ``config_hash``; every ``config`` key that
-  differs, dotted; ``datasets``, ``splits`` ...) except ``created``, and keys, dtypes or offset
-  groups that differ between the layouts.
-
-Values are equal when identical, NaN equal to NaN (cameras of full shapes are NaN); with ``atol``
-float values within ``atol`` of each other count as equal. The stores are read block-wise
-(:meth:`becos.store.Benchmark.read_block`, about ``max_bytes`` of arrays per store at once) and
-compared per key with numpy, so memory does not grow with the store.
-
-:attr:`StoreComparison.identical`: same pairs, arrays, metas, layout and root attributes apart from
-``created`` and ``versions`` (which say when and with what the store was built: a rebuild with
-other library versions that reproduces every array is identical, and the summary still lists the
-version differences). Command line: ``becos validate STORE --against OTHER [--json OUT]``
-(:mod:`becos.validate`).
+:func:`compare_stores` matches the pairs of stores A and B by ``pair_id`` and returns a
+:class:`StoreComparison`: pairs only in one store, per common pair the arrays that differ sorted into
+reasons (remeshing, partial view, ground truth, rotations, annotations, scalars, meta), and the root
+attributes (library versions, config keys) and layout differences that explain them. NaN equals NaN;
+``atol`` is a float tolerance. Stores are read block-wise, so memory does not grow with the store.
+Command line: ``becos validate STORE --against OTHER``. Reasons and their keys: docs/design/validate.md.
 """
 
 from __future__ import annotations
@@ -490,7 +451,7 @@ def _compare_rows(xa: np.ndarray, xb: np.ndarray, atol: float) -> tuple[np.ndarr
 def compare_stores(
     a: str | Path, b: str | Path, *, atol: float = 0.0, max_bytes: int = COMPARE_BLOCK_BYTES
 ) -> StoreComparison:
-    """Compare store ``a`` with store ``b`` pair by pair (module docstring).
+    """Compare store ``a`` with store ``b`` pair by pair (reasons: docs/design/validate.md).
 
     Args:
         a, b: store folders written by :func:`becos.store.write_store`.

@@ -1,56 +1,11 @@
 """The dataset registry: one YAML per dataset (``config/datasets/<name>.yaml``) and the shapes it lists.
 
-A dataset spec says where a dataset lives below a *data root* (the reference's ``data/`` folder:
-``tosca-off``, ``MPI-FAUST/training/registrations`` ...), how many shapes to expect, how to bring a
-shape into the common frame, and how a shape name maps to its category, class, template key and
-split. :meth:`DatasetSpec.list_shapes` turns a data root into :class:`ShapeEntry` rows;
-:func:`prepare_shape` loads one shape in the common frame.
-
-Common frame: y up, metres-like units, centred. For a file's (V, 3) vertices ``V`` (row vectors)::
-
-    common = (V * scale - centre) @ frame_rotation,   centre = mean(V * scale, axis=0)
-
-``frame_rotation`` is Open3D's ``get_rotation_matrix_from_xyz(radians(rot_deg))`` = Rx @ Ry @ Rz,
-applied on the right exactly as the reference does (its ``rot`` values are kept). For TOSCA
-``[90, 0, 0]`` maps the file's +z (up) to +y; four-legged TOSCA animals then face +z.
-
-YAML keys (all datasets):
-
-=====================  ============================================================================
-``name``               dataset name (``tosca``; matches the template table and the network)
-``title``              human-readable name
-``folder``             folder below the data root (reference ``folder_name``)
-``file_type``          ``off`` / ``ply`` / ``obj``
-``layout``             ``flat`` (``<folder>/<name>.<type>``), ``class_folders``
-                       (``<folder>/<class>/<stem>.<type>``, name ``<class>/<stem>``) or ``dt4d``
-                       (names ``<class>/<action><frame:03d>`` from ``info_file`` of the annotation
-                       folder's ``data/``; files ``<folder>/<class>/<action><frame:03d>.obj``, written
-                       by :mod:`becos.dt4d` from ``DeformingThings4D/<kind>``; folder ``dt4d_<kind>``)
-``file_glob``          optional glob of the files to list (flat/class_folders), default ``*.<type>``
-``expected_count``     number of used shapes (excluded ones not counted), or ``generated``: a collection
-                       written by ``becos synthetic``, whose counts (total and per class) are those of
-                       the files its manifest (``<data root>/../synthetic.json``) lists, at any size
-``expected_per_class`` optional ``{class: count}`` (not with ``generated``)
-``scale``              factor applied to file coordinates
-``rotation_deg``       ``[rx, ry, rz]`` in degrees (Open3D xyz convention)
-``rotation_per_shape`` optional: per-shape rotations ``{values: {...}}`` inline, or
-                       ``{from_reference: config/smal.yaml, key: rot}`` read from the user's BeCoS
-                       annotation folder; dict keys are names with ``/`` -> ``_``; ``default`` for
-                       names without a key (the reference uses ``[0, 0, 0]``)
-``category``           ordered rules ``{match: regex, value: str}``; first ``re.search`` match
-                       (case-insensitive) wins
-``class``              ordered rules as above; ``value`` is formatted with the match groups
-                       (``{1}``) and ``{name}``
-``template_key``       format string with ``{name}`` and ``{class}`` (key of the template table)
-``split``              ``{rule: by_class | by_name, train: [...], val: [...], test: [...]}``,
-                       ``{rule: slices, order: reference_numeric, train: n, val: n, test: n}`` or
-                       ``{rule: template_table}`` (the table's split column of the shape's key)
-``excluded``           names listed with split ``excluded`` (never paired)
-``usage``              train usage count (reference ``shape_usage_counts``)
-``source``             ``url``, ``licence``, ``citation``, ``instructions`` (quoted in errors), and for
-                       a public archive becos may download (config key ``download``) ``archive``:
-                       ``{url, sha256, extract_to}`` (:class:`DatasetArchive`)
-=====================  ============================================================================
+:meth:`DatasetSpec.list_shapes` turns a data root (the reference's ``data/`` folder) into
+:class:`ShapeEntry` rows (name, category, class, template key, split, file); :func:`prepare_shape` loads
+one shape in the common frame: y up, metres-like units, centred. For a file's (V, 3) vertices ``V``
+(row vectors): ``common = (V * scale - centre) @ frame_rotation``, ``centre = mean(V * scale, axis=0)``,
+``frame_rotation`` = Rx @ Ry @ Rz of ``rotation_deg`` (Open3D's xyz convention, applied on the right as
+the reference does). The YAML keys, one by one: docs/design/data.md.
 """
 
 from __future__ import annotations
@@ -257,7 +212,7 @@ class _Rule:
 
 
 class DatasetSpec:
-    """A parsed dataset YAML (see the module docstring for the keys).
+    """A parsed dataset YAML (the keys: docs/design/data.md).
 
     Attributes:
         path: the YAML file; ``raw``: its content; plus ``name``, ``folder``, ``file_type``, ``layout``,

@@ -1,62 +1,12 @@
 """Scoring predicted correspondences against a benchmark: per-pair metrics, summary tables, PCK plots.
 
-``becos evaluate STORE PRED [PRED ...] --out DIR`` scores one or more methods on the pairs of one
-benchmark store (one setting) and writes, into ``DIR``:
-
-- ``per_pair.csv``: one row per (method, pair): identity (pair_id, split, category, dataset, names),
-  ``n_scored`` / ``n_infinite`` / ``n_excluded`` vertices, ``mean_error`` (over finite errors, in units
-  of sqrt(area of the full X)), ``auc`` under the chosen preset with its name in ``auc_preset``,
-  ``auc_<preset>`` for the chosen and the paper preset, overlap ``iou``/``f1`` (and per shape
-  ``iou_x``, ``iou_y``, ...), ``left_right``; all fractions in [0, 1].
-- ``summary.csv`` / ``summary.md``: the means over pairs (each pair's metrics being means over its
-  vertices), overall and per split, category and dataset, x 100 like the paper's tables. AUC columns
-  name their preset: ``auc_x100[paper-0.00-0.99]`` is the one to compare with the paper's figures
-  (reference facts §11-12), ``auc_x100[<preset>]`` the chosen one (default ``mean-0.10x40``).
-- ``pck.csv`` (method, threshold, pck: mean over pairs of the per-pair PCK curves) and ``pck.png``
-  (one curve per method, matplotlib Agg).
-- ``evaluation.json``: store, split, methods, presets, geodesic method, counts, timings.
-
-Prediction formats (one method each; the method's name is the folder name, without a ``.zarr``
-suffix, unless ``--names`` is given):
-
-- **Folder of .npy files**: ``<pair_id>.npy`` holds the map, an integer array (V_y,) giving for each
-  vertex of shape 1 (Y) of the record a vertex of shape 0 (X), or -1 for "no counterpart", in the
-  record's own vertex numbering (for a partial shape, the partial shape's vertices: like the record's
-  ``corr_10``). Optional ``<pair_id>_overlap_x.npy`` (V_x,) and ``<pair_id>_overlap_y.npy`` (V_y,): the
-  predicted overlap masks, bool, or float scores read as overlap where > 0.5.
-- **Zarr store** (a group, Zarr v2 or v3): arrays named ``<pair_id>``, ``<pair_id>_overlap_x``,
-  ``<pair_id>_overlap_y`` at the root, with the same contents.
-
-With ``--direction xy`` the maps go the other way, X -> Y (V_x,) like ``corr_01``, and the errors are
-measured on Y. The overlap file names always name the shape they cover.
-
-Metric rules (:mod:`becos.metrics`): the error of a vertex is the geodesic distance, on the FULL
-shape 0 (for a partial X: its full remeshed shape, ``x_full_vertices``/``x_full_faces`` of the record),
-between the predicted vertex and the true point, divided by sqrt(area of the full X). The true point
-is, by default (``truth="vertex"``), the record's vertex-form truth ``corr_10`` (the corner of the
-exact point's face nearest it: the released ``corres_10``, the vertex form the paper's numbers were
-scored against, which the reference took as the largest-weight corner;
-the ground truth as prediction scores exactly 100); with ``truth="point"`` (``--truth point``) it is
-the exact barycentric point ``corr_10_face``/``corr_10_weights``, against which even the ground-truth
-vertex map has errors of up to about one edge (on ~9.5k-vertex TOSCA cats: AUC x100 ~92.4 under
-``mean-0.10x40``, ~98.3 under the paper preset). Geodesics: potpourri3d's heat method by default,
-rows computed from the true points' corners (one set of rows serves every method; a prediction equal
-to the true vertex needs none) and cached per shape across pairs
-(:class:`becos.geodesics.GeodesicsCache`); ``--geodesics dijkstra`` uses exact edge-graph distances by
-searches bounded around each prediction. Cost of the heat method: ~2.5 ms per source row on a
-9k-vertex shape (2 busy cores), i.e. ~18 s for an F2F pair whose X has no cached rows, whatever the
-number of methods. Settings with a partial X *and* Y (P2P) use the infinity
-rule (matched without a true counterpart, or unmatched with one: infinite error; unmatched and truly
-without: excluded); F2F and P2F exclude the vertices without a true counterpart and give an unmatched
-vertex with one an infinite error. Overlap IoU/F1: predicted vs true masks (``s_overlap_mask``); a
-method that writes no Y mask gets the mask its map implies (``map >= 0``; column ``overlap_source``);
-``iou``/``f1`` average the shapes with a predicted mask. Left/right: the Y vertex's own label
-(``y_annotation``, -1 = none) against the label of the predicted X vertex (``x_annotation``); P2P
-failures count 0 and correctly unmatched vertices are excluded; NaN when Y has no labels.
-
-A partial shape's full shape is the record's ``<s>_full_vertices``/``<s>_full_faces`` (schema v1; empty
-for a full shape, which is then its own full shape); :func:`full_shape` checks that the partial shape
-is the one cut from it.
+``becos evaluate STORE PRED [PRED ...] --out DIR`` writes ``per_pair.csv``, ``summary.csv``/``.md``
+(means x 100 per split, category and dataset; AUC columns name their preset), ``pck.csv``/``pck.png``
+and ``evaluation.json``. A prediction is a folder of ``<pair_id>.npy`` (V_y,) int maps Y -> X (-1 = no
+counterpart; optional ``_overlap_x``/``_overlap_y`` masks) or a Zarr group of the same arrays;
+``--direction xy`` for X -> Y. Errors: geodesic distance on the full X between predicted vertex and
+truth (``corr_10`` by default), over sqrt(area of the full X). Formats, metric rules and costs in
+detail: docs/design/evaluate.md.
 """
 
 from __future__ import annotations
@@ -375,7 +325,7 @@ def evaluate_record(
             corner of the exact point's face nearest it; the released ``corres_10``; the ground truth
             scores exactly 100); ``"point"``: the exact barycentric point
             ``corr_10_face``/``corr_10_weights`` (then even the ground-truth vertex map has errors up to
-            about one edge; see the module docstring).
+            about one edge; see docs/design/evaluate.md).
         info: identity columns (:func:`pair_info`); derived from the record when None.
 
     Returns:

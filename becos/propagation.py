@@ -1,62 +1,12 @@
 """Per-vertex left/right labels on every shape, propagated through the shape network.
 
-A few templates carry per-vertex labels (the annotation folder's ``precomputed_chirality_templates/``,
-listed in ``config/templates_chirality_all.csv``: horse0, centaur0, FAUST tr_reg_000 and eight DT4D
-poses). Any other shape gets its labels from ONE of them:
-
-- **Which template.** The annotated template whose network node is nearest to the shape's class
-  template node, by hop count in the network (a tree, so the path is unique). Ties: the row that
-  comes first in ``templates_chirality_all.csv`` wins (the reference's order, §7.8 of the facts).
-  For TOSCA: cat (2 hops), dog (1), wolf (2) and horse (0) -> horse0; centaur -> centaur0 itself (0);
-  michael, david, victoria -> FAUST tr_reg_000 (1). Ties are common among DT4D animals: 20 nodes
-  (pumaRW, catBG, bullMJ6, zebraBM, shrec20_cow, ...) are equally near horse0, rhinoDJ7S, bear3EP and
-  deerK5L, and get horse0 (first row).
-- **Where the labels land.** A DT4D row names a pose of its class (``elephantLN0/act2053``) while
-  the network node's template is another pose of the same class (``elephantLN0/act1008``); both are
-  one triangulation, so the label file indexes the template's vertices. Maps therefore end on the
-  annotated node's network template, whose mesh the network needs anyway (for TOSCA and FAUST the two
-  are the same shape).
-- **The map.** The network's exact composition (:meth:`becos.network.ShapeNetwork.ground_truth`):
-  shape (or its remesh, through :attr:`becos.remesh.Remeshed.to_original`) -> class template ->
-  network templates -> annotated template, as one :class:`~becos.surface_map.SurfaceMap`.
-- **The label at an image point** (a face and barycentric weights on the annotated template) is the
-  label of the face corner with the largest weight (:meth:`SurfaceMap.to_vertex_indices`; never the
-  nearest vertex in 3D, which can jump between touching parts).
-- **None = -1.** A vertex whose image does not exist (a semantic part the annotated template lacks;
-  edge-file rows ``-1 0 0 0``) gets :data:`NO_LABEL` (-1). The reference takes the template's LAST
-  label there (numpy index -1); we do not.
-
-Label values are the files' own (0/1); :data:`LABEL_NAMES` says what they mean (1 = left, 0 =
-right; see there).
-
-Caching: the map "class template -> annotated template" and the labels it gives the class
-template's vertices are composed once per (class template node, annotated node) and kept by a
-:class:`LabelPropagator`, one per :class:`~becos.network.ShapeNetwork` (:func:`propagator`). A shape
-in its original triangulation shares its class template's vertex order (identity hop), so its
-labels are the class labels as they are. For a remeshed shape the network composes
-``to_original`` onto its cached template chain (one :func:`becos.surface_map.compose`, closest-point
-queries for ~10,000 points; 0.02-0.06 s per TOSCA shape once the class map exists, which takes
-0.1-1 s per class).
-
-API::
-
-    LABEL_NAMES                      {-1: "none", 0: "right", 1: "left"}
-    propagate_labels(network, entry, *, remesh=None, annotated=None) -> (V,) int8
-        V = entry's vertex count, or remesh.mesh.n_vertices with a remesh; raises BecosError when the
-        annotated template (or a template on the way) cannot be reached with the data available.
-    labels_for_instance(network, entry, remesh=None) -> (V,) int8 | None
-        the pair-building entry point: cached per (dataset, name, remesh content); None (logged once
-        per class) where propagate_labels would raise for missing data. Read-only array.
-    labels_for_partial(full_labels, partial_to_full) -> (V_partial,) int8
-    labels_through_remesh(labels, remesh, original_faces) -> (V_remeshed,) int8
-        labels of the original triangulation carried to remeshed vertices (largest-weight corner of
-        each remeshed vertex's point on the original surface).
-    nearest_annotated(network, entry) -> (AnnotatedTemplate, hops)
-    agreement(a, b) -> float   share of vertices labelled in a or b whose labels are equal
-
-``entry`` is a :class:`becos.datasets.ShapeEntry` (or anything with ``dataset``, ``name``,
-``template_key``); ``remesh`` a :class:`becos.remesh.Remeshed` of that shape's mesh (original or
-prepared common-frame mesh: only its maps onto the original face rows are used).
+A few templates carry per-vertex labels (``config/templates_chirality_all.csv``); any other shape gets
+those of the annotated template nearest its class template in the network (ties: the file's first row),
+through the network's exact map, taking the label of the largest-weight corner of each image point.
+Labels are int8: 1 = left, 0 = right, :data:`NO_LABEL` (-1) where a vertex has no image.
+``propagate_labels(network, entry, *, remesh=None) -> (V,) int8``; :func:`labels_for_instance` is the
+cached pair-building entry point (None where the data to reach a template is missing). The choice of
+template, caching, timings and the API: docs/design/ground-truth.md.
 """
 
 from __future__ import annotations

@@ -1,86 +1,12 @@
 """Pair manifests: which shape pairs a benchmark contains, per setting, chosen so that growth is local.
 
-A manifest is a table with one row per matching instance (a *pair copy*)::
-
-    pair_id, setting, split, category, copy, x_dataset, x_name, y_dataset, y_name,
-    seed, x_variant, y_variant, chunk
-
-sorted by split (train, val, test) then ``pair_id``. It is computed from the catalog
-(:mod:`becos.catalog`) by :func:`sample_pairs` and nothing else: no global random stream, no
-dependence on the catalog's row order.
-
-Anchors
--------
-Every pair has an *anchor* shape and a copy index ``c``:
-
-- ``full_full`` / ``partial_partial``: the anchor is X. A train shape anchors ``u`` pairs
-  (``c = 0 .. u-1``), ``u = floor(usage * usage_scale + 0.5)`` with ``usage`` its dataset's usage
-  count; a val/test shape anchors one pair (``c = 0``). So every train shape is X exactly ``u``
-  times; it is also Y whenever another anchor picks it, so its *total* number of appearances is
-  ``u`` plus a count that is about ``u`` on average (see :func:`appearance_counts`). The reference
-  puts a shape ``usage`` times into a list and pairs neighbours, i.e. ``usage`` appearances in all
-  and about ``usage/2`` pairs per shape: ``usage_scale=0.5`` gives about the published pair counts.
-- ``partial_full``: the anchor is Y (the partial shape) with the same copy counts; X is the full
-  template that the template table's ``partial_full_template`` / ``partial_full_dataset`` columns
-  name for Y's ``template_key``.
-
-Partner choice (F2F, P2P): rendezvous hashing
----------------------------------------------
-Anchor ``a``'s copy ``c`` picks as partner the candidate ``t`` (same split, same category pool,
-``t`` not ``a`` and of another name) with the smallest score ``h(seed, setting, a, c, t)``
-(:func:`partner_score`). A score depends on nothing but its five keys, so adding shapes to a pool
-changes an existing anchor copy's partner only if one of the new shapes scores lower than the
-current minimum: for a pool growing from ``n`` to ``n + m`` candidates a share of about
-``m / (n + m)`` of the existing anchors change partner, every other pair stays byte-identical, and
-pairs of pools that did not grow never change. The score is a two-level keyed hash:
-``mix64(K(seed, setting, a, c) XOR mix64(K(t)))`` with ``K`` = :func:`becos.seeding.stable_hash`
-(SHA-256) and ``mix64`` the SplitMix64 finaliser in wrapping uint64 arithmetic. It is computed as a
-matrix (anchor copies × candidates) in blocks and is identical on every machine; a whole
-benchmark-sized manifest (~2,500 shapes, ~23k pair copies) takes about 1 s.
-
-Pools and centaurs
-------------------
-Pairs form only inside a category pool: humans with humans, four-legged with four-legged.
-``combinations`` selects the pools: ``human``, ``four-legged``, ``human_centaur``,
-``four-legged_centaur`` and ``all`` (both pools, with centaurs). Centaurs *join* the pools of a
-combination that includes them, in train only:
-
-- a centaur anchors its ``u`` copies split between the joined pools in turn: copy ``c`` goes to
-  pool ``POOL_ORDER[c % n]`` of the ``n`` joined pools (``all``: even copies human, odd copies
-  four-legged; ``human_centaur``: all copies human), so it still anchors exactly ``u`` pairs;
-- a centaur anchor's candidates are the pool's shapes plus the other centaurs (centaur–centaur
-  pairs exist, as in the published lists); a non-centaur anchor never sees a centaur as a
-  candidate — so enabling centaurs adds pairs and changes no existing one;
-- a val/test centaur (TOSCA has none) makes no pair: it is counted in the report under
-  ``centaur_not_train``. For ``partial_full`` the same holds; a centaur Y's pair is labelled
-  ``centaur``.
-
-The pair's ``category`` column is the pool (``human`` / ``four-legged``) for F2F/P2P and Y's
-category (``human`` / ``four-legged`` / ``centaur``) for P2F.
-
-Per-copy fields
----------------
-- ``pair_id`` = 16 hex digits of ``stable_hash(setting, x, y, copy)`` (``x`` = ``dataset/name``);
-- ``seed`` = ``stable_hash(seed, pair_id)`` (63 bits, so it fits a signed 64-bit column);
-- ``x_variant``, ``y_variant`` = ``stable_hash(pair seed, 'x_variant' | 'y_variant') % n_variants``
-  (which of the K remeshes of each shape the pair uses);
-- ``chunk``: the chunk job of the pair (:func:`assign_chunks`). A pair's *bucket*
-  ``stable_hash(pair_id) % N_BUCKETS`` never changes; the manifest's ``J`` chunk jobs are ``J``
-  contiguous bucket ranges, ``chunk = bucket * J // N_BUCKETS``. ``J`` (:func:`chunk_jobs`) is the
-  largest power of two that leaves each job at least ``pairs_per_chunk`` pairs, at most ``n_chunks``:
-  growth that keeps ``J`` adds pairs to chunks and never moves one; when ``J`` doubles, every job
-  splits into two (chunk ``k`` into ``2k`` and ``2k + 1``). A moved pair keeps its files (they are
-  named by pair id, and its input key does not hold the chunk): regrouping reruns chunk jobs but
-  recomputes no pair.
-
-Caps
-----
-``caps={'val': 100, ...}`` keeps, per split, the ``n`` pairs whose anchor copy has the smallest
-``stable_hash(seed, setting, 'cap', anchor, copy)``; this rank ignores the partner, so a cap keeps
-the same anchor copies when pools grow (except where new anchors rank lower).
-
-Skipped pairs are counted, never fatal: ``manifest.attrs['report']`` holds
-``{'skipped': {reason: n_pair_copies}, 'n_pairs': {split: n}, 'excluded_shapes': n}``.
+:func:`sample_pairs` turns the catalog (:mod:`becos.catalog`) into a manifest, one row per matching
+instance: ``pair_id, setting, split, category, copy, x_dataset, x_name, y_dataset, y_name, seed,
+x_variant, y_variant, chunk``, sorted by split (train, val, test) then ``pair_id``. Every draw is a keyed
+hash of what it is for (no global random stream, no dependence on row order), so adding shapes changes
+few existing pairs; :func:`assign_chunks` groups pairs into chunk jobs that only split as they grow.
+Skipped pairs are counted in ``manifest.attrs['report']``. Anchors, partner choice, pools, centaurs,
+per-copy fields, caps and chunks in detail: docs/design/sampling.md.
 """
 
 from __future__ import annotations

@@ -67,7 +67,7 @@ def test_remesh_counts_topology_and_maps(remeshes, name):
 
 
 def assert_remesh_guarantees(original: TriMesh, r: Remeshed, stats: dict, target: int) -> None:
-    """The remesh's documented guarantees (module docstring of becos.remesh): exact vertex target, one
+    """The remesh's documented guarantees (docs/design/remesh.md): exact vertex target, one
     manifold oriented component with the input's Euler characteristic, maps complete both ways and
     within the ground-truth error bounds."""
     assert r.target_vertices == target and r.target_faces is None

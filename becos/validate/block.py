@@ -69,7 +69,7 @@ class BlockChecker:
 
     def side(self, s: str, o: str, corr: str) -> None:
         """Every check of one side ``s`` (``x`` or ``y``; ``o`` the other, ``corr`` its correspondence
-        key ``corr_01`` or ``corr_10``), in the order of the module docstring's table."""
+        key ``corr_01`` or ``corr_10``), in the order of the table in docs/design/validate.md."""
         partial = self.cnt[f"{s}_full_face"] > 0  # (n,) bool: the shape is a partial view
         self.side_index_ranges(s, o, corr, partial)
         self.side_unmatched(s, corr)

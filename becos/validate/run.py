@@ -30,7 +30,7 @@ block size sets the validator's memory, independent of the store's size)."""
 
 
 def validate(path: str | Path, progress: bool = False) -> ValidationReport:
-    """Run every check on a store; see the module docstring. Never raises for a bad store: a store that
+    """Run every check on a store; see docs/design/validate.md. Never raises for a bad store: a store that
     is missing or does not open gives one ``store`` problem."""
     started = time.perf_counter()
     path = Path(path)
@@ -101,5 +101,5 @@ def check_blocks(bench, ids: np.ndarray, problems: list[str], found: Problems, s
 
 
 def validate_store(path: str | Path) -> list[str]:
-    """Human-readable problems of a benchmark store; empty = valid (checks: module docstring)."""
+    """Human-readable problems of a benchmark store; empty = valid (checks: docs/design/validate.md)."""
     return validate(path).problems
