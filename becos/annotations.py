@@ -1,28 +1,11 @@
 """The BeCoS annotation folder: shape network, template tables, template-to-template edge files.
 
-A folder laid out like the reference checkout (``../shared/unpack`` prints one) holds::
-
-    config/adjacency_matrix.csv          70 x 70 0/1 matrix over template nodes (a tree)
-    config/templates_all.csv             one row per dataset class: template, split, P2F template
-    config/templates_chirality_all.csv   shapes that carry left/right labels
-    precomputed_corr_templates/          <A>_<B>_corres.txt edge files, same_triangulation_dt4d_animals.txt
-    corres_comp/default_faces/<name>.npy faces of templates, for when a dataset is absent
-    precomputed_chirality_templates/     per-vertex 0/1 left/right labels
-    data/info_dt4d_*.json                DT4D classes and frames (read by :mod:`becos.datasets`)
-
-Names used here:
-
-- *key*: the first column of the template table (``tosca_cat``, ``faust``, ``dt4d_animal_bearVGG``).
-- *node*: a network node (``tosca_cat0``, ``faust_tr_reg_000``, ``dt4d_animal_bearVGG``,
-  ``smal_horses_muybridge_075_04``).
-- *template*: a shape name inside its dataset (``cat0``, ``bearVGG/Attack2012``,
-  ``horses/muybridge_075_04``).
-
-Edge files (``A_B_corres.txt``, template A -> template B) have one row per vertex of A and four
-whitespace columns: a face index into B's faces (as in B's original file / default faces) and three
-barycentric weights in face-column order; ``-1 0 0 0`` means "no counterpart". Each text file is
-parsed once into a binary cache (``.npz``, keyed by path, size, mtime, ctime and inode: an edit that
-restores the modification time is parsed again); later loads read that.
+A folder laid out like the reference checkout (``config/adjacency_matrix.csv``, ``config/templates_all.csv``,
+``precomputed_corr_templates/`` ...). Names: a *key* is the template table's first column
+(``tosca_cat``), a *node* a network node (``tosca_cat0``), a *template* a shape name inside its dataset
+(``cat0``). Edge files (``A_B_corres.txt``) hold one row per vertex of A: a face index into B's faces and
+three barycentric weights (``-1 0 0 0`` = no counterpart), parsed once into a binary cache. The folder's
+files: docs/design/ground-truth.md.
 """
 
 from __future__ import annotations

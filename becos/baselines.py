@@ -1,36 +1,12 @@
 """Baseline matchers, so that evaluation tables and plots are real: a floor and an axiomatic method.
 
-``becos baseline NAME STORE --out PRED_DIR [--split test]`` runs one baseline on every pair of a
-split and writes its predictions in the folder format of :mod:`becos.evaluate` (``<pair_id>.npy``,
-a map from each vertex of Y to a vertex of X or -1; for partial-to-partial pairs also
-``<pair_id>_overlap_x.npy`` / ``_overlap_y.npy``), plus ``baseline.json`` (parameters, timings).
-
-- ``nn`` (:func:`nearest_neighbour`): each Y vertex goes to the nearest X vertex in 3D after both
-  shapes are centred (centroid subtracted). The records' shapes are randomly rotated about the up
-  (y) axis, and nothing undoes that rotation, so this is a floor, not a method: it only scores where
-  the random rotations happen to be similar. P2P: a vertex is in the predicted overlap when the other
-  shape has a vertex within ``overlap_threshold`` x sqrt(full area); Y vertices outside it map to -1.
-- ``zoomout`` (:func:`wks_zoomout`): an axiomatic spectral method, invariant to rigid motions. Per shape
-  the robust Laplacian (``robust_laplacian.mesh_laplacian``, intrinsic Delaunay, lumped mass) and its
-  first eigenpairs (scipy ``eigsh``, shift-invert, fixed start vector), at the scale of unit FULL-shape
-  area (a partial shape keeps the eigenvalues of a part of its full shape). Wave-kernel-signature
-  descriptors (Aubry et al. 2011) on shared log-energies give a first 20 x 20 functional map from
-  pyFM's energy (descriptor preservation, Laplacian commutativity, descriptor commutativity and the
-  orientation-preserving term of Ren et al. 2018, which tells a map from its left/right mirror image;
-  solved exactly as one linear system); ZoomOut (Melzi et al. 2019) refines it to 60 basis functions,
-  alternating nearest neighbours in the spectral embedding and least-squares refits on a fixed random
-  sample of 2,000 Y vertices (full nearest-neighbour query only at the end). P2P: after the map, Y is
-  moved onto X by a trimmed Procrustes fit on the mapped pairs, and overlap is decided by distance as
-  for ``nn``. Partial shapes get no special treatment (no partial functional maps), so partial-to-full
-  pairs are this baseline's weak spot. The weights were set on the cat0 -> cat3 test pairs only.
-  Measured on the cat0 -> cat3 test-fixture pairs (remeshed, ~9.5k vertices; AUC x100 under
-  ``mean-0.10x40`` / ``paper-0.00-0.99``, heat geodesics, mean of 2 pairs): F2F nn 18.8 / 82.5,
-  zoomout 61.0 / 94.9; P2F nn 11.0 / 63.2, zoomout 9.5 / 69.6; P2P nn 0.0 / 2.5 (mIoU 3.8),
-  zoomout 14.3 / 36.3 (mIoU 42.4).
-
-Both work in the records' final frame and units; distances are compared after dividing by each
-shape's full sqrt-area (1 for area-normalised records). Cost on a ~9.5k-vertex pair (2 busy cores):
-``nn`` ~0.05 s, ``zoomout`` 1-3 s (BLAS limited to one thread: :func:`single_threaded_blas`).
+``becos baseline NAME STORE --out PRED_DIR [--split test]`` runs one baseline on every pair of a split
+and writes predictions in the folder format of :mod:`becos.evaluate` (``<pair_id>.npy``: each vertex of
+Y to a vertex of X or -1; P2P also ``_overlap_x.npy``/``_overlap_y.npy``) plus ``baseline.json``.
+``nn`` (:func:`nearest_neighbour`, nearest vertex in 3D after centring: a floor) and ``zoomout``
+(:func:`wks_zoomout`, WKS functional map refined by ZoomOut). Both work in the records' final frame and
+units, distances divided by each shape's full sqrt-area. Method details, scores and costs:
+docs/design/evaluate.md.
 """
 
 from __future__ import annotations
@@ -85,8 +61,8 @@ class NearestNeighbourOptions:
 
 
 def nearest_neighbour(record: PairRecord, options: NearestNeighbourOptions = NearestNeighbourOptions()) -> Prediction:
-    """Each Y vertex -> the nearest X vertex after subtracting each shape's centroid (see the module
-    docstring). Shapes are compared at unit full-shape area."""
+    """Each Y vertex -> the nearest X vertex after subtracting each shape's centroid (see
+    docs/design/evaluate.md). Shapes are compared at unit full-shape area."""
     x = record["x_vertices"] / _unit_scale(record, "x")
     y = record["y_vertices"] / _unit_scale(record, "y")
     x = x - x.mean(axis=0)
@@ -386,7 +362,7 @@ def single_threaded_blas():
 
 
 def wks_zoomout(record: PairRecord, options: ZoomOutOptions = ZoomOutOptions()) -> Prediction:
-    """WKS functional map refined by ZoomOut (see the module docstring). Y -> X map, -1 only outside the
+    """WKS functional map refined by ZoomOut (docs/design/evaluate.md). Y -> X map, -1 only outside the
     predicted overlap of a P2P pair."""
     with single_threaded_blas():
         mapping = spectral_map(record, options)

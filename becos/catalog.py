@@ -1,27 +1,10 @@
 """The shape catalog: one table row per shape a benchmark may use, written as a stable CSV.
 
-The catalog is the flat, reviewable form of the dataset listing (``becos.datasets``): everything the
-pair sampler (:mod:`becos.sampling`) needs to know about a shape, and nothing geometric.
-
-Columns (in this order):
-
-==================  =======  ==============================================================
-column              dtype    meaning
-==================  =======  ==============================================================
-dataset             str      dataset name (``tosca``, ``faust``, ``dt4d_animal`` ...)
-name                str      shape name inside its dataset (``michael3``, ``bear3EP/Attack4009``)
-category            str      ``human``, ``four-legged`` or ``centaur``
-class               str      shape class (``michael``; the dataset name where there is none)
-split               str      ``train``, ``val``, ``test`` or ``excluded``
-file                str      path of the mesh file, as listed
-template_key        str      key into the template table (``tosca_michael``, ``faust``)
-scale               float    dataset scale applied to the file's coordinates
-frame_rotation_0-8  float    the (3, 3) frame rotation, row-major (row vectors, ``V @ R``)
-usage               int      the dataset's usage count (train anchors per shape)
-==================  =======  ==============================================================
-
-Row order is stable: dataset, then a natural sort of the name (``michael2`` before ``michael10``),
-then the raw name, so listing order and file-system order never leak into the table.
+The flat, reviewable form of the dataset listing (:mod:`becos.datasets`): everything the pair sampler
+(:mod:`becos.sampling`) needs about a shape, nothing geometric. Columns :data:`COLUMNS`: dataset, name,
+category, class, split, file, template_key, scale, ``frame_rotation_0-8`` (the (3, 3) frame rotation,
+row-major, for row vectors ``V @ R``) and usage. Rows sort by dataset, then a natural sort of the name,
+then the raw name, so file-system order never leaks in. Each column's meaning: docs/design/sampling.md.
 """
 
 from __future__ import annotations

@@ -1,31 +1,12 @@
 """Fetching and unpacking dataset archives: resumable download, checksum, safe extraction, atomic install.
 
-:func:`fetch` streams a URL (``http``, ``https`` or ``file``) into a partial file, with a progress bar
-(tqdm, on stderr). An interrupted download keeps its partial file ``.<name>.part`` and a small
-sidecar ``.<name>.part.json`` (URL, ``ETag`` / ``Last-Modified``, total size); the next call asks the
-server for the rest (``Range: bytes=N-`` with ``If-Range``). A server that answers the whole file
-instead (it ignores ``Range``, or the file changed) restarts the download from byte 0. The SHA-256 of
-the complete file is compared with the pinned digest when there is one; a mismatch removes the
-partial file and is an error naming both digests.
-
-:func:`extract_archive` unpacks a zip or tar archive after checking every member: absolute paths,
-``..`` components, symbolic links in zips, links leaving a tar archive and device files are refused
-before anything is written.
-
-:func:`download_dataset` installs a dataset's public archive (``source.archive`` of its YAML,
-:class:`becos.datasets.DatasetArchive`): download beside ``<data_dir>/<extract_to>``, extract into a
-temporary folder there, check that the archive yields the dataset's files (KIDS: ``off/*.off``),
-write the record ``.becos-download.json`` (URL, SHA-256, whether it was pinned) and rename the folder
-into place, so a folder under the final name is always complete. While the YAML's ``sha256`` is null
-the first download records its digest and warns (saying what to pin); once it is pinned a different
-archive, or a folder recorded from a different archive, is an error.
-
-:func:`fetch_annotations` installs a pinned BeCoS annotation archive (``.tar.gz``/``.tgz``/``.tar``/``.zip``,
-``http(s)://`` or ``file://``) the same way: downloaded with :func:`fetch`, extracted safely, the record
-written (URL, SHA-256), moved into place atomically; a second call with the same digest does nothing.
-
-Every failure of a dataset download is a :class:`DownloadError` (a :class:`~becos.errors.ConfigError`) naming the URL or
-file, the problem and the fix.
+:func:`fetch` streams a URL (``http``, ``https``, ``file``) into a partial file that a later call resumes
+(``Range`` with ``If-Range``), and compares the SHA-256 with the pinned digest. :func:`extract_archive`
+unpacks a zip or tar after refusing unsafe members (absolute paths, ``..``, links leaving the archive,
+devices). :func:`download_dataset` installs a dataset's public archive (``source.archive`` of its YAML)
+and :func:`fetch_annotations` a pinned annotation archive, each under its final name only once complete,
+with a ``.becos-download.json`` record. Every failure is a :class:`DownloadError` naming the URL or
+file, the problem and the fix. The rules in detail: docs/design/data.md.
 """
 
 from __future__ import annotations
@@ -467,7 +448,7 @@ def _record(folder: Path) -> dict | None:
 def download_dataset(
     name: str, data_dir: str | Path, url: str | None = None, *, config_dir=None, progress: bool = True
 ) -> dict:
-    """Download and install dataset ``name``'s public archive below ``data_dir`` (module docstring).
+    """Download and install dataset ``name``'s public archive below ``data_dir`` (docs/design/data.md).
 
     Nothing is downloaded when ``<data_dir>/<extract_to>`` already yields the dataset's files (a
     previous download, or the user's own copy). A folder under the final name is never half

@@ -2,39 +2,11 @@
 
 ``becos prepare-dt4d --data-dir DATA --info INFO_JSON --kind animals|humanoids [--classes C ...]`` reads
 ``DATA/DeformingThings4D/<kind>/<class>_<action>/<class>_<action>.anime`` and writes
-``DATA/dt4d_<kind>/<class>/<action><frame:03d>.obj`` for every frame ``INFO_JSON`` lists
-(``{class: {action: [frame ids]}}``, the annotation folder's ``data/info_dt4d_<kind>.json``).
-
-``.anime`` (little-endian, DeformingThings4D's own format)::
-
-    int32 nf, nv, nt | float32 (nv, 3) vertices of frame 0 | int32 (nt, 3) faces (0-based)
-    | float32 (nf - 1, nv, 3) offsets;   frame k = frame0 + offsets[k - 1] (float32 sum), frame 0 = frame0
-
-Units and frame are the file's (metres, z up); the dataset YAML's ``rotation_deg`` brings them to y up later.
-
-Each frame is made exactly as the reference's ``preprocess_dt4d.py`` does, because the annotation
-files (edge files, chirality labels, default faces) index its vertex and face rows:
-``trimesh.Trimesh(v, f, process=False, maintain_order=True).split(only_watertight=False)``, then the
-component with the most vertices. trimesh's own split is used, so
-its repair (it fills 3- and 4-edge holes of each component, reference facts §7.6) happens here too.
-The OBJ is written by trimesh's exporter as the reference's ``mesh.export(path)`` writes it (the same
-bytes under the same trimesh version: ``v`` lines with 8 decimals, trimesh's default, then ``f`` lines,
-both in the component's order); read back with ``process=False, maintain_order=True`` (as
-:func:`becos.mesh.read_mesh` does) it gives the same vertex order and face rows, positions to 5e-9.
-The component is the first of the largest, as the reference's ``sorted(parts, key=vertex count,
-reverse=True)[0]`` (a stable sort) picks it.
-
-Never rewritten unless the ``.anime`` changed: each class folder holds a stamp
-``DATA/dt4d_<kind>/<class>/.becos-dt4d.json`` (:data:`STAMP_NAME`)::
-
-    {"format": 1, "kind", "class", "trimesh": version,
-     "animations": {action: {"anime": path below DATA, "size": bytes, "mtime_ns", "sha256", "frames": [ids]}}}
-
-An animation whose ``.anime`` has the recorded size and mtime is unchanged without reading it; else its
-sha256 decides (a re-extracted, identical file keeps its OBJs and only the stamp's mtime is updated).
-An unchanged animation writes only its listed frames whose OBJ is missing; a changed or unrecorded one
-rewrites all its listed frames. The stamp is rewritten after each animation (atomically, like every OBJ),
-so an interrupted run keeps what it finished. It is also the workflow rule's output (:func:`preparation_plan`).
+``DATA/dt4d_<kind>/<class>/<action><frame:03d>.obj`` for every frame ``INFO_JSON`` lists, exactly as the
+reference's ``preprocess_dt4d.py`` (trimesh's split, the largest component, trimesh's OBJ export), since
+the annotation files index its vertex and face rows. Units and frame are the file's (metres, z up). A
+stamp per class (:data:`STAMP_NAME`) keeps an OBJ unless its ``.anime`` changed. The ``.anime`` format,
+the stamp and the rules: docs/design/data.md.
 """
 
 from __future__ import annotations
@@ -138,7 +110,7 @@ class Animation:
 
 
 def read_anime(path: str | Path) -> Animation:
-    """Parse and check a ``.anime`` file (see the module docstring for the layout).
+    """Parse and check a ``.anime`` file (the layout: docs/design/data.md).
 
     Raises:
         InputFileError: missing file, truncated file, counts inconsistent with the file size, or face

@@ -1,25 +1,11 @@
 """Geodesic rows as parallel jobs: each distinct full mesh of every setting solved once, in parts.
 
-The workflow's geodesics run in three steps (``workflow/rules/export.smk``):
-
-1. ``becos geodesic-plan STORE... --out PLAN --parts N [--splits test]`` reads the stores of all
-   settings and lists every distinct full mesh (up to rigid motion, :func:`becos.export.geodesics._full_mesh_key`:
-   a remesh variant shared by several pairs or settings is one mesh) with the union of the vertices
-   the chosen splits' shapes keep. Meshes are spread over N parts, largest first onto the least loaded
-   part (cost ~ rows x vertices), and each part is written as ``PLAN/part_<k>.npz`` (per mesh:
-   ``<key>|vertices`` (V, 3) float64, ``<key>|faces`` (F, 3) int64, ``<key>|sources`` (R,) int64
-   sorted, ``<key>|sqrt_area`` () float64: the full mesh's sqrt-area in the records' units, 1 for
-   area-normalised records), with ``PLAN/plan.json`` listing mesh, part, vertex and row counts.
-2. ``becos geodesic-rows PLAN/part_<k>.npz OUT`` (one job per part) writes ``OUT/<key>.npy``: the
-   (R, R) float32 block between the sources of the symmetrised heat-method distances
-   (:func:`becos.geodesics.distance_rows`, :func:`becos.export.geodesics.symmetric_block`) divided by the
-   sqrt-area: exactly the geo-lora matrix of a shape that keeps those R vertices (a full shape: R = V),
-   so the layouts hard-link it instead of writing it again. ``OUT/<key>.sources.npy`` lists the sources;
-   ``OUT/timings.json`` gives per mesh the sqrt-area, the CPU seconds of the solve and of the write.
-3. ``becos export-geodesics STORE OUT --rows OUT_0 OUT_1 ...`` (one job per setting) links each shape's
-   matrix to its mesh's block where they are the same, cuts it out of the block otherwise, and writes
-   the loaders' layouts (:func:`becos.export.geodesics.write_geodesic_matrices`). The blocks are temporary: once
-   every setting is written, the links are the only names of those files.
+Three steps (``workflow/rules/export.smk``): ``becos geodesic-plan`` lists every distinct full mesh of
+the stores with the vertices the chosen splits keep and spreads them over N parts
+(``PLAN/part_<k>.npz``, ``PLAN/plan.json``); ``becos geodesic-rows`` solves one part into (R, R)
+float32 blocks ``OUT/<key>.npy`` (heat-method distances over the full mesh's sqrt-area);
+``becos export-geodesics`` links or cuts each shape's matrix from those blocks into the loaders'
+layouts. File contents and shapes per step: docs/design/evaluate.md.
 """
 
 from __future__ import annotations

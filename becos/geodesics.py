@@ -1,25 +1,11 @@
 """Geodesic distances on triangle meshes, for evaluating correspondences.
 
-Two estimators of the surface geodesic distance, both in the units of the mesh's vertex coordinates:
-
-- ``"heat"``: the heat method (Crane et al. 2013) as implemented by potpourri3d
-  (``MeshHeatMethodDistanceSolver``, intrinsic-Delaunay "robust" Laplacian). The solver is factored
-  once per mesh; each source vertex then costs two sparse back-solves. Smooth, slightly below the exact
-  geodesic near the source, and close to it elsewhere.
-- ``"dijkstra"``: shortest paths along mesh edges (scipy.sparse.csgraph). Exact for the edge graph and an
-  upper bound of the surface geodesic (typically 0–15 % longer on triangle meshes, depending on how the
-  path crosses the triangulation).
-
-Whole distance matrices (the exports) come from :func:`distance_rows`, whose heat method is
-:class:`HeatDistanceSolver`: the same method on the intrinsic Delaunay triangulation, with hundreds of
-sources per multi-column solve (~3x cheaper per row than potpourri3d's one source per call).
-
-Surface points are given as (face, barycentric weights) in face-column order, as everywhere in becos
-(see :mod:`becos.geometry`).
-
-Costs measured on 2 cores (TOSCA michael0, 52,565 vertices): unbounded Dijkstra ~9 ms per source,
-Dijkstra bounded to a few edge lengths ~1 ms per source (scipy's per-source O(V) set-up dominates);
-on a 10k-vertex mesh both are ~5x cheaper.
+Two estimators, both in the units of the mesh's vertex coordinates: ``"heat"`` (the heat method,
+potpourri3d, factored once per mesh) and ``"dijkstra"`` (shortest paths along edges: exact for the edge
+graph, an upper bound of the surface geodesic). Whole distance matrices (the exports) come from
+:func:`distance_rows` with :class:`HeatDistanceSolver` (many sources per solve). Surface points are
+(face, barycentric weights) in face-column order (:mod:`becos.geometry`). Accuracy and costs:
+docs/design/evaluate.md.
 """
 
 from __future__ import annotations
@@ -84,7 +70,7 @@ class GeodesicDistances:
 
     Args:
         mesh: the surface; distances are in the units of ``mesh.vertices``.
-        method: ``"heat"`` (default) or ``"dijkstra"`` (see the module docstring).
+        method: ``"heat"`` (default) or ``"dijkstra"`` (see docs/design/evaluate.md).
         cache_bytes: memory budget of the row cache (0 disables it).
         heat_t_coef: time-step coefficient of the heat method (potpourri3d's ``t_coef``; 1 = mean edge
             length squared).

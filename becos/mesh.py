@@ -1,25 +1,12 @@
 """Triangle meshes: the in-memory type, reading mesh files, a cache of parsed arrays, and the
 repairs applied to a COPY of a mesh before remeshing.
 
-Vertex order is always the file's order (ground truth is indexed by it): files are read with
-trimesh ``process=False, maintain_order=True`` and never merged, re-ordered or repaired in place.
-
-Faults that real downloads have and how becos treats them (see ``docs/faults.md``):
-
-- NaN/infinite coordinates, face indices out of range, empty/truncated/unparsable files:
-  :class:`~becos.errors.InputFileError` from :func:`read_mesh` (file, problem, fix).
-- faces with a repeated vertex index, duplicate faces (the same three vertices as an earlier row,
-  in any order or winding), unreferenced vertices, and small extra connected components:
-  :func:`surface_for_remeshing` drops them on a copy (zero-area faces, ``area <= ZERO_AREA_RTOL ×
-  longest edge²``, are kept there so the surface stays closed); the copy remembers, per vertex and per face, the input vertex and the
-  input face row it came from, so maps computed on it are translated back to the input's vertex
-  order and face rows (:mod:`becos.remesh` does this). No surface point is ever placed in a
-  degenerate or duplicate face (:func:`surface_faces`; :class:`becos.geometry.SurfaceLocator`
-  skips them too).
-- extra components holding more than :data:`MAX_DROPPED_AREA_SHARE` of the area: an error (the file
-  holds several shapes, not one surface with specks).
-- inconsistently wound faces (normal in real data: TOSCA michael0, david0, horse5/6, centaur3/4):
-  counted here, re-oriented on the copy by :mod:`becos.remesh`.
+Vertex order is always the file's order (ground truth is indexed by it): files are read with trimesh
+``process=False, maintain_order=True`` and never merged, re-ordered or repaired in place. Unreadable
+input is an :class:`~becos.errors.InputFileError` from :func:`read_mesh` (file, problem, fix);
+:func:`surface_for_remeshing` drops repeated-index and duplicate faces, unreferenced vertices and small
+extra components on a copy that remembers each vertex's and face's input row. Each fault and its
+treatment: docs/design/data.md and docs/faults.md.
 """
 
 from __future__ import annotations

@@ -1,30 +1,12 @@
 """Matching metrics: geodesic errors, PCK curves and their AUC, overlap IoU/F1, left/right accuracy.
 
-Conventions (Princeton protocol, as in the BeCoS paper):
-
-- A prediction maps each vertex of shape 1 (Y) to a vertex of shape 0 (X), or to -1 ("no counterpart"),
-  like the benchmark's ``corres_10``. Callers holding the other direction swap the shapes themselves.
-- The error of a Y vertex is the geodesic distance on X between the predicted vertex and the true point,
-  divided by sqrt(area of X). If X is a partial shape, distances and area are those of its FULL shape
-  (pass ``x_to_full`` = partial2full and the full shape's geodesics/area).
-- Partial shapes (P2P): a vertex matched though it has no counterpart, or unmatched though it has one, has
-  an infinite error (it is never counted correct, so curves stay below 100 %); a vertex unmatched and
-  truly without counterpart is excluded (NaN in the error arrays below).
-
-Error arrays: (N,) float64, NaN = excluded, inf = P2P failure. All fractions are in [0, 1]; the
-"x 100" of tables is the caller's.
-
-AUC conventions are named presets, and every AUC result carries its preset's name
-(:func:`get_preset` parses the parametrised families; T and the number of steps are in the name):
-
-- ``"mean-<T>x<N>"``, default ``"mean-0.10x40"``: PCK at the N thresholds ``linspace(0, T, N)``;
-  AUC = the arithmetic mean of those PCK values (the issue's "mean PCK over [0, T]"). Ground truth = 1.
-- ``"ulrssm-<T>x<N>"``, e.g. ``"ulrssm-0.10x40"``: the same thresholds; AUC = trapezoid of the PCK curve
-  against ``linspace(0, 1, N)``, i.e. normalised by the threshold range, as in ULRSSM's
-  ``metrics/geodist_metric.py``. Ground truth = 1.
-- ``"paper-0.00-0.99"``: PCK at ``0.00, 0.01, ..., 0.99`` (100 values); AUC = trapezoid with step 0.01,
-  NOT renormalised (so ground truth scores 0.99), as in DeepShapeMatchingKit; x 100 this reproduces the
-  AUC figures of the BeCoS paper (reference facts §11/§12). Use it for any comparison with the paper.
+A prediction maps each vertex of Y to a vertex of X or -1 (like ``corres_10``). The error of a Y vertex
+is the geodesic distance on X (a partial X: its FULL shape) between predicted vertex and true point,
+over sqrt(area of X). Error arrays: (N,) float64, NaN = excluded, inf = P2P failure (matched without a
+counterpart, or unmatched with one). Fractions are in [0, 1]. AUC conventions are named presets
+(:func:`get_preset`): ``mean-<T>x<N>`` (default ``mean-0.10x40``), ``ulrssm-<T>x<N>`` and
+``paper-0.00-0.99`` (the one that reproduces the BeCoS paper's figures). Conventions and presets in
+detail: docs/design/evaluate.md.
 """
 
 from __future__ import annotations
@@ -94,7 +76,7 @@ def preset_name(family: str, max_threshold: float, steps: int) -> str:
 
 def get_preset(name: str) -> AucPreset:
     """The :class:`AucPreset` of a name: ``"paper-0.00-0.99"`` or ``"<family>-<T>x<N>"`` with family
-    ``mean`` or ``ulrssm`` (see the module docstring), T > 0 in units of sqrt(area), N >= 2."""
+    ``mean`` or ``ulrssm`` (see docs/design/evaluate.md), T > 0 in units of sqrt(area), N >= 2."""
     if name in AUC_PRESETS:
         return AUC_PRESETS[name]
     family, _, rest = str(name).partition("-")

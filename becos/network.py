@@ -1,32 +1,11 @@
 """Paths through the shape network and dense ground truth between any two shapes of a category.
 
-A path from shape X to shape Y runs X -> X's template -> network templates ... -> Y's template -> Y
-(optionally with remeshed X and Y at the ends). Each hop is a :class:`~becos.surface_map.SurfaceMap`
-from the vertices of one surface to points on the next:
-
-- shape <-> its template: identity (vertex i is vertex i) when both are meshes of one triangulation
-  -- poses of one class (TOSCA, DT4D), or a whole dataset built on one template mesh (FAUST, SCAPE,
-  KIDS, SMAL). Vertex counts are checked; face rows may differ by winding, so every surface keeps
-  its own faces.
-- template -> template: the annotation folder's edge file, or identity for DT4D classes listed as
-  sharing a triangulation.
-- remeshed X -> X: :attr:`becos.remesh.Remeshed.to_original`; Y -> remeshed Y: ``from_original``.
-
-Identity hops at the END of a path (onto Y's original mesh, no remeshed Y) are applied exactly: a
-point with weights w in the face with vertices {a, b, c} of the last mapped surface becomes the point
-with the same weights on a, b and c in Y's face with that vertex set (:func:`transplant`; the weights
-are permuted where the winding differs), not a closest-point projection. Only points whose vertex
-set is no usable face of Y (a different triangulation) are projected. Y's vertices that lie in no
-usable face (unreferenced vertices, e.g. the three isolated vertices of a KIDS mesh; vertices only
-used by degenerate faces) have no counterpart there (:func:`identity_map`). No point is placed in a
-degenerate or duplicate face (:func:`becos.mesh.surface_faces`).
-
-The template-to-template part is composed once per pair of classes and cached (projected onto the
-last template, whose mesh is in Y's dataset); the shape and remesh hops are then composed onto the
-target per pair, the part of a path after its first hop (X's template ... remeshed Y) once per job
-for all the shapes of X's class (:meth:`ShapeNetwork._tail`). Compositions run backwards from their target
-(:func:`becos.surface_map.compose_path`), so an intermediate template needs only its faces (from
-the dataset when present, else the annotation folder's default faces).
+A path X -> X's template -> network templates ... -> Y's template -> Y (optionally remeshed X and Y at
+the ends) is a chain of :class:`~becos.surface_map.SurfaceMap` hops: identity between a shape and its
+template (one triangulation), the annotation folder's edge files between templates, and the remesh maps.
+:meth:`ShapeNetwork.ground_truth` composes it backwards from the target, so an intermediate template
+needs only its faces; template-to-template parts are cached per pair of classes. The hops, exact
+identity ends and caching: docs/design/ground-truth.md.
 """
 
 from __future__ import annotations

@@ -1,18 +1,12 @@
 """Pair assembly: two prepared shapes and their ground truth -> one matching instance (a PairRecord).
 
-Settings:
-
-- ``full_full`` (F2F): both shapes full.
-- ``partial_full`` (P2F): Y is one virtual scan, X (the full template of Y's class) stays full.
-- ``partial_partial`` (P2P): both scanned; camera pairs re-drawn until both overlaps lie in
-  ``[min_overlap, max_overlap]`` (:func:`becos.partiality.cast_p2p`).
-
-Frames. Inputs are full meshes in the common y-up frame at dataset scale (prepared and, usually,
-remeshed). Y is moved rigidly onto X by Procrustes on the ground-truth pairs (missing ones masked),
-then each shape gets its own random rotation, applied last: about the up axis by default, uniform
-on SO(3) with ``one_axis_rotation=False``. With ``area_normalised`` the vertices are divided by the
-full shape's sqrt-area (about the common-frame origin) before that rotation: the paper's
-"normalised" variant. Every draw comes from the pair's own seed (:func:`becos.seeding.rng_for`).
+Settings: ``full_full`` (F2F, both full); ``partial_full`` (P2F: Y one virtual scan, X the full template
+of Y's class); ``partial_partial`` (P2P: both scanned, camera pairs re-drawn until both overlaps lie in
+``[min_overlap, max_overlap]``, :func:`becos.partiality.cast_p2p`). Frames: inputs are full meshes in the
+common y-up frame at dataset scale; Y is moved rigidly onto X (Procrustes on the ground-truth pairs),
+then each shape gets its own random rotation, applied last (about the up axis, or uniform on SO(3) with
+``one_axis_rotation=False``); ``area_normalised`` divides by the full shape's sqrt-area (about the
+common-frame origin) before it. Every draw comes from the pair's own seed (:func:`becos.seeding.rng_for`).
 """
 
 from __future__ import annotations

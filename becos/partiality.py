@@ -1,19 +1,12 @@
 """Partial shapes: virtual scans, exact bookkeeping, overlap and partial ground truth.
 
-A *partial* of a full mesh is the set of faces one virtual scan keeps (the largest edge-connected
-component by area of the faces a camera sees, :mod:`becos.visibility`) with the vertices they use.
-:func:`cut` builds it from the face mask alone — no nearest-neighbour search, no rounding, no hole
-filling — so every partial vertex knows its full vertex and every partial face its full face.
-
-Overlap (:func:`overlap_mask`): a vertex of partial X̂ *has its counterpart on* partial Ŷ when its
-ground-truth point (``gt_xy``: full X vertex -> point on full Y, face + barycentric weights) lies in
-a face that Ŷ kept; a ``-1`` ground truth has no counterpart. ``overlap(X̂)`` is the share of X̂'s
-vertices that have one. :func:`partial_map` re-expresses those points on Ŷ's own faces.
-
-Scans of a pair (:func:`cast_p2p`, :func:`cast_p2f`) follow :mod:`becos.cameras`: each shape is seen
-in its *unit-box frame* (centred on its bounding box, largest side 1); for a partial-to-partial pair
-Y is first moved rigidly into X's frame (Procrustes on the ground-truth pairs) so the two cameras of
-a regime are drawn in one shared orientation.
+A *partial* of a full mesh is the faces one virtual scan keeps (:mod:`becos.visibility`) with the
+vertices they use; :func:`cut` builds it from the face mask alone, so every partial vertex knows its full
+vertex and every partial face its full face. :func:`overlap_mask`: a vertex of partial X̂ has a
+counterpart on partial Ŷ when its ground-truth point lies in a face Ŷ kept; :func:`partial_map`
+re-expresses those points on Ŷ's faces. :func:`cast_p2p`, :func:`cast_p2f` scan each shape in its
+unit-box frame (:mod:`becos.cameras`), Y first moved rigidly into X's frame for P2P. In detail:
+docs/design/partiality.md.
 """
 
 from __future__ import annotations

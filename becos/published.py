@@ -1,34 +1,11 @@
 """The published BeCoS pair lists (``config/pairings_original_<setting>.pkl``) <-> pair manifests.
 
-Published pickle schema (reference-facts §4): a list of three lists ``[train, test, val]`` of pairs
-``(x, y)``; each shape is a dict with ``name``, ``org_dataset``, ``category``, ``file_path``,
-``scale``, ``rot``, ``partial_full_template``, ``partial_full_dataset``, ``desired_n_face_remeshed``,
-``random_rot`` ((3, 3) float64) and, in the partial-to-partial file, ``cam_pos`` ((10, 3) float64).
-
-Import (:func:`import_published`) gives a manifest in the schema of :mod:`becos.sampling` plus extra
-columns:
-
-- ``published_index``: position of the pair in its split list;
-- ``x_category``, ``y_category``: the shapes' own categories (the pair's ``category`` is the
-  non-centaur one, ``centaur`` for a centaur–centaur pair);
-- ``x_face_target``, ``y_face_target``: ``desired_n_face_remeshed``;
-- ``x_random_rot_0..8``, ``y_random_rot_0..8``: the random rotations, row-major.
-
-Published pairs have no copy index: ``copy`` = how many times the same ``(x, y)`` occurred earlier
-in the same split list, so ``pair_id`` (= ``stable_hash(setting, x, y, copy)``) is unique;
-``seed``, variants and ``chunk`` are derived as for sampled pairs.
-
-Cameras (P2P: ten tries per shape) are kept beside the manifest: :func:`save_cameras` writes one
-``.npz`` with ``pair_id`` (N,) and ``cam_pos`` (N, 2, 10, 3) float64 (x tries, y tries), no pickle.
-
-Export (:func:`write_published_pickle`) writes a manifest back in the published schema, so a
-benchmark can be shared as pair lists + code. Each dict also carries a ``becos`` sub-dict
-(pair_id, setting, category, copy, seed, variant, chunk) that the reference ignores and that makes
-manifest -> pickle -> manifest exact. Arrays are pickled as ``numpy.array(list, dtype)``, readable by
-numpy 1.x and 2.x alike.
-
-Loading uses a restricted unpickler: only numpy's array/dtype reconstruction is allowed; any other
-global in the file is refused (a pickle can otherwise run arbitrary code).
+:func:`import_published` turns a published pickle (three lists ``[train, test, val]`` of shape-dict
+pairs) into a manifest in the schema of :mod:`becos.sampling` plus the published face targets and
+random rotations; :func:`save_cameras` keeps P2P cameras beside it (``cam_pos`` (N, 2, 10, 3) float64,
+no pickle); :func:`write_published_pickle` writes a manifest back in the published schema, exactly
+round-tripping. Loading uses a restricted unpickler (numpy arrays only). The pickle schema and the
+extra columns: docs/design/sampling.md.
 """
 
 from __future__ import annotations

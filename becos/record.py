@@ -1,18 +1,13 @@
 """The matching-instance record, schema version 1: everything a pair's consumer needs, as flat arrays.
 
-A record holds shape 0 (X) and shape 1 (Y) and the ground truth between them. Arrays that index a
-shape's vertices are *named after that shape*: ``x_overlap_mask`` has one entry per vertex of X.
-
-The schema (keys, dtypes, shapes, store groups and meanings) is one table, :data:`RECORD_SCHEMA`,
-built from :data:`SIDE_FIELDS` (per shape ``s`` in ``x``, ``y``) and :data:`PAIR_FIELDS` (ground
-truth, vertex form ``corr_01`` (V_x,) X vertex -> Y vertex, -1 = no counterpart on Y, and
-barycentric form ``corr_01_face``/``corr_01_weights``; ``corr_10*`` the same from Y to X). Its rows
-are listed at the end of this docstring (generated from the table).
-
-Final frame: ``final = ((file * scale - centre) @ frame_rotation @ align_rotation + align_translation)
-@ random_rotation``. Metadata (``meta``): schema_version, pair_id, seed, setting, split, n_tries,
-accepted, try_index, area_normalised, vertex_rounding (:data:`VERTEX_MAP_ROUNDING`), options, and per
-shape name, dataset, category, class.
+A record holds shape 0 (X), shape 1 (Y) and the ground truth between them; arrays that index a shape's
+vertices are *named after that shape* (``x_overlap_mask``: one entry per vertex of X). The schema (keys,
+dtypes, shapes, store groups, meanings) is one table, :data:`RECORD_SCHEMA`, from :data:`SIDE_FIELDS` (per
+shape ``s`` in x, y) and :data:`PAIR_FIELDS` (``corr_01`` (V_x,) X vertex -> Y vertex, -1 = none, and its
+barycentric form ``corr_01_face``/``corr_01_weights``; ``corr_10*`` from Y to X), listed at the end of this
+docstring. Final frame: ``((file * scale - centre) @ frame_rotation @ align_rotation + align_translation)
+@ random_rotation``. ``meta``: schema_version, pair_id, seed, setting, split, n_tries, accepted, try_index,
+area_normalised, vertex_rounding (:data:`VERTEX_MAP_ROUNDING`), options, per shape name, dataset, category, class.
 """
 
 from __future__ import annotations

@@ -1,28 +1,11 @@
 """The reference generator's remesh, reproduced bit for bit (config ``remesher: reference``).
 
-Only with this remesh do the published lists' face targets, rotations and cameras (and the shipped
-``precomputed_triangle_ids``) refer to the meshes they were made for (reference facts §7.2). The
-procedure, on the shape's FILE coordinates (file vertex order and face rows):
-
-1. coordinates × :data:`COORDINATE_FACTOR` (1000);
-2. faces re-oriented by libigl's BFS orientation (``igl.bfs_orient``; each patch's sign arbitrary);
-3. ONE Loop subdivision through libigl's subdivision matrix S (``igl.loop_matrix``, named
-   ``loop_subdivision_matrix`` in libigl 2.5): ``V2 = S V1``, faces ×4;
-4. quadric decimation with fast-simplification to ``target_count = desired_n_face_remeshed``
-   (aggressiveness 7, its default), collapses recorded; replaying them on the float32 subdivided
-   vertices gives each subdivided vertex's remeshed vertex;
-5. coordinates / 1000.
-
-Nothing else is done (no repair, no largest component, no snap): the faces are the reference's
-rows, in its order and winding. The reference's own vertex maps (rounded to vertices,
-:attr:`ReferenceRemesh.remeshed_to_source` / :attr:`ReferenceRemesh.source_to_remeshed`) are
-available for comparisons; becos's pipeline uses its own exact maps instead
-(:func:`remesh_like_reference`): remeshed vertices are NOT on the original surface (Loop smoothing
-moves them), so ``to_original`` is the closest point of the original surface with a compatible normal
-and records that distance; ``from_original`` likewise onto the remeshed surface.
-
-The reference's special case for a KIDS shape named ``kid19`` (a triangle added on three isolated
-vertices) is not reproduced: no KIDS file has that name (facts §7.2).
+Only with this remesh do the published lists' face targets, rotations and cameras refer to the meshes
+they were made for. On the shape's FILE coordinates: × :data:`COORDINATE_FACTOR`, libigl BFS
+orientation, one Loop subdivision, fast-simplification to ``desired_n_face_remeshed``, / 1000; nothing
+else. :func:`remesh_like_reference` gives it becos's own exact maps (``to_original``: closest point with
+a compatible normal, the distance recorded; ``from_original`` likewise); the reference's vertex maps are
+kept on :class:`ReferenceRemesh` for comparisons. The procedure step by step: docs/design/remesh.md.
 """
 
 from __future__ import annotations

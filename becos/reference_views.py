@@ -1,29 +1,11 @@
 """The reference's partial views from the published cameras (reference facts §7.5, §7.6).
 
-A view of a full shape (the reference's remesh, :mod:`becos.reference_remesh`) from a published
-camera position ``cam_pos`` (a unit vector, one per try) is:
-
-1. the triangles hit: the shipped ``precomputed_triangle_ids/<setting>/<name, / -> _>_cam_<x>_<y>_<z>.npy``
-   (3-decimal coordinates; sorted unique ids) when it exists, else a cast of the reference's camera
-   (:func:`cast_pinhole`): a pinhole of 5000 × 5000 rays, 90° field of view, eye at ``cam_pos``,
-   looking at the origin, up +y, onto the shape in the reference's casting frame
-   (:func:`becos.reference_remesh.reference_pose`, Y aligned to X, divided by its sqrt-area);
-2. the component the reference keeps (:func:`reference_component`): trimesh's
-   ``split(only_watertight=False)`` of those triangles (float32 vertex positions, as Open3D's tensor
-   mesh holds them), the largest by area (ties: trimesh's first). trimesh's split also fills 3- and
-   4-edge holes; a fill triangle is a face of the full mesh, or (a 4-edge hole filled along the other
-   diagonal: trimesh 4.4, the reference's, and 5.x choose differently) one of two triangles spanning
-   two full faces. The kept set is therefore a set of full faces
-   (:attr:`ReferenceComponent.kept_faces`, :func:`full_faces_covering`), equal whichever diagonal.
-
-Reference quirk kept (its ``save_corres_for_shape_pair``): for Y the triangle-id file is named with
-X's camera of the same try, while the file's content is Y's view from Y's own camera (checked on
-the oracle: a cast from Y's ``cam_pos`` gives exactly that file's set). :func:`pair_view_files`
-encodes that naming. A shipped file is one per (shape, camera), while a train shape sits in many
-pairs: the files of wolf1 and centaur1 read as Y of oracle pairs train/384 and train/477 are their
-views in their OWN, unaligned frame (as the X of another pair; Jaccard 1.0 there, 0.77 / 0.52 in the
-pair's aligned frame). So the file is always preferred; a cast (file absent) uses the pair's frame,
-as the reference does when it casts.
+A view of a full shape (the reference's remesh, :mod:`becos.reference_remesh`) from a published camera
+``cam_pos`` (a unit vector per try) is the triangles hit (the shipped ``precomputed_triangle_ids`` file
+when it exists, else :func:`cast_pinhole`, the reference's 5000 × 5000, 90° pinhole cast) reduced to the
+component the reference keeps (:func:`reference_component`: trimesh's split, the largest by area), as a
+set of full faces. :func:`pair_view_files` keeps the reference's file naming quirk. The steps and the
+quirk: docs/design/partiality.md.
 """
 
 from __future__ import annotations
@@ -138,7 +120,7 @@ class ReferenceComponent:
 
 def reference_component(vertices: np.ndarray, faces: np.ndarray, triangle_ids: np.ndarray) -> ReferenceComponent:
     """The largest-area component of the triangles ``triangle_ids`` of the full mesh, as the reference
-    selects it (module docstring). ``vertices`` in the casting frame (only area ratios matter)."""
+    selects it (docs/design/partiality.md). ``vertices`` in the casting frame (only area ratios matter)."""
     import trimesh
     from scipy.spatial import cKDTree
 

@@ -1,37 +1,11 @@
 """Stage 7, "report": counts, the overlap histogram and ground-truth renders of a benchmark.
 
-Everything here is headless (matplotlib's Agg canvas, no display, no OpenGL) and written atomically.
-
-Renders (:func:`render_pair`)
------------------------------
-X and Y side by side, orthographic, in X's *common frame*: the random rotation of each shape is undone
-(``common = final @ random_rotation.T``; the record stores ``final = common @ random_rotation``), and
-Y's common vertices are already aligned onto X, so both shapes stand upright (the pair's up axis,
-``y`` by default, points up on screen) and are seen from the same direction at the same scale.
-
-Colours show the ground truth (colour transfer): each X vertex gets a smooth, saturated colour of its
-position (normalised to X's bounding box: hue along the box's longest side, value along the second,
-saturation along the third; never grey), each Y vertex gets the colour of its X counterpart
-``corr_10`` (grey :data:`NO_MATCH_GREY` where ``corr_10 == -1``), and a face is drawn in the mean
-colour of its three vertices, Lambert-shaded from its face normal (two-sided, light from the viewer's
-upper left). Faces are depth-sorted back to front (painter's algorithm) and drawn as one
-``PolyCollection`` per shape: ~20k faces per shape render in well under a second.
-
-View direction (``view="auto"``): the mean viewing direction of the scanner cameras of the partial
-shapes (``x_camera`` / ``y_camera``, Y's mapped through its alignment rotation), so a scan faces
-the viewer; for a full pair, the horizontal axis along which X is thinnest (a side view of a
-four-legged animal, a front or back view of a standing human), raised by 20° of elevation.
-
-Report folder (:func:`write_report`)
-------------------------------------
-``counts.csv``, ``overlap_histogram.csv``, ``overlap_histogram.png``, ``summary.json``,
-``renders/<pair_id>.png`` and ``index.html`` (static, relative links; opens without Snakemake).
-For a P2P store the overlap histogram is shown beside the published benchmark's
-(:data:`becos.published.P2P_OVERLAP_HISTOGRAM`), both as shares of all directions since the totals
-differ (:func:`published_overlap_comparison`).
-``snakemake --report report.zip`` packs each setting's folder with the caption
-``workflow/report/index.rst`` (which describes every file above) under ``workflow/report/workflow.rst``
-(:data:`CAPTIONS`).
+Headless (matplotlib's Agg canvas) and written atomically. :func:`render_pair` draws X and Y side by
+side, orthographic, in X's common frame (random rotations undone), Y coloured by the colour of its X
+counterpart ``corr_10`` (grey :data:`NO_MATCH_GREY` where -1). :func:`write_report` writes
+``counts.csv``, ``overlap_histogram.csv``/``.png``, ``summary.json``, ``renders/<pair_id>.png`` and a
+static ``index.html``; for a P2P store the overlap histogram is shown beside the published one.
+Colours, the view direction and the Snakemake report captions: docs/design/report.md.
 """
 
 from __future__ import annotations
@@ -126,7 +100,7 @@ def transfer_colours(x_colours: np.ndarray, corr_10: np.ndarray) -> np.ndarray:
 def view_direction(record: PairRecord, view: str | Sequence[float] = "auto") -> np.ndarray:
     """(3,) unit vector from the shapes towards the viewer, in X's common frame.
 
-    ``view``: ``"auto"`` (see the module docstring), ``"front"`` (+z), ``"back"`` (-z), ``"side"`` (+x),
+    ``view``: ``"auto"`` (see docs/design/report.md), ``"front"`` (+z), ``"back"`` (-z), ``"side"`` (+x),
     ``"top"`` (+y), or any (3,) direction in the common frame.
     """
     if isinstance(view, str):
@@ -206,7 +180,7 @@ def render_pair(
 ) -> Path:
     """Write a PNG of ``size`` = (width, height) pixels showing X (left) and Y (right) with colour transfer.
 
-    See the module docstring for frames, colours and the view. Both panels share one scale (units of
+    See docs/design/report.md for frames, colours and the view. Both panels share one scale (units of
     the record's common frame) so relative sizes are true. Returns ``path``.
     """
     from matplotlib.collections import PolyCollection

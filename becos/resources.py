@@ -1,14 +1,11 @@
 """Per-rule scheduler resources (memory in MiB, run time in minutes) from measured peaks.
 
-``workflow/resources.yaml`` holds, per rule, ``mem_mb`` and ``runtime`` set from the peaks that
-``benchmarks/resources.py`` measured on a real run (with margins), and for the chunk rules
-(``ground_truth``, ``pairs``) ``seconds_per_pair``: their run time grows with the pairs of the
-chunk, their memory does not (a chunk job keeps at most a few shapes loaded,
-:data:`becos.workflow.shapes.SHAPES_KEPT`). A rule missing from the file gets :data:`DEFAULT`.
-
-Snakemake calls the functions returned here with the job's wildcards and ``attempt`` (1, then 2, ...
-when a profile sets ``retries``), so a retried job asks for ``attempt`` times the memory and time:
-a job killed by the scheduler for exceeding its request comes back with a larger one.
+``workflow/resources.yaml`` holds per rule ``mem_mb`` and ``runtime`` from the peaks ``benchmarks/resources.py``
+measured on a real run (with margins), and for chunk rules ``seconds_per_pair``: their run time grows with
+the chunk's pairs, their memory does not (at most :data:`becos.workflow.shapes.SHAPES_KEPT` shapes
+loaded). A rule missing from the file gets :data:`DEFAULT`. Snakemake calls the functions returned here
+with the job's wildcards and ``attempt`` (1, 2, ... when a profile sets ``retries``), so a retried job,
+killed for exceeding its request, asks for ``attempt`` times the memory and time.
 """
 
 from __future__ import annotations

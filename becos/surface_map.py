@@ -1,20 +1,12 @@
 """Maps from the vertices of one mesh to points on another surface, and their composition.
 
-A :class:`SurfaceMap` sends each vertex of a *source* mesh to a point of a *target* surface, given
-as a target face and barycentric weights in face-column order, or to "none" (face ``-1``): the
-vertex lies on a semantic part the target lacks. This is the one representation of ground truth in
-becos; vertex-index form (``-1`` = none) is derived from it only at the end
-(:meth:`SurfaceMap.to_nearest_vertices` for a record's final vertex maps, the largest-weight corner
-:meth:`SurfaceMap.to_vertex_indices` for labels), so no rounding happens at intermediate shapes.
-
-Composition (:func:`compose`) follows the issue's rule: the image of a point (face f, weights w)
-of the middle surface is the w-weighted combination of the images of f's vertices, projected to
-the closest point of the target surface among the faces near the images' faces along the target's
-connectivity (:data:`COMPOSE_RINGS`; never onto another part that touches them in space); if f's largest-weight vertex has no image the point has
-none, otherwise the weights are renormalised over the vertices that have one. Maps are composed
-from the target end backwards, so that only the *faces* of intermediate templates are needed (the
-BeCoS annotation folder ships those for templates whose datasets a user may not have) and every
-projection lands on the final target, whose geometry is always known.
+A :class:`SurfaceMap` sends each vertex of a *source* mesh to a point of a *target* surface (a target
+face and barycentric weights in face-column order) or to "none" (face ``-1``: a part the target lacks).
+It is the one representation of ground truth in becos; the vertex-index form (``-1`` = none) is derived
+only at the end (:meth:`SurfaceMap.to_nearest_vertices`; :meth:`SurfaceMap.to_vertex_indices` for labels).
+:func:`compose` maps a point through the images of its face's vertices, projected onto the target among
+faces near them along its connectivity (:data:`COMPOSE_RINGS`); maps compose from the target backwards,
+so intermediate templates need only their faces. The rule in full: docs/design/ground-truth.md.
 """
 
 from __future__ import annotations

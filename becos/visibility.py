@@ -1,25 +1,12 @@
 """Which triangles of a mesh a camera sees, and the largest edge-connected piece of them.
 
-The virtual scan of BeCoS keeps the triangles seen by a camera, then only the largest
-edge-connected component of them by area. The reference renders a dense 5000×5000 pinhole image
-(25 M rays, Open3D) and keeps every triangle some pixel ray hits first. Here the same question is
-answered without an image: one ray from the eye to each of a few sample points per triangle
-(:data:`SAMPLE_BARYCENTRICS`: the centroid and points near the corners, pulled inside), cast with
-Embree (embreex). A triangle is seen when some ray's *first* hit is that triangle — a ray aimed at
-triangle A that is stopped by triangle B makes B seen (B is visible there), so occluders are found
-too. Rays whose direction lies outside the camera's square field of view are not cast (the dense
-image has no pixel there). The answer does not depend on an image resolution; ``benchmarks/
-partiality.py`` measures its agreement with the dense cast (:meth:`VisibilityScene.grid_visible_faces`).
-
-No front-facing test is applied, deliberately: the first hit along a ray from the eye is visible
-whatever its winding, and the back of a closed surface is never a first hit anyway. Winding is
-not reliable on the data (TOSCA poses reverse some faces, facts §10: 1,594 rows of michael0), and
-the dense reference ignores it too, so a facing test would only drop visible, mis-wound triangles
-(and triangles seen through a boundary hole, which the reference keeps).
-
-Frames: the mesh and the camera must be given in the same frame (becos uses the unit-box frame of
-:mod:`becos.cameras`). Embree works in float32; in that frame (coordinates ≤ 0.5 in magnitude)
-its resolution (~3e-8) is far below any triangle size.
+A triangle is seen when the *first* hit of some ray from the eye to one of its sample points
+(:data:`SAMPLE_BARYCENTRICS`) is that triangle (Embree via embreex; rays outside the camera's square
+field of view are not cast), so occluders are found too and no image resolution is involved. No
+front-facing test (winding is unreliable in the data). The scan keeps the largest edge-connected
+component of the seen triangles by area. Mesh and camera must be in the same frame (becos: the unit-box
+frame of :mod:`becos.cameras`; Embree's float32 is ample there). Why, and the agreement with the
+reference's dense image: docs/design/partiality.md.
 """
 
 from __future__ import annotations

@@ -4,6 +4,7 @@ screen holds the set-up and main-job command and the test command that CI runs."
 
 from __future__ import annotations
 
+import ast
 import re
 from pathlib import Path
 
@@ -49,3 +50,16 @@ def test_readme_first_screen_holds_the_commands():
     assert test_command.endswith("python -m pytest -n 2 -q") and test_command in first_screen
     setup_and_run = 'python3 -m venv .venv && .venv/bin/pip install -q -e ".[test]" && .venv/bin/snakemake --cores 2'
     assert setup_and_run in first_screen
+
+
+def test_module_docstrings_are_short_and_their_pages_exist():
+    """A module docstring says what the module is and its contract in at most 10 lines; the design notes it
+    points to (``docs/design/<page>.md``) exist."""
+    long, missing = [], []
+    for path in sorted(PACKAGE.rglob("*.py")):
+        doc = ast.get_docstring(ast.parse(path.read_text()), clean=True) or ""
+        if len(doc.strip().splitlines()) > 10:
+            long.append(f"{path.relative_to(REPO)}: {len(doc.strip().splitlines())} lines")
+        missing += [page for page in re.findall(r"docs/design/[\w-]+\.md", doc) if not (REPO / page).exists()]
+    assert long == [], "module docstrings over 10 lines (move design notes to docs/design/)"
+    assert missing == []

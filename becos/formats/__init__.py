@@ -1,19 +1,12 @@
 """Mesh file formats, one module each (the model is trimesh's ``exchange/``): the cheap structure check
 of a file, and for OFF the one reader of becos.
 
-- :mod:`becos.formats.off`: the OFF header, :func:`~becos.formats.off.check_off` and
-  :func:`~becos.formats.off.read_off` (triangle OFF, numpy; :func:`becos.mesh.read_mesh` reads plain
-  ones with :func:`~becos.formats.off.read_plain_off` and checks the header of the others);
-- :mod:`becos.formats.ply`: :func:`~becos.formats.ply.check_ply` (ASCII and binary, from the header
-  and the file size);
-- :mod:`becos.formats.obj`: :func:`~becos.formats.obj.check_obj`;
-- :mod:`becos.formats.text`: data lines of text formats located with numpy, and the line-numbered
-  checks of vertex and face lines that OFF and ASCII PLY share.
-
-PLY, OBJ and irregular OFF files are read by trimesh (:func:`becos.mesh.read_mesh`). The checks are
-what :func:`becos.check.meshes.check_mesh_file` runs on every mesh of a dataset (~10 ms per 5 MB file);
-:func:`check_file` dispatches on the suffix. :func:`not_a_regular_file` says what an entry that is no
-file is (a folder, a named pipe, a link to a device, ...), from ``stat`` alone.
+Modules: ``off`` (header, :func:`~becos.formats.off.check_off`, :func:`~becos.formats.off.read_off`),
+``ply`` (ASCII and binary check from header and file size), ``obj``, ``text`` (data lines and the
+line-numbered checks OFF and ASCII PLY share), ``problems``. PLY, OBJ and irregular OFF files are read by
+trimesh (:func:`becos.mesh.read_mesh`). :func:`check_file` dispatches on the suffix;
+:func:`not_a_regular_file` names an entry that is no file, from ``stat`` alone. In detail:
+docs/design/data.md.
 """
 
 from __future__ import annotations

@@ -1,21 +1,11 @@
 """Geodesic distances of a store's shapes on demand: the lazy route beside the geodesics export.
 
-:class:`GeodesicView` gives, for the pairs of a store (or of one split), the geodesic distances a
-training or evaluation loop asks for, without writing any (V, V) matrix:
-
-- :meth:`GeodesicView.to_truth`: per vertex of shape x, the distance on shape y between a predicted
-  vertex and its ground-truth vertex (the geodesic error of a prediction);
-- :meth:`GeodesicView.rows`: rows of a shape's matrix, from given vertices to all its vertices.
-
-Values are those of the export (``docs/released-layout.md`` section 3): measured on the shape's FULL
-remeshed mesh (through ``partial_to_full``), by the same heat-method solver
-(:class:`becos.geodesics.HeatDistanceSolver`), float32, divided by the full shape's sqrt-area (1 when
-the store is ``area_normalised``), as geo-lora's ``geodesic_dist_matrices/<stem>.npy``.
-
-Cost: one factorisation per distinct full mesh (up to rigid motion, :func:`becos.geodesics.shape_key`),
-then one solve per new source row (~2 ms at 10k vertices), rows kept per mesh up to ``cache_bytes``.
-Each mesh's solver lives in a worker process of its own, ended when the mesh leaves the cache
-(``max_meshes``): the sparse Cholesky library keeps memory per factorisation until its process ends.
+:class:`GeodesicView` gives, without writing any (V, V) matrix, :meth:`~GeodesicView.to_truth` (per
+vertex of x, the distance on y between a predicted vertex and its truth) and :meth:`~GeodesicView.rows`
+(rows of a shape's matrix). Values are those of the export (``docs/released-layout.md`` section 3):
+on the shape's FULL remeshed mesh, heat method, float32, divided by the full shape's sqrt-area. One
+factorisation per distinct full mesh, each in a worker process of its own. Costs and caching:
+docs/design/store.md.
 """
 
 from __future__ import annotations

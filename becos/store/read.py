@@ -3,16 +3,9 @@
 
 :meth:`Benchmark.record`, :meth:`Benchmark.records` and :class:`TrainingView` read the chunk files
 directly (:class:`_ChunkFiles`: per key one ``pread`` and one Blosc decode per 64 KiB chunk touched);
-:meth:`Benchmark.read_block` (``becos validate``, ``compare``) reads through zarr.
-
-Why a hand-written reader beside zarr (issue 15 prefers the library unless a figure says otherwise): a
-random ``record(i)`` costs about half an ``np.load`` of the same pair's npz read directly, and 8.5–9.8
-of them through zarr (``benchmarks/store.py``, ``reads``: ratio 0.49 against 8.5–9.8). Measured again
-with ``python benchmarks/store.py --results <tiny TOSCA run>/results --random 40`` (6 pairs per setting,
-CPU time): ``record`` 4.4–5.0 ms, ``np.load`` of the run's pair file 9.3–10.6 ms (ratio 0.43–0.53),
-zarr's ``read_block`` of one pair 44–45 ms (ratio 4.3–4.8). A training loop reads pairs one at a time,
-so zarr's per-call cost would dominate it; any problem still falls back to zarr, which reports it
-(:meth:`Benchmark.read_rows`).
+:meth:`Benchmark.read_block` (``becos validate``, ``compare``) reads through zarr, and any problem falls
+back to zarr, which reports it (:meth:`Benchmark.read_rows`). Why a hand-written reader (measured):
+docs/design/store.md.
 """
 
 from __future__ import annotations

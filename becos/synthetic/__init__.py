@@ -1,25 +1,12 @@
-"""A built-in synthetic shape collection, generated from code (issue 5).
+"""A built-in synthetic shape collection, generated from code: no licence, no download.
 
-Most source datasets need a licence and a manual download; this collection needs neither. It is
-shaped like the real thing so every stage of the workflow runs on it for real: two datasets with
-different triangulations, units and file frames (``synthy``: metres, y-up; ``synthz``: centimetres,
-z-up like TOSCA), six humanoid classes, six four-legged classes and a centaur, several poses per
-class sharing one triangulation, and a BeCoS-format annotation folder (template network, template
-tables, barycentric template correspondences with semantic missing parts, default faces,
-left/right labels) derived from the construction.
-
-Modules: :mod:`~becos.synthetic.bodies` (parts, skeletons, implicit surface, charts, posing),
-:mod:`~becos.synthetic.meshing` (marching cubes and relaxation), :mod:`~becos.synthetic.collection`
-(correspondences and the files).
-
-Command line (:mod:`becos.cli.synthetic`; the workflow's rule runs the first form, the second is equivalent)::
-
-    becos synthetic OUT_DIR --seed 0 --poses 4
-    python -m becos.synthetic OUT_DIR --seed 0 --poses 4
-    becos synthetic OUT_DIR --fraction 0.0625     # 1/16 of the BeCoS-size collection (161 shapes)
-
-Deterministic (byte-identical files for the same seed and poses, any process, any PYTHONHASHSEED)
-and fast: about 5-10 s for the default 13 classes x 4 poses on 2 cores.
+Shaped like the real thing so every stage runs on it for real: two datasets with different
+triangulations, units and file frames, six humanoid and six four-legged classes and a centaur, several
+poses per class sharing one triangulation, and a BeCoS-format annotation folder derived from the
+construction. Modules: ``bodies`` (parts, skeletons, implicit surface, charts, posing), ``meshing``
+(marching cubes, relaxation), ``collection`` (correspondences, files). ``becos synthetic OUT_DIR --seed 0
+--poses 4`` (or ``python -m becos.synthetic``; ``--fraction`` for a share of the BeCoS-size collection);
+deterministic, byte-identical for the same seed and poses. Timing and more: docs/design/data.md.
 """
 
 from __future__ import annotations

@@ -1,23 +1,11 @@
 """Articulated synthetic bodies: parts, skeletons, the implicit surface, charts and posing.
 
-Every body is a tree of *parts*. A part is a tapered capsule with an elliptic cross-section around
-a bone segment ``a -> b`` (``a`` = the joint it rotates about). All coordinates here are in the
-common frame of becos: metres, +y up, the body facing +z, anatomical left = +x, feet at y ~ 0.
-
-Three quantities are derived from the parts, always vectorised over points and parts:
-
-- the *part field* ``f_p(x)`` (metres, < 0 inside part p), and the body's implicit surface
-  ``min over skeleton edges (p, parent) of smin(f_p, f_parent)`` (smooth at joints, hard elsewhere);
-- the *part label* of a surface point: ``argmin_p f_p(x)`` (a crisp partition of the surface);
-- the *chart* of a point w.r.t. part p: its position on the canonical capsule of p (unit radius,
-  length :data:`CANONICAL_LENGTH`, in the part's bone frame). Charts are defined by part *name*, so
-  the canonical capsules of all classes form one shared parameter domain: a point of class A on part
-  p corresponds to the point of class B's part p with the same chart position.
-
-Part names carry the body plan: ``b_*`` parts belong to the biped (humanoid) plan, ``q_*`` to the
-quadruped plan, so a centaur (quadruped lower body + biped upper body) shares its ``b_*`` parts with
-humanoids and its ``q_*`` parts with four-legged classes, and nothing else. Names ending in
-``_l``/``_r`` are the anatomical left (+x) / right (-x) copies.
+A body is a tree of parts, each a tapered capsule around a bone ``a -> b``, in becos's common frame
+(metres, +y up, facing +z, anatomical left = +x, feet at y ~ 0). Derived, vectorised over points and
+parts: the part field ``f_p(x)`` (metres, < 0 inside) and the implicit surface, the part label
+(``argmin_p f_p``) and the chart of a point on part p's canonical capsule (shared by part *name* across
+classes, which gives the correspondences). Part names: ``b_*`` biped, ``q_*`` quadruped (a centaur has
+both), ``_l``/``_r`` left/right copies. In detail: docs/design/data.md.
 """
 
 from __future__ import annotations
@@ -40,7 +28,7 @@ class Part:
     """One body part: a tapered capsule with elliptic cross-section around the bone ``a -> b``.
 
     Attributes:
-        name: part name (see module docstring).
+        name: part name (see docs/design/data.md).
         parent: name of the parent part (None for the root), the part it is blended with and moves with.
         a, b: (3,) bone end points, metres, common frame; ``a`` is the joint the part rotates about.
         ra, rb: radius at ``a`` and at ``b`` (metres), linear in between, spherical-ish caps.

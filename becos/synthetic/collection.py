@@ -1,49 +1,12 @@
 """The synthetic collection: classes built and posed, template correspondences, files on disk.
 
-Layout written by :func:`generate_collection` (``OUT`` = its ``out_dir``)::
-
-    OUT/synthetic.json                       what was generated (seed, poses, datasets, sha256 of every file)
-    OUT/data/<folder_name>/<class><k>.off    shapes, k = 0 .. (the class's poses)-1 (k = 0 is the template)
-    OUT/annotations/                          a folder shaped like the BeCoS reference checkout:
-        config/adjacency_matrix.csv           the template network (a tree over <dataset>_<class>0)
-        config/templates_all.csv              one row per class, key <dataset>_<class>
-        config/templates_chirality_all.csv    the templates that carry left/right labels
-        precomputed_corr_templates/<A>[_edit]_<B>[_edit]_corres.txt   one file per directed edge
-        corres_comp/default_faces/<template>.npy                        int64 (F, 3) template faces
-        precomputed_chirality_templates/<dataset>_<template>.txt        one 0/1 per template vertex
-
-Datasets (the file frames differ on purpose, to exercise the registry's scale and rotation):
-
-- ``synthy``: files in the common frame (metres, +y up, facing +z): scale 1, rot [0, 0, 0].
-- ``synthz``: files z-up in centimetres and offset, like TOSCA: scale 0.01, rot [90, 0, 0] (the
-  registry maps ``(V * scale - mean) @ R`` to the common frame, R = Rx(90) in row-vector form).
-
-Ground truth between classes comes from the construction: both templates are meshes of bodies whose
-parts share canonical capsules (:meth:`becos.synthetic.bodies.Body.chart`), the shared parameter
-domain, and every vertex carries the part whose field is smallest there (its label). A template
-vertex of class A on part p is mapped to the point of class B's surface with the same position in a
-shared chart, located in B's triangulation by a closest-point query among B's faces *in chart
-space* (so the barycentric weights are those of B's piecewise-linear chart):
-
-- next to a junction both classes have (within ZONE_WIDTH of the boundary between a part and its
-  parent, either side), in the junction's band chart (:func:`junction_chart`): the angle around the
-  child's bone and the normalised field difference ``zeta`` (:func:`junction_coordinate`), which is
-  0 exactly on the label boundary of every class. The boundary maps onto the boundary and each side
-  onto the same side;
-- elsewhere, in p's capsule chart, rescaled per angle so that the part region spans the same range
-  on every class (:attr:`ClassModel.extents`);
-- where B has a part that A lacks on p (a tail, horns; the centaur's human torso on the barrel), the
-  surface of A under it and the collar around it are spread over B's collar
-  (:func:`_spread_over_collars`, continuous and monotone in depth) instead of being pressed onto
-  the rim.
-
-Vertices on parts B lacks (horns, tail, the centaur's other half) get ``-1 0 0 0``.
-
-Measured (tests/test_synthetic.py, all 24 directed edges of the template tree, 242,731 matched
-vertices): 99.37 % land on the same body part (torso, head with neck, each limb, tail, horn) judged
-by the vertex the pipeline rounds to (dominant corner of the image face; lowest edge 98.80 %),
-99.97 % judged by the image point itself (its part field), 98.69 % on the same bone segment. The
-rounding misses are vertices within about half an edge of a part boundary.
+:func:`generate_collection` writes into ``out_dir``: ``synthetic.json`` (what was generated, sha256 of
+every file), the shapes ``data/<folder_name>/<class><k>.off`` (k = 0 is the template) of two datasets
+whose file frames differ on purpose (``synthy``: metres, y-up; ``synthz``: centimetres, z-up, offset),
+and ``annotations/``, a folder shaped like the BeCoS reference checkout (network, template tables, edge
+files, default faces, left/right labels). Template correspondences come from the construction (shared
+part charts); vertices on parts the other class lacks get ``-1 0 0 0``. The layout, the charts and
+measured part agreement: docs/design/data.md.
 """
 
 from __future__ import annotations
@@ -635,7 +598,7 @@ def poses_at_fraction(fraction: float) -> dict[str, int]:
 def generate_collection(
     out_dir: str | Path, seed: int = 0, poses_per_class: int = 4, fraction: float | None = None
 ) -> Path:
-    """Generate the synthetic collection into ``out_dir`` (see the module docstring for the layout).
+    """Generate the synthetic collection into ``out_dir`` (the layout: docs/design/data.md).
 
     Deterministic: the same (seed, poses_per_class, fraction) gives byte-identical files. The seed
     changes the poses only (templates, annotations and pose 0 are seed-independent), and a class's

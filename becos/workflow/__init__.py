@@ -1,43 +1,13 @@
 """The workflow's stages as library functions: config -> plan -> the work of one job.
 
-Snakemake (``Snakefile``, ``workflow/rules/*.smk``) only names files; every job runs one ``becos``
-sub-command, which calls one function of :mod:`becos.workflow.stages` (or of :mod:`becos.store`,
-:mod:`becos.export`, :mod:`becos.validate`, :mod:`becos.report`). One idea per module:
-
-    config    the schema (``becos/data/schema.yaml``, the only statement of the defaults), config files
-    digests   content digests of the input files (what reruns the dataset check and a remesh)
-    options   the options builder, the one reader of the resolved config: one frozen dataclass per
-              stage (its fields are the keys that rerun it), the options JSON a job receives, the
-              checks across keys, ``remesher: auto`` resolved
-    layout    where every file under ``results`` lives, which remesh file a pair side uses
-    plan      catalog, manifests and the jobs they imply (what Snakemake needs to build the job graph)
-    shapes    a chunk job's shapes, kept while its pairs use them
-    stages    one function per job kind
-
-Every public name is importable from ``becos.workflow`` itself (``import becos.workflow as bw``).
-
-Files under ``results`` (config key ``results``)::
-
-    config.json                         the resolved configuration (defaults filled in)
-    checks/datasets.json                what the dataset check found
-    catalog.csv                         every shape of the enabled datasets (becos.catalog)
-    remeshed/<dataset>/<name>/<v>.npz   one remesh variant: mesh + maps to/from the original (.ply beside)
-    <setting>/manifest.csv              the pairs of a setting (becos.sampling)
-    <setting>/ground_truth/chunk_<k>.json  index of the chunk's ground-truth files <pair_id>.npz
-    <setting>/pairs/chunk_<k>.json      index of the chunk's pair records <pair_id>.npz (becos.record)
-    <setting>/benchmark.zarr            the store (becos.store), validated into validation.json
-    cache/                              parsed meshes and edge files (safe to delete)
-
-Incremental rebuilds. A pair's chunk job is a contiguous range of fixed hash buckets of its id
-(:func:`becos.sampling.assign_chunks`; the manifest's ``chunk`` column records the grouping), so
-growth adds pairs to chunks and moves one only when the number of chunk jobs doubles; a moved pair
-keeps its files (named by pair id; the chunk is not part of any input key). A chunk job reruns when
-the manifest or catalog is rewritten or its stage's options change (they are its Snakemake
-``params``, :func:`job_options`); a remesh job only when its shape's catalog row or target changes.
-Inside a chunk job, a pair's file is rewritten only when the pair's *input key* changed: the digest
-of its manifest row (except its chunk), the stage options and the digests of the files
-it reads (remesh variants, ground truth). So enabling another dataset recomputes only the new or
-re-partnered pairs, and changing ``min_overlap`` recomputes records but no remesh and no ground truth.
+Snakemake only names files; every job runs one ``becos`` sub-command, which calls one function of
+:mod:`becos.workflow.stages` (or of :mod:`becos.store`, :mod:`becos.export`, :mod:`becos.validate`,
+:mod:`becos.report`). Modules: ``config`` (the schema, the only statement of the defaults; config
+files), ``digests`` (input files by content), ``options`` (the one reader of the resolved config: a
+frozen dataclass per stage), ``layout`` (every path under ``results``), ``plan`` (catalog, manifests,
+jobs), ``shapes`` (a chunk job's shapes), ``stages`` (one function per job kind). Every public name is
+importable from ``becos.workflow``. The files under ``results`` and incremental rebuilds:
+docs/design/workflow.md.
 """
 
 from becos.workflow.config import (

@@ -1,31 +1,12 @@
 """Content digests of the files a run reads from outside ``results`` (the datasets' mesh files, the
 annotation folder): what the workflow's rerun decisions follow for them, instead of modification times.
 
-Snakemake reruns a job when an input is *newer* than its output. A file replaced by different content
-with an older time (``cp -p`` of a backup, an archive re-extracted with its stored times, a dataset
-re-downloaded with ``rsync -t``) goes unseen that way. So the rules pass content digests as ``params``,
-which Snakemake's ``params`` rerun trigger compares with the values recorded when the output was made:
-
-- ``check_datasets``, ``catalog`` and ``manifest`` get one digest over every file the dataset check reads
-  (:func:`check_input_files`), so any changed mesh or annotation file is checked again (and stops the run
-  if it no longer fits its class or its edge);
-- a ``remesh`` job gets its mesh file's digest, so a changed mesh is remeshed whatever its time;
-- the chunk jobs (``ground_truth``, ``pairs``) get the digest of the annotation folder's files
-  (:func:`annotation_input_files`) and, without remeshing, of the original meshes of their pairs: a
-  changed file reruns them, and their per-pair input keys recompute exactly the pairs that read it.
-
-Each job that reads such a file carries the digest itself: Snakemake does not rerun the jobs after one
-whose output was rewritten with the same content (its input checksums), so a rerun check that reports
-the same does not reach the jobs behind it.
-
-Files that a rule of the same run writes (the synthetic collection, downloads, prepared DeformingThings4D
-OBJs, a fetched annotation folder) are left out: their producing job's output time is what reruns the
-check, and a digest taken before that job runs would differ from the one after it.
-
-Hashing is cached (:class:`DigestCache`, ``results/cache/input_digests.json``) on each file's size,
-modification time, status-change time and inode: an unchanged tree costs one ``stat`` per file. The
-status-change time (``st_ctime``) cannot be set back by a user, so an edit that keeps the size and
-restores the modification time is still hashed again.
+The rules pass these digests as ``params``, so a file replaced by other content with an older time
+(``cp -p``, an archive re-extracted with its stored times) still reruns the jobs that read it:
+:func:`check_input_files` for the dataset check, catalog and manifest, a mesh file's digest for its
+remesh job, :func:`annotation_input_files` (and, without remeshing, the pairs' meshes) for chunk jobs.
+Files a rule of the same run writes are left out. Hashing is cached (:class:`DigestCache`,
+``results/cache/input_digests.json``) on each file's size, times and inode. Why each: docs/design/workflow.md.
 """
 
 from __future__ import annotations
