@@ -6,6 +6,7 @@ traceback."""
 from __future__ import annotations
 
 import json
+import re
 import shutil
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -403,7 +404,7 @@ CORRUPTIONS = (
 def test_every_check_has_a_corruption():
     page = (Path(__file__).resolve().parents[1] / "docs" / "design" / "validate.md").read_text()
     section = page.split("## `becos.validate`")[1].split("\n## ")[0]
-    documented = [line.split("``")[1] for line in section.splitlines() if line.startswith("``")]
+    documented = re.findall(r"^``(\w+)``", section, flags=re.MULTILINE)
     assert set(documented) == set(CHECKS) | {"store"}
     assert [c.check for c in CORRUPTIONS] == list(CHECKS)
 
