@@ -115,9 +115,8 @@ class SurfaceMap:
 
         On a large face the nearest vertex is often a neighbour's far corner rather than a corner of
         the face; its distance is measured in the two faces unfolded into one plane, so a vertex that
-        is near in 3D only across a fold, a thin part or a contact is never preferred. On issue #20's
-        TOSCA run this put the maps' mean error 0.8-1.0 % above the best vertex map (nearest corner
-        in 3D, :meth:`to_nearest_corners`: 3-3.5 %).
+        is near in 3D only across a fold, a thin part or a contact is never preferred (measured against
+        the other rules: docs/measurements.md, vertex rounding).
 
         Args:
             target_vertices: (V, 3) float target vertex positions (any frame: distances are compared,
@@ -138,9 +137,8 @@ class SurfaceMap:
         (records with meta ``vertex_rounding: nearest_corner``; :func:`becos.validate` checks them by it).
 
         The largest-weight corner is the nearest only on equilateral faces (its regions are bounded by
-        the medians, not the perpendicular bisectors); on TOSCA remeshes it put the maps' mean error
-        13-14 % above the best vertex map, the nearest corner 3-4 % (issue #20). The three corners of
-        one face lie on one part, so the choice never jumps across a contact.
+        the medians, not the perpendicular bisectors; measured: docs/measurements.md, vertex rounding). The
+        three corners of one face lie on one part, so the choice never jumps across a contact.
 
         Args:
             target_vertices: (V, 3) float target vertex positions (any frame; a similarity does not
