@@ -78,14 +78,14 @@ def test_a_store_rewritten_under_a_reader_is_a_named_error(store, pair_record_fi
         ),
         (
             ["catalog", "--options", "{}"],
-            "becos catalog: --options: lacks the key 'annotations' (given keys: []). Fix: ",
+            "becos catalog: --options: lacks the key 'results' (given keys: []). Fix: ",
         ),
         (["remesh", "--options", "{}", "--shape", "{x", "--token", "v0"], "becos remesh: --shape: not valid JSON"),
         (
             [
                 "ground-truth",
                 "--options",
-                '{"results": "RESULTS", "annotations": "x", "template_file": "t"}',
+                '{"results": "RESULTS", "annotations": "x", "template_file": "t", "remesh": true}',
                 "--setting",
                 "full_full",
                 "--chunk",
