@@ -275,7 +275,7 @@ def test_pairs_stage_builds_published_p2p_pairs_from_the_published_views(publish
     sides, the published rotations, the try the reference kept; masks are becos's exact ones."""
     from becos.pairs import build_pair
     from becos.reference_views import full_faces_covering
-    from becos.workflow import ShapeStore, pair_options, pair_published_rotations, pair_published_views, remesh_token
+    from becos.workflow import ShapeStore, pair_published_rotations, pair_published_views, pairs_options, remesh_token
 
     config = published["config"]
     row = oracle.manifest_row(published["manifests"]["partial_partial"], "train", 384)
@@ -283,7 +283,7 @@ def test_pairs_stage_builds_published_p2p_pairs_from_the_published_views(publish
     remeshed, gt = oracle.pair_ground_truth(published, stage, row)
     shapes = ShapeStore(config, published["plan"].catalog)
     x, y = (shapes.instance("tosca", row[f"{s}_name"], remesh_token(row, s, True)) for s in "xy")
-    options = pair_options(config, "partial_partial")
+    options = pairs_options(config, "partial_partial").pair_options()
     views = pair_published_views(config, row, options)
     assert views is not None
     record = build_pair(

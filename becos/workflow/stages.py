@@ -313,12 +313,6 @@ def load_ground_truth(path: Path):
         )
 
 
-def pair_options(config, setting: str):
-    """:class:`becos.pairs.PairOptions` of ``setting`` (:meth:`PairsOptions.pair_options`; ``config``: a
-    resolved config or the pairs stage's options)."""
-    return pairs_options(config, setting).pair_options()
-
-
 def pairs_stage(
     options: PairsOptions | dict,
     setting: str,
