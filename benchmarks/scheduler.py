@@ -4,11 +4,12 @@ A workflow of ``--jobs`` independent one-line ``shell:`` jobs (all ready at once
 variants are after the manifests; with ``--own-input`` each reads a file of its own) runs from scratch with ``--cores 2 --scheduler S`` for each selector
 and size, alternating. Per run: wall and the Snakemake process tree's CPU seconds (user + system, the
 jobs' ``echo`` included, the same for both selectors). ``growth``: the log-log slope of CPU in the job
-count per selector (1: linear). becos's workflow profile (profiles/default) selects ``greedy``.
+count per selector (1: linear). becos's workflow profile (profiles/default) selects ``greedy`` with
+``--scheduler-subsample 100``; ``--subsample N`` compares greedy with and without it instead of ILP.
 
 Usage::
 
-    python benchmarks/scheduler.py [--jobs 100,400,800] [--workdir /tmp/becos-scheduler]
+    python benchmarks/scheduler.py [--jobs 100,400,800] [--own-input] [--subsample 100] [--workdir /tmp/becos-scheduler]
 """
 
 from __future__ import annotations
@@ -38,14 +39,16 @@ rule one:
 """
 
 
-def run(workdir: Path, scheduler: str, jobs: int, own_input: bool) -> dict:
-    """One run from scratch; CPU from the children's rusage difference (Snakemake and its jobs)."""
+def run(workdir: Path, scheduler: str, jobs: int, own_input: bool, subsample: int | None = None) -> dict:
+    """One run from scratch; CPU from the children's rusage difference (Snakemake and its jobs).
+    ``subsample``: Snakemake's ``--scheduler-subsample`` (ready jobs the selector sees per round)."""
     shutil.rmtree(workdir, ignore_errors=True)
     (workdir / "in").mkdir(parents=True)
     (workdir / "Snakefile").write_text(SNAKEFILE)
     for i in range(jobs if own_input else 0):
         (workdir / "in" / f"{i}.txt").write_text(str(i))
     command = [sys.executable, "-m", "snakemake", "--cores", "2", "--scheduler", scheduler, "--quiet", "all"]
+    command += ["--scheduler-subsample", str(subsample)] if subsample else []
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     start = time.perf_counter()
     subprocess.run(
@@ -60,7 +63,7 @@ def run(workdir: Path, scheduler: str, jobs: int, own_input: bool) -> dict:
     cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
     assert len(list((workdir / "out").iterdir())) == jobs
     return {
-        "scheduler": scheduler,
+        "scheduler": scheduler + (f"+subsample {subsample}" if subsample else ""),
         "jobs": jobs,
         "own_input": own_input,
         "wall_seconds": round(wall, 2),
@@ -78,17 +81,24 @@ def main() -> None:
         help="each job reads its own input file, as each remesh job reads its shape's mesh (Snakemake checks "
         "the size of every ready job's inputs in every scheduling round)",
     )
+    parser.add_argument(
+        "--subsample",
+        type=int,
+        help="compare greedy with greedy plus --scheduler-subsample N (as profiles/default sets) instead of ILP",
+    )
     args = parser.parse_args()
     sizes = [int(n) for n in args.jobs.split(",")]
-    runs = [run(args.workdir, scheduler, n, args.own_input) for n in sizes for scheduler in ("ilp", "greedy")]
+    variants = [("greedy", None), ("greedy", args.subsample)] if args.subsample else [("ilp", None), ("greedy", None)]
+    runs = [run(args.workdir, s, n, args.own_input, sub) for n in sizes for s, sub in variants]
     growth = {}
-    for scheduler in ("ilp", "greedy"):
-        cpu = [r["cpu_seconds"] for r in runs if r["scheduler"] == scheduler]
+    for name in dict.fromkeys(r["scheduler"] for r in runs):
+        cpu = [r["cpu_seconds"] for r in runs if r["scheduler"] == name]
         slope = np.polyfit(np.log(sizes), np.log(cpu), 1)[0] if len(sizes) > 1 else float("nan")
-        growth[scheduler] = {"cpu_seconds": cpu, "slope": round(float(slope), 3)}
+        growth[name] = {"cpu_seconds": cpu, "slope": round(float(slope), 3)}
+    first, second = (r["scheduler"] for r in runs[:2])
     ratio = {str(n): round(runs[2 * i]["cpu_seconds"] / runs[2 * i + 1]["cpu_seconds"], 2) for i, n in enumerate(sizes)}
     shutil.rmtree(args.workdir, ignore_errors=True)
-    print(json.dumps({"runs": runs, "growth": growth, "cpu_ratio_ilp_over_greedy": ratio}, indent=1))
+    print(json.dumps({"runs": runs, "growth": growth, f"cpu_ratio_{first}_over_{second}": ratio}, indent=1))
 
 
 if __name__ == "__main__":

@@ -339,13 +339,15 @@ def test_every_sub_command_is_one_arguments_and_handler_pair(monkeypatch, capsys
 
 @pytest.mark.parametrize("profile", [None, "profiles/local", "profiles/slurm", "profiles/cluster-generic"])
 def test_every_run_selects_jobs_greedily(profile, monkeypatch):
-    """Snakemake's ILP job selector made Snakemake's own CPU grow faster than the job count at scale
-    (issue #30; benchmarks/scheduler.py): the workflow profile, read beside any --profile, selects the
-    greedy one."""
+    """Snakemake's ILP job selector, and its sizing of every ready job's inputs each round, made
+    Snakemake's own CPU grow faster than the job count at scale (issue #30; benchmarks/scheduler.py):
+    the workflow profile, read beside any --profile, selects the greedy one among a bounded sample."""
     monkeypatch.chdir(REPO)
     from snakemake.cli import parse_args
 
     _, args = parse_args(["--cores", "2", "-n", *(("--profile", profile) if profile else ())])
     assert args.scheduler == "greedy"
+    assert args.scheduler_subsample == 100
     _, args = parse_args(["--cores", "2", "-n", "--workflow-profile", "none"])
-    assert args.scheduler == "ilp"  # Snakemake's own default: the profile's line is what changes it
+    assert args.scheduler == "ilp"  # Snakemake's own default: the profile's lines are what change it
+    assert args.scheduler_subsample is None
