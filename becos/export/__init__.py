@@ -2,26 +2,22 @@
 
 Writers take an iterable of :class:`~becos.record.PairRecord` (a store's ``Benchmark.records()``)
 and stream it: :mod:`.released` (the released BeCoS layout), :mod:`.psmal`, :mod:`.dpfm`,
-:mod:`.ulrssm`, and :mod:`.geodesics` (geodesic matrices where loaders read them). :mod:`.staging`
-holds what they share (folders renamed into place, per-split numbering, ids, logs), :mod:`.text`
+:mod:`.ulrssm` (its MAT files: :mod:`.mat`), and :mod:`.geodesics` (geodesic matrices where loaders
+read them; DeepShapeMatchingKit's cache names: :mod:`.dsmk`). :mod:`.staging` holds what they share (folders renamed into place, per-split numbering, ids, logs), :mod:`.text`
 the OFF/VTS text. Layouts, files and keys: ``docs/released-layout.md``.
 """
 
 from becos.export.dpfm import DPFM_NONE_MAPS, dpfm_shape_id, write_dpfm
+from becos.export.dsmk import DSMK_FOLDER, dsmk_cache_name
 from becos.export.geodesics import (
-    DSMK_FOLDER,
     GEODESIC_FOLDER,
     GEODESIC_LAYOUTS,
-    MAT_MAX_VERTICES,
-    dsmk_cache_name,
-    mat_prefix,
-    mat_size,
     mesh_sqrt_areas,
     symmetric_block,
     write_geodesic_matrices,
     write_geodesics,
-    write_symmetric_mat,
 )
+from becos.export.mat import MAT_MAX_VERTICES, mat_prefix, mat_size, write_symmetric_mat
 from becos.export.psmal import psmal_shape_id, write_psmal
 from becos.export.released import (
     PICKLE_PROTOCOL,

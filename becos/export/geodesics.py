@@ -1,6 +1,6 @@
 """Geodesic matrices of the exports: the plan (each distinct full mesh once, with the vertices its shapes
-keep), per-mesh blocks (solved in processes, or read from ``becos geodesic-rows`` folders), streamed
-MAT v5 files (ULRSSM's ``dist/<k>.mat``), and the loaders' layouts: :func:`write_geodesic_matrices`
+keep), per-mesh blocks (solved in processes, or read from ``becos geodesic-rows`` folders) cut into row
+chunks for streamed writes (ULRSSM's MAT files: :mod:`.mat`), and the loaders' layouts: :func:`write_geodesic_matrices`
 (geo-lora's ``geodesic_dist_matrices/<stem>.npy``, DeepShapeMatchingKit's cache names) and
 :func:`write_geodesics` (PSMAL ids). Matrices are (V, V) float32, measured on the shape's FULL mesh.
 """
@@ -19,6 +19,8 @@ from pathlib import Path
 import numpy as np
 
 from becos.errors import BecosError
+from becos.export.dsmk import DSMK_FOLDER, dsmk_cache_name, dsmk_reads, save_dsmk_pointer
+from becos.export.mat import WRITE_CHUNK_BYTES
 from becos.export.psmal import psmal_shape_id
 from becos.export.released import released_file_stem, released_infos
 from becos.export.staging import (
@@ -34,89 +36,6 @@ from becos.export.staging import (
     write_log,
 )
 from becos.record import PairRecord, full_shape
-
-_MI_INT8, _MI_INT32, _MI_UINT32, _MI_SINGLE, _MI_MATRIX = 1, 5, 6, 7, 14
-
-
-_MX_SINGLE_CLASS = 7
-
-
-MAT_MAX_VERTICES = 32767
-"""Largest V of a (V, V) float32 MAT v5 matrix: its element's byte count is a uint32 (4 V² + 48 < 2³²).
-scipy's ``loadmat`` (ULRSSM's reader) cannot read the HDF5-based v7.3 files that would hold more."""
-
-
-_MAT_TEXT = b"MATLAB 5.0 MAT-file, Platform: posix, Created by: becos (scipy.io.loadmat reads it)"
-
-
-WRITE_CHUNK_BYTES = 32 << 20
-"""Bytes per buffered write of a matrix (rows of a cut, gathered at a time)."""
-
-
-def _mat_pad(nbytes: int) -> int:
-    return -nbytes % 8
-
-
-def mat_prefix(n: int, name: str = "dist") -> bytes:
-    """The first bytes of a little-endian MAT v5 file holding one real (n, n) float32 matrix ``name``:
-    the 128-byte header (fixed text, no date, so the bytes depend on the matrix alone) and the tags of
-    the ``miMATRIX`` element (array flags ``mxSINGLE_CLASS``, dimensions (n, n), name, ``miSINGLE``
-    data of 4 n² bytes) laid out as ``scipy.io.savemat`` lays them out. The 4 n² data bytes follow in
-    column-major order, then zeros up to a multiple of 8 bytes. For a symmetric matrix column-major is
-    row-major: the rows of a C-ordered array are written as they are, in as many pieces as wanted."""
-    import struct
-
-    if not 0 <= n <= MAT_MAX_VERTICES:
-        raise ExportError(
-            f"a {n} x {n} float32 matrix does not fit a MATLAB v5 file (at most {MAT_MAX_VERTICES} rows), "
-            f"and ULRSSM's scipy.io.loadmat reads no v7.3 file. Fix: leave out --geodesics for shapes this "
-            f"large (ULRSSM computes dist itself), or remesh to fewer vertices"
-        )
-    label = name.encode("ascii")
-    if len(label) <= 4:  # small data element: byte count and type in one word, data in the next four bytes
-        name_element = struct.pack("<HH", _MI_INT8, len(label)) + label.ljust(4, b"\0")
-    else:
-        name_element = struct.pack("<II", _MI_INT8, len(label)) + label + b"\0" * _mat_pad(len(label))
-    data = 4 * n * n
-    body = (
-        struct.pack("<IIII", _MI_UINT32, 8, _MX_SINGLE_CLASS, 0)
-        + struct.pack("<IIii", _MI_INT32, 8, n, n)
-        + name_element
-        + struct.pack("<II", _MI_SINGLE, data)
-    )
-    header = _MAT_TEXT.ljust(116, b" ") + b"\0" * 8 + struct.pack("<H", 0x0100) + b"IM"
-    return header + struct.pack("<II", _MI_MATRIX, len(body) + data + _mat_pad(data)) + body
-
-
-def mat_size(n: int, name: str = "dist") -> int:
-    """Bytes of the MAT v5 file of an (n, n) float32 matrix (:func:`mat_prefix`)."""
-    data = 4 * n * n
-    return len(mat_prefix(n, name)) + data + _mat_pad(data)
-
-
-def write_symmetric_mat(path: str | Path, n: int, chunks: Iterable[np.ndarray], name: str = "dist") -> int:
-    """Write a symmetric (n, n) float32 matrix as the MAT v5 file ``path`` (variable ``name``),
-    atomically, from ``chunks``: consecutive (k, n) float32 row blocks whose rows add up to n (the
-    matrix is never whole in memory here). Returns the bytes written; ``scipy.io.loadmat(path)[name]``
-    gives the matrix back (float32, (n, n))."""
-    from becos.atomic import atomic_path
-
-    data = 4 * n * n
-    with atomic_path(path, suffix=".tmp.mat") as tmp:
-        with open(tmp, "wb") as fh:
-            fh.write(mat_prefix(n, name))
-            done = 0
-            for chunk in chunks:
-                chunk = np.ascontiguousarray(chunk, dtype=np.float32)
-                if chunk.ndim != 2 or chunk.shape[1] != n:
-                    raise ValueError(f"row block of shape {chunk.shape}, expected (k, {n})")
-                if chunk.size:
-                    fh.write(memoryview(chunk).cast("B"))
-                done += chunk.shape[0]
-            if done != n:
-                raise ValueError(f"{done} rows written, expected {n}")
-            fh.write(b"\0" * _mat_pad(data))
-    return Path(path).stat().st_size
 
 
 def cut_chunks(block: np.ndarray, cut: np.ndarray | None) -> Iterator[np.ndarray]:
@@ -528,90 +447,6 @@ GEODESIC_LAYOUTS = ("geo-lora", "dsmk")
 """The geodesic layouts :func:`write_geodesic_matrices` can write (``exports.geodesic_layouts``)."""
 
 
-DSMK_FOLDER = "dsmk"
-"""Folder of DeepShapeMatchingKit's geodesic cache layout (:func:`write_geodesic_matrices`)."""
-
-
-def dsmk_cache_name(vertices: np.ndarray, faces: np.ndarray) -> str:
-    """DeepShapeMatchingKit's geodesic cache file name of a shape, ``<sha1>_0.npz``, as its
-    ``BeCoSDataset`` (``shape_scale: default``) looks it up: ``utils.cache_util.get_cached_compute`` hashes
-    the loaded OFF's vertices as float32 and its faces as int64 (``hash_arrays``: SHA-1 over the raw bytes
-    of each array in turn); ``_0`` is the first slot of its collision chain.
-
-    Args:
-        vertices: (V, 3) the shape's written vertices (any float dtype; cast to float32 as the loader does).
-        faces: (F, 3) its faces.
-    """
-    import hashlib
-
-    digest = hashlib.sha1()
-    digest.update(np.ascontiguousarray(vertices, dtype=np.float32).view(np.uint8))
-    digest.update(np.ascontiguousarray(faces, dtype=np.int64).view(np.uint8))
-    return f"{digest.hexdigest()}_0.npz"
-
-
-class _NpyFile:
-    """Pickles as ``numpy.load(path)``."""
-
-    def __init__(self, path: str):
-        self.path = path
-
-    def __reduce__(self):
-        return (np.load, (self.path,))
-
-
-class _ScaledNpyFile:
-    """Pickles as ``operator.mul(numpy.load(path), scale)``: the (V, V) float32 file times a Python float
-    (float32 arithmetic, the same bytes as ``array * np.float32(scale)``). Only ``numpy.load`` and
-    ``_operator.mul`` are named, so any numpy version reads it."""
-
-    def __init__(self, path: str, scale: float):
-        self.path, self.scale = path, float(scale)
-
-    def __reduce__(self):
-        import operator
-
-        return (operator.mul, (_NpyFile(self.path), self.scale))
-
-
-def save_dsmk_pointer(path: str | Path, vertices: np.ndarray, faces: np.ndarray, target: Path, scale: float) -> int:
-    """Write DeepShapeMatchingKit's cache file ``path`` (:func:`dsmk_cache_name`) without a copy of the
-    matrix: ``verts`` (V, 3) float32 and ``faces`` (F, 3) int64 as its cache holds them, and ``result``
-    a pickle that reads the geo-lora file ``target`` (absolute; (V, V) float32, divided by the sqrt-area)
-    and multiplies it by ``scale`` (the sqrt-area), so the loader's ``np.load(path,
-    allow_pickle=True)["result"]`` is the (V, V) float32 matrix in the units of the vertices, equal to
-    the copy :func:`write_geodesic_matrices` would write. A few hundred bytes plus the mesh; if
-    ``target`` is gone (the export moved), the lookup raises FileNotFoundError, which the loader's
-    cache treats as a miss: it computes the matrix itself and replaces this file. Atomic; returns the
-    bytes written."""
-    import io
-    import pickle
-    import zipfile
-
-    from becos.atomic import atomic_path
-
-    result = io.BytesIO()
-    np.lib.format.write_array_header_1_0(result, {"descr": "|O", "fortran_order": False, "shape": ()})
-    pickle.dump(_ScaledNpyFile(str(Path(target).resolve()), scale), result, protocol=2)
-    members = {
-        "verts.npy": np.ascontiguousarray(vertices, dtype=np.float32),
-        "faces.npy": np.ascontiguousarray(faces, dtype=np.int64),
-    }
-    with atomic_path(path, suffix=".tmp.npz") as tmp:
-        with zipfile.ZipFile(tmp, "w", compression=zipfile.ZIP_STORED) as z:
-            for name, array in members.items():
-                with z.open(zipfile.ZipInfo(name), "w") as fh:  # default timestamp 1980-01-01, as numpy's
-                    np.lib.format.write_array(fh, array, allow_pickle=False)
-            z.writestr(zipfile.ZipInfo("result.npy"), result.getvalue())
-    return Path(path).stat().st_size
-
-
-def _dsmk_reads(setting: str, side: int) -> bool:
-    """Whether DeepShapeMatchingKit's BeCoSDataset asks for the geodesics of this shape: only the first
-    shape of each pair it forms is given ``dist``; it forms (0, 1) always and (1, 0) for F2F and P2P."""
-    return side == 0 or setting in ("partial_partial", "full_full")
-
-
 def symmetric_block(rows: np.ndarray, sources: np.ndarray, sqrt_area: float) -> np.ndarray:
     """(R, R) float32: the distances between the R ``sources`` of a mesh, from its (R, V) ``rows``
     (row i from vertex ``sources[i]``), symmetrised (the mean of d(a, b) and d(b, a)), zero on the
@@ -674,7 +509,7 @@ def geodesic_disk_estimate(
         n = len(sh.p2f)
         if "geo-lora" in layouts and n != len(needed[sh.key]):  # p2f ⊆ needed: equal sets iff equal lengths
             cuts.setdefault(sh.stem, 4 * n * n + _NPY_HEADER_BYTES)
-        if "dsmk" in layouts and _dsmk_reads(sh.setting, sh.side):
+        if "dsmk" in layouts and dsmk_reads(sh.setting, sh.side):
             matrix = 0 if dsmk_points and "geo-lora" in layouts else 4 * n * n
             dsmk[(sh.split, sh.pair_id, sh.side)] = matrix + _DSMK_FILE_BYTES_PER_VERTEX * n + 1024
     out = {
@@ -836,7 +671,7 @@ def write_geodesic_matrices(
                     matrix = _block_cut(path, cut, whole)
                     save_npy(folder / f"{sh.stem}.npy", matrix)
             dsmk_file = ""
-            if "dsmk" in layouts and _dsmk_reads(sh.setting, sh.side):
+            if "dsmk" in layouts and dsmk_reads(sh.setting, sh.side):
                 dsmk_file = f"{DSMK_FOLDER}/{sh.split}/dist/{dsmk_cache_name(sh.vertices, sh.faces)}"
                 if dsmk_file not in dsmk_written:
                     dsmk_written.add(dsmk_file)

@@ -13,16 +13,14 @@ from pathlib import Path
 import numpy as np
 
 from becos.export.geodesics import (
-    WRITE_CHUNK_BYTES,
     GeodesicShape,
     cut_chunks,
     geodesic_plan,
-    mat_size,
     mesh_blocks,
     mesh_sqrt_areas,
     task_rows,
-    write_symmetric_mat,
 )
+from becos.export.mat import WRITE_CHUNK_BYTES, mat_size, write_symmetric_mat
 from becos.export.staging import (
     IDS_FILE,
     LOGS_DIR,
