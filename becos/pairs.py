@@ -17,6 +17,7 @@ from functools import cached_property
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from becos.align import RigidTransform
 from becos.defaults import config_default
 from becos.mesh import TriMesh
 from becos.partiality import Partial, Scanner, align_to, cast_p2f, cast_p2p, whole
@@ -144,6 +145,186 @@ def _shape_arrays(
     }
 
 
+@dataclass
+class _Views:
+    """What a setting keeps of a pair before the final placement: the two kept parts (``px`` of X,
+    ``py`` of Y), the rigid alignment of Y onto X, the overlap masks, the maps between the parts, the
+    cameras (None where no scan was made) and the setting's updates of the pair meta (tries)."""
+
+    px: Partial
+    py: Partial
+    alignment: RigidTransform
+    mask_x: np.ndarray
+    mask_y: np.ndarray
+    map_xy: SurfaceMap
+    map_yx: SurfaceMap
+    camera_x: object = None
+    camera_y: object = None
+    meta: dict = field(default_factory=dict)
+
+
+def _published_p2p_views(x, y, gt_xy, gt_yx, published_views) -> _Views:
+    """P2P on the published cameras' views (the try the reference keeps), with exact masks and maps."""
+    from becos.partiality import cut, overlap_mask, partial_map
+
+    pub = published_views(x.mesh, y.mesh, gt_xy, gt_yx)
+    px, py = cut(x.mesh, pub.choice.kept_x), cut(y.mesh, pub.choice.kept_y)
+    alignment = align_to(x.mesh, y.mesh, gt_xy)
+    mask_x, mask_y = overlap_mask(px, gt_xy, py), overlap_mask(py, gt_yx, px)
+    map_xy, map_yx = partial_map(px, gt_xy, py), partial_map(py, gt_yx, px)
+    c = pub.choice
+    meta = {
+        "n_tries": len(c.reference_overlaps),
+        "accepted": bool(c.accepted),
+        "try_index": int(c.try_index),
+        "published_views": {
+            "camera_try": int(c.camera_try),
+            "exact_try": int(c.exact_try),
+            "exact_rule_keeps_another_try": bool(c.exact_differs),
+            "reference_overlaps": c.reference_overlaps.tolist(),
+            "exact_overlaps": c.exact_overlaps.tolist(),
+            "sources": pub.sources,
+        },
+    }
+    return _Views(px, py, alignment, mask_x, mask_y, map_xy, map_yx, pub.camera_x, pub.camera_y, meta)
+
+
+def _cast_p2p_views(x, y, gt_xy, gt_yx, seed, pair_id, options: PairOptions, scanners) -> _Views:
+    """P2P: both shapes scanned from cameras drawn from the pair's seed (:func:`becos.partiality.cast_p2p`)."""
+    scan = cast_p2p(
+        x.mesh,
+        y.mesh,
+        gt_xy,
+        gt_yx,
+        (seed, pair_id),
+        regime=options.cam_pos_regime,
+        up_axis=options.up_axis,
+        camera_distance=options.camera_distance,
+        n_tries=options.n_cam_pos,
+        min_overlap=options.min_overlap,
+        max_overlap=options.max_overlap,
+        scanners=None if None in scanners else scanners,
+    )
+    meta = {"n_tries": scan.n_tries_used, "accepted": bool(scan.accepted), "try_index": scan.try_index}
+    return _Views(
+        scan.partial_x,
+        scan.partial_y,
+        scan.alignment,
+        scan.mask_x,
+        scan.mask_y,
+        scan.map_xy,
+        scan.map_yx,
+        scan.camera_x,
+        scan.camera_y,
+        meta,
+    )
+
+
+def _p2f_views(x, y, gt_xy, gt_yx, seed, pair_id, options: PairOptions, scanner) -> _Views:
+    """P2F: X whole, Y scanned from one camera drawn from the pair's seed (:func:`becos.partiality.cast_p2f`)."""
+    scan = cast_p2f(
+        x.mesh,
+        y.mesh,
+        gt_xy,
+        gt_yx,
+        (seed, pair_id),
+        up_axis=options.up_axis,
+        camera_distance=options.camera_distance,
+        scanner=scanner,
+    )
+    alignment = align_to(x.mesh, y.mesh, gt_xy)
+    meta = {"n_tries": 1, "try_index": 0}
+    return _Views(
+        scan.full_x,
+        scan.partial_y,
+        alignment,
+        scan.mask_x,
+        scan.mask_y,
+        scan.map_xy,
+        scan.map_yx,
+        None,
+        scan.camera_y,
+        meta,
+    )
+
+
+def _views(x, y, gt_xy, gt_yx, seed, pair_id, options: PairOptions, scanners, published_views) -> _Views:
+    """The setting's views of the pair (F2F: both shapes whole, the ground truth as the maps)."""
+    if options.setting == "partial_partial" and published_views is not None:
+        return _published_p2p_views(x, y, gt_xy, gt_yx, published_views)
+    if options.setting == "partial_partial":
+        return _cast_p2p_views(x, y, gt_xy, gt_yx, seed, pair_id, options, scanners)
+    if options.setting == "partial_full":
+        return _p2f_views(x, y, gt_xy, gt_yx, seed, pair_id, options, scanners[1])
+    alignment = align_to(x.mesh, y.mesh, gt_xy)
+    return _Views(whole(x.mesh), whole(y.mesh), alignment, gt_xy.matched, gt_yx.matched, gt_xy, gt_yx)
+
+
+def _pair_meta(x, y, pair_id: str, seed: int, split: str, options: PairOptions) -> dict:
+    """The pair meta before its views are made (their tries update it: :attr:`_Views.meta`)."""
+    meta = {
+        "pair_id": pair_id,
+        "seed": int(seed),
+        "setting": options.setting,
+        "split": split,
+        "area_normalised": options.area_normalised,
+        "n_tries": 0,
+        "accepted": True,
+        "try_index": -1,
+        "vertex_rounding": VERTEX_MAP_ROUNDING,
+        "options": {k: getattr(options, k) for k in options.__dataclass_fields__},
+    }
+    for key, s in (("x", x), ("y", y)):
+        meta[key] = {"name": s.name, "dataset": s.dataset, "category": s.category, "class": s.shape_class}
+    return meta
+
+
+def _final_rotations(seed: int, pair_id: str, options: PairOptions, rotations) -> tuple[np.ndarray, np.ndarray]:
+    """(3, 3) rotations of x and y (row vectors, applied last): ``rotations`` if given, else drawn from
+    the pair's seed."""
+    if rotations is not None:
+        rot_x, rot_y = (np.asarray(r, dtype=np.float64).reshape(3, 3) for r in rotations)
+        return rot_x, rot_y
+    rot_x = random_rotation(rng_for(seed, pair_id, "rotation", "x"), options.up_axis, options.one_axis_rotation)
+    rot_y = random_rotation(rng_for(seed, pair_id, "rotation", "y"), options.up_axis, options.one_axis_rotation)
+    return rot_x, rot_y
+
+
+def _pair_arrays(x, y, views: _Views, rot_x: np.ndarray, rot_y: np.ndarray, area_normalised: bool) -> dict:
+    """The record's arrays: each shape's kept part placed (Y aligned onto X, divided by the full shape's
+    sqrt-area when ``area_normalised``, then rotated) and the maps between the parts."""
+    area_x, area_y = x.area, y.area
+    px, py, alignment = views.px, views.py, views.alignment
+    norm_x = np.sqrt(area_x) if area_normalised else 1.0
+    norm_y = np.sqrt(area_y) if area_normalised else 1.0
+    final_x = (px.mesh.vertices / norm_x) @ rot_x
+    final_y = (alignment.apply(py.mesh.vertices) / norm_y) @ rot_y
+    full_x = (x.mesh.vertices / norm_x) @ rot_x
+    full_y = (alignment.apply(y.mesh.vertices) / norm_y) @ rot_y
+
+    arrays = {}
+    shape_x = _shape_arrays(x, px, final_x, views.mask_x, np.eye(3), np.zeros(3), rot_x, views.camera_x, area_x, full_x)
+    shape_y = _shape_arrays(
+        y,
+        py,
+        final_y,
+        views.mask_y,
+        alignment.rotation.T.copy(),
+        alignment.translation.copy(),
+        rot_y,
+        views.camera_y,
+        area_y,
+        full_y,
+    )
+    arrays.update({f"x_{k}": v for k, v in shape_x.items()})
+    arrays.update({f"y_{k}": v for k, v in shape_y.items()})
+    for name, m, target, full in (("corr_01", views.map_xy, py, y), ("corr_10", views.map_yx, px, x)):
+        arrays[name] = target.round_to_vertices(m, full.vertex_rounding)
+        arrays[f"{name}_face"] = m.face
+        arrays[f"{name}_weights"] = m.weights
+    return arrays
+
+
 def build_pair(
     x: ShapeInstance,
     y: ShapeInstance,
@@ -178,116 +359,8 @@ def build_pair(
             f"pair {pair_id}: ground truth lengths {len(gt_xy)}, {len(gt_yx)} do not match the "
             f"meshes ({x.mesh.n_vertices}, {y.mesh.n_vertices} vertices)"
         )
-    meta = {
-        "pair_id": pair_id,
-        "seed": int(seed),
-        "setting": options.setting,
-        "split": split,
-        "area_normalised": options.area_normalised,
-        "n_tries": 0,
-        "accepted": True,
-        "try_index": -1,
-        "vertex_rounding": VERTEX_MAP_ROUNDING,
-        "options": {k: getattr(options, k) for k in options.__dataclass_fields__},
-    }
-    for key, s in (("x", x), ("y", y)):
-        meta[key] = {"name": s.name, "dataset": s.dataset, "category": s.category, "class": s.shape_class}
-
-    camera_x = camera_y = None
-    if options.setting == "partial_partial" and published_views is not None:
-        from becos.partiality import cut, overlap_mask, partial_map
-
-        pub = published_views(x.mesh, y.mesh, gt_xy, gt_yx)
-        px, py = cut(x.mesh, pub.choice.kept_x), cut(y.mesh, pub.choice.kept_y)
-        alignment = align_to(x.mesh, y.mesh, gt_xy)
-        mask_x, mask_y = overlap_mask(px, gt_xy, py), overlap_mask(py, gt_yx, px)
-        map_xy, map_yx = partial_map(px, gt_xy, py), partial_map(py, gt_yx, px)
-        camera_x, camera_y = pub.camera_x, pub.camera_y
-        c = pub.choice
-        meta.update(
-            n_tries=len(c.reference_overlaps),
-            accepted=bool(c.accepted),
-            try_index=int(c.try_index),
-            published_views={
-                "camera_try": int(c.camera_try),
-                "exact_try": int(c.exact_try),
-                "exact_rule_keeps_another_try": bool(c.exact_differs),
-                "reference_overlaps": c.reference_overlaps.tolist(),
-                "exact_overlaps": c.exact_overlaps.tolist(),
-                "sources": pub.sources,
-            },
-        )
-    elif options.setting == "partial_partial":
-        scan = cast_p2p(
-            x.mesh,
-            y.mesh,
-            gt_xy,
-            gt_yx,
-            (seed, pair_id),
-            regime=options.cam_pos_regime,
-            up_axis=options.up_axis,
-            camera_distance=options.camera_distance,
-            n_tries=options.n_cam_pos,
-            min_overlap=options.min_overlap,
-            max_overlap=options.max_overlap,
-            scanners=None if None in scanners else scanners,
-        )
-        px, py, alignment = scan.partial_x, scan.partial_y, scan.alignment
-        mask_x, mask_y, map_xy, map_yx = scan.mask_x, scan.mask_y, scan.map_xy, scan.map_yx
-        camera_x, camera_y = scan.camera_x, scan.camera_y
-        meta.update(n_tries=scan.n_tries_used, accepted=bool(scan.accepted), try_index=scan.try_index)
-    elif options.setting == "partial_full":
-        scan = cast_p2f(
-            x.mesh,
-            y.mesh,
-            gt_xy,
-            gt_yx,
-            (seed, pair_id),
-            up_axis=options.up_axis,
-            camera_distance=options.camera_distance,
-            scanner=scanners[1],
-        )
-        px, py = scan.full_x, scan.partial_y
-        alignment = align_to(x.mesh, y.mesh, gt_xy)
-        mask_x, mask_y, map_xy, map_yx = scan.mask_x, scan.mask_y, scan.map_xy, scan.map_yx
-        camera_y = scan.camera_y
-        meta.update(n_tries=1, try_index=0)
-    else:
-        px, py = whole(x.mesh), whole(y.mesh)
-        alignment = align_to(x.mesh, y.mesh, gt_xy)
-        mask_x, mask_y, map_xy, map_yx = gt_xy.matched, gt_yx.matched, gt_xy, gt_yx
-
-    area_x, area_y = x.area, y.area
-    if rotations is not None:
-        rot_x, rot_y = (np.asarray(r, dtype=np.float64).reshape(3, 3) for r in rotations)
-    else:
-        rot_x = random_rotation(rng_for(seed, pair_id, "rotation", "x"), options.up_axis, options.one_axis_rotation)
-        rot_y = random_rotation(rng_for(seed, pair_id, "rotation", "y"), options.up_axis, options.one_axis_rotation)
-    norm_x = np.sqrt(area_x) if options.area_normalised else 1.0
-    norm_y = np.sqrt(area_y) if options.area_normalised else 1.0
-    final_x = (px.mesh.vertices / norm_x) @ rot_x
-    final_y = (alignment.apply(py.mesh.vertices) / norm_y) @ rot_y
-    full_x = (x.mesh.vertices / norm_x) @ rot_x
-    full_y = (alignment.apply(y.mesh.vertices) / norm_y) @ rot_y
-
-    arrays = {}
-    shape_x = _shape_arrays(x, px, final_x, mask_x, np.eye(3), np.zeros(3), rot_x, camera_x, area_x, full_x)
-    shape_y = _shape_arrays(
-        y,
-        py,
-        final_y,
-        mask_y,
-        alignment.rotation.T.copy(),
-        alignment.translation.copy(),
-        rot_y,
-        camera_y,
-        area_y,
-        full_y,
-    )
-    arrays.update({f"x_{k}": v for k, v in shape_x.items()})
-    arrays.update({f"y_{k}": v for k, v in shape_y.items()})
-    for name, m, target, full in (("corr_01", map_xy, py, y), ("corr_10", map_yx, px, x)):
-        arrays[name] = target.round_to_vertices(m, full.vertex_rounding)
-        arrays[f"{name}_face"] = m.face
-        arrays[f"{name}_weights"] = m.weights
-    return PairRecord(arrays, meta)
+    meta = _pair_meta(x, y, pair_id, seed, split, options)
+    views = _views(x, y, gt_xy, gt_yx, seed, pair_id, options, scanners, published_views)
+    meta.update(views.meta)
+    rot_x, rot_y = _final_rotations(seed, pair_id, options, rotations)
+    return PairRecord(_pair_arrays(x, y, views, rot_x, rot_y, options.area_normalised), meta)
