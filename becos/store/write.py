@@ -444,9 +444,39 @@ def write_store(
     Returns:
         ``out`` as a Path. Raises :class:`InputFileError` naming the offending record file.
     """
-    import zarr
-
     out = Path(out)
+    metadata = _store_metadata(metadata, setting)
+    started = time.perf_counter()
+    paths = [Path(p) for p in record_paths]
+    if not paths:
+        raise BecosError(f"{out}: no pair records given. Fix: pass record .npz files or chunk index files")
+    check_out_folder(out, [*protect, *paths], overwrite=overwrite)  # the files named first
+    infos = _scan_records(paths, setting)
+    layout, lengths = _plan_layout(infos)
+    n = len(infos)
+    if progress and n >= 50:
+        _progress(f"{n} records scanned in {time.perf_counter() - started:.1f} s")
+
+    out.parent.mkdir(parents=True, exist_ok=True)
+    remove_stale_temporaries(out.parent, [out.name])  # one job writes a store: these are a killed write's
+    tmp = Path(tempfile.mkdtemp(dir=out.parent, prefix=f".{out.name}.", suffix=".tmp"))
+    try:
+        _fill_store(tmp, infos, layout, lengths, setting, metadata, progress, started)
+        os.chmod(tmp, 0o755)
+        _replace_dir(tmp, out)
+    except BaseException as exc:
+        shutil.rmtree(tmp, ignore_errors=True)
+        full = exc if isinstance(exc, OSError) else exc.__cause__ or exc.__context__
+        if isinstance(full, OSError) and full.errno in (errno.ENOSPC, errno.EDQUOT):
+            raise DiskFullError(out, full) from exc
+        raise
+    if progress:
+        _progress(f"{n} pairs -> {out} ({time.perf_counter() - started:.1f} s)")
+    return out
+
+
+def _store_metadata(metadata: Mapping | None, setting: str) -> dict:
+    """``metadata`` as JSON would give it back, checked against ``setting``."""
     if setting not in SETTINGS:
         raise BecosError(f"setting must be one of {SETTINGS}, got {setting!r}")
     metadata = json.loads(json.dumps(dict(metadata or {}), default=str))
@@ -455,11 +485,11 @@ def write_store(
             f"the store metadata says setting {metadata['setting']!r} but --setting is {setting!r}. "
             "Fix: pass the metadata file of the same setting"
         )
-    started = time.perf_counter()
-    paths = [Path(p) for p in record_paths]
-    if not paths:
-        raise BecosError(f"{out}: no pair records given. Fix: pass record .npz files or chunk index files")
-    check_out_folder(out, [*protect, *paths], overwrite=overwrite)  # the files named first
+    return metadata
+
+
+def _scan_records(paths: list[Path], setting: str) -> list:
+    """:func:`scan_record` of each file, in store order; each pair once, each of ``setting``."""
     infos = []
     seen: dict[str, Path] = {}
     for path in paths:
@@ -476,90 +506,93 @@ def write_store(
             )
         infos.append(info)
     infos.sort(key=lambda i: store_order_key(i.meta.get("split", ""), i.meta["pair_id"]))
-    layout, lengths = _plan_layout(infos)
-    n = len(infos)
-    if progress and n >= 50:
-        _progress(f"{n} records scanned in {time.perf_counter() - started:.1f} s")
+    return infos
 
-    out.parent.mkdir(parents=True, exist_ok=True)
-    remove_stale_temporaries(out.parent, [out.name])  # one job writes a store: these are a killed write's
-    tmp = Path(tempfile.mkdtemp(dir=out.parent, prefix=f".{out.name}.", suffix=".tmp"))
+
+def _fill_store(tmp: Path, infos: list, layout: dict, lengths: dict, setting, metadata, progress, started) -> None:
+    """Write the store of ``infos`` (in that order) into the new folder ``tmp``: offsets, arrays, pairs
+    table and root attributes (``metadata`` plus what the store is)."""
+    import zarr
+
+    n = len(infos)
+    root = zarr.open_group(str(tmp), mode="w", zarr_format=3)
+    arrays, offsets_group = root.create_group("arrays"), root.create_group("offsets")
+    first = infos[0].shapes
+    disk = {key: disk_dtype(key, first[key][1]) for key in layout}
+    digests = ContentDigests(
+        {**{f"arrays/{key}": disk[key] for key in layout}, **{f"offsets/{group}": np.int64 for group in lengths}}
+    )
+    for group, n_rows in lengths.items():
+        offsets = np.zeros(n + 1, dtype=np.int64)
+        offsets[1:] = np.cumsum(n_rows)
+        offsets_group.create_array(
+            group, data=offsets, chunks=(n + 1,), compressors=_compressors(), chunk_key_encoding=CHUNK_KEYS
+        )
+        digests.update(f"offsets/{group}", offsets)
+    writer = _Writer()
+    sinks = {
+        key: _create_sink(arrays, key, group, first[key][0], disk[key], n, lengths, writer, digests)
+        for key, group in layout.items()
+    }
+    metas, rows = _copy_records(infos, sinks, layout, writer, progress, started)
+    write_pairs(root, metas, rows)
+    splits: dict[str, int] = {}
+    for m in metas:
+        splits[m.get("split", "")] = splits.get(m.get("split", ""), 0) + 1
+    attrs = dict(metadata)
+    attrs.update(
+        schema_version=SCHEMA_VERSION,
+        setting=setting,
+        n_pairs=n,
+        splits=splits,
+        created=datetime.now(UTC).isoformat(timespec="seconds"),
+        versions=_versions(),
+        becos_store={"format": STORE_FORMAT, "layout": layout, "sha256": digests.hexdigests()},
+    )
+    root.attrs.update(attrs)
+
+
+def _create_sink(arrays, key: str, group, shape, dtype, n: int, lengths: dict, writer, digests) -> _Sink:
+    """The array ``key`` of the store (every pair's rows; ``group`` None: one stacked row per pair, of
+    ``shape``) and the sink that fills it."""
+    total = n if group is None else int(lengths[group].sum())
+    row_shape = shape if group is None else shape[1:]
+    chunks, shards = _chunking(
+        total, row_shape, dtype.itemsize, CHUNK_BYTES if group is not None else STACKED_CHUNK_BYTES
+    )
+    array = arrays.create_array(
+        key,
+        shape=(total, *row_shape),
+        dtype=dtype,
+        chunks=chunks,
+        shards=shards,
+        compressors=_compressors(),
+        fill_value=np.zeros((), dtype).item(),
+        chunk_key_encoding=CHUNK_KEYS,
+        # every chunk file exists, even all-zero ones: an absent file is damage
+        config={"write_empty_chunks": True},
+    )
+    return _Sink(array, (shards or chunks)[0], writer, digests, f"arrays/{key}")
+
+
+def _copy_records(infos: list, sinks: dict, layout: dict, writer, progress, started) -> tuple[list, list]:
+    """Every record's arrays into ``sinks`` (closed, and ``writer`` finished, at the end); returns the
+    pair metas and table rows."""
+    n = len(infos)
+    metas, rows = [], []
+    step = max(1, math.ceil(n / 10))
     try:
-        root = zarr.open_group(str(tmp), mode="w", zarr_format=3)
-        arrays, offsets_group = root.create_group("arrays"), root.create_group("offsets")
-        first = infos[0].shapes
-        disk = {key: disk_dtype(key, first[key][1]) for key in layout}
-        digests = ContentDigests(
-            {**{f"arrays/{key}": disk[key] for key in layout}, **{f"offsets/{group}": np.int64 for group in lengths}}
-        )
-        for group, n_rows in lengths.items():
-            offsets = np.zeros(n + 1, dtype=np.int64)
-            offsets[1:] = np.cumsum(n_rows)
-            offsets_group.create_array(
-                group, data=offsets, chunks=(n + 1,), compressors=_compressors(), chunk_key_encoding=CHUNK_KEYS
-            )
-            digests.update(f"offsets/{group}", offsets)
-        sinks = {}
-        writer = _Writer()
-        for key, group in layout.items():
-            shape, dtype = first[key][0], disk[key]
-            total = n if group is None else int(lengths[group].sum())
-            row_shape = shape if group is None else shape[1:]
-            chunks, shards = _chunking(
-                total, row_shape, dtype.itemsize, CHUNK_BYTES if group is not None else STACKED_CHUNK_BYTES
-            )
-            array = arrays.create_array(
-                key,
-                shape=(total, *row_shape),
-                dtype=dtype,
-                chunks=chunks,
-                shards=shards,
-                compressors=_compressors(),
-                fill_value=np.zeros((), dtype).item(),
-                chunk_key_encoding=CHUNK_KEYS,
-                # every chunk file exists, even all-zero ones: an absent file is damage
-                config={"write_empty_chunks": True},
-            )
-            sinks[key] = _Sink(array, (shards or chunks)[0], writer, digests, f"arrays/{key}")
-        metas, rows = [], []
-        step = max(1, math.ceil(n / 10))
-        try:
-            for i, info in enumerate(infos):
-                _add_record(info, sinks, layout, metas, rows, i)
-                if progress and n >= 50 and ((i + 1) % step == 0 or i + 1 == n):
-                    _progress(f"{i + 1}/{n} records read ({time.perf_counter() - started:.1f} s)")
-            for sink in sinks.values():
-                sink.close()
-        except BaseException:
-            writer.finish(failed=True)
-            raise
-        writer.finish()
-        write_pairs(root, metas, rows)
-        splits: dict[str, int] = {}
-        for m in metas:
-            splits[m.get("split", "")] = splits.get(m.get("split", ""), 0) + 1
-        attrs = dict(metadata)
-        attrs.update(
-            schema_version=SCHEMA_VERSION,
-            setting=setting,
-            n_pairs=n,
-            splits=splits,
-            created=datetime.now(UTC).isoformat(timespec="seconds"),
-            versions=_versions(),
-            becos_store={"format": STORE_FORMAT, "layout": layout, "sha256": digests.hexdigests()},
-        )
-        root.attrs.update(attrs)
-        os.chmod(tmp, 0o755)
-        _replace_dir(tmp, out)
-    except BaseException as exc:
-        shutil.rmtree(tmp, ignore_errors=True)
-        full = exc if isinstance(exc, OSError) else exc.__cause__ or exc.__context__
-        if isinstance(full, OSError) and full.errno in (errno.ENOSPC, errno.EDQUOT):
-            raise DiskFullError(out, full) from exc
+        for i, info in enumerate(infos):
+            _add_record(info, sinks, layout, metas, rows, i)
+            if progress and n >= 50 and ((i + 1) % step == 0 or i + 1 == n):
+                _progress(f"{i + 1}/{n} records read ({time.perf_counter() - started:.1f} s)")
+        for sink in sinks.values():
+            sink.close()
+    except BaseException:
+        writer.finish(failed=True)
         raise
-    if progress:
-        _progress(f"{n} pairs -> {out} ({time.perf_counter() - started:.1f} s)")
-    return out
+    writer.finish()
+    return metas, rows
 
 
 def _replace_dir(tmp: Path, out: Path) -> None:
