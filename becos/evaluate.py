@@ -331,22 +331,14 @@ def evaluate_record(
     Returns:
         :class:`PairResult` with one row per method, in the order of ``predictions``.
     """
-    if direction not in DIRECTIONS:
-        raise ValueError(f"direction must be one of {sorted(DIRECTIONS)}, got {direction!r}")
-    if truth not in TRUTHS:
-        raise ValueError(f"truth must be one of {TRUTHS}, got {truth!r}")
-    presets = tuple(presets)
-    for p in presets:
-        get_preset(p)
+    presets = _checked_options(direction, truth, presets)
     geodesics = geodesics or GeodesicsCache("heat")
     src, dst, key = DIRECTIONS[direction]
     info = dict(pair_info(record) if info is None else info)
     pair_id = info.get("pair_id") or record.meta.get("pair_id")
     a = record.arrays
     n = {s: len(a[f"{s}_vertices"]) for s in ("x", "y")}
-    p2p = all(len(a[f"{s}_full_to_partial"]) != n[s] or (a[f"{s}_full_to_partial"] < 0).any() for s in ("x", "y"))
-    if record.meta.get("setting") in SETTINGS:
-        p2p = record.meta["setting"] == "partial_partial"
+    p2p = _is_p2p(record, n)
 
     methods = list(predictions)
     for m in methods:
@@ -356,30 +348,9 @@ def evaluate_record(
     solver = geodesics.get(
         shape_key(full.mesh, meta_dst.get("dataset"), meta_dst.get("name"), int(a[f"{dst}_remesh_variant"])), full.mesh
     )
-
-    true_face = np.asarray(a[f"{key}_face"], dtype=np.int64)
-    has_true = true_face >= 0
-    if truth == "vertex":  # the record's vertex-form truth, as one-hot points on the full shape
-        true_vertex = np.asarray(a[key], dtype=np.int64)
-        full_vertex = np.where(true_vertex >= 0, full.vertex_to_full[np.maximum(true_vertex, 0)], -1)
-        point = SurfaceMap.from_vertex_indices(full_vertex, full.mesh.faces)
-        face_on_full, weights = point.face, point.weights
-    else:
-        face_on_full = np.where(has_true, full.face_to_full[np.maximum(true_face, 0)], -1)
-        weights = np.asarray(a[f"{key}_weights"], dtype=np.float64)
+    face_on_full, weights, has_true = _true_points(a, key, full, truth)
     preds = np.stack([predictions[m].map for m in methods], axis=1) if methods else np.zeros((n[src], 0), np.int64)
-    targets = np.where(preds >= 0, full.vertex_to_full[np.maximum(preds, 0)], -1)
-    distances = np.full(preds.shape, np.nan)
-    rows_true = np.flatnonzero(has_true)
-    if len(rows_true) and len(methods):
-        if solver.method == "dijkstra":  # bounded searches from each prediction: exact, cheap when near
-            for k in range(len(methods)):
-                ok = rows_true[targets[rows_true, k] >= 0]
-                distances[ok, k] = solver.between(targets[ok, k], face_on_full[ok], weights[ok])
-        else:  # heat: one set of rows, from the true points' corners, serves every method
-            distances[rows_true] = solver.point_to_vertices(
-                face_on_full[rows_true], weights[rows_true], targets[rows_true]
-            )
+    distances = _prediction_distances(solver, full, preds, face_on_full, weights, has_true)
 
     labels_src = np.asarray(a[f"{src}_annotation"], dtype=np.int64)
     labels_dst = np.asarray(a[f"{dst}_annotation"], dtype=np.int64)
@@ -390,31 +361,17 @@ def evaluate_record(
     for k, m in enumerate(methods):
         pred = preds[:, k]
         has_pred = pred >= 0
-        errors = np.where(has_pred & has_true, distances[:, k] / full.sqrt_area, np.nan)
-        errors[has_true & ~has_pred] = np.inf
-        if p2p:
-            errors[~has_true & has_pred] = np.inf
-        included = errors[~np.isnan(errors)]
-        finite = included[np.isfinite(included)]
+        errors = _method_errors(has_pred, has_true, distances[:, k] / full.sqrt_area, p2p)
         row = {
             "method": m,
             **info,
             "direction": direction,
             "truth": truth,
             "geodesics": solver.method,
-            "n_vertices": int(n[src]),
-            "n_scored": int(len(included)),
-            "n_infinite": int(len(included) - len(finite)),
-            "n_excluded": int(n[src] - len(included)),
-            "mean_error": float(finite.mean()) if len(finite) else float("nan"),
+            **_error_columns(errors, n[src]),
+            **_auc_columns(errors, presets),
+            **_overlap_scores(predictions[m], a, src, has_pred),
         }
-        for j, name in enumerate(presets):
-            spec = get_preset(name)
-            value = spec.area(pck_curve(errors, spec.thresholds))
-            if j == 0:
-                row["auc"], row["auc_preset"] = value, name
-            row[f"auc_{name}"] = value
-        row.update(_overlap_scores(predictions[m], a, src, has_pred))
         row["left_right"] = (
             left_right_accuracy(pred, true_labels, labels_dst, has_true if p2p else None)
             if has_labels
@@ -423,6 +380,98 @@ def evaluate_record(
         result.rows.append(row)
         result.errors[m] = errors
     return result
+
+
+def _checked_options(direction: str, truth: str, presets: Iterable[str]) -> tuple[str, ...]:
+    """The AUC presets as a tuple, once ``direction``, ``truth`` and each preset are known names."""
+    if direction not in DIRECTIONS:
+        raise ValueError(f"direction must be one of {sorted(DIRECTIONS)}, got {direction!r}")
+    if truth not in TRUTHS:
+        raise ValueError(f"truth must be one of {TRUTHS}, got {truth!r}")
+    presets = tuple(presets)
+    for p in presets:
+        get_preset(p)
+    return presets
+
+
+def _method_errors(has_pred: np.ndarray, has_true: np.ndarray, scaled: np.ndarray, p2p: bool) -> np.ndarray:
+    """(N,) errors of one method (``scaled``: its distances over the full shape's sqrt-area): NaN where
+    neither a prediction nor a true point counts, inf for a missing prediction (and, P2P, for a
+    prediction where no true point is)."""
+    errors = np.where(has_pred & has_true, scaled, np.nan)
+    errors[has_true & ~has_pred] = np.inf
+    if p2p:
+        errors[~has_true & has_pred] = np.inf
+    return errors
+
+
+def _is_p2p(record: PairRecord, n: Mapping[str, int]) -> bool:
+    """Whether the pair is partial-to-partial: from its setting, or (records without one) from both
+    shapes being cut (``n``: vertices per shape)."""
+    a = record.arrays
+    p2p = all(len(a[f"{s}_full_to_partial"]) != n[s] or (a[f"{s}_full_to_partial"] < 0).any() for s in ("x", "y"))
+    if record.meta.get("setting") in SETTINGS:
+        p2p = record.meta["setting"] == "partial_partial"
+    return p2p
+
+
+def _true_points(a: Mapping, key: str, full, truth: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The true points of the map ``key`` on the full target shape ``full``: (N,) face on the full mesh,
+    (N, 3) barycentric weights, and (N,) whether the source vertex has a true point at all. ``truth``
+    ``"vertex"``: the record's vertex-form truth as one-hot points; ``"point"``: the exact points."""
+    true_face = np.asarray(a[f"{key}_face"], dtype=np.int64)
+    has_true = true_face >= 0
+    if truth == "vertex":  # the record's vertex-form truth, as one-hot points on the full shape
+        true_vertex = np.asarray(a[key], dtype=np.int64)
+        full_vertex = np.where(true_vertex >= 0, full.vertex_to_full[np.maximum(true_vertex, 0)], -1)
+        point = SurfaceMap.from_vertex_indices(full_vertex, full.mesh.faces)
+        return point.face, point.weights, has_true
+    face_on_full = np.where(has_true, full.face_to_full[np.maximum(true_face, 0)], -1)
+    return face_on_full, np.asarray(a[f"{key}_weights"], dtype=np.float64), has_true
+
+
+def _prediction_distances(solver, full, preds, face_on_full, weights, has_true) -> np.ndarray:
+    """(N, M) geodesic distances on the full target mesh (units of its vertices) from each source
+    vertex's true point to the M methods' predicted vertices (``preds``, (N, M) target vertex indices,
+    -1: none); NaN where either is missing."""
+    targets = np.where(preds >= 0, full.vertex_to_full[np.maximum(preds, 0)], -1)
+    distances = np.full(preds.shape, np.nan)
+    rows_true = np.flatnonzero(has_true)
+    if len(rows_true) and preds.shape[1]:
+        if solver.method == "dijkstra":  # bounded searches from each prediction: exact, cheap when near
+            for k in range(preds.shape[1]):
+                ok = rows_true[targets[rows_true, k] >= 0]
+                distances[ok, k] = solver.between(targets[ok, k], face_on_full[ok], weights[ok])
+        else:  # heat: one set of rows, from the true points' corners, serves every method
+            distances[rows_true] = solver.point_to_vertices(
+                face_on_full[rows_true], weights[rows_true], targets[rows_true]
+            )
+    return distances
+
+
+def _error_columns(errors: np.ndarray, n_vertices: int) -> dict:
+    """Counts and mean of one method's (N,) errors (NaN: not scored, inf: failed)."""
+    included = errors[~np.isnan(errors)]
+    finite = included[np.isfinite(included)]
+    return {
+        "n_vertices": int(n_vertices),
+        "n_scored": int(len(included)),
+        "n_infinite": int(len(included) - len(finite)),
+        "n_excluded": int(n_vertices - len(included)),
+        "mean_error": float(finite.mean()) if len(finite) else float("nan"),
+    }
+
+
+def _auc_columns(errors: np.ndarray, presets: tuple[str, ...]) -> dict:
+    """``auc`` and ``auc_preset`` of the first preset, and ``auc_<preset>`` of each."""
+    out = {}
+    for j, name in enumerate(presets):
+        spec = get_preset(name)
+        value = spec.area(pck_curve(errors, spec.thresholds))
+        if j == 0:
+            out["auc"], out["auc_preset"] = value, name
+        out[f"auc_{name}"] = value
+    return out
 
 
 def _overlap_scores(prediction: Prediction, a: Mapping, src: str, has_pred: np.ndarray) -> dict:
