@@ -336,51 +336,93 @@ def write_published_pickle(
     if len(settings) > 1:
         raise ConfigError(f"a pair list holds one setting; manifest has {sorted(settings)}")
     partial = bool(settings & {"partial_full", "partial_partial"})
-    face_targets = face_targets or default_face_target
-    shapes = {shape_key(r["dataset"], r["name"]): r for r in catalog.to_dict("records")}
-    rot_cache: dict[str, list] = {}
-    root = None if data_root is None else Path(data_root).resolve()
+    entries = _PublishedShapes(catalog, template_rows, face_targets or default_face_target, data_root)
+    lists: dict[str, list] = {s: [] for s in PUBLISHED_SPLITS}
+    for row in sort_manifest(manifest).to_dict("records"):
+        if row["split"] not in lists:
+            raise ConfigError(f"pair {row['pair_id']}: split {row['split']!r} has no place in a pair list")
+        pid = row["pair_id"]
+        rot = (
+            np.asarray(_lookup(random_rotations, pid, "random rotations"))
+            if random_rotations is not None
+            else _default_random_rotations(int(row["seed"]))
+        )
+        cam = None
+        if partial:
+            cam = (
+                np.asarray(_lookup(cameras, pid, "cameras"))
+                if cameras is not None
+                else _default_cameras(int(row["seed"]), regime)
+            )
+        faces = (None, None) if pair_face_targets is None else _lookup(pair_face_targets, pid, "face targets")
+        lists[row["split"]].append(
+            (
+                entries.shape_dict("x", row, rot[0], None if cam is None else cam[0], faces[0]),
+                entries.shape_dict("y", row, rot[1], None if cam is None else cam[1], faces[1]),
+            )
+        )
+    buf = io.BytesIO()
+    _PortablePickler(buf, protocol=4).dump([lists[s] for s in PUBLISHED_SPLITS])
+    write_bytes(path, buf.getvalue())
 
-    def file_path(entry: dict) -> str:
-        if root is None:
+
+def _lookup(table: Mapping, pid: str, what: str):
+    """``table[pid]``, or ConfigError naming the pair and what is missing for it."""
+    if pid not in table:
+        raise ConfigError(
+            f"pair {pid}: no {what} given for it (the store lacks the pair?). Fix: write the "
+            f"pair list from the store built from this manifest"
+        )
+    return table[pid]
+
+
+class _PublishedShapes:
+    """The shape dicts of a published pair list, from the catalog (frame rotations converted once per
+    shape) and the template rows; arguments as in :func:`write_published_pickle`."""
+
+    def __init__(self, catalog: pd.DataFrame, template_rows, face_targets, data_root):
+        self.shapes = {shape_key(r["dataset"], r["name"]): r for r in catalog.to_dict("records")}
+        self.template_rows, self.face_targets = template_rows, face_targets
+        self.root = None if data_root is None else Path(data_root).resolve()
+        self.rot_cache: dict[str, list] = {}
+
+    def file_path(self, entry: dict) -> str:
+        """``file_path`` as the reference writes it: ``data/<path below the data root>`` (the catalog's
+        file as is without a data root)."""
+        if self.root is None:
             return str(entry["file"])
         try:
-            below = Path(entry["file"]).resolve().relative_to(root)
+            below = Path(entry["file"]).resolve().relative_to(self.root)
         except ValueError:
             raise ConfigError(
                 f"{entry['file']}: shape {entry['dataset']}/{entry['name']} lies outside the data "
-                f"root {root}. Fix: pass the data_dir the catalog was built from"
+                f"root {self.root}. Fix: pass the data_dir the catalog was built from"
             ) from None
         return f"data/{below.as_posix()}"
 
-    def lookup(table: Mapping | None, pid: str, what: str):
-        if pid not in table:
-            raise ConfigError(
-                f"pair {pid}: no {what} given for it (the store lacks the pair?). Fix: write the "
-                f"pair list from the store built from this manifest"
-            )
-        return table[pid]
-
-    def shape_dict(side: str, row: dict, rot: np.ndarray, cam: np.ndarray | None, faces: int | None) -> dict:
+    def shape_dict(self, side: str, row: dict, rot: np.ndarray, cam: np.ndarray | None, faces: int | None) -> dict:
+        """The dict of shape ``side`` (``x``/``y``) of manifest ``row``: (3, 3) ``rot`` its random
+        rotation, (10, 3) ``cam`` its cameras (partial settings), ``faces`` its face target (None: from
+        ``face_targets``)."""
         key = shape_key(row[f"{side}_dataset"], row[f"{side}_name"])
-        entry = shapes.get(key)
+        entry = self.shapes.get(key)
         if entry is None:
             raise ConfigError(f"shape {key} of pair {row['pair_id']} is not in the catalog")
-        if key not in rot_cache:
-            rot_cache[key] = rotation_to_xyz_degrees(frame_rotation(entry))
-        trow = find_template_row(template_rows, str(entry["template_key"]))
+        if key not in self.rot_cache:
+            self.rot_cache[key] = rotation_to_xyz_degrees(frame_rotation(entry))
+        trow = find_template_row(self.template_rows, str(entry["template_key"]))
         d = {
             "name": str(row[f"{side}_name"]),
             "org_dataset": str(row[f"{side}_dataset"]),
             "category": str(entry["category"]),
-            "file_path": file_path(entry),
+            "file_path": self.file_path(entry),
             "scale": float(entry["scale"]),
-            "rot": list(rot_cache[key]),
+            "rot": list(self.rot_cache[key]),
             "partial_full_template": row_field(trow, "partial_full_template") if trow is not None else UNDEFINED,
             "partial_full_dataset": row_field(trow, "partial_full_dataset") if trow is not None else UNDEFINED,
             "desired_n_face_remeshed": int(faces)
             if faces is not None
-            else int(face_targets(row[f"{side}_dataset"], row[f"{side}_name"], int(row[f"{side}_variant"]))),
+            else int(self.face_targets(row[f"{side}_dataset"], row[f"{side}_name"], int(row[f"{side}_variant"]))),
             "random_rot": np.array(rot, dtype=np.float64),
             "becos": {
                 "pair_id": str(row["pair_id"]),
@@ -395,34 +437,6 @@ def write_published_pickle(
         if cam is not None:
             d["cam_pos"] = np.array(cam, dtype=np.float64)
         return d
-
-    lists: dict[str, list] = {s: [] for s in PUBLISHED_SPLITS}
-    for row in sort_manifest(manifest).to_dict("records"):
-        if row["split"] not in lists:
-            raise ConfigError(f"pair {row['pair_id']}: split {row['split']!r} has no place in a pair list")
-        pid = row["pair_id"]
-        rot = (
-            np.asarray(lookup(random_rotations, pid, "random rotations"))
-            if random_rotations is not None
-            else _default_random_rotations(int(row["seed"]))
-        )
-        cam = None
-        if partial:
-            cam = (
-                np.asarray(lookup(cameras, pid, "cameras"))
-                if cameras is not None
-                else _default_cameras(int(row["seed"]), regime)
-            )
-        faces = (None, None) if pair_face_targets is None else lookup(pair_face_targets, pid, "face targets")
-        lists[row["split"]].append(
-            (
-                shape_dict("x", row, rot[0], None if cam is None else cam[0], faces[0]),
-                shape_dict("y", row, rot[1], None if cam is None else cam[1], faces[1]),
-            )
-        )
-    buf = io.BytesIO()
-    _PortablePickler(buf, protocol=4).dump([lists[s] for s in PUBLISHED_SPLITS])
-    write_bytes(path, buf.getvalue())
 
 
 def store_pair_facts(bench) -> dict[str, dict[str, np.ndarray]]:
