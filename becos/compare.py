@@ -463,31 +463,8 @@ def compare_stores(
         if a store is missing or cannot be opened.
     """
     A, B = _open(a), _open(b)
-    ids_a = A.table["pair_id"].to_numpy().astype(str)
-    ids_b = B.table["pair_id"].to_numpy().astype(str)
-    _, ia, ib = np.intersect1d(ids_a, ids_b, assume_unique=False, return_indices=True)
-    order = np.argsort(ia, kind="stable")
-    ia, ib = ia[order].astype(np.int64), ib[order].astype(np.int64)
-    common = ids_a[ia]
-    only_a = sorted(set(ids_a) - set(ids_b))
-    only_b = sorted(set(ids_b) - set(ids_a))
-
-    layout: dict[str, dict] = {}
-    keys = []
-    for key in list(A.layout) + [k for k in B.layout if k not in A.layout]:
-        if key not in A.layout or key not in B.layout:
-            layout[key] = {
-                "a": "present" if key in A.layout else "absent",
-                "b": "present" if key in B.layout else "absent",
-            }
-            continue
-        arr_a, arr_b = A.array(key), B.array(key)
-        ga, gb = A.layout[key], B.layout[key]
-        desc_a = {"dtype": str(arr_a.dtype), "row_shape": list(arr_a.shape[1:]), "group": ga}
-        desc_b = {"dtype": str(arr_b.dtype), "row_shape": list(arr_b.shape[1:]), "group": gb}
-        if desc_a != desc_b:
-            layout[key] = {"a": desc_a, "b": desc_b}
-        keys.append(key)  # rows of another shape or kind: every common pair marked (_compare_key)
+    ia, ib, common, only_a, only_b = _matched_pairs(A, B)
+    layout, keys = _compare_layouts(A, B)
 
     m = len(common)
     values = {k: np.zeros(m, dtype=np.int64) for k in keys}
@@ -506,11 +483,7 @@ def compare_stores(
         block_a, block_b = A.read_block(a0, a1), B.read_block(b0, b1)
         la, lb = ra - a0, rb - b0
         sel = slice(k0, k1)
-        for s in ("x", "y"):
-            for block, local in ((block_a, la), (block_b, lb)):
-                group = block.layout.get(f"{s}_full_faces")
-                if group is not None:
-                    partial[s][sel] |= block.counts(group)[local] > 0
+        _mark_partial(partial, block_a, block_b, la, lb, sel)
         for key in keys:
             n_diff, dmax = _compare_key(key, block_a, block_b, la, lb, atol)
             values[key][sel] = n_diff
@@ -518,30 +491,11 @@ def compare_stores(
                 max_abs[key][sel] = dmax
         for s in ("x", "y"):
             _explain_by_transforms(s, block_a, block_b, la, lb, values, sel, moved, atol)
-        for j, (i_a, i_b) in enumerate(zip(la, lb)):
-            # the record's content digest follows from its arrays and meta: a difference there says nothing new
-            ma, mb = (
-                {k: v for k, v in meta.items() if k != "content_digest"}
-                for meta in (block_a.metas[i_a], block_b.metas[i_b])
-            )
-            if ma != mb:
-                diff = dict_differences(ma, mb)
-                if diff:
-                    meta_differs[k0 + j] = True
-                    meta_diffs[str(common[k0 + j])] = diff
+        for j, diff in _meta_differences(block_a, block_b, la, lb):
+            meta_differs[k0 + j] = True
+            meta_diffs[str(common[k0 + j])] = diff
 
-    reasons = np.zeros((m, len(REASONS)), dtype=bool)
-    for key, v in values.items():
-        hit = (v != 0) & ~moved[key] if key in moved else v != 0
-        side, _, rest = key.partition("_")
-        if side in ("x", "y") and rest in MESH_KEYS:
-            S = side.upper()
-            reasons[:, REASONS.index(f"remeshing of {S} differs")] |= hit & ~partial[side]
-            reasons[:, REASONS.index(f"partial view of {S} differs")] |= hit & partial[side]
-        else:
-            reasons[:, REASONS.index(key_reason(key))] |= hit
-    reasons[:, REASONS.index("meta differs")] = meta_differs
-
+    reasons = _reasons(m, values, moved, partial, meta_differs)
     attributes = dict_differences(A.metadata, B.metadata, ignore=IGNORED_ATTRIBUTES)
     return StoreComparison(
         Path(a),
@@ -563,6 +517,81 @@ def compare_stores(
         partial,
         moved,
     )
+
+
+def _matched_pairs(A, B):
+    """The pairs of stores ``A`` and ``B``: their rows ``ia``, ``ib`` of the pairs both hold (in A's
+    order), those pairs' ids, and the ids only in A and only in B (sorted)."""
+    ids_a = A.table["pair_id"].to_numpy().astype(str)
+    ids_b = B.table["pair_id"].to_numpy().astype(str)
+    _, ia, ib = np.intersect1d(ids_a, ids_b, assume_unique=False, return_indices=True)
+    order = np.argsort(ia, kind="stable")
+    ia, ib = ia[order].astype(np.int64), ib[order].astype(np.int64)
+    only_a = sorted(set(ids_a) - set(ids_b))
+    only_b = sorted(set(ids_b) - set(ids_a))
+    return ia, ib, ids_a[ia], only_a, only_b
+
+
+def _compare_layouts(A, B) -> tuple[dict[str, dict], list[str]]:
+    """The array keys whose presence or description (dtype, row shape, offsets group) differs between
+    the stores, and the keys both hold (to compare row by row)."""
+    layout: dict[str, dict] = {}
+    keys = []
+    for key in list(A.layout) + [k for k in B.layout if k not in A.layout]:
+        if key not in A.layout or key not in B.layout:
+            layout[key] = {
+                "a": "present" if key in A.layout else "absent",
+                "b": "present" if key in B.layout else "absent",
+            }
+            continue
+        arr_a, arr_b = A.array(key), B.array(key)
+        ga, gb = A.layout[key], B.layout[key]
+        desc_a = {"dtype": str(arr_a.dtype), "row_shape": list(arr_a.shape[1:]), "group": ga}
+        desc_b = {"dtype": str(arr_b.dtype), "row_shape": list(arr_b.shape[1:]), "group": gb}
+        if desc_a != desc_b:
+            layout[key] = {"a": desc_a, "b": desc_b}
+        keys.append(key)  # rows of another shape or kind: every common pair marked (_compare_key)
+    return layout, keys
+
+
+def _mark_partial(partial: dict, block_a, block_b, la, lb, sel: slice) -> None:
+    """Mark in ``partial[s][sel]`` the pairs whose shape ``s`` is a partial view in either store."""
+    for s in ("x", "y"):
+        for block, local in ((block_a, la), (block_b, lb)):
+            group = block.layout.get(f"{s}_full_faces")
+            if group is not None:
+                partial[s][sel] |= block.counts(group)[local] > 0
+
+
+def _meta_differences(block_a, block_b, la, lb):
+    """``(j, differences)`` of each pair j of the batch whose metas differ (the content digest aside)."""
+    for j, (i_a, i_b) in enumerate(zip(la, lb)):
+        # the record's content digest follows from its arrays and meta: a difference there says nothing new
+        ma, mb = (
+            {k: v for k, v in meta.items() if k != "content_digest"}
+            for meta in (block_a.metas[i_a], block_b.metas[i_b])
+        )
+        if ma != mb:
+            diff = dict_differences(ma, mb)
+            if diff:
+                yield j, diff
+
+
+def _reasons(m: int, values: dict, moved: dict, partial: dict, meta_differs: np.ndarray) -> np.ndarray:
+    """(m, len(REASONS)) bool: why each common pair differs, from the per-key difference counts (a
+    coordinate difference a rigid motion explains excluded)."""
+    reasons = np.zeros((m, len(REASONS)), dtype=bool)
+    for key, v in values.items():
+        hit = (v != 0) & ~moved[key] if key in moved else v != 0
+        side, _, rest = key.partition("_")
+        if side in ("x", "y") and rest in MESH_KEYS:
+            S = side.upper()
+            reasons[:, REASONS.index(f"remeshing of {S} differs")] |= hit & ~partial[side]
+            reasons[:, REASONS.index(f"partial view of {S} differs")] |= hit & partial[side]
+        else:
+            reasons[:, REASONS.index(key_reason(key))] |= hit
+    reasons[:, REASONS.index("meta differs")] = meta_differs
+    return reasons
 
 
 def _is_coordinate_key(key: str) -> bool:
