@@ -10,7 +10,6 @@ Colours, the view direction and the Snakemake report captions: docs/design/repor
 
 from __future__ import annotations
 
-import html
 import io
 import json
 from collections.abc import Iterable, Mapping, Sequence
@@ -20,7 +19,8 @@ import numpy as np
 
 from becos.atomic import write_bytes, write_text
 from becos.record import PairRecord
-from becos.settings import SPLITS
+from becos.report_page import index_html
+from becos.settings import SETTING_LABELS, SPLITS
 from becos.store.layout import TABLE_COLUMNS
 
 #: RGB of Y vertices without a counterpart on X (``corr_10 == -1``), before shading.
@@ -34,7 +34,6 @@ TEXT_COLOUR = "#1d2c57"
 HIST_EDGES = np.linspace(0.0, 1.0, 11)
 #: Table columns :func:`write_report` needs.
 REQUIRED_COLUMNS = ("pair_id", "split", "category", "x_dataset", "y_dataset", "x_overlap", "y_overlap")
-SETTING_LABELS = {"full_full": "F2F", "partial_full": "P2F", "partial_partial": "P2P"}
 #: Output -> its caption file in ``workflow/report/`` (``report(..., caption=...)`` of rule ``report``).
 CAPTIONS = {"report": "index.rst"}
 
@@ -547,8 +546,30 @@ def write_report(
     counts = count_table(table)
     write_text(out / "counts.csv", counts.to_csv(index=False))
     hist = overlap_histogram(table)
+    renders, not_found, settings = _render_samples(records, table, out, n_renders, size)
+    setting = metadata.get("setting") or (settings.pop() if len(settings) == 1 else "mixed" if settings else None)
 
-    # renders
+    label = SETTING_LABELS.get(setting or "", setting or "")
+    published = published_overlap_comparison(hist) if setting == "partial_partial" else None
+    hist_frame = _histogram_frame(hist, published)
+    write_text(out / "overlap_histogram.csv", hist_frame.to_csv(index=False))
+    plot_overlap_histogram(
+        hist,
+        out / "overlap_histogram.png",
+        published=published,
+        title=f"{label} overlap histogram: {len(table)} pairs, {hist['n_directions']} directions"
+        + (" vs published" if published else ""),
+    )
+    summary = _summary(table, setting, counts, hist, published, renders, not_found, metadata)
+    write_text(out / "summary.json", json.dumps(summary, indent=2, sort_keys=False) + "\n")
+    write_text(out / "index.html", index_html(summary, counts, hist_frame))
+    return summary
+
+
+def _render_samples(records, table, out: Path, n_renders: int, size) -> tuple[list[dict], list[str], set[str]]:
+    """Render the pairs :func:`select_render_ids` chooses to ``out/renders/<pair_id>.png``. Returns the
+    renders (``pair_id``, ``split``, ``file``) in chosen order, the chosen ids not found among
+    ``records`` (sorted), and the settings seen in the table and the records read."""
     chosen = select_render_ids(table, n_renders)
     wanted = set(chosen)
     rendered: dict[str, dict] = {}
@@ -564,21 +585,11 @@ def write_report(
         render_pair(record, out / file, size=size)
         rendered[pid] = {"pair_id": pid, "split": str(record.meta.get("split", "")), "file": file}
         wanted.discard(pid)
-    renders = [rendered[p] for p in chosen if p in rendered]
-    setting = metadata.get("setting") or (settings.pop() if len(settings) == 1 else "mixed" if settings else None)
+    return [rendered[p] for p in chosen if p in rendered], sorted(wanted), settings
 
-    label = SETTING_LABELS.get(setting or "", setting or "")
-    published = published_overlap_comparison(hist) if setting == "partial_partial" else None
-    hist_frame = _histogram_frame(hist, published)
-    write_text(out / "overlap_histogram.csv", hist_frame.to_csv(index=False))
-    plot_overlap_histogram(
-        hist,
-        out / "overlap_histogram.png",
-        published=published,
-        title=f"{label} overlap histogram: {len(table)} pairs, {hist['n_directions']} directions"
-        + (" vs published" if published else ""),
-    )
 
+def _summary(table, setting, counts, hist, published, renders, not_found, metadata) -> dict:
+    """The report's summary (:func:`write_report`'s return value)."""
     summary = {
         "setting": setting,
         "n_pairs": int(len(table)),
@@ -588,7 +599,7 @@ def write_report(
         "published_overlap_histogram": published,
         "overlap": {s: _stats(table[f"{s}_overlap"]) for s in ("x", "y")},
         "renders": renders,
-        "missing_renders": sorted(wanted),
+        "missing_renders": not_found,
         "files": {
             "counts": "counts.csv",
             "overlap_histogram": "overlap_histogram.png",
@@ -605,8 +616,6 @@ def write_report(
     if len(names) == 4:
         shapes = set(zip(table["x_dataset"], table["x_name"])) | set(zip(table["y_dataset"], table["y_name"]))
         summary["n_distinct_shapes"] = len(shapes)
-    write_text(out / "summary.json", json.dumps(summary, indent=2, sort_keys=False) + "\n")
-    write_text(out / "index.html", _index_html(summary, counts, hist_frame))
     return summary
 
 
@@ -652,107 +661,3 @@ def _stats(values) -> dict:
 def _jsonable(value):
     """A JSON-safe copy (numpy scalars/arrays to Python, unknown objects to str)."""
     return json.loads(json.dumps(value, default=lambda o: o.tolist() if hasattr(o, "tolist") else str(o)))
-
-
-def _index_html(summary: Mapping, counts, hist_frame) -> str:
-    esc = html.escape
-    setting = summary.get("setting") or "?"
-    label = SETTING_LABELS.get(setting, setting)
-    meta = summary.get("metadata") or {}
-    facts = [
-        ("setting", f"{label} ({setting})"),
-        ("pairs", summary["n_pairs"]),
-        (
-            "splits",
-            ", ".join(
-                f"{s}: {summary['counts'].get('split', {}).get(s, {}).get('total', 0)}" for s in summary["splits"]
-            ),
-        ),
-    ]
-    for key in ("n_distinct_shapes", "n_not_accepted"):
-        if key in summary:
-            facts.append((key.replace("n_", "").replace("_", " "), summary[key]))
-    for key in ("schema_version", "config_hash", "created"):
-        if key in meta:
-            facts.append((key.replace("_", " "), meta[key]))
-    rows = "\n".join(f"<tr><th>{esc(str(k))}</th><td>{esc(str(v))}</td></tr>" for k, v in facts)
-    gallery = (
-        "\n".join(
-            f'<figure><a href="{esc(r["file"])}"><img src="{esc(r["file"])}" alt="{esc(r["pair_id"])}" '
-            f'loading="lazy"></a><figcaption>{esc(r["pair_id"])} ({esc(r["split"])})</figcaption></figure>'
-            for r in summary["renders"]
-        )
-        or "<p>No renders.</p>"
-    )
-    missing = ""
-    if summary.get("missing_renders"):
-        missing = f"<p class=warn>Not found among the records: {esc(', '.join(summary['missing_renders']))}</p>"
-    comparison = ""
-    published = summary.get("published_overlap_histogram")
-    if published:
-        tv = published["total_variation"]
-        rows_html = "\n".join(
-            f"<tr><td>{c} %</td><td>{n:,}</td><td>{100 * a:.1f} %</td><td>{m:,}</td><td>{100 * b:.1f} %</td></tr>"
-            for c, n, a, m, b in zip(
-                published["bin_centre_percent"],
-                published["count"],
-                published["share"],
-                published["published_count"],
-                published["published_share"],
-            )
-        )
-        comparison = f"""<h3>Beside the published BeCoS P2P histogram</h3>
-<p>Shares of all directions (ours: {published["n_directions"]:,}; published:
-{published["n_published_directions"]:,} = 2 &times; 10,464 pairs, from the BeCoS paper).
-Total variation distance: {"n/a" if tv is None else f"{tv:.3f}"} (0 = same shape, 1 = disjoint).</p>
-<table class=published>
-<tr><th>bin centre</th><th>ours</th><th>ours share</th><th>published</th><th>published share</th></tr>
-{rows_html}
-</table>"""
-    count_blocks = "\n".join(
-        f"<h3>{esc(group)}</h3>\n" + block.drop(columns="group").to_html(index=False, border=0, escape=True)
-        for group, block in counts.groupby("group", sort=False)
-    )
-    return f"""<!doctype html>
-<html lang="en">
-<head>
-<meta charset="utf-8">
-<title>BeCoS benchmark report: {esc(label)}</title>
-<style>
-body {{ font-family: sans-serif; margin: 2em auto; max-width: 1200px; color: #1d2c57; }}
-table {{ border-collapse: collapse; margin-bottom: 1em; }}
-th, td {{ padding: 2px 10px; text-align: right; border-bottom: 1px solid #ddd; }}
-th {{ text-align: left; }}
-figure {{ display: inline-block; margin: 0 1em 1em 0; }}
-figure img {{ width: 560px; border: 1px solid #ccc; }}
-.warn {{ color: #a00; }}
-pre {{ background: #f5f5f8; padding: 1em; overflow-x: auto; }}
-</style>
-</head>
-<body>
-<h1>BeCoS benchmark report: {esc(label)}</h1>
-<table>
-{rows}
-</table>
-<p>Files: <a href="summary.json">summary.json</a>, <a href="counts.csv">counts.csv</a>,
-<a href="overlap_histogram.csv">overlap_histogram.csv</a>.</p>
-<h2>Overlap histogram</h2>
-<p>Share of each shape's vertices whose ground-truth point lies on the other shape, both directions of
-every pair ({summary["overlap_histogram"]["n_directions"]} directions), in 10 % bins.</p>
-<img src="overlap_histogram.png" alt="overlap histogram">
-{hist_frame.to_html(index=False, border=0)}
-{comparison}
-<h2>Sample pairs</h2>
-<p>X (left) is coloured by its vertex positions; each Y vertex (right) takes the colour of its ground-truth
-X vertex; grey Y vertices have no counterpart on X. Random rotations undone, common y-up frame.</p>
-{missing}
-{gallery}
-<h2>Counts</h2>
-{count_blocks}
-<h2>Metadata</h2>
-<details><summary>store metadata (JSON)</summary>
-<pre>{esc(json.dumps(meta, indent=2, sort_keys=True))}</pre>
-</details>
-</body>
-</html>
-"""

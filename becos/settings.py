@@ -9,6 +9,8 @@ from __future__ import annotations
 
 SETTINGS = ("full_full", "partial_full", "partial_partial")
 """The three pair settings, in the order manifests, stores and reports list them."""
+SETTING_LABELS = {"full_full": "F2F", "partial_full": "P2F", "partial_partial": "P2P"}
+"""The short name of each setting (reports, tables)."""
 
 SPLITS = ("train", "val", "test")
 """The benchmark's splits, in the order tables list them (the published pickles store train, test, val:
