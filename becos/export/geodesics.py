@@ -631,8 +631,6 @@ def write_geodesic_matrices(
     and printed with the free space of the output's file system (``free_bytes`` when given); an estimate
     above it stops the export (:class:`DiskEstimateError`) and leaves ``out`` untouched.
     """
-    from becos.atomic import link_or_copy, save_npy, save_npz
-
     unknown = sorted(set(layouts) - set(GEODESIC_LAYOUTS))
     if unknown or not layouts:
         raise ExportError(f"geodesic layouts {unknown or '(none)'}: unknown. Fix: choose from {GEODESIC_LAYOUTS}")
@@ -640,81 +638,109 @@ def write_geodesic_matrices(
     out = Path(out_dir)
     dsmk_points = "geo-lora" in layouts and not dsmk_copies
     with staged_dir(out, overwrite) as tmp:
-        shapes, meshes, needed, numbers = geodesic_plan(records, splits, keep_arrays=True)
-        estimate = geodesic_disk_estimate(shapes, needed, layouts, dsmk_points, blocks=rows is None)
-        free = free_space(tmp, free_bytes)
-        print(f"export-geodesics: {estimate_text(estimate, free)}", file=sys.stderr, flush=True)
-        require_room(
-            out,
-            estimate["disk_bytes"],
-            free,
-            "the geodesic matrices",
-            "free disk space, choose another output folder on a larger disk, or export fewer splits "
-            "(--splits test) or layouts (--layouts geo-lora)",
+        shapes, meshes, needed, numbers = _geodesic_plan_with_room(
+            records, splits, layouts, dsmk_points, rows, out, tmp, free_bytes
         )
         work = tmp / ".rows"
         work.mkdir()
         blocks = _blocks_for(shapes, meshes, needed, rows, method, jobs, work, progress)
         folder = tmp / GEODESIC_FOLDER
         folder.mkdir()
-        table, written, dsmk_written = [], set(), set()
-        for sh in shapes:
-            sources, path, scale = blocks[sh.key]
-            cut = np.searchsorted(sources, sh.p2f)
-            whole = len(cut) == len(sources) and np.array_equal(cut, np.arange(len(sources)))
-            matrix = None  # the shape's geo-lora matrix, when read
-            if "geo-lora" in layouts and sh.stem not in written:  # one full mesh in several pairs: one file
-                written.add(sh.stem)
-                if whole:
-                    link_or_copy(path, folder / f"{sh.stem}.npy")
-                else:
-                    matrix = _block_cut(path, cut, whole)
-                    save_npy(folder / f"{sh.stem}.npy", matrix)
-            dsmk_file = ""
-            if "dsmk" in layouts and dsmk_reads(sh.setting, sh.side):
-                dsmk_file = f"{DSMK_FOLDER}/{sh.split}/dist/{dsmk_cache_name(sh.vertices, sh.faces)}"
-                if dsmk_file not in dsmk_written:
-                    dsmk_written.add(dsmk_file)
-                    (tmp / dsmk_file).parent.mkdir(parents=True, exist_ok=True)
-                    if dsmk_points:
-                        target = out.resolve() / GEODESIC_FOLDER / f"{sh.stem}.npy"
-                        save_dsmk_pointer(tmp / dsmk_file, sh.vertices, sh.faces, target, scale)
-                    else:
-                        result = _block_cut(path, cut, whole) if matrix is None else matrix
-                        result *= np.float32(scale)  # DSMK divides by the info file's sqrt-area itself
-                        verts = sh.vertices.astype(np.float32)
-                        save_npz(tmp / dsmk_file, verts=verts, faces=sh.faces, result=result)
-                        del result
-            del matrix
-            table.append(
-                [
-                    sh.split,
-                    numbers[(sh.split, sh.pair_id)],
-                    sh.pair_id,
-                    sh.side,
-                    sh.stem,
-                    sh.mesh_id,
-                    len(sh.p2f),
-                    repr(scale),
-                    dsmk_file,
-                ]
-            )
+        table = _write_shapes(shapes, blocks, numbers, layouts, folder, tmp, out if dsmk_points else None)
         shutil.rmtree(work)
-        write_ids(
-            folder / "index.csv",
-            ["split", "index", "pair_id", "side", "stem", "mesh_id", "n_vertices", "sqrt_area", "dsmk_file"],
-            table,
-        )
-        counts = {split: len({r[2] for r in table if r[0] == split}) for split in dict.fromkeys(r[0] for r in table)}
-        write_log(
-            tmp,
-            "becos.export.write_geodesic_matrices",
-            f"becos geodesic matrices ({method}, divided by sqrt-area; DeepShapeMatchingKit cache)",
-            counts,
-            None,
-            metadata,
-        )
+        _write_geodesic_index(tmp, folder, table, method, metadata)
     return out
+
+
+def _geodesic_plan_with_room(records, splits, layouts, dsmk_points: bool, rows, out: Path, tmp: Path, free_bytes):
+    """:func:`geodesic_plan` of ``records``, once the disk under ``tmp`` has room for what it writes
+    (the estimate is printed; :class:`DiskEstimateError` naming ``out`` otherwise)."""
+    shapes, meshes, needed, numbers = geodesic_plan(records, splits, keep_arrays=True)
+    estimate = geodesic_disk_estimate(shapes, needed, layouts, dsmk_points, blocks=rows is None)
+    free = free_space(tmp, free_bytes)
+    print(f"export-geodesics: {estimate_text(estimate, free)}", file=sys.stderr, flush=True)
+    require_room(
+        out,
+        estimate["disk_bytes"],
+        free,
+        "the geodesic matrices",
+        "free disk space, choose another output folder on a larger disk, or export fewer splits "
+        "(--splits test) or layouts (--layouts geo-lora)",
+    )
+    return shapes, meshes, needed, numbers
+
+
+def _write_shapes(shapes, blocks, numbers, layouts, folder: Path, tmp: Path, pointed: Path | None) -> list[list]:
+    """Each shape's files in ``layouts`` (geo-lora under ``folder``, DeepShapeMatchingKit under ``tmp``;
+    its files point into ``pointed``'s geo-lora folder when given, else hold copies). Returns the
+    index rows, one per pair side."""
+    table, written, dsmk_written = [], set(), set()
+    for sh in shapes:
+        sources, path, scale = blocks[sh.key]
+        cut = np.searchsorted(sources, sh.p2f)
+        whole = len(cut) == len(sources) and np.array_equal(cut, np.arange(len(sources)))
+        matrix = None  # the shape's geo-lora matrix, when read
+        if "geo-lora" in layouts and sh.stem not in written:  # one full mesh in several pairs: one file
+            written.add(sh.stem)
+            matrix = _write_geo_lora(folder / f"{sh.stem}.npy", path, cut, whole)
+        dsmk_file = ""
+        if "dsmk" in layouts and dsmk_reads(sh.setting, sh.side):
+            dsmk_file = f"{DSMK_FOLDER}/{sh.split}/dist/{dsmk_cache_name(sh.vertices, sh.faces)}"
+            if dsmk_file not in dsmk_written:
+                dsmk_written.add(dsmk_file)
+                target = None if pointed is None else pointed.resolve() / GEODESIC_FOLDER / f"{sh.stem}.npy"
+                _write_dsmk(tmp / dsmk_file, sh, target, path, cut, whole, matrix, scale)
+        del matrix
+        index = numbers[(sh.split, sh.pair_id)]
+        table.append([sh.split, index, sh.pair_id, sh.side, sh.stem, sh.mesh_id, len(sh.p2f), repr(scale), dsmk_file])
+    return table
+
+
+def _write_geo_lora(path: Path, block: Path, cut: np.ndarray, whole: bool) -> np.ndarray | None:
+    """Write the geo-lora file ``path`` of a shape: the mesh's ``block`` file itself (linked) when the
+    shape keeps every vertex, else its ``cut`` rows and columns. Returns the cut matrix (None if linked)."""
+    from becos.atomic import link_or_copy, save_npy
+
+    if whole:
+        link_or_copy(block, path)
+        return None
+    matrix = _block_cut(block, cut, whole)
+    save_npy(path, matrix)
+    return matrix
+
+
+def _write_dsmk(path: Path, sh: GeodesicShape, target, block: Path, cut, whole: bool, matrix, scale: float) -> None:
+    """Write DeepShapeMatchingKit's cache file ``path`` of shape ``sh``: a pointer to its geo-lora file
+    ``target`` (when not None), else a copy of the matrix (``matrix``, or cut from ``block``) times
+    ``scale``, the full shape's sqrt-area (its loader divides by it itself)."""
+    from becos.atomic import save_npz
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    if target is not None:
+        save_dsmk_pointer(path, sh.vertices, sh.faces, target, scale)
+        return
+    result = _block_cut(block, cut, whole) if matrix is None else matrix
+    result *= np.float32(scale)  # DSMK divides by the info file's sqrt-area itself
+    verts = sh.vertices.astype(np.float32)
+    save_npz(path, verts=verts, faces=sh.faces, result=result)
+
+
+def _write_geodesic_index(tmp: Path, folder: Path, table: list, method: str, metadata) -> None:
+    """``index.csv`` of the geo-lora folder (one row per pair side) and the export's log."""
+    write_ids(
+        folder / "index.csv",
+        ["split", "index", "pair_id", "side", "stem", "mesh_id", "n_vertices", "sqrt_area", "dsmk_file"],
+        table,
+    )
+    counts = {split: len({r[2] for r in table if r[0] == split}) for split in dict.fromkeys(r[0] for r in table)}
+    write_log(
+        tmp,
+        "becos.export.write_geodesic_matrices",
+        f"becos geodesic matrices ({method}, divided by sqrt-area; DeepShapeMatchingKit cache)",
+        counts,
+        None,
+        metadata,
+    )
 
 
 class GeodesicJobError(BecosError):
