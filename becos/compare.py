@@ -256,14 +256,6 @@ class StoreComparison:
     def summary(self) -> str:
         """A readable multi-line summary: pair counts, reasons with example pairs and the arrays behind
         them, layout and metadata (versions, config) differences, and the verdict."""
-
-        def examples(ids) -> str:
-            ids = [str(p) for p in ids]
-            return ", ".join(ids[:MAX_EXAMPLES]) + (" ..." if len(ids) > MAX_EXAMPLES else "")
-
-        def number(x) -> str:
-            return "n/a" if x is None else (x if isinstance(x, str) else f"{x:.3g}")
-
         n_diff = int(self.differing.sum())
         lines = [
             f"compare: {self.path_a} ({self.n_a} pairs, {self.setting_a}) against {self.path_b} "
@@ -276,46 +268,15 @@ class StoreComparison:
             f"{len(self.only_a)} only in {self.path_a.name}, {len(self.only_b)} only in {self.path_b.name}"
         )
         if self.only_a:
-            lines.append(f"  only in {self.path_a}: {len(self.only_a)} pair(s), e.g. {examples(self.only_a)}")
+            lines.append(f"  only in {self.path_a}: {len(self.only_a)} pair(s), e.g. {_examples(self.only_a)}")
         if self.only_b:
-            lines.append(f"  only in {self.path_b}: {len(self.only_b)} pair(s), e.g. {examples(self.only_b)}")
+            lines.append(f"  only in {self.path_b}: {len(self.only_b)} pair(s), e.g. {_examples(self.only_b)}")
         stats = self.key_stats()
-        tol = f" (atol {self.atol:g})" if self.atol else ""
         for j, reason in enumerate(REASONS):
             hit = self.reasons[:, j]
-            if not hit.any():
-                continue
-            if reason == "meta differs":
-                keys = sorted({k for m in self.meta.values() for k in m})
-                detail = "keys " + ", ".join(keys[:6]) + (" ..." if len(keys) > 6 else "")
-            else:
-                parts = []
-                for key, st in stats.items():
-                    if reason not in self._key_reasons(key):
-                        continue
-                    text = f"{key}: {st['pairs']} pair(s)"
-                    if st["pairs"] > st["shape_differs"]:
-                        text += f", {st['values']} value(s)"
-                        if key in self.max_abs:
-                            text += f", max |diff| {number(st['max_abs'])}"
-                    if st["shape_differs"]:
-                        text += (
-                            ", row count differs"
-                            if st["shape_differs"] == st["pairs"]
-                            else f", row count differs in {st['shape_differs']}"
-                        )
-                    if st["same_in_common_frame"] and reason.startswith("rotations"):
-                        text += (
-                            ", same in the common frame"
-                            if st["same_in_common_frame"] == st["pairs"]
-                            else f", same in the common frame in {st['same_in_common_frame']}"
-                        )
-                    # under a rotations reason, the rotations before the coordinates they moved
-                    parts.append((reason.startswith("rotations") and _is_coordinate_key(key), text))
-                parts = [text for _, text in sorted(parts, key=lambda p: p[0])]
-                more = f"; {len(parts) - 4} more array(s), see --json" if len(parts) > 4 else ""
-                detail = "; ".join(parts[:4]) + more + tol
-            lines.append(f"  {reason}: {int(hit.sum())} pair(s), e.g. {examples(self.common[hit])} ({detail})")
+            if hit.any():
+                detail = self._reason_detail(reason, stats)
+                lines.append(f"  {reason}: {int(hit.sum())} pair(s), e.g. {_examples(self.common[hit])} ({detail})")
         for key, d in self.layout.items():
             lines.append(f"  layout of {key} differs: {d['a']} vs {d['b']}")
         versions = self.version_differences
@@ -328,17 +289,66 @@ class StoreComparison:
             lines.append(f"  metadata {key}: {_show(a)} -> {_show(b)}")
         if len(other) > 12:
             lines.append(f"  ... {len(other) - 12} more metadata differences (see --json)")
-        if self.identical:
-            verdict = "identical" + (" data (built with other library versions)" if self.attributes else "")
-        elif self.data_identical:
-            verdict = "same pairs and arrays, but the metadata differs"
-        else:
-            verdict = (
-                f"the stores differ: {n_diff} pair(s) differ, {len(self.only_a) + len(self.only_b)} "
-                f"in one store only{', layouts differ' if self.layout else ''}"
-            )
-        lines.append(f"  result: {verdict}")
+        lines.append(f"  result: {self._verdict(n_diff)}")
         return "\n".join(lines)
+
+    def _reason_detail(self, reason: str, stats: dict) -> str:
+        """The summary's parenthesis after a reason: the meta keys that differ, or the arrays behind it."""
+        if reason == "meta differs":
+            keys = sorted({k for m in self.meta.values() for k in m})
+            return "keys " + ", ".join(keys[:6]) + (" ..." if len(keys) > 6 else "")
+        parts = []
+        for key, st in stats.items():
+            if reason in self._key_reasons(key):
+                # under a rotations reason, the rotations before the coordinates they moved
+                parts.append(
+                    (reason.startswith("rotations") and _is_coordinate_key(key), self._key_text(key, st, reason))
+                )
+        parts = [text for _, text in sorted(parts, key=lambda p: p[0])]
+        more = f"; {len(parts) - 4} more array(s), see --json" if len(parts) > 4 else ""
+        tol = f" (atol {self.atol:g})" if self.atol else ""
+        return "; ".join(parts[:4]) + more + tol
+
+    def _key_text(self, key: str, st: dict, reason: str) -> str:
+        """One array's part of a reason's detail (:meth:`key_stats` ``st``)."""
+        text = f"{key}: {st['pairs']} pair(s)"
+        if st["pairs"] > st["shape_differs"]:
+            text += f", {st['values']} value(s)"
+            if key in self.max_abs:
+                text += f", max |diff| {_number(st['max_abs'])}"
+        if st["shape_differs"]:
+            text += (
+                ", row count differs"
+                if st["shape_differs"] == st["pairs"]
+                else f", row count differs in {st['shape_differs']}"
+            )
+        if st["same_in_common_frame"] and reason.startswith("rotations"):
+            text += (
+                ", same in the common frame"
+                if st["same_in_common_frame"] == st["pairs"]
+                else f", same in the common frame in {st['same_in_common_frame']}"
+            )
+        return text
+
+    def _verdict(self, n_diff: int) -> str:
+        if self.identical:
+            return "identical" + (" data (built with other library versions)" if self.attributes else "")
+        if self.data_identical:
+            return "same pairs and arrays, but the metadata differs"
+        return (
+            f"the stores differ: {n_diff} pair(s) differ, {len(self.only_a) + len(self.only_b)} "
+            f"in one store only{', layouts differ' if self.layout else ''}"
+        )
+
+
+def _examples(ids) -> str:
+    """Up to MAX_EXAMPLES pair ids, comma-separated (``...`` when there are more)."""
+    ids = [str(p) for p in ids]
+    return ", ".join(ids[:MAX_EXAMPLES]) + (" ..." if len(ids) > MAX_EXAMPLES else "")
+
+
+def _number(x) -> str:
+    return "n/a" if x is None else (x if isinstance(x, str) else f"{x:.3g}")
 
 
 def _json_float(x) -> float | str | None:
