@@ -9,9 +9,6 @@ from pathlib import Path
 PACKAGE = Path(__file__).resolve().parents[1] / "becos"
 MAX_MODULE_LINES = 800
 MAX_FUNCTION_LINES = 100
-PENDING_LONG_FUNCTIONS = {"becos/workflow/stages.py pairs_stage"}
-"""Functions over the bar whose split is under way elsewhere (issue #32: ``becos/workflow/`` belongs to
-another change). Named, not hidden: the test fails once one is split and still listed here."""
 
 
 def _modules() -> dict[str, Path]:
@@ -50,7 +47,4 @@ def _long_functions() -> dict[str, int]:
 
 def test_no_function_over_100_lines():
     long = _long_functions()
-    new = {f: n for f, n in long.items() if f not in PENDING_LONG_FUNCTIONS}
-    assert not new, f"functions over {MAX_FUNCTION_LINES} lines (split them along their seams): {new}"
-    done = PENDING_LONG_FUNCTIONS - set(long)
-    assert not done, f"{sorted(done)} no longer over {MAX_FUNCTION_LINES} lines: remove from PENDING_LONG_FUNCTIONS"
+    assert not long, f"functions over {MAX_FUNCTION_LINES} lines (split them along their seams): {long}"
