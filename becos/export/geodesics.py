@@ -135,38 +135,48 @@ def mesh_blocks(
     tasks submitted and not yet consumed (bounded memory), each task's (rows, V) float32 result cut to
     the block's columns as it arrives; no rows file on disk. From ``rows_folders`` (outputs of
     ``becos geodesic-rows``): each block read (and cut to ``needed``) from its file."""
-    import multiprocessing
     import time
-    from collections import deque
 
     order = sorted(meshes, key=lambda k: (-len(needed[k]), k))
     started = time.monotonic()
-    if rows_folders is not None:
-        loaded = rows_covering(rows_folders, needed, order)
-        for key in order:
-            _, path, scale = loaded[key]
-            if abs(scale - scales[key]) > 1e-6 * abs(scale):
-                raise ExportError(
-                    f"{path}: sqrt-area {scale!r} differs from {scales[key]!r} of this store. Fix: build every "
-                    f"setting's store with the same config (area_normalised) and rerun `becos geodesic-plan`"
-                )
-        for i, key in enumerate(order):
-            have, path, _ = loaded[key]
-            whole = len(have) == len(needed[key])
-            block = np.empty((len(needed[key]),) * 2, dtype=np.float32)
-            _read_npy_block(path, None if whole else np.searchsorted(have, needed[key]), block)
-            if progress:
-                print(
-                    f"{label}: read mesh {i + 1}/{len(order)} ({len(block)} rows) from {path.parent}, "
-                    f"{time.monotonic() - started:.0f} s",
-                    file=sys.stderr,
-                    flush=True,
-                )
-            yield key, needed[key], block
-            del block
-        return
 
-    from concurrent.futures import ProcessPoolExecutor
+    def say(text: str) -> None:  # progress on stderr, with the seconds since the start
+        if progress:
+            print(f"{text}, {time.monotonic() - started:.0f} s", file=sys.stderr, flush=True)
+
+    if rows_folders is not None:
+        yield from _blocks_read(rows_folders, needed, scales, order, say, label)
+    else:
+        yield from _blocks_computed(
+            meshes, needed, scales, order, method, jobs, say, f"{label} ({method}, {jobs} jobs)"
+        )
+
+
+def _blocks_read(rows_folders, needed: dict, scales: Mapping[str, float], order: list, say, label: str):
+    """:func:`mesh_blocks` read from the files of ``becos geodesic-rows`` (``rows_folders``) in ``order``;
+    their sqrt-areas must equal ``scales``. ``say``: the progress printer."""
+    loaded = rows_covering(rows_folders, needed, order)
+    for key in order:
+        _, path, scale = loaded[key]
+        if abs(scale - scales[key]) > 1e-6 * abs(scale):
+            raise ExportError(
+                f"{path}: sqrt-area {scale!r} differs from {scales[key]!r} of this store. Fix: build every "
+                f"setting's store with the same config (area_normalised) and rerun `becos geodesic-plan`"
+            )
+    for i, key in enumerate(order):
+        have, path, _ = loaded[key]
+        whole = len(have) == len(needed[key])
+        block = np.empty((len(needed[key]),) * 2, dtype=np.float32)
+        _read_npy_block(path, None if whole else np.searchsorted(have, needed[key]), block)
+        say(f"{label}: read mesh {i + 1}/{len(order)} ({len(block)} rows) from {path.parent}")
+        yield key, needed[key], block
+        del block
+
+
+def _blocks_computed(meshes: dict, needed: dict, scales: Mapping[str, float], order: list, method, jobs, say, label):
+    """:func:`mesh_blocks` computed by ``jobs`` worker processes in ``order``: each mesh's block filled
+    from its tasks' rows as they arrive (a mesh's tasks are consecutive), then symmetrised."""
+    from contextlib import closing
 
     tasks = [
         (key, start, *meshes[key], needed[key][start : start + step], method)
@@ -175,25 +185,9 @@ def mesh_blocks(
         for start in range(0, len(needed[key]), step)
     ]
     total, done = sum(len(needed[k]) for k in order), 0
-    # every task in a fresh process (also with jobs=1): the sparse Cholesky solver behind the heat
-    # method (cholespy) keeps ~V x 447 x 8 bytes per factorisation that has solved, freed only when its
-    # process ends (measured: +67 MB per 9.4k-vertex task; a long-lived process grew to 2 GB)
-    pool = ProcessPoolExecutor(
-        max_workers=max(1, jobs), mp_context=multiprocessing.get_context("spawn"), max_tasks_per_child=1
-    )
-
-    def results() -> Iterator[tuple[str, int, np.ndarray]]:
-        pending = deque()
-        for task in tasks:
-            pending.append(pool.submit(_geodesic_task, task))
-            if len(pending) >= max(1, jobs):  # at most `jobs` results in this process: bounded memory
-                yield pending.popleft().result()
-        while pending:
-            yield pending.popleft().result()
-
-    try:
-        block, filled, n_meshes = None, 0, 0
-        for key, start, rows in results():
+    block, filled = None, 0
+    with closing(_task_results(tasks, jobs)) as results:
+        for key, start, rows in results:
             sources = needed[key]
             if block is None:
                 block, filled = np.empty((len(sources), len(sources)), dtype=np.float32), 0
@@ -202,17 +196,33 @@ def mesh_blocks(
             filled += len(rows)
             done += len(rows)
             del rows
-            if progress:
-                print(
-                    f"{label} ({method}, {jobs} jobs): {done}/{total} rows of {len(order)} meshes, "
-                    f"{time.monotonic() - started:.0f} s",
-                    file=sys.stderr,
-                    flush=True,
-                )
+            say(f"{label}: {done}/{total} rows of {len(order)} meshes")
             if filled == len(sources):
-                n_meshes += 1
                 yield key, sources, _symmetrise_in_place(block, scales[key])
                 block = None
+
+
+def _task_results(tasks: list, jobs: int) -> Iterator[tuple[str, int, np.ndarray]]:
+    """``(key, start, rows)`` of each :func:`_geodesic_task` in the order of ``tasks``, each run in a fresh
+    process, ``jobs`` at a time, at most ``jobs`` results held here (bounded memory)."""
+    import multiprocessing
+    from collections import deque
+    from concurrent.futures import ProcessPoolExecutor
+
+    # every task in a fresh process (also with jobs=1): the sparse Cholesky solver behind the heat
+    # method (cholespy) keeps ~V x 447 x 8 bytes per factorisation that has solved, freed only when its
+    # process ends (measured: +67 MB per 9.4k-vertex task; a long-lived process grew to 2 GB)
+    pool = ProcessPoolExecutor(
+        max_workers=max(1, jobs), mp_context=multiprocessing.get_context("spawn"), max_tasks_per_child=1
+    )
+    try:
+        pending = deque()
+        for task in tasks:
+            pending.append(pool.submit(_geodesic_task, task))
+            if len(pending) >= max(1, jobs):
+                yield pending.popleft().result()
+        while pending:
+            yield pending.popleft().result()
     finally:
         pool.shutdown(cancel_futures=True)
 
