@@ -180,29 +180,10 @@ def _write_ulrssm_dist(
     summary written to ``logs/geodesics.json`` (estimate, files, links, copies, bytes, seconds)."""
     import time
 
-    from becos.atomic import link_or_copy
-
     started = time.monotonic()
     scales = mesh_sqrt_areas(shapes)
     groups = distinct_matrices(shapes)
-    estimate = ulrssm_geodesic_estimate(groups, needed, meshes, jobs, rows_folders is None)
-    free = free_space(tmp, free_bytes)
-    print(
-        f"export-ulrssm geodesics: {estimate['files']} distinct dist matrices of {estimate['meshes']} meshes for "
-        f"{estimate['sides']} pair sides (the rest hard links): disk {gigabytes(estimate['disk_bytes'])}, peak memory "
-        f"~{gigabytes(estimate['memory_bytes'])} ({jobs} jobs, largest mesh {estimate['largest_mesh_rows']} vertices); "
-        f"free on the output's disk: {gigabytes(free)}",
-        file=sys.stderr,
-        flush=True,
-    )
-    require_room(
-        out,
-        estimate["disk_bytes"],
-        free,
-        "the ULRSSM geodesic matrices",
-        "free disk space, choose another --out on a larger disk, or export geodesics of fewer splits (--splits test)",
-        f"{estimate['files']} distinct (V, V) float32 .mat files of {estimate['meshes']} meshes",
-    )
+    estimate, free = _ulrssm_estimate_with_room(tmp, out, groups, needed, meshes, jobs, rows_folders, free_bytes)
 
     def dist_path(sh: GeodesicShape) -> Path:
         return tmp / sh.split / str(numbers[(sh.split, sh.pair_id)]) / "dist" / f"{sh.side}.mat"
@@ -212,20 +193,8 @@ def _write_ulrssm_dist(
         meshes, needed, scales, method, jobs, progress, rows_folders, "export-ulrssm geodesics"
     ):
         for group in groups[key].values():
-            first = group[0]
-            cut = np.searchsorted(sources, first.p2f)
-            whole = len(cut) == len(sources) and np.array_equal(cut, np.arange(len(sources)))
-            path = dist_path(first)
-            path.parent.mkdir(exist_ok=True)
-            nbytes += write_symmetric_mat(path, len(cut), cut_chunks(block, None if whole else cut))
-            written += 1
-            for sh in group[1:]:
-                dist_path(sh).parent.mkdir(exist_ok=True)
-                if link_or_copy(path, dist_path(sh)):
-                    links += 1
-                else:
-                    copies += 1
-                    nbytes += path.stat().st_size
+            n_links, n_copies, n_bytes = _write_distinct_matrix(group, sources, block, dist_path)
+            written, links, copies, nbytes = written + 1, links + n_links, copies + n_copies, nbytes + n_bytes
         del block
     if copies:
         print(
@@ -247,3 +216,49 @@ def _write_ulrssm_dist(
     if progress:
         print(f"export-ulrssm geodesics: {json.dumps(summary)}", file=sys.stderr, flush=True)
     return summary
+
+
+def _ulrssm_estimate_with_room(tmp: Path, out: Path, groups, needed, meshes, jobs: int, rows_folders, free_bytes):
+    """:func:`ulrssm_geodesic_estimate` and the free bytes under ``tmp``, printed, once the disk has room
+    for the dist files (:class:`DiskEstimateError` naming ``out`` otherwise)."""
+    estimate = ulrssm_geodesic_estimate(groups, needed, meshes, jobs, rows_folders is None)
+    free = free_space(tmp, free_bytes)
+    print(
+        f"export-ulrssm geodesics: {estimate['files']} distinct dist matrices of {estimate['meshes']} meshes for "
+        f"{estimate['sides']} pair sides (the rest hard links): disk {gigabytes(estimate['disk_bytes'])}, peak memory "
+        f"~{gigabytes(estimate['memory_bytes'])} ({jobs} jobs, largest mesh {estimate['largest_mesh_rows']} vertices); "
+        f"free on the output's disk: {gigabytes(free)}",
+        file=sys.stderr,
+        flush=True,
+    )
+    require_room(
+        out,
+        estimate["disk_bytes"],
+        free,
+        "the ULRSSM geodesic matrices",
+        "free disk space, choose another --out on a larger disk, or export geodesics of fewer splits (--splits test)",
+        f"{estimate['files']} distinct (V, V) float32 .mat files of {estimate['meshes']} meshes",
+    )
+    return estimate, free
+
+
+def _write_distinct_matrix(group: list[GeodesicShape], sources: np.ndarray, block: np.ndarray, dist_path):
+    """One distinct dist matrix: the first shape of ``group`` gets the MAT file of ``block`` (rows and
+    columns ``sources``) cut to its vertices, the others hard links to it (copies where refused).
+    Returns (links, copies, bytes written)."""
+    from becos.atomic import link_or_copy
+
+    first = group[0]
+    cut = np.searchsorted(sources, first.p2f)
+    whole = len(cut) == len(sources) and np.array_equal(cut, np.arange(len(sources)))
+    path = dist_path(first)
+    path.parent.mkdir(exist_ok=True)
+    nbytes, links, copies = write_symmetric_mat(path, len(cut), cut_chunks(block, None if whole else cut)), 0, 0
+    for sh in group[1:]:
+        dist_path(sh).parent.mkdir(exist_ok=True)
+        if link_or_copy(path, dist_path(sh)):
+            links += 1
+        else:
+            copies += 1
+            nbytes += path.stat().st_size
+    return links, copies, nbytes
