@@ -182,7 +182,6 @@ def render_pair(
     See docs/design/report.md for frames, colours and the view. Both panels share one scale (units of
     the record's common frame) so relative sizes are true. Returns ``path``.
     """
-    from matplotlib.collections import PolyCollection
     from matplotlib.figure import Figure
 
     width, height = (int(v) for v in size)
@@ -194,6 +193,20 @@ def render_pair(
     light = basis @ np.array([-0.35, 0.5, 1.0])  # from the viewer's upper left, in the common frame
     light /= np.linalg.norm(light)
 
+    panels = _projected_panels(record, basis, light)
+    fig = Figure(figsize=(width / dpi, height / dpi), dpi=dpi, facecolor=BACKGROUND)
+    _draw_panels(fig, record, panels, width, height)
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="png", dpi=dpi, facecolor=BACKGROUND)
+    path = Path(path)
+    write_bytes(path, buffer.getvalue())
+    return path
+
+
+def _projected_panels(record: PairRecord, basis: np.ndarray, light: np.ndarray) -> list[tuple]:
+    """X's and Y's panel: ``(shape, tri2d, face_rgb, screen)`` with ``screen`` the (V, 3) vertices in the
+    camera ``basis`` (columns right, up, towards the viewer), ``tri2d`` the (F, 3, 2) screen triangles
+    sorted far to near and ``face_rgb`` their (F, 3) shaded colours (light: (3,) unit, common frame)."""
     xc, yc = common_vertices(record, "x"), common_vertices(record, "y")
     x_colours = position_colours(xc)
     colours = {"x": x_colours, "y": transfer_colours(x_colours, record["corr_10"])}
@@ -205,10 +218,16 @@ def render_pair(
         order = np.argsort(tri[:, :, 2].mean(axis=1), kind="stable")  # far to near
         face_rgb = shaded_face_colours(vertices, faces, colours[shape], light)
         panels.append((shape, tri[order, :, :2], face_rgb[order], screen))
+    return panels
+
+
+def _draw_panels(fig, record: PairRecord, panels: list[tuple], width: int, height: int) -> None:
+    """Draw :func:`_projected_panels` side by side at one scale into ``fig`` (``width`` x ``height``
+    pixels), with each panel's label, the pair's title and the colour legend."""
+    from matplotlib.collections import PolyCollection
 
     title_h = 0.16 if height >= 200 else 0.22
     label_h = 0.08
-    fig = Figure(figsize=(width / dpi, height / dpi), dpi=dpi, facecolor=BACKGROUND)
     panel_w, panel_h = 0.5, 1.0 - title_h - label_h
     # one scale for both panels: half the world units per pixel that fit the larger shape (+6 % margin)
     half = 1e-9
@@ -259,11 +278,6 @@ def render_pair(
         fontsize=8,
         color=TEXT_COLOUR,
     )
-    buffer = io.BytesIO()
-    fig.savefig(buffer, format="png", dpi=dpi, facecolor=BACKGROUND)
-    path = Path(path)
-    write_bytes(path, buffer.getvalue())
-    return path
 
 
 def _title(record: PairRecord) -> str:
