@@ -621,16 +621,7 @@ def generate_collection(
         ConfigError: bad arguments, or ``out_dir`` is a non-empty folder that is not a collection.
     """
     out_dir = Path(out_dir).resolve()
-    if not (isinstance(seed, (int, np.integer)) and seed >= 0):
-        raise ConfigError(f"synthetic collection: seed must be a non-negative integer, got {seed!r}")
-    if fraction is None:
-        if not (isinstance(poses_per_class, (int, np.integer)) and 1 <= poses_per_class <= 20):
-            raise ConfigError(
-                f"synthetic collection: poses_per_class must be an integer in 1..20, got {poses_per_class!r}"
-            )
-        poses = {f"{s.dataset}_{s.name}": int(poses_per_class) for s in CLASSES}
-    else:
-        poses = poses_at_fraction(fraction)
+    poses = _poses(seed, poses_per_class, fraction)
     if out_dir.exists() and (not out_dir.is_dir() or (any(out_dir.iterdir()) and not _is_collection(out_dir))):
         raise ConfigError(
             f"{out_dir} exists and is not a synthetic collection (no {MANIFEST}); refusing to "
@@ -647,39 +638,64 @@ def generate_collection(
                 verts = ds.to_file_frame(model.pose(int(seed), k))
                 _write(tmp / "data" / ds.folder_name / f"{spec.name}{k}.off", format_off(verts, model.mesh.faces))
         _write_annotations(tmp / "annotations", models)
-        files = sorted(p for p in tmp.rglob("*") if p.is_file())
-        manifest = {
-            "generator": "becos.synthetic",
-            "format_version": FORMAT_VERSION,
-            "seed": int(seed),
-            "poses_per_class": int(poses_per_class) if fraction is None else poses,
-            "datasets": {
-                n: {"folder_name": d.folder_name, "scale": d.scale, "rot": list(d.rot)} for n, d in DATASETS.items()
-            },
-            "classes": [
-                {
-                    "dataset": s.dataset,
-                    "name": s.name,
-                    "category": s.category,
-                    "template": s.template,
-                    "n_vertices": models[s.node].mesh.n_vertices,
-                }
-                for s in CLASSES
-            ],
-            "files": {p.relative_to(tmp).as_posix(): _sha256(p) for p in files},
-        }
-        if fraction is not None:
-            manifest["fraction"] = float(fraction)
+        manifest = _manifest(tmp, models, seed, poses_per_class, poses, fraction)
         _write(tmp / MANIFEST, json.dumps(manifest, indent=1, sort_keys=True) + "\n")
         os.chmod(tmp, 0o755)
-        if out_dir.exists():
-            old = Path(tempfile.mkdtemp(dir=out_dir.parent, prefix=f".{out_dir.name}.old-"))
-            os.replace(out_dir, old / "collection")
-            os.replace(tmp, out_dir)
-            shutil.rmtree(old, ignore_errors=True)
-        else:
-            os.replace(tmp, out_dir)
+        _replace(out_dir, tmp)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
     return out_dir
+
+
+def _poses(seed, poses_per_class, fraction) -> dict[str, int]:
+    """Shapes per class, ``{<dataset>_<class>: count}``, of :func:`generate_collection`'s arguments
+    (checked; a bad one is a ConfigError)."""
+    if not (isinstance(seed, (int, np.integer)) and seed >= 0):
+        raise ConfigError(f"synthetic collection: seed must be a non-negative integer, got {seed!r}")
+    if fraction is not None:
+        return poses_at_fraction(fraction)
+    if not (isinstance(poses_per_class, (int, np.integer)) and 1 <= poses_per_class <= 20):
+        raise ConfigError(f"synthetic collection: poses_per_class must be an integer in 1..20, got {poses_per_class!r}")
+    return {f"{s.dataset}_{s.name}": int(poses_per_class) for s in CLASSES}
+
+
+def _manifest(tmp: Path, models: dict, seed: int, poses_per_class: int, poses: dict, fraction: float | None) -> dict:
+    """The collection's manifest: generator, seed, poses per class (``poses_per_class``, or ``poses`` at a
+    ``fraction``), datasets, classes and the sha256 of every file written so far under ``tmp``."""
+    files = sorted(p for p in tmp.rglob("*") if p.is_file())
+    manifest = {
+        "generator": "becos.synthetic",
+        "format_version": FORMAT_VERSION,
+        "seed": int(seed),
+        "poses_per_class": int(poses_per_class) if fraction is None else poses,
+        "datasets": {
+            n: {"folder_name": d.folder_name, "scale": d.scale, "rot": list(d.rot)} for n, d in DATASETS.items()
+        },
+        "classes": [
+            {
+                "dataset": s.dataset,
+                "name": s.name,
+                "category": s.category,
+                "template": s.template,
+                "n_vertices": models[s.node].mesh.n_vertices,
+            }
+            for s in CLASSES
+        ],
+        "files": {p.relative_to(tmp).as_posix(): _sha256(p) for p in files},
+    }
+    if fraction is not None:
+        manifest["fraction"] = float(fraction)
+    return manifest
+
+
+def _replace(out_dir: Path, tmp: Path) -> None:
+    """Rename the finished folder ``tmp`` to ``out_dir``, an existing collection there moved aside first
+    and removed after."""
+    if out_dir.exists():
+        old = Path(tempfile.mkdtemp(dir=out_dir.parent, prefix=f".{out_dir.name}.old-"))
+        os.replace(out_dir, old / "collection")
+        os.replace(tmp, out_dir)
+        shutil.rmtree(old, ignore_errors=True)
+    else:
+        os.replace(tmp, out_dir)
