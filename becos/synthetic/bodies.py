@@ -165,40 +165,29 @@ def humanoid(
     return _with_mirrors(parts)
 
 
-def _quadruped_parts(
-    size: float,
-    legs: float,
-    girth: float,
-    neck: float,
-    length: float,
-    horns: bool,
-    tail: str | None,
-    head_and_neck: bool = True,
-) -> list[Part]:
-    s, g = size, girth
-    r = s * g
+def _quadruped_head(P, s: float, r: float, neck: float, horns: bool) -> list[Part]:
+    """Quadruped neck, head and (``horns``) left horn on the barrel's front, metres: ``P`` maps the reference
+    coordinates of :func:`_quadruped_parts` to the body's, ``s`` its size, ``r`` size x girth; ``neck``
+    stretches the neck, and the head moves with the neck's end."""
+    n0 = np.array(P(0, 0.62, 0.30))
+    n1 = n0 + (np.array(P(0, 0.82, 0.46)) - n0) * neck
+    shift = n1 - np.array(P(0, 0.82, 0.46))
+    h0 = np.array(P(0, 0.86, 0.48)) + shift
+    h1 = np.array(P(0, 0.80, 0.66)) + shift
+    parts = [
+        Part("q_neck", "q_barrel", tuple(n0), tuple(n1), 0.075 * r, 0.055 * r, k=0.05 * s),
+        Part("q_head", "q_neck", tuple(h0), tuple(h1), 0.075 * r, 0.042 * r, 0.85, 1.0, 0.03 * s),
+    ]
+    if horns:
+        base = np.array(P(0.035, 0.93, 0.50)) + shift
+        tip = base + np.array([0.055, 0.13, -0.08]) * s
+        parts.append(Part("q_horn_l", "q_head", tuple(base), tuple(tip), 0.03 * s, 0.02 * s, k=0.015 * s))
+    return parts
 
-    def P(x, y, z, leg=False):
-        # reference coordinates: barrel ~0.55 m high; legs stretch vertically by `legs`
-        yy = y * legs if leg else y + (legs - 1.0) * 0.5
-        return (x * g * s, yy * s, z * length * s)
 
-    parts = [Part("q_barrel", None, P(0, 0.55, -0.35), P(0, 0.57, 0.28), 0.15 * r, 0.16 * r, 0.8, 1.0, 0.05 * s)]
-    if head_and_neck:
-        n0 = np.array(P(0, 0.62, 0.30))
-        n1 = n0 + (np.array(P(0, 0.82, 0.46)) - n0) * neck
-        shift = n1 - np.array(P(0, 0.82, 0.46))
-        h0 = np.array(P(0, 0.86, 0.48)) + shift
-        h1 = np.array(P(0, 0.80, 0.66)) + shift
-        parts += [
-            Part("q_neck", "q_barrel", tuple(n0), tuple(n1), 0.075 * r, 0.055 * r, k=0.05 * s),
-            Part("q_head", "q_neck", tuple(h0), tuple(h1), 0.075 * r, 0.042 * r, 0.85, 1.0, 0.03 * s),
-        ]
-        if horns:
-            base = np.array(P(0.035, 0.93, 0.50)) + shift
-            tip = base + np.array([0.055, 0.13, -0.08]) * s
-            parts.append(Part("q_horn_l", "q_head", tuple(base), tuple(tip), 0.03 * s, 0.02 * s, k=0.015 * s))
-    parts += [
+def _quadruped_legs(P, s: float, r: float) -> list[Part]:
+    """Quadruped left fore and hind legs (upper, lower, foot), metres; arguments as :func:`_quadruped_head`."""
+    return [
         Part(
             "q_fupper_l",
             "q_barrel",
@@ -254,6 +243,32 @@ def _quadruped_parts(
             k=0.015 * s,
         ),
     ]
+
+
+def _quadruped_parts(
+    size: float,
+    legs: float,
+    girth: float,
+    neck: float,
+    length: float,
+    horns: bool,
+    tail: str | None,
+    head_and_neck: bool = True,
+) -> list[Part]:
+    """A quadruped's parts before mirroring (left side only), metres; arguments as :func:`quadruped`,
+    ``head_and_neck`` False for a centaur's lower body."""
+    s, g = size, girth
+    r = s * g
+
+    def P(x, y, z, leg=False):
+        # reference coordinates: barrel ~0.55 m high; legs stretch vertically by `legs`
+        yy = y * legs if leg else y + (legs - 1.0) * 0.5
+        return (x * g * s, yy * s, z * length * s)
+
+    parts = [Part("q_barrel", None, P(0, 0.55, -0.35), P(0, 0.57, 0.28), 0.15 * r, 0.16 * r, 0.8, 1.0, 0.05 * s)]
+    if head_and_neck:
+        parts += _quadruped_head(P, s, r, neck, horns)
+    parts += _quadruped_legs(P, s, r)
     if tail == "long":
         parts.append(Part("q_tail", "q_barrel", P(0, 0.60, -0.45), P(0, 0.42, -0.74), 0.04 * r, 0.022 * r, k=0.03 * s))
     elif tail == "short":
