@@ -164,42 +164,12 @@ def import_published(
             if keep is not None and not {x["org_dataset"], y["org_dataset"]} <= keep:
                 dropped[split] += 1
                 continue
-            meta = x.get("becos")
-            if meta is not None:
-                pid, pseed, copy, chunk = meta["pair_id"], int(meta["seed"]), int(meta["copy"]), int(meta["chunk"])
-                category, xv, yv = meta["category"], int(meta["variant"]), int(y["becos"]["variant"])
-            else:
-                pid = pair_id_of(setting, xk, yk, copy)
-                pseed = stable_hash(seed, pid, bits=63)
-                chunk = stable_hash(pid) % n_chunks
-                category = _pair_category(x, y)
-                xv, yv = stable_hash(pseed, "x_variant") % n_variants, stable_hash(pseed, "y_variant") % n_variants
-            rec = {
-                "pair_id": pid,
-                "setting": setting,
-                "split": split,
-                "category": category,
-                "copy": copy,
-                "x_dataset": x["org_dataset"],
-                "x_name": x["name"],
-                "y_dataset": y["org_dataset"],
-                "y_name": y["name"],
-                "seed": pseed,
-                "x_variant": xv,
-                "y_variant": yv,
-                "chunk": chunk,
-                "published_index": index,
-                "x_category": x["category"],
-                "y_category": y["category"],
-                "x_face_target": int(x["desired_n_face_remeshed"]),
-                "y_face_target": int(y["desired_n_face_remeshed"]),
-            }
-            for side, s in (("x", x), ("y", y)):
-                rot = np.asarray(s["random_rot"], dtype=np.float64).reshape(9)
-                rec.update({f"{side}_random_rot_{i}": float(v) for i, v in enumerate(rot)})
+            rec = _manifest_row(setting, split, index, x, y, copy, seed, n_variants, n_chunks)
             records.append(rec)
             if "cam_pos" in x and "cam_pos" in y:
-                cameras[pid] = np.stack([np.asarray(x["cam_pos"], np.float64), np.asarray(y["cam_pos"], np.float64)])
+                cameras[rec["pair_id"]] = np.stack(
+                    [np.asarray(x["cam_pos"], np.float64), np.asarray(y["cam_pos"], np.float64)]
+                )
     df = pd.DataFrame.from_records(records)
     if df.empty:
         df = pd.DataFrame(columns=list(MANIFEST_COLUMNS))
@@ -214,6 +184,49 @@ def import_published(
     }
     df.attrs["report"] = report
     return PublishedImport(df, cameras or None, report)
+
+
+def _manifest_row(
+    setting: str, split: str, index: int, x: dict, y: dict, copy: int, seed, n_variants, n_chunks
+) -> dict:
+    """The manifest row of the published pair ``(x, y)``, the ``index``-th of ``split`` and the ``copy``-th
+    of its shapes: ids, seed, variants and chunk from the becos metadata of an exported pickle, else
+    derived (arguments as :func:`import_published`), and the published face targets and rotations."""
+    xk, yk = shape_key(x["org_dataset"], x["name"]), shape_key(y["org_dataset"], y["name"])
+    meta = x.get("becos")
+    if meta is not None:
+        pid, pseed, copy, chunk = meta["pair_id"], int(meta["seed"]), int(meta["copy"]), int(meta["chunk"])
+        category, xv, yv = meta["category"], int(meta["variant"]), int(y["becos"]["variant"])
+    else:
+        pid = pair_id_of(setting, xk, yk, copy)
+        pseed = stable_hash(seed, pid, bits=63)
+        chunk = stable_hash(pid) % n_chunks
+        category = _pair_category(x, y)
+        xv, yv = stable_hash(pseed, "x_variant") % n_variants, stable_hash(pseed, "y_variant") % n_variants
+    rec = {
+        "pair_id": pid,
+        "setting": setting,
+        "split": split,
+        "category": category,
+        "copy": copy,
+        "x_dataset": x["org_dataset"],
+        "x_name": x["name"],
+        "y_dataset": y["org_dataset"],
+        "y_name": y["name"],
+        "seed": pseed,
+        "x_variant": xv,
+        "y_variant": yv,
+        "chunk": chunk,
+        "published_index": index,
+        "x_category": x["category"],
+        "y_category": y["category"],
+        "x_face_target": int(x["desired_n_face_remeshed"]),
+        "y_face_target": int(y["desired_n_face_remeshed"]),
+    }
+    for side, s in (("x", x), ("y", y)):
+        rot = np.asarray(s["random_rot"], dtype=np.float64).reshape(9)
+        rec.update({f"{side}_random_rot_{i}": float(v) for i, v in enumerate(rot)})
+    return rec
 
 
 def published_shapes(manifest: pd.DataFrame) -> pd.DataFrame:
