@@ -309,31 +309,7 @@ def compose(
     loose = ~exact
     if loose.any():
         locator = locator if locator is not None else SurfaceLocator(target)
-        safe_face = np.where(image_face[loose] >= 0, image_face[loose], 0)
-        # (L, 3, 3) corners of the image faces (the locator is the target's, as its normals and rings are)
-        image_points = np.einsum("mkj,mkjd->mkd", image_weights[loose], locator.triangles[safe_face])
-        points = np.einsum("mk,mkd->md", w[loose], image_points)
-        # the point lies between its images: it may only land near their faces along the target's
-        # connectivity, never on another part that touches them in space (normals alone are misled
-        # where parts pass through each other or meet at an angle)
-        normals = np.einsum("mk,mkd->md", w[loose], locator.face_normals[safe_face])
-        near_vertices = np.asarray(target.faces)[safe_face].reshape(-1, 9)  # (L, 9) image corners
-        used = np.repeat(w[loose] > 0, 3, axis=1)  # (L, 9)
-        near_vertices = np.where(used, near_vertices, near_vertices[np.arange(len(used)), used.argmax(axis=1)][:, None])
-        rings = locator.rings(COMPOSE_RINGS)
-        target_faces = np.asarray(target.faces)
-
-        def accept(rows, cand):
-            corners = target_faces[cand]  # (M, K, 3)
-            near = near_vertices[rows]  # (M, 9)
-            # a face sharing a corner with an image face is within the rings (a vertex is within 0 rings
-            # of itself): only the others need the sparse lookup
-            ok = (near[:, None, :, None] == corners[:, :, None, :]).any(axis=(2, 3))  # (M, K)
-            row, col = np.nonzero(~ok)
-            ok[row, col] = rings.near(near[row][:, :, None], corners[row, col][:, None, :]).any(axis=(1, 2))
-            return ok
-
-        f, bw, d, _ = locator.closest_near(points, accept, normals)
+        f, bw, d = _project_near_images(w[loose], image_face[loose], image_weights[loose], target, locator)
         face[alive[loose]] = f
         weights[alive[loose]] = bw
         distance[alive[loose]] = d
@@ -341,6 +317,43 @@ def compose(
     inherited = np.where(np.isnan(first.distance), 0.0, first.distance)
     distance = np.where(face >= 0, np.fmax(distance, inherited), np.nan)
     return SurfaceMap(face, weights, distance)
+
+
+def _project_near_images(
+    w: np.ndarray, image_face: np.ndarray, image_weights: np.ndarray, target: TriMesh, locator: SurfaceLocator
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Points whose corner images lie in different target faces, projected onto ``target`` near them.
+
+    ``w`` (L, 3) weights of the corners, ``image_face`` (L, 3) and ``image_weights`` (L, 3, 3) the corners'
+    images (face -1 only where ``w`` is 0). The ``w``-combination of the images (a point between them, off
+    the surface) goes to its closest point (:meth:`SurfaceLocator.closest_near`, with the images' normals)
+    among the faces within :data:`COMPOSE_RINGS` rings of the image faces' corners. Returns (L,) faces, (L, 3) barycentric weights, (L,) distances."""
+    safe_face = np.where(image_face >= 0, image_face, 0)
+    # (L, 3, 3) corners of the image faces (the locator is the target's, as its normals and rings are)
+    image_points = np.einsum("mkj,mkjd->mkd", image_weights, locator.triangles[safe_face])
+    points = np.einsum("mk,mkd->md", w, image_points)
+    # the point lies between its images: it may only land near their faces along the target's
+    # connectivity, never on another part that touches them in space (normals alone are misled
+    # where parts pass through each other or meet at an angle)
+    normals = np.einsum("mk,mkd->md", w, locator.face_normals[safe_face])
+    near_vertices = np.asarray(target.faces)[safe_face].reshape(-1, 9)  # (L, 9) image corners
+    used = np.repeat(w > 0, 3, axis=1)  # (L, 9)
+    near_vertices = np.where(used, near_vertices, near_vertices[np.arange(len(used)), used.argmax(axis=1)][:, None])
+    rings = locator.rings(COMPOSE_RINGS)
+    target_faces = np.asarray(target.faces)
+
+    def accept(rows, cand):
+        corners = target_faces[cand]  # (M, K, 3)
+        near = near_vertices[rows]  # (M, 9)
+        # a face sharing a corner with an image face is within the rings (a vertex is within 0 rings
+        # of itself): only the others need the sparse lookup
+        ok = (near[:, None, :, None] == corners[:, :, None, :]).any(axis=(2, 3))  # (M, K)
+        row, col = np.nonzero(~ok)
+        ok[row, col] = rings.near(near[row][:, :, None], corners[row, col][:, None, :]).any(axis=(1, 2))
+        return ok
+
+    f, bw, d, _ = locator.closest_near(points, accept, normals)
+    return f, bw, d
 
 
 def compose_path(
