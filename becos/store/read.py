@@ -13,7 +13,7 @@ from __future__ import annotations
 import json
 import math
 import os
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -222,6 +222,42 @@ def _rebuild_fix(store: Path, setting: object) -> str:
     )
 
 
+def _checked_store_info(path: Path, attrs: Mapping, fix: str) -> dict:
+    """The ``becos_store`` attribute of a store's root ``attrs``, once its store format and record schema
+    are the ones this becos reads (an InputFileError saying newer, older or not a store otherwise)."""
+    info = attrs.get("becos_store")
+    newer = "upgrade becos (pip install -U the becos checkout) to read it, or re-export the store with this becos"
+    found = info.get("format") if isinstance(info, dict) else None
+    if isinstance(found, int) and not isinstance(found, bool) and found > STORE_FORMAT:
+        raise InputFileError(
+            path,
+            f"was written by a newer becos: store format {found}, this becos reads format {STORE_FORMAT}",
+            newer,
+        )
+    if isinstance(found, int) and not isinstance(found, bool) and 0 < found < STORE_FORMAT:
+        raise InputFileError(
+            path,
+            f"was written by an older becos: store format {found}, this becos reads format {STORE_FORMAT}",
+            _rebuild_fix(path, attrs.get("setting")),
+        )
+    if not isinstance(info, dict) or found != STORE_FORMAT:
+        raise InputFileError(path, f"is not a becos benchmark store of format {STORE_FORMAT}", fix)
+    schema = attrs.get("schema_version")
+    if isinstance(schema, int) and not isinstance(schema, bool) and schema > SCHEMA_VERSION:
+        raise InputFileError(
+            path,
+            f"was written by a newer becos: record schema {schema}, this becos reads {SCHEMA_VERSION}",
+            newer,
+        )
+    if attrs.get("schema_version") != SCHEMA_VERSION:
+        raise InputFileError(
+            path,
+            f"holds record schema {attrs.get('schema_version')}, this becos reads {SCHEMA_VERSION}",
+            "re-export the store with this becos version",
+        )
+    return info
+
+
 class Benchmark:
     """A benchmark store opened for reading (:func:`open_benchmark`).
 
@@ -234,7 +270,6 @@ class Benchmark:
     """
 
     def __init__(self, path: str | Path):
-        import pandas as pd
         import zarr
 
         self.path = Path(path)
@@ -246,36 +281,7 @@ class Benchmark:
             attrs = dict(root.attrs)
         except Exception as exc:  # zarr raises several types for unreadable metadata
             raise InputFileError(self.path, f"cannot be opened as a Zarr store ({exc})", fix) from exc
-        info = attrs.get("becos_store")
-        newer = "upgrade becos (pip install -U the becos checkout) to read it, or re-export the store with this becos"
-        found = info.get("format") if isinstance(info, dict) else None
-        if isinstance(found, int) and not isinstance(found, bool) and found > STORE_FORMAT:
-            raise InputFileError(
-                self.path,
-                f"was written by a newer becos: store format {found}, this becos reads format {STORE_FORMAT}",
-                newer,
-            )
-        if isinstance(found, int) and not isinstance(found, bool) and 0 < found < STORE_FORMAT:
-            raise InputFileError(
-                self.path,
-                f"was written by an older becos: store format {found}, this becos reads format {STORE_FORMAT}",
-                _rebuild_fix(self.path, attrs.get("setting")),
-            )
-        if not isinstance(info, dict) or found != STORE_FORMAT:
-            raise InputFileError(self.path, f"is not a becos benchmark store of format {STORE_FORMAT}", fix)
-        schema = attrs.get("schema_version")
-        if isinstance(schema, int) and not isinstance(schema, bool) and schema > SCHEMA_VERSION:
-            raise InputFileError(
-                self.path,
-                f"was written by a newer becos: record schema {schema}, this becos reads {SCHEMA_VERSION}",
-                newer,
-            )
-        if attrs.get("schema_version") != SCHEMA_VERSION:
-            raise InputFileError(
-                self.path,
-                f"holds record schema {attrs.get('schema_version')}, this becos reads {SCHEMA_VERSION}",
-                "re-export the store with this becos version",
-            )
+        info = _checked_store_info(self.path, attrs, fix)
         self._root = root
         self._files: dict[str, _ChunkFiles] | None = None
         self._stamp = self._identity()
@@ -285,8 +291,25 @@ class Benchmark:
         self.content_digests: dict[str, str] = dict(info.get("sha256") or {})
         """Node name -> sha256 of its content when written (:class:`ContentDigests`); empty for stores
         written before becos recorded them."""
+        frame = self._read_nodes(root)
+        self.table = frame.astype({k: v for k, v in TABLE_DTYPES.items() if k in frame.columns})
+        self._row_of = {pid: i for i, pid in enumerate(self.table["pair_id"])}
+        n = len(self.table)
+        for name, o in [*self.offsets.items(), ("meta_offsets", self._meta_offsets)]:
+            if len(o) != n + 1:
+                raise InputFileError(
+                    self.path,
+                    f"offsets '{name}' have {len(o)} entries for {n} pairs",
+                    "re-export the store (it is damaged)",
+                )
+
+    def _read_nodes(self, root):
+        """Open the array nodes, read the offsets and the pair metas' offsets; returns the pairs table as
+        read (a missing or damaged node is a :class:`DamagedStoreError` naming it, not a traceback)."""
+        import pandas as pd
+
         node = "arrays"
-        try:  # a missing or damaged node is a damaged store, not a traceback
+        try:
             self._arrays = {}
             for key in self.layout:
                 node = f"arrays/{key}"
@@ -301,21 +324,11 @@ class Benchmark:
             self._meta_json = root[node]
             node = "pairs/table_json"
             table = json.loads(bytes(np.asarray(root[node][:])).decode("utf-8"))
-            frame = pd.DataFrame(table["rows"], columns=table["columns"])
+            return pd.DataFrame(table["rows"], columns=table["columns"])
         except Exception as exc:
             raise DamagedStoreError(
                 self.path, f"{node} is missing or unreadable ({type(exc).__name__}: {exc})", DAMAGED_STORE_FIX
             ) from exc
-        self.table = frame.astype({k: v for k, v in TABLE_DTYPES.items() if k in frame.columns})
-        self._row_of = {pid: i for i, pid in enumerate(self.table["pair_id"])}
-        n = len(self.table)
-        for name, o in [*self.offsets.items(), ("meta_offsets", self._meta_offsets)]:
-            if len(o) != n + 1:
-                raise InputFileError(
-                    self.path,
-                    f"offsets '{name}' have {len(o)} entries for {n} pairs",
-                    "re-export the store (it is damaged)",
-                )
 
     def __repr__(self) -> str:
         return f"Benchmark({str(self.path)!r}, setting={self.setting!r}, pairs={len(self)})"
