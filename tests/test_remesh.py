@@ -290,6 +290,19 @@ def test_variants_sharing_the_per_shape_part_are_byte_identical(tosca, remeshes)
         remesh_with_stats(tosca("wolf1"), 9000, shape=shape)
 
 
+def test_loop_subdivision_splits_only_edges_longer_than_the_remeshs(tosca):
+    """Step 4 (issue #31): centaur3's coarse parts are refined, not every edge (the decimation then
+    removes far fewer faces); where that leaves too few faces for the target (wolf0 asked for
+    15,000 vertices) every edge is split."""
+    from becos.remesh.decimate import SUBDIVISION_MIN_FACES, loop_subdivided
+
+    (cv, cf), (wv, wf) = (RemeshInput(tosca(name)).oriented for name in ("centaur3", "wolf0"))
+    refined, every_edge = loop_subdivided(cv, cf, 19000), loop_subdivided(wv, wf, 30000)  # (kept: own the meshes)
+    faces = refined.current_mesh().face_number()
+    assert SUBDIVISION_MIN_FACES * 19000 <= faces < 0.5 * 4 * len(cf), faces
+    assert every_edge.current_mesh().face_number() == 4 * len(wf)
+
+
 def test_face_target_mode(tosca):
     original = tosca("horse0")  # closed: every collapse removes two faces
     r = remesh(original, target_faces=18500)

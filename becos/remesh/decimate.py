@@ -18,6 +18,17 @@ PRE_DECIMATION_FACTOR = 2.0
 them directly to the target; fast-simplification first decimates them to this × the face target
 (:mod:`becos.remesh`, steps 3-4)."""
 
+SUBDIVISION_EDGE = 1.0
+"""The Loop subdivision of step 4 (:func:`loop_subdivided`) splits the edges longer than this × the
+remesh's edge length (that of an equilateral triangulation of the input's area with the face target's
+faces): it refines where the input is coarser than the remesh (which is what evens out the remesh of
+an unevenly triangulated input) instead of everywhere."""
+
+SUBDIVISION_MIN_FACES = 1.2
+"""A refinement by :data:`SUBDIVISION_EDGE` that leaves fewer faces than this × the face target (an
+input at most about as fine as the remesh; TOSCA's wolves are not) is replaced by a subdivision of
+every edge, so the decimation always has faces to remove."""
+
 DECIMATORS = ("pymeshlab", "fast-simplification")
 """The quadric decimators of steps 3-4 (config ``decimator``); the first is the default."""
 
@@ -58,6 +69,29 @@ def meshset_arrays(ms) -> tuple[np.ndarray, np.ndarray]:
         np.array(m.vertex_matrix(), dtype=np.float64, copy=True),
         np.array(m.face_matrix(), dtype=np.int64, copy=True),
     )
+
+
+def loop_subdivided(vertices: np.ndarray, faces: np.ndarray, face_goal: int):
+    """A pymeshlab mesh set holding ONE Loop subdivision of (V, 3) ``vertices`` / (F, 3) ``faces``
+    (input units) that splits the edges longer than :data:`SUBDIVISION_EDGE` × the edge length of
+    an equilateral triangulation of the surface's area with ``face_goal`` faces; every edge is split
+    instead where that leaves fewer than :data:`SUBDIVISION_MIN_FACES` × ``face_goal`` faces.
+
+    Splitting every edge (the remesher before issue #31) quadrupled the faces the decimation then
+    removes: on TOSCA centaur3 (31.5k faces) 126k faces, 1.9 CPU-s of decimation, against 55k faces
+    and 0.47 CPU-s with the same or better triangles (99.9th-percentile edge 3.89 vs 3.87 × the
+    median, faces with an angle under 10 degrees 391 vs 825)."""
+    import pymeshlab
+
+    edge = SUBDIVISION_EDGE * float(
+        np.sqrt(4.0 * face_areas(TriMesh(vertices, faces)).sum() / (np.sqrt(3.0) * face_goal))
+    )
+    ms = meshset(vertices, faces)
+    ms.meshing_surface_subdivision_loop(iterations=1, threshold=pymeshlab.PureValue(edge))
+    if ms.current_mesh().face_number() < SUBDIVISION_MIN_FACES * face_goal:
+        ms = meshset(vertices, faces)
+        ms.meshing_surface_subdivision_loop(iterations=1, threshold=pymeshlab.PercentageValue(0))
+    return ms
 
 
 def pymeshlab_decimate(ms, target_faces: int, **settings) -> None:

@@ -14,6 +14,7 @@ from becos.remesh.decimate import (
     DECIMATORS,
     PRE_DECIMATION_FACTOR,
     fast_decimate,
+    loop_subdivided,
     meshset,
     meshset_arrays,
     pymeshlab_decimate,
@@ -173,16 +174,15 @@ def _remesh_surface(
         v = jitter_on_surface(v, f, float(jitter), rng_for(seed, "jitter"))
     cpu.lap("jitter")
     # 3.-4. pre-decimation of large inputs, one Loop subdivision
-    import pymeshlab
-
     fast = decimator == "fast-simplification"
     topology = shape.topology
     large = len(f) > PRE_DECIMATION_FACTOR * face_goal
     if fast and large:
         v, f = fast_decimate(v, f, int(PRE_DECIMATION_FACTOR * face_goal), topology, stats, "pre-decimation")
-    ms = meshset(v, f)
     if fast or not large:  # pymeshlab decimates a large input directly (:mod:`becos.remesh`, step 3)
-        ms.meshing_surface_subdivision_loop(iterations=1, threshold=pymeshlab.PercentageValue(0))
+        ms = loop_subdivided(v, f, face_goal)
+    else:
+        ms = meshset(v, f)
     stats["seconds_prepare"] = time.perf_counter() - t0
     cpu.lap("subdivide")
     # decimation to the target
