@@ -181,11 +181,13 @@ def store_of(tmp_path):
 
 @dataclass(frozen=True)
 class TinyReference:
-    """The tiny TOSCA reference run: its working folder and :func:`tiny_tosca.results_fingerprint`,
-    taken as soon as the run ended (before any test touched the folder)."""
+    """The tiny TOSCA reference run: its working folder, :func:`tiny_tosca.results_fingerprint`, taken as
+    soon as the run ended (before any test touched the folder), and the folder of its jobs' opened-paths
+    audit records (:mod:`becos.cli.audit`)."""
 
     workdir: Path
     fingerprint: dict[str, str]
+    opened: Path
 
 
 @pytest.fixture(scope="session")
@@ -196,23 +198,28 @@ def tiny_tosca_reference(becos_code, tmp_path_factory) -> TinyReference:
     Under pytest-xdist each worker has its own session, so the run goes to the folder the workers share
     (the parent of their base temporary folders, new for each pytest run, as pytest-xdist's docs
     advise) under an exclusive ``flock``: the first worker to ask makes it, the other waits and reads
-    it. The fingerprint is written after the run; its file marks the run complete."""
+    it. The fingerprint is written after the run; its file marks the run complete. Each job records the
+    paths it opens (``BECOS_AUDIT_OPENS``) into the folder ``opened``."""
     from snakemake_cmd import snakemake
     from tiny_tosca import results_fingerprint, tiny_tosca_config, write_config_file
+
+    from becos.cli.audit import AUDIT_ENV
 
     shared = os.environ.get("PYTEST_XDIST_WORKER") is not None
     root = tmp_path_factory.getbasetemp().parent if shared else tmp_path_factory.mktemp("tiny")
     workdir, done = root / "tiny-tosca", root / "tiny-tosca.fingerprint.json"
+    opened = root / "tiny-tosca-opened"
     with open(root / "tiny-tosca.lock", "w") as lock:
         fcntl.flock(lock, fcntl.LOCK_EX)
         if not done.exists():
             shutil.rmtree(workdir, ignore_errors=True)  # a worker that died mid-run
+            shutil.rmtree(opened, ignore_errors=True)
             write_config_file(workdir, tiny_tosca_config(becos_code))
-            snakemake(workdir, "--cores", "2")
+            snakemake(workdir, "--cores", "2", env={AUDIT_ENV: str(opened)})
             partial = done.with_suffix(".tmp")
             partial.write_text(json.dumps(results_fingerprint(workdir)))
             partial.replace(done)
-    return TinyReference(workdir, json.loads(done.read_text()))
+    return TinyReference(workdir, json.loads(done.read_text()), opened)
 
 
 @pytest.fixture(scope="session")

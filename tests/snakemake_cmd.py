@@ -28,10 +28,11 @@ def snakemake_cmd(
     return [*python, "-m", "snakemake", "-s", str(Path(repo) / "Snakefile"), *where, *args]
 
 
-def snakemake(workdir: Path, *args: str, check: bool = True) -> subprocess.CompletedProcess:
-    """Run :func:`snakemake_cmd` (output captured as text, ``PYTHONUNBUFFERED=1``); with ``check``, a
-    failed run raises AssertionError with its output and the job logs that hold an error."""
-    env = dict(os.environ, PYTHONUNBUFFERED="1")
+def snakemake(workdir: Path, *args: str, check: bool = True, env: dict | None = None) -> subprocess.CompletedProcess:
+    """Run :func:`snakemake_cmd` (output captured as text, ``PYTHONUNBUFFERED=1``, ``env`` added to the
+    environment); with ``check``, a failed run raises AssertionError with its output and the job logs
+    that hold an error."""
+    env = dict(os.environ, PYTHONUNBUFFERED="1", **(env or {}))
     result = subprocess.run(snakemake_cmd(workdir, *args), capture_output=True, text=True, env=env)
     if check and result.returncode != 0:
         logs = "\n".join(

@@ -14,6 +14,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 import yaml
 from snakemake_cmd import snakemake
 from tiny_tosca import TINY_SHAPES, tosca_config, write_config_file
@@ -460,3 +461,25 @@ def test_ulrssm_and_dpfm_exports_are_rules_with_cached_outputs(tiny_tosca_run, t
         assert _tree(dpfm) == _tree(by_hand / "dpfm")
     again = snakemake(run, "--cores", "2", *exports)
     assert "Nothing to be done" in again.stdout + again.stderr, again.stdout[-2000:]
+
+
+@pytest.mark.xfail(strict=True, reason="issue #32 item 2: jobs read files their rules do not declare")
+def test_each_job_opens_only_what_its_rule_declares(tiny_tosca_reference, becos_code):
+    """Every `becos` job of the tiny run recorded what it opened (BECOS_AUDIT_OPENS, becos.cli.audit); under
+    the working directory and the BeCoS code folder (data and annotations), each path is one its rule
+    declares (tests/opened_paths.py says what counts as declared)."""
+    from opened_paths import recorded_jobs, undeclared_opens
+
+    run, opened = tiny_tosca_reference.workdir, tiny_tosca_reference.opened
+    records = sorted(opened.glob("*.json"))
+    assert len(records) == len(recorded_jobs(run)), "one audit record per becos job of the run"
+    remesh_reads = [
+        path
+        for record in records
+        if record.name.startswith("ground-truth-")
+        for event, path, _ in json.loads(record.read_text())["opened"]
+        if event == "open" and "/results/remeshed/" in path
+    ]
+    assert remesh_reads, "the audit sees the ground-truth jobs open their remesh files"
+    problems = undeclared_opens(run, opened, [becos_code])
+    assert not problems, f"{len(problems)} undeclared opens:\n" + "\n".join(problems[:60])

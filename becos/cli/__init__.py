@@ -67,6 +67,10 @@ def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     known = {name for name, _, _ in SUBCOMMANDS}
     only = argv[0] if argv and argv[0] in known else None
+    if only is not None:
+        from becos.cli.audit import install_open_audit
+
+        install_open_audit(only)  # tests only (BECOS_AUDIT_OPENS): what the job opens
     args = build_parser(only).parse_args(argv)
     try:
         return args.func(args)
