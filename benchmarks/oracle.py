@@ -116,7 +116,8 @@ class StageRemeshes:
         if key not in self._done:
             out = self.plan.layout.remeshed(dataset, name, token)
             start = time.perf_counter()
-            remesh_stage(self.options, json.loads(self.plan.shape_json(dataset, name)), token, out)
+            row = {**json.loads(self.plan.shape_json(dataset, name)), "file": self.plan.files[(dataset, name)]}
+            remesh_stage(self.options, row, token, out)
             self.seconds[key] = time.perf_counter() - start
             self._done[key] = load_remeshed(out)
         return self._done[key]

@@ -39,8 +39,9 @@ each ``becos`` job) appends its own CPU time at exit to a log (a ``sitecustomize
 before/after comparison) with this script. ``--remeshed DIR`` copies a finished run's
 ``results/remeshed`` in first (the remesh jobs are then done; every later stage still runs from
 scratch), for a quicker comparison of the chunk stages on a loaded machine; the parsed original meshes
-the remesh jobs leave in ``results/cache/meshes`` are copied too when they are beside it (without them
-the ground-truth job parses every original mesh, which a run from scratch never does).
+that code before issue 32 item 2 left in ``results/cache/meshes`` are copied too when they are beside it
+(that code's ground-truth jobs read them; since then each chunk job parses the original meshes its rule
+declares, in memory).
 
 ``--scaling`` measures end-to-end throughput (issue 16, target 3) for each setting and each size in
 ``--sizes`` (default 150 and 1,000 pairs): one run per (setting, size) from scratch on ``--cores 2``,

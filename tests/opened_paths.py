@@ -45,7 +45,7 @@ def recorded_jobs(workdir: Path) -> dict[tuple[str, ...], Job]:
         job["outputs"].add(output)
         params = [_unquote(p) for p in meta.get("params", []) if isinstance(p, str)]
         for p in [output, *meta.get("input", []), *meta.get("log", []), *params]:
-            if p and (p.startswith("/") or (workdir / p).exists()) and "\n" not in p and not p.startswith("{"):
+            if p and not p.startswith(("{", "[")) and "\n" not in p and (p.startswith("/") or (workdir / p).exists()):
                 job["declared"].add(os.path.normpath(workdir / p))
     return {
         argv: Job(j["rule"], argv, tuple(sorted(j["outputs"])), tuple(sorted(j["declared"])))

@@ -68,16 +68,16 @@ def test_a_store_rewritten_under_a_reader_is_a_named_error(store, pair_record_fi
     "argv, message",
     [
         (
-            ["catalog", "--options", "{bad"],
+            ["catalog", "--options", "{bad", "--data-dir", "RESULTS", "--annotations", "RESULTS"],
             "becos catalog: --options: not valid JSON (Expecting property name enclosed "
             "in double quotes at line 1 column 2: '{bad'). Fix: pass the JSON",
         ),
         (
-            ["catalog", "--options", "[1, 2]"],
+            ["catalog", "--options", "[1, 2]", "--data-dir", "RESULTS", "--annotations", "RESULTS"],
             "becos catalog: --options: a JSON object {...} is needed, not a JSON list",
         ),
         (
-            ["catalog", "--options", "{}"],
+            ["catalog", "--options", "{}", "--data-dir", "RESULTS", "--annotations", "RESULTS"],
             "becos catalog: --options: lacks the key 'results' (given keys: []). Fix: ",
         ),
         (["remesh", "--options", "{}", "--shape", "{x", "--token", "v0"], "becos remesh: --shape: not valid JSON"),
@@ -86,6 +86,8 @@ def test_a_store_rewritten_under_a_reader_is_a_named_error(store, pair_record_fi
                 "ground-truth",
                 "--options",
                 '{"results": "RESULTS", "annotations": "x", "template_file": "t", "remesh": true}',
+                "--annotations",
+                "x",
                 "--setting",
                 "full_full",
                 "--chunk",

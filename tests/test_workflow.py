@@ -14,7 +14,6 @@ import sys
 from pathlib import Path
 
 import numpy as np
-import pytest
 import yaml
 from snakemake_cmd import snakemake
 from tiny_tosca import TINY_SHAPES, tosca_config, write_config_file
@@ -463,7 +462,6 @@ def test_ulrssm_and_dpfm_exports_are_rules_with_cached_outputs(tiny_tosca_run, t
     assert "Nothing to be done" in again.stdout + again.stderr, again.stdout[-2000:]
 
 
-@pytest.mark.xfail(strict=True, reason="issue #32 item 2: jobs read files their rules do not declare")
 def test_each_job_opens_only_what_its_rule_declares(tiny_tosca_reference, becos_code):
     """Every `becos` job of the tiny run recorded what it opened (BECOS_AUDIT_OPENS, becos.cli.audit); under
     the working directory and the BeCoS code folder (data and annotations), each path is one its rule

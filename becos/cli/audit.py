@@ -5,7 +5,8 @@ The record holds the command line (``argv``), the working directory and ``opened
 path, mode]`` per distinct path, ``event`` one of :data:`AUDIT_EVENTS` (Python's audit events,
 https://docs.python.org/3/library/audit_events.html: ``open`` is raised by ``builtins.open``,
 ``io.open`` and ``os.open``, hence by ``np.load`` and pandas; listings raise their own events). Files
-opened by C code (e.g. a mesh library's own reader) raise no event.
+opened by C code (e.g. a mesh library's own reader) raise no event, and an ``os.open`` of a relative
+name may be relative to a folder descriptor (``dir_fd``, which the event does not carry): it is left out.
 """
 
 from __future__ import annotations
@@ -41,6 +42,8 @@ def install_open_audit(command: str) -> None:
             return  # a file descriptor
         mode = ""
         if event == "open" and len(args) > 2:
+            if args[1] is None and not os.path.isabs(path):
+                return  # os.open of a name in a folder given by descriptor (dir_fd; shutil.rmtree), unknown here
             mode = args[1] if isinstance(args[1], str) else _flags_mode(args[2])
         absolute = os.path.normpath(os.path.join(cwd, os.fspath(path)))
         if absolute.endswith(CODE_SUFFIXES) or "__path_hook__" in absolute:

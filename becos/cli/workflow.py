@@ -55,11 +55,15 @@ def _stage(run):
     @functools.wraps(run)
     def handler(args: argparse.Namespace) -> int:
         options = parse_json_option(args.options, "--options", args.command)
+        given = sorted(options)
+        for key in ("data_dir", "annotations"):  # the folders the rule passes stand for the options' own
+            if getattr(args, key, None) is not None:
+                options[key] = str(getattr(args, key))
         try:
             run(args, options)
         except KeyError as exc:
             raise ConfigError(
-                f"--options: lacks the key {exc} (given keys: {sorted(options)}). Fix: "
+                f"--options: lacks the key {exc} (given keys: {given}). Fix: "
                 f"pass the JSON the workflow's rule writes (becos.workflow.job_options)"
             ) from None
         except TypeError as exc:
@@ -85,6 +89,15 @@ def _stage(run):
 def _options(parser: argparse.ArgumentParser, whole_config: bool = False) -> None:
     what = "the whole config" if whole_config else "the job's options (becos.workflow.job_options)"
     parser.add_argument("--options", required=True, help=f"JSON: {what}")
+
+
+def _annotations(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--annotations",
+        required=True,
+        type=Path,
+        help="the annotation folder the job reads (config `annotations`; replaces the options' own)",
+    )
 
 
 def _setting(parser: argparse.ArgumentParser) -> None:
@@ -122,6 +135,13 @@ def run_write_config(args: argparse.Namespace, config: dict) -> None:
 
 def catalog_arguments(parser: argparse.ArgumentParser) -> None:
     _options(parser)
+    parser.add_argument(
+        "--data-dir",
+        required=True,
+        type=Path,
+        help="the data folder the job lists (config `data_dir`; replaces the options' own)",
+    )
+    _annotations(parser)
     _out(parser)
 
 
@@ -132,6 +152,7 @@ def run_catalog(args: argparse.Namespace, config: dict) -> None:
 
 def manifest_arguments(parser: argparse.ArgumentParser) -> None:
     _options(parser)
+    _annotations(parser)
     _setting(parser)
     parser.add_argument("--catalog", required=True, type=Path)
     _out(parser)
@@ -144,7 +165,10 @@ def run_manifest(args: argparse.Namespace, config: dict) -> None:
 
 def remesh_arguments(parser: argparse.ArgumentParser) -> None:
     _options(parser)
-    parser.add_argument("--shape", required=True, help="JSON: the shape's catalog row")
+    parser.add_argument("--shape", required=True, help="JSON: the shape's catalog row (but its file)")
+    parser.add_argument(
+        "--mesh", type=Path, help="the shape's mesh file (the workflow's rule passes it; default: the row's file)"
+    )
     parser.add_argument("--token", required=True, help="v<k> (variant k) or f<n> (target faces n)")
     parser.add_argument("--ply", type=Path, help="also write the remeshed mesh as PLY")
     _out(parser)
@@ -152,11 +176,15 @@ def remesh_arguments(parser: argparse.ArgumentParser) -> None:
 
 @_stage
 def run_remesh(args: argparse.Namespace, config: dict) -> None:
-    remesh_stage(config, parse_json_option(args.shape, "--shape", args.command), args.token, args.out, args.ply)
+    shape = parse_json_option(args.shape, "--shape", args.command)
+    if args.mesh is not None:
+        shape["file"] = str(args.mesh)
+    remesh_stage(config, shape, args.token, args.out, args.ply)
 
 
 def ground_truth_arguments(parser: argparse.ArgumentParser) -> None:
     _options(parser)
+    _annotations(parser)
     _setting(parser)
     _chunk(parser)
     _manifest_catalog(parser)
@@ -172,6 +200,7 @@ def run_ground_truth(args: argparse.Namespace, config: dict) -> None:
 
 def pairs_arguments(parser: argparse.ArgumentParser) -> None:
     _options(parser)
+    _annotations(parser)
     _setting(parser)
     _chunk(parser)
     parser.add_argument("--ground-truth", required=True, type=Path, help="the chunk's ground-truth index")

@@ -46,7 +46,8 @@ class Layout:
 
     @property
     def cache(self) -> Path:
-        """Parsed meshes and edge files (safe to delete; no job declares it)."""
+        """The Snakemake process's parsed edge files and input digests (safe to delete; no job reads it: a
+        job parses the files its rule passes)."""
         return self.results / "cache"
 
     @property

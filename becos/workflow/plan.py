@@ -27,15 +27,16 @@ if TYPE_CHECKING:
     import pandas as pd  # imported where used: write-config, metadata and remesh jobs start without it
 
 
-def annotation_source(options):
+def annotation_source(options, cache: str | Path | None = None):
     """The annotation folder of ``options`` (a resolved config or any options with ``annotations``,
-    ``template_file`` and ``results``), its parsed edge files cached under ``results/cache``."""
+    ``template_file`` and ``results``), its parsed edge files cached in the folder ``cache`` (default
+    ``results/cache/annotations``, the Snakemake process's)."""
     from becos.annotations import AnnotationSource
 
     options = AnnotationOptions.of(options)
     return AnnotationSource(
         options.annotations,
-        cache_dir=Layout.of(options).cache / "annotations",
+        cache_dir=Layout.of(options).cache / "annotations" if cache is None else cache,
         template_table=options.template_file,
     )
 
@@ -213,13 +214,29 @@ class Plan:
         rows = self.chunk_rows(setting, chunk)
         return sorted({self.files[key] for side in "xy" for key in zip(rows[f"{side}_dataset"], rows[f"{side}_name"])})
 
+    def chunk_mesh_files(self, setting: str, chunk: int) -> list[str]:
+        """Every original mesh file a chunk job reads: its pairs' shapes (their centres, and their geometry
+        without remeshing) and the catalogued templates on the network paths between them (the ground
+        truth's edge maps land on their faces; :func:`network_templates_between`)."""
+        keys = self._catalog_rows
+        rows = self.chunk_rows(setting, chunk)
+        files = set(self.chunk_original_files(setting, chunk))
+        for xd, xn, yd, yn in zip(rows["x_dataset"], rows["x_name"], rows["y_dataset"], rows["y_name"]):
+            x_key, y_key = keys[(xd, xn)]["template_key"], keys[(yd, yn)]["template_key"]
+            for template in network_templates_between(self._annotations, x_key, y_key):
+                if template in self.files:
+                    files.add(self.files[template])
+        return sorted(files)
+
     @cached_property
     def _catalog_rows(self) -> dict[tuple[str, str], dict]:
         return {(r["dataset"], r["name"]): r for r in self.catalog.to_dict("records")}
 
     def shape_json(self, dataset: str, name: str) -> str:
-        """A shape's catalog row as JSON (the remesh job's description of its shape)."""
-        return json.dumps(self._catalog_rows[(dataset, name)], sort_keys=True)
+        """A shape's catalog row as JSON but its ``file`` (the remesh job's description of its shape; the
+        rule passes the file itself)."""
+        row = self._catalog_rows[(dataset, name)]
+        return json.dumps({k: v for k, v in row.items() if k != "file"}, sort_keys=True)
 
     def remesh_target(self, dataset: str, name: str, token: str) -> dict:
         return remesh_target(self.options.seed, dataset, name, token)
@@ -265,6 +282,13 @@ def published_views_folder(config, setting: str) -> Path | None:
 
     folder = triangle_ids_folder(PairsOptions.of(config).annotations, setting)
     return folder if folder.is_dir() else None
+
+
+def network_templates_between(annotations, x_key: str, y_key: str) -> list[tuple[str, str]]:
+    """``(dataset, name)`` of each template on the network path between the templates of template keys
+    ``x_key`` and ``y_key``, both ends included."""
+    nodes = annotations.path(annotations.node_of_key(x_key), annotations.node_of_key(y_key))
+    return [tuple(annotations.node_template(node)) for node in nodes]
 
 
 def edge_files_between(annotations, x_key: str, y_key: str) -> list[Path]:

@@ -108,11 +108,20 @@ class ShapeStore:
     grow with the number of pairs in a chunk.
     """
 
-    def __init__(self, options, catalog: pd.DataFrame | list[dict], remeshed: str | Path | None = None):
+    def __init__(
+        self,
+        options,
+        catalog: pd.DataFrame | list[dict],
+        remeshed: str | Path | None = None,
+        cache: str | Path | None = None,
+    ):
         """``options``: the job's stage options (:mod:`becos.workflow.options`; or a resolved config): its
         ``results`` and, for the shape network, its annotation folder. ``catalog``: the catalog table, or
         some of its rows as dicts. ``remeshed``: the folder of the remesh variants (a chunk job's declared
-        remesh root; default: :attr:`Layout.remeshed_root`)."""
+        remesh root; default: :attr:`Layout.remeshed_root`). ``cache``: a folder where parsed meshes and
+        edge files are kept across jobs (benchmarks, tests); default None: a job parses the files its
+        rule declares, keeping them in memory only (parsed edge files in a temporary folder of its own),
+        so it reads no file its rule does not name."""
         from becos.mesh import MeshCache
 
         self.layout = Layout.of(options)
@@ -120,7 +129,9 @@ class ShapeStore:
         self.remeshed_root = self.layout.remeshed_root if remeshed is None else Path(remeshed)
         rows = catalog if isinstance(catalog, list) else catalog.to_dict("records")
         self.entries = {(r["dataset"], r["name"]): shape_entry(r) for r in rows}
-        self.mesh_cache = MeshCache(self.layout.cache / "meshes", max_in_memory=MESHES_KEPT)
+        self._cache = None if cache is None else Path(cache)
+        self.mesh_cache = MeshCache(None if self._cache is None else self._cache / "meshes", max_in_memory=MESHES_KEPT)
+        self._edge_cache = None  # the temporary folder of parsed edge files without ``cache``
         self._prepared = _Recent(SHAPES_KEPT)
         self._remeshed = _Recent(SHAPES_KEPT, on_drop=self._forget_remeshed)
         self._scanners = _Recent(SHAPES_KEPT)
@@ -251,7 +262,14 @@ class ShapeStore:
         from becos.network import ShapeNetwork
 
         if self._network is None:
-            self._network = ShapeNetwork(annotation_source(self._annotation_options), self.mesh)
+            if self._cache is not None:
+                cache = self._cache / "annotations"
+            else:
+                import tempfile
+
+                self._edge_cache = tempfile.TemporaryDirectory(prefix="becos-edges-")  # removed with the store
+                cache = Path(self._edge_cache.name)
+            self._network = ShapeNetwork(annotation_source(self._annotation_options, cache), self.mesh)
         return self._network
 
     def instance(self, dataset: str, name: str, token: str):

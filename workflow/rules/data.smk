@@ -120,7 +120,9 @@ if config["download"]:
 
 checkpoint check_datasets:
     input:
-        generated_inputs,
+        # gates only: what the run generates or downloads must be in place first; the check reads it
+        # through the folders it is passed (data_dir, annotations)
+        gate=generated_inputs,
     output:
         LAYOUT.checks,
     log:
@@ -144,7 +146,7 @@ checkpoint check_datasets:
 
 rule catalog:
     input:
-        LAYOUT.checks,
+        gate=LAYOUT.checks,  # a gate only: the catalog is made of checked datasets
     output:
         LAYOUT.catalog,
     log:
@@ -154,5 +156,8 @@ rule catalog:
     params:
         options=bw.job_options(config, "catalog"),
         inputs=lambda w: inputs_digest(),  # a rerun trigger only, as for check_datasets
+        data_dir=config["data_dir"],
+        annotations=config["annotations"],
     shell:
-        "becos catalog --options {params.options:q} --out {output:q} > {log:q} 2>&1"
+        "becos catalog --options {params.options:q} --data-dir {params.data_dir:q}"
+        " --annotations {params.annotations:q} --out {output:q} > {log:q} 2>&1"

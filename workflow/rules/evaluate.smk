@@ -4,7 +4,7 @@
 rule baseline:
     input:
         store=rules.zarr_store.output[0],
-        validation=rules.validate_store.output[0],
+        gate=rules.validate_store.output[0],  # a gate only: the store passed its validation
     output:
         directory(str(LAYOUT.predictions("{setting}", "{baseline}"))),
     log:

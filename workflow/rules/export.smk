@@ -56,7 +56,7 @@ rule validate_store:
 rule released_layout:
     input:
         store=rules.zarr_store.output[0],
-        validation=rules.validate_store.output[0],
+        gate=rules.validate_store.output[0],  # a gate only: the store passed its validation
     output:
         directory(str(LAYOUT.released("{setting}"))),
     log:
@@ -73,7 +73,7 @@ rule released_layout:
 rule psmal_layout:
     input:
         store=rules.zarr_store.output[0],
-        validation=rules.validate_store.output[0],
+        gate=rules.validate_store.output[0],  # a gate only: the store passed its validation
     output:
         directory(str(LAYOUT.psmal("{setting}"))),
     log:
@@ -92,7 +92,7 @@ rule psmal_layout:
 rule ulrssm_layout:
     input:
         store=rules.zarr_store.output[0],
-        validation=rules.validate_store.output[0],
+        gate=rules.validate_store.output[0],  # a gate only: the store passed its validation
     output:
         directory(str(LAYOUT.ulrssm("{setting}"))),
     log:
@@ -109,7 +109,7 @@ rule ulrssm_layout:
 rule dpfm_layout:
     input:
         store=rules.zarr_store.output[0],
-        validation=rules.validate_store.output[0],
+        gate=rules.validate_store.output[0],  # a gate only: the store passed its validation
     output:
         directory(str(LAYOUT.dpfm("{setting}"))),
     log:
@@ -134,7 +134,7 @@ GEODESIC_SPLITS = " ".join(["--splits", *EXPORTS["geodesic_splits"]]) if EXPORTS
 rule geodesic_plan:
     input:
         stores=[str(LAYOUT.store(s)) for s in SETTINGS],
-        validations=[str(LAYOUT.validation(s)) for s in SETTINGS],
+        gate=[str(LAYOUT.validation(s)) for s in SETTINGS],  # gates only: the stores passed validation
     output:
         temp(directory(str(LAYOUT.geodesic_plan))),
     log:
@@ -171,7 +171,7 @@ rule geodesic_rows:
 rule geodesics:
     input:
         store=rules.zarr_store.output[0],
-        validation=rules.validate_store.output[0],
+        gate=rules.validate_store.output[0],  # a gate only: the store passed its validation
         rows=[str(LAYOUT.geodesic_rows(part)) for part in range(GEODESIC_PARTS)],
     output:
         directory(str(LAYOUT.geodesics("{setting}"))),
@@ -211,7 +211,7 @@ rule published_pairings:
 rule report:
     input:
         store=rules.zarr_store.output[0],
-        validation=rules.validate_store.output[0],
+        gate=rules.validate_store.output[0],  # a gate only: the store passed its validation
     output:
         report(
             directory(str(LAYOUT.report("{setting}"))),

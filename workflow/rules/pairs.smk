@@ -16,14 +16,15 @@ rule manifest:
     params:
         options=bw.job_options(config, "manifest"),
         inputs=lambda w: inputs_digest(),  # a rerun trigger only, as for check_datasets
+        annotations=config["annotations"],
     shell:
-        "becos manifest --options {params.options:q} --setting {wildcards.setting}"
-        " --catalog {input.catalog:q} --out {output:q} > {log:q} 2>&1"
+        "becos manifest --options {params.options:q} --annotations {params.annotations:q}"
+        " --setting {wildcards.setting} --catalog {input.catalog:q} --out {output:q} > {log:q} 2>&1"
 
 
 rule remesh:
     input:
-        lambda w: plan().files[(w.dataset, w.name)],
+        mesh=lambda w: plan().files[(w.dataset, w.name)],
     output:
         npz=LAYOUT.remeshed("{dataset}", "{name}", "{token}"),
         ply=LAYOUT.remeshed_ply("{dataset}", "{name}", "{token}"),
@@ -49,18 +50,20 @@ rule remesh:
         shape=lambda w: plan().shape_json(w.dataset, w.name),
         options=bw.job_options(config, "remesh"),
     shell:
-        "becos remesh --options {params.options:q} --shape {params.shape:q}"
+        "becos remesh --options {params.options:q} --shape {params.shape:q} --mesh {input.mesh:q}"
         " --token {wildcards.token} --out {output.npz:q} --ply {output.ply:q} > {log:q} 2>&1"
 
 
 # A chunk job's remesh files are declared one by one (input.remeshed) and passed as their folder
 # (params.remeshed): a chunk may read hundreds, more than one shell command line holds, and the job opens
 # exactly the declared ones (both named by remesh_token of the chunk's manifest rows, becos.workflow).
+# Its original meshes (input.meshes) are named by the catalog's rows; the annotation folder is passed.
 rule ground_truth:
     input:
         manifest=rules.manifest.output[0],
         catalog=LAYOUT.catalog,
         remeshed=lambda w: plan().chunk_inputs(w.setting, int(w.chunk)),
+        meshes=lambda w: plan().chunk_mesh_files(w.setting, int(w.chunk)),
         edges=lambda w: plan().chunk_edge_files(w.setting, int(w.chunk)),
     output:
         LAYOUT.ground_truth_index("{setting}", "{chunk}"),
@@ -79,8 +82,10 @@ rule ground_truth:
         options=bw.job_options(config, "ground_truth"),
         sources=chunk_sources_digest,  # a rerun trigger only: the content of what it reads outside results
         remeshed=LAYOUT.remeshed_root,
+        annotations=config["annotations"],
     shell:
-        "becos ground-truth --options {params.options:q} --setting {wildcards.setting} --chunk {wildcards.chunk}"
+        "becos ground-truth --options {params.options:q} --annotations {params.annotations:q}"
+        " --setting {wildcards.setting} --chunk {wildcards.chunk}"
         " --manifest {input.manifest:q} --catalog {input.catalog:q} --remeshed {params.remeshed:q}"
         " --out {output:q} > {log:q} 2>&1"
 
@@ -91,6 +96,7 @@ rule pairs:
         manifest=rules.manifest.output[0],
         catalog=LAYOUT.catalog,
         remeshed=lambda w: plan().chunk_inputs(w.setting, int(w.chunk)),
+        meshes=lambda w: plan().chunk_mesh_files(w.setting, int(w.chunk)),
         triangle_ids=published_views_input,
     output:
         LAYOUT.pairs_index("{setting}", "{chunk}"),
@@ -109,8 +115,10 @@ rule pairs:
         options=lambda w: bw.job_options(config, "pairs", w.setting),
         sources=chunk_sources_digest,  # a rerun trigger only, as for ground_truth
         remeshed=LAYOUT.remeshed_root,
+        annotations=config["annotations"],
         triangle_ids=lambda w, input: optional_path("--triangle-ids", input.triangle_ids),
     shell:
-        "becos pairs --options {params.options:q} --setting {wildcards.setting} --chunk {wildcards.chunk}"
+        "becos pairs --options {params.options:q} --annotations {params.annotations:q}"
+        " --setting {wildcards.setting} --chunk {wildcards.chunk}"
         " --ground-truth {input.ground_truth:q} --manifest {input.manifest:q} --catalog {input.catalog:q}"
         " --remeshed {params.remeshed:q} {params.triangle_ids} --out {output:q} > {log:q} 2>&1"
