@@ -223,9 +223,17 @@ def _read_stamp(path: Path, kind: str, cls: str) -> dict:
 
 
 def prepare_class(
-    data_dir: str | Path, kind: str, cls: str, actions: dict[str, list[int]], info_path: Path | None = None
+    data_dir: str | Path,
+    kind: str,
+    cls: str,
+    actions: dict[str, list[int]],
+    info_path: Path | None = None,
+    anime: set[Path] | None = None,
 ) -> dict[str, int]:
     """Write the OBJ frames of one class (``actions``: ``{action: [frame ids]}``) and its stamp.
+
+    ``anime``: the ``.anime`` files the job was given (its rule's inputs); an action whose file
+    (:func:`anime_path`) is not among them is missing. None: every file under ``data_dir``.
 
     Returns counts ``{"written", "kept", "animations_read"}``.
 
@@ -245,7 +253,7 @@ def prepare_class(
     for action, frames in actions.items():
         source = anime_path(data_dir, kind, cls, action)
         listed = f" (animation {cls}/{action}, listed in {info_path})" if info_path else f" ({cls}/{action})"
-        if not source.is_file():
+        if not source.is_file() or (anime is not None and source not in anime):
             raise InputFileError(source, f"the animation file is missing{listed}", REQUEST)
         st = source.stat()
         record = old.get(action) or {}
@@ -298,9 +306,15 @@ def prepare_class(
 
 
 def prepare_dt4d(
-    data_dir: str | Path, info_path: str | Path, kind: str, classes: list[str] | None = None, log=None
+    data_dir: str | Path,
+    info_path: str | Path,
+    kind: str,
+    classes: list[str] | None = None,
+    log=None,
+    anime: list[str | Path] | None = None,
 ) -> dict[str, int]:
-    """Prepare every class of ``info_path`` (or only ``classes``); counts summed over the classes."""
+    """Prepare every class of ``info_path`` (or only ``classes``); counts summed over the classes.
+    ``anime``: the ``.anime`` files to read (the workflow rule's inputs); None: every listed one."""
     if kind not in KINDS:
         raise ConfigError(f"--kind must be one of {KINDS}, got {kind!r}")
     info_path = Path(info_path)
@@ -317,7 +331,8 @@ def prepare_dt4d(
         raise InputFileError(source_folder(data_dir, kind), "the DeformingThings4D folder is missing", REQUEST)
     total = {"classes": 0, "written": 0, "kept": 0, "animations_read": 0}
     for cls in chosen:
-        counts = prepare_class(data_dir, kind, cls, info[cls], info_path)
+        given = None if anime is None else {Path(p) for p in anime}
+        counts = prepare_class(data_dir, kind, cls, info[cls], info_path, given)
         total["classes"] += 1
         for key, value in counts.items():
             total[key] += value

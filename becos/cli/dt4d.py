@@ -25,6 +25,13 @@ def configure_parser(parser: argparse.ArgumentParser) -> argparse.ArgumentParser
     )
     parser.add_argument("--kind", required=True, choices=KINDS, help="animals or humanoids")
     parser.add_argument("--classes", nargs="+", metavar="CLASS", help="only these classes (default: all listed)")
+    parser.add_argument(
+        "--anime",
+        nargs="*",
+        type=Path,
+        metavar="FILE",
+        help="the .anime files to read (the workflow's rule passes its inputs); default: every listed one",
+    )
     return parser
 
 
@@ -32,7 +39,7 @@ def run_cli(args: argparse.Namespace) -> int:
     def log(message: str) -> None:
         print(message, file=sys.stderr, flush=True)
 
-    total = prepare_dt4d(args.data_dir, args.info, args.kind, args.classes, log=log)
+    total = prepare_dt4d(args.data_dir, args.info, args.kind, args.classes, log=log, anime=args.anime)
     print(json.dumps({"out": str(output_folder(args.data_dir, args.kind)), **total}))
     return 0
 

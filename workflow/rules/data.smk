@@ -88,7 +88,7 @@ if DT4D_JOBS:
             listing=lambda w: DT4D_JOBS[(w.kind, w.cls)].listing,
         shell:
             "becos prepare-dt4d --data-dir {params.data_dir:q} --info {input.info:q} --kind {wildcards.kind}"
-            " --classes {wildcards.cls:q} > {log:q} 2>&1"
+            " --classes {wildcards.cls:q} --anime {input.anime:q} > {log:q} 2>&1"
 
 
 if config["download"]:
