@@ -96,8 +96,8 @@ def test_a_store_rewritten_under_a_reader_is_a_named_error(store, pair_record_fi
                 "RESULTS/full_full/manifest.csv",
                 "--catalog",
                 "RESULTS/catalog.csv",
-                "--remeshed",
-                "RESULTS/remeshed",
+                "--remesh-files",
+                "RESULTS/full_full/remesh_files.json",
             ],
             "becos ground-truth: RESULTS/catalog.csv: not found (an input of this stage). "
             "Fix: run the stages before `becos ground-truth`",

@@ -51,7 +51,9 @@ def built(becos_code, tmp_path_factory):
     )
     layout = bw.Layout.of(config)
     bw.write_catalog_stage(config, layout.catalog)
-    bw.write_manifest_stage(config, "full_full", layout.catalog, layout.manifest("full_full"))
+    bw.write_manifest_stage(
+        config, "full_full", layout.catalog, layout.manifest("full_full"), layout.remesh_files("full_full")
+    )
     plan = bw.Plan.build(config)
     rows = {(r["dataset"], r["name"]): r for r in plan.catalog.to_dict("records")}
     for dataset, name, token in plan.remesh_jobs:
@@ -69,9 +71,13 @@ def built(becos_code, tmp_path_factory):
 
 
 def _inputs(config) -> dict:
-    """The paths a chunk job of full_full is given (its rule's manifest, catalog and remesh folder)."""
+    """The paths a chunk job of full_full is given (its rule's manifest, catalog and remesh list file)."""
     layout = bw.Layout.of(config)
-    return {"manifest": layout.manifest("full_full"), "catalog": layout.catalog, "remeshed": layout.remeshed_root}
+    return {
+        "manifest": layout.manifest("full_full"),
+        "catalog": layout.catalog,
+        "remesh_files": layout.remesh_files("full_full"),
+    }
 
 
 def _ground_truth(config) -> tuple[dict, dict]:

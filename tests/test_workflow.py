@@ -246,8 +246,12 @@ def test_chunk_files_do_not_depend_on_the_shapes_a_job_keeps(tiny_tosca_run, tmp
             for name in files:
                 (results / setting / "ground_truth" / name).unlink(missing_ok=True)
                 (results / setting / "pairs" / name).unlink(missing_ok=True)
-            layout = bw.Layout.of(config)  # the paths the chunk's rules pass
-            inputs = {"manifest": layout.manifest(setting), "catalog": layout.catalog, "remeshed": layout.remeshed_root}
+            layout = bw.Layout.of(config)  # the paths the chunk's rules pass, the list file's moved to the copy
+            listed = json.loads(layout.remesh_files(setting).read_text())
+            moved = {c: [[*e[:3], str(layout.remeshed(*e[:3]))] for e in rows] for c, rows in listed.items()}
+            remesh_files = tmp_path / "remesh_files.json"
+            remesh_files.write_text(json.dumps(moved))
+            inputs = {"manifest": layout.manifest(setting), "catalog": layout.catalog, "remesh_files": remesh_files}
             assert bw.ground_truth_stage(config, setting, chunk, gt_index, **inputs)["computed"] > 0
             assert bw.pairs_stage(config, setting, chunk, gt_index, pairs_index, **inputs)["computed"] > 0
             for kind, ix in (("ground_truth", gt_index), ("pairs", pairs_index)):

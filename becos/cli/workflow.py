@@ -107,7 +107,10 @@ def _setting(parser: argparse.ArgumentParser) -> None:
 def _chunk(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--chunk", required=True, type=int)
     parser.add_argument(
-        "--remeshed", required=True, type=Path, help="the folder of the remesh variants (results/remeshed)"
+        "--remesh-files",
+        required=True,
+        type=Path,
+        help="the list file of each chunk's remesh files (the manifest job's --remesh-files)",
     )
 
 
@@ -156,11 +159,12 @@ def manifest_arguments(parser: argparse.ArgumentParser) -> None:
     _setting(parser)
     parser.add_argument("--catalog", required=True, type=Path)
     _out(parser)
+    parser.add_argument("--remesh-files", type=Path, help="also write the remesh files of each chunk (JSON)")
 
 
 @_stage
 def run_manifest(args: argparse.Namespace, config: dict) -> None:
-    write_manifest_stage(config, args.setting, args.catalog, args.out)
+    write_manifest_stage(config, args.setting, args.catalog, args.out, args.remesh_files)
 
 
 def remesh_arguments(parser: argparse.ArgumentParser) -> None:
@@ -194,7 +198,13 @@ def ground_truth_arguments(parser: argparse.ArgumentParser) -> None:
 @_stage
 def run_ground_truth(args: argparse.Namespace, config: dict) -> None:
     ground_truth_stage(
-        config, args.setting, args.chunk, args.out, manifest=args.manifest, catalog=args.catalog, remeshed=args.remeshed
+        config,
+        args.setting,
+        args.chunk,
+        args.out,
+        manifest=args.manifest,
+        catalog=args.catalog,
+        remesh_files=args.remesh_files,
     )
 
 
@@ -224,7 +234,7 @@ def run_pairs(args: argparse.Namespace, config: dict) -> None:
         triangle_ids=args.triangle_ids,
         manifest=args.manifest,
         catalog=args.catalog,
-        remeshed=args.remeshed,
+        remesh_files=args.remesh_files,
     )
 
 

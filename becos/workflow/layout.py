@@ -59,6 +59,10 @@ class Layout:
     def manifest(self, setting: str) -> Path:
         return self.results / setting / "manifest.csv"
 
+    def remesh_files(self, setting: str) -> Path:
+        """The remesh files each chunk job of a setting reads, by chunk (written with the manifest)."""
+        return self.results / setting / "remesh_files.json"
+
     @property
     def remeshed_root(self) -> Path:
         """The folder of every remesh variant (:func:`remeshed_file`)."""

@@ -170,12 +170,7 @@ class Plan:
         return {(d, n): f for d, n, f in zip(self.catalog["dataset"], self.catalog["name"], self.catalog["file"])}
 
     def _side_files(self, rows: pd.DataFrame) -> list[tuple[str, str, str]]:
-        remesh = self.options.remesh
-        out = set()
-        for row in rows.to_dict("records"):
-            for side in ("x", "y"):
-                out.add((row[f"{side}_dataset"], row[f"{side}_name"], remesh_token(row, side, remesh)))
-        return sorted(out)
+        return side_shapes(rows, self.options.remesh)
 
     @cached_property
     def remesh_jobs(self) -> list[tuple[str, str, str]]:
@@ -255,6 +250,29 @@ class Plan:
             for xd, xn, yd, yn in zip(rows["x_dataset"], rows["x_name"], rows["y_dataset"], rows["y_name"])
         }
         return sorted({str(p) for kx, ky in pairs for p in edge_files_between(self._annotations, kx, ky)})
+
+
+def side_shapes(rows: pd.DataFrame, remesh: bool) -> list[tuple[str, str, str]]:
+    """``(dataset, name, token)`` of each shape the pairs of manifest ``rows`` use (:func:`remesh_token`), sorted."""
+    out = set()
+    for row in rows.to_dict("records"):
+        for side in ("x", "y"):
+            out.add((row[f"{side}_dataset"], row[f"{side}_name"], remesh_token(row, side, remesh)))
+    return sorted(out)
+
+
+def chunk_remesh_files(manifest: pd.DataFrame, options) -> dict[str, list[list[str]]]:
+    """Per chunk of ``manifest`` (its number as a string), ``[dataset, name, token, path]`` of each remesh
+    file its pairs use (none without remeshing), the paths of :meth:`Layout.remeshed`: what its chunk
+    jobs read, the list file :meth:`Layout.remesh_files` holds. ``options``: the manifest's."""
+    options = ManifestOptions.of(options)
+    if not options.remesh:
+        return {str(int(c)): [] for c in sorted(set(manifest["chunk"]))}
+    layout = Layout.of(options)
+    return {
+        str(int(c)): [[*key, str(layout.remeshed(*key))] for key in side_shapes(rows, True)]
+        for c, rows in manifest.groupby("chunk", sort=True)
+    }
 
 
 def remesh_target(seed: int, dataset: str, name: str, token: str) -> dict:

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import hashlib
 from collections import OrderedDict
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -66,6 +67,23 @@ ShapeKey = tuple[str, str, str]
 """``(dataset, name, token)``: one pair side's shape as a chunk job loads it."""
 
 
+@dataclass(frozen=True)
+class RemeshFiles:
+    """The remesh files a chunk job was given: ``files`` by shape key, from the list file ``source``."""
+
+    source: Path
+    files: dict[ShapeKey, Path]
+
+    def path(self, dataset: str, name: str, token: str) -> Path:
+        try:
+            return self.files[(dataset, name, token)]
+        except KeyError:
+            raise ConfigError(
+                f"{self.source}: lists no remesh file of {dataset}/{name} {token}, which the chunk's pairs use. "
+                "Fix: re-run the workflow (the list is older than the manifest; snakemake --forcerun manifest)"
+            ) from None
+
+
 def pair_shape_keys(row: dict, remesh: bool) -> tuple[ShapeKey, ShapeKey]:
     """The shapes of a manifest row's two sides."""
     return (
@@ -112,13 +130,13 @@ class ShapeStore:
         self,
         options,
         catalog: pd.DataFrame | list[dict],
-        remeshed: str | Path | None = None,
+        remeshed: str | Path | RemeshFiles | None = None,
         cache: str | Path | None = None,
     ):
         """``options``: the job's stage options (:mod:`becos.workflow.options`; or a resolved config): its
         ``results`` and, for the shape network, its annotation folder. ``catalog``: the catalog table, or
-        some of its rows as dicts. ``remeshed``: the folder of the remesh variants (a chunk job's declared
-        remesh root; default: :attr:`Layout.remeshed_root`). ``cache``: a folder where parsed meshes and
+        some of its rows as dicts. ``remeshed``: the remesh files a chunk job was given
+        (:class:`RemeshFiles`), or the folder of the remesh variants (default: :attr:`Layout.remeshed_root`). ``cache``: a folder where parsed meshes and
         edge files are kept across jobs (benchmarks, tests); default None: a job parses the files its
         rule declares, keeping them in memory only (parsed edge files in a temporary folder of its own),
         so it reads no file its rule does not name."""
@@ -126,7 +144,9 @@ class ShapeStore:
 
         self.layout = Layout.of(options)
         self._annotation_options = options
-        self.remeshed_root = self.layout.remeshed_root if remeshed is None else Path(remeshed)
+        self._remesh_files = remeshed if isinstance(remeshed, RemeshFiles) else None
+        folder = remeshed if remeshed is not None and self._remesh_files is None else self.layout.remeshed_root
+        self.remeshed_root = Path(folder)
         rows = catalog if isinstance(catalog, list) else catalog.to_dict("records")
         self.entries = {(r["dataset"], r["name"]): shape_entry(r) for r in rows}
         self._cache = None if cache is None else Path(cache)
@@ -203,8 +223,14 @@ class ShapeStore:
         if token == "original":
             return None
         return self._remeshed.get_or_make(
-            (dataset, name, token), lambda: load_remeshed(remeshed_file(self.remeshed_root, dataset, name, token))
+            (dataset, name, token), lambda: load_remeshed(self.remesh_path(dataset, name, token))
         )
+
+    def remesh_path(self, dataset: str, name: str, token: str) -> Path:
+        """The file of a remesh variant: the one the job was given, else its place under the remesh folder."""
+        if self._remesh_files is not None:
+            return self._remesh_files.path(dataset, name, token)
+        return remeshed_file(self.remeshed_root, dataset, name, token)
 
     def file_digest(self, path: Path) -> str:
         path = Path(path)
@@ -216,7 +242,7 @@ class ShapeStore:
         """Digest of the file a pair side is built from (remesh variant, or the original mesh)."""
         if token == "original":
             return self.file_digest(self.entry(dataset, name).path)
-        return self.file_digest(remeshed_file(self.remeshed_root, dataset, name, token))
+        return self.file_digest(self.remesh_path(dataset, name, token))
 
     def edge_digests(self, x, y) -> list[str]:
         """Digests of the edge files the ground truth between entries ``x`` and ``y`` reads (both ways),

@@ -27,8 +27,14 @@ from becos.workflow.options import (
     digest,
     pairs_options,
 )
-from becos.workflow.plan import build_catalog, build_manifest, remesh_target, uses_published_views
-from becos.workflow.shapes import ShapeKey, ShapeStore, visit_order
+from becos.workflow.plan import (
+    build_catalog,
+    build_manifest,
+    chunk_remesh_files,
+    remesh_target,
+    uses_published_views,
+)
+from becos.workflow.shapes import RemeshFiles, ShapeKey, ShapeStore, visit_order
 
 if TYPE_CHECKING:
     import pandas as pd  # imported where used: write-config, metadata and remesh jobs start without it
@@ -51,13 +57,19 @@ def write_catalog_stage(options: CatalogOptions | dict, out: Path) -> pd.DataFra
     return catalog
 
 
-def write_manifest_stage(options: ManifestOptions | dict, setting: str, catalog_path: Path, out: Path) -> pd.DataFrame:
-    """Write the pair manifest of ``setting`` (``options``: the manifest's, or a resolved config) to ``out``."""
+def write_manifest_stage(
+    options: ManifestOptions | dict, setting: str, catalog_path: Path, out: Path, remesh_files: Path | None = None
+) -> pd.DataFrame:
+    """Write the pair manifest of ``setting`` (``options``: the manifest's, or a resolved config) to ``out``
+    and, to ``remesh_files``, the remesh files each of its chunks reads (:func:`chunk_remesh_files`, JSON)."""
     from becos.catalog import read_catalog
     from becos.sampling import write_manifest
 
     manifest = build_manifest(ManifestOptions.of(options), setting, read_catalog(catalog_path))
     write_manifest(manifest, out)
+    if remesh_files is not None:
+        lists = chunk_remesh_files(manifest, options)
+        write_text(remesh_files, json.dumps(lists, indent=1, sort_keys=True) + "\n")
     report = manifest.attrs.get("report", {})
     _log(f"manifest {setting}: {len(manifest)} pairs -> {out}; {json.dumps(report, sort_keys=True)}")
     return manifest
@@ -131,6 +143,22 @@ def _chunk_rows(manifest_path: Path, chunk: int) -> pd.DataFrame:
     return manifest[manifest["chunk"] == int(chunk)]
 
 
+def read_remesh_files(path: Path, chunk: int) -> RemeshFiles:
+    """The remesh files of ``chunk`` that the list file ``path`` names (:func:`write_manifest_stage`)."""
+    from becos.errors import InputFileError
+
+    try:
+        listed = json.loads(Path(path).read_text())[str(int(chunk))]
+        files = {(d, n, t): Path(p) for d, n, t, p in listed}
+    except (ValueError, KeyError, TypeError) as exc:
+        raise InputFileError(
+            path,
+            f"holds no list of chunk {chunk}'s remesh files ({type(exc).__name__}: {exc})",
+            "re-run the workflow: the manifest job writes it (snakemake --forcerun manifest)",
+        ) from None
+    return RemeshFiles(Path(path), files)
+
+
 def _progress(stage: str, setting: str, chunk: int, entries: list[dict], n_rows: int, started: float) -> None:
     """A progress line every 10 pairs and at the end of a chunk."""
     done = len(entries)
@@ -188,12 +216,13 @@ def ground_truth_stage(
     *,
     manifest: Path,
     catalog: Path,
-    remeshed: Path,
+    remesh_files: Path,
 ) -> dict:
     """Ground truth both ways for every pair of a chunk; files already up to date are kept.
 
-    Reads the setting's ``manifest``, the ``catalog`` and the remesh variants of the chunk's pairs under
-    the folder ``remeshed`` (the paths its rule declares); writes ``<pair_id>.npz`` beside ``out_index``.
+    Reads the setting's ``manifest``, the ``catalog``, the remesh variants of the chunk's pairs that the
+    list file ``remesh_files`` names (:func:`becos.workflow.plan.chunk_remesh_files`; the paths its rule
+    declares) and the original meshes the catalog names; writes ``<pair_id>.npz`` beside ``out_index``.
     ``options``: the ground-truth stage's (or a resolved config).
     """
     from becos.catalog import read_catalog
@@ -201,7 +230,7 @@ def ground_truth_stage(
     started = time.perf_counter()
     options = GroundTruthOptions.of(options)
     remesh = options.remesh
-    shapes = ShapeStore(options, read_catalog(catalog), remeshed=remeshed)
+    shapes = ShapeStore(options, read_catalog(catalog), remeshed=read_remesh_files(remesh_files, chunk))
     rows = _chunk_rows(manifest, chunk)
     folder = Path(out_index).parent
     _remove_killed_writes([*(pair_file(folder, pid) for pid in rows["pair_id"]), Path(out_index)])
@@ -322,13 +351,13 @@ def pairs_stage(
     *,
     manifest: Path,
     catalog: Path,
-    remeshed: Path,
+    remesh_files: Path,
     triangle_ids: Path | None = None,
 ) -> dict:
     """Pair records (partiality, alignment, rotation, annotations) for every pair of a chunk.
 
     Reads the setting's ``manifest``, the ``catalog``, the ground-truth files listed in ``gt_index``, the
-    remesh variants under ``remeshed`` and, for published P2P views, the shipped triangle ids in the
+    remesh variants the list file ``remesh_files`` names and, for published P2P views, the shipped triangle ids in the
     folder ``triangle_ids`` (None: every view is cast); writes ``<pair_id>.npz`` beside ``out_index``.
     ``options``: the pairs stage's of ``setting`` (or a resolved config).
     """
@@ -337,7 +366,7 @@ def pairs_stage(
 
     started = time.perf_counter()
     stage = pairs_options(options, setting)
-    shapes = ShapeStore(stage, read_catalog(catalog), remeshed=remeshed)
+    shapes = ShapeStore(stage, read_catalog(catalog), remeshed=read_remesh_files(remesh_files, chunk))
     gt_files = {e["pair_id"]: e for e in json.loads(Path(gt_index).read_text())["pairs"]}
     rows = _chunk_rows(manifest, chunk)
     folder = Path(out_index).parent

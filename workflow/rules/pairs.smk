@@ -8,7 +8,8 @@ rule manifest:
     input:
         catalog=LAYOUT.catalog,
     output:
-        LAYOUT.manifest("{setting}"),
+        manifest=LAYOUT.manifest("{setting}"),
+        remesh_files=LAYOUT.remesh_files("{setting}"),
     log:
         "logs/manifest/{setting}.log",
     conda:
@@ -19,7 +20,8 @@ rule manifest:
         annotations=config["annotations"],
     shell:
         "becos manifest --options {params.options:q} --annotations {params.annotations:q}"
-        " --setting {wildcards.setting} --catalog {input.catalog:q} --out {output:q} > {log:q} 2>&1"
+        " --setting {wildcards.setting} --catalog {input.catalog:q} --out {output.manifest:q}"
+        " --remesh-files {output.remesh_files:q} > {log:q} 2>&1"
 
 
 rule remesh:
@@ -54,14 +56,16 @@ rule remesh:
         " --token {wildcards.token} --out {output.npz:q} --ply {output.ply:q} > {log:q} 2>&1"
 
 
-# A chunk job's remesh files are declared one by one (input.remeshed) and passed as their folder
-# (params.remeshed): a chunk may read hundreds, more than one shell command line holds, and the job opens
-# exactly the declared ones (both named by remesh_token of the chunk's manifest rows, becos.workflow).
-# Its original meshes (input.meshes) are named by the catalog's rows; the annotation folder is passed.
+# A chunk job's remesh files are declared one by one (input.remeshed) and passed in a list file that the
+# manifest job writes (input.remesh_files, every chunk's list): a chunk may read hundreds, more than one
+# shell command line holds. Both are named by becos.workflow.plan.side_shapes of the chunk's manifest rows,
+# and the job opens only the listed files. Its original meshes (input.meshes) are named by the catalog's
+# rows; the annotation folder is passed.
 rule ground_truth:
     input:
-        manifest=rules.manifest.output[0],
+        manifest=rules.manifest.output.manifest,
         catalog=LAYOUT.catalog,
+        remesh_files=rules.manifest.output.remesh_files,
         remeshed=lambda w: plan().chunk_inputs(w.setting, int(w.chunk)),
         meshes=lambda w: plan().chunk_mesh_files(w.setting, int(w.chunk)),
         edges=lambda w: plan().chunk_edge_files(w.setting, int(w.chunk)),
@@ -81,20 +85,20 @@ rule ground_truth:
     params:
         options=bw.job_options(config, "ground_truth"),
         sources=chunk_sources_digest,  # a rerun trigger only: the content of what it reads outside results
-        remeshed=LAYOUT.remeshed_root,
         annotations=config["annotations"],
     shell:
         "becos ground-truth --options {params.options:q} --annotations {params.annotations:q}"
         " --setting {wildcards.setting} --chunk {wildcards.chunk}"
-        " --manifest {input.manifest:q} --catalog {input.catalog:q} --remeshed {params.remeshed:q}"
+        " --manifest {input.manifest:q} --catalog {input.catalog:q} --remesh-files {input.remesh_files:q}"
         " --out {output:q} > {log:q} 2>&1"
 
 
 rule pairs:
     input:
         ground_truth=rules.ground_truth.output[0],
-        manifest=rules.manifest.output[0],
+        manifest=rules.manifest.output.manifest,
         catalog=LAYOUT.catalog,
+        remesh_files=rules.manifest.output.remesh_files,
         remeshed=lambda w: plan().chunk_inputs(w.setting, int(w.chunk)),
         meshes=lambda w: plan().chunk_mesh_files(w.setting, int(w.chunk)),
         triangle_ids=published_views_input,
@@ -114,11 +118,10 @@ rule pairs:
     params:
         options=lambda w: bw.job_options(config, "pairs", w.setting),
         sources=chunk_sources_digest,  # a rerun trigger only, as for ground_truth
-        remeshed=LAYOUT.remeshed_root,
         annotations=config["annotations"],
         triangle_ids=lambda w, input: optional_path("--triangle-ids", input.triangle_ids),
     shell:
         "becos pairs --options {params.options:q} --annotations {params.annotations:q}"
         " --setting {wildcards.setting} --chunk {wildcards.chunk}"
         " --ground-truth {input.ground_truth:q} --manifest {input.manifest:q} --catalog {input.catalog:q}"
-        " --remeshed {params.remeshed:q} {params.triangle_ids} --out {output:q} > {log:q} 2>&1"
+        " --remesh-files {input.remesh_files:q} {params.triangle_ids} --out {output:q} > {log:q} 2>&1"
