@@ -1,6 +1,6 @@
 """The workflow's config schema, ``becos/data/schema.yaml``: the one statement of every config default.
 
-Library code that takes the same options as the workflow (e.g. :class:`becos.pairs.PairOptions`) reads
+Library code that takes the same options as the workflow (e.g. :class:`becos.build.pairs.PairOptions`) reads
 its defaults here (:func:`config_default`) instead of restating them.
 """
 

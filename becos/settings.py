@@ -14,7 +14,7 @@ SETTING_LABELS = {"full_full": "F2F", "partial_full": "P2F", "partial_partial": 
 
 SPLITS = ("train", "val", "test")
 """The benchmark's splits, in the order tables list them (the published pickles store train, test, val:
-``becos.published.PUBLISHED_SPLITS``)."""
+``becos.build.published.PUBLISHED_SPLITS``)."""
 
 MIN_OVERLAP = 0.1
 MAX_OVERLAP = 0.9

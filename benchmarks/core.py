@@ -21,11 +21,11 @@ from remesh import SAMPLE, _tosca_dir, remesh_benchmark  # noqa: E402
 def composition_benchmark(repeats: int = 5) -> dict:
     """Milliseconds per ground-truth map once caches are warm: remeshed X -> remeshed Y, and
     original X -> original Y (``remesh: false``)."""
-    from becos.annotations import AnnotationSource
-    from becos.datasets import DatasetSpec, prepare_shape
-    from becos.mesh import MeshCache
-    from becos.network import ShapeNetwork
-    from becos.remesh import remesh, variant_target_vertices
+    from becos.build.network import ShapeNetwork
+    from becos.build.remesh import remesh, variant_target_vertices
+    from becos.core.mesh import MeshCache
+    from becos.sources.annotations import AnnotationSource
+    from becos.sources.datasets import DatasetSpec, prepare_shape
 
     tosca = _tosca_dir()
     root = tosca.parent.parent

@@ -27,7 +27,7 @@ sys.path.insert(0, str(REPO / "tests"))  # the transcribed loader lives with its
 
 from test_dpfm_export import dpfm_items  # noqa: E402
 
-from becos.export import DPFM_NONE_MAPS  # noqa: E402
+from becos.products.export import DPFM_NONE_MAPS  # noqa: E402
 
 
 def main() -> None:

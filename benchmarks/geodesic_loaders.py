@@ -13,7 +13,7 @@ its ``run`` folder), for every test pair of ``--setting``:
   in ``tests/test_geodesic_export.py``) divided by the sqrt-area: equal to geo-lora's file;
 - ``--ulrssm OUT``: ``becos export-ulrssm --geodesics --splits test`` into OUT, then each pair's
   ``dist/<k>.mat`` by ULRSSM's ``scipy.io.loadmat(...)["dist"]``: equal to geo-lora's file;
-- the lazy route: :meth:`becos.store.GeodesicView.to_truth` of the same prediction, its wall seconds
+- the lazy route: :meth:`becos.products.store.GeodesicView.to_truth` of the same prediction, its wall seconds
   per pair (the first pair of a mesh pays the solver's start and factorisation) and its largest
   difference from the exported errors.
 
@@ -42,10 +42,10 @@ from test_geodesic_export import dsmk_cached_result  # noqa: E402  (DeepShapeMat
 
 
 def main() -> None:
-    from becos.export import dsmk_cache_name, full_shape
-    from becos.geodesics import HeatDistanceSolver, shape_key
-    from becos.mesh import TriMesh
-    from becos.store import GeodesicView, open_benchmark
+    from becos.core.geodesics import HeatDistanceSolver, shape_key
+    from becos.core.mesh import TriMesh
+    from becos.products.export import dsmk_cache_name, full_shape
+    from becos.products.store import GeodesicView, open_benchmark
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("run", type=Path, help="the workflow's working folder (results/ below it)")

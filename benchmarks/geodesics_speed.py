@@ -3,12 +3,12 @@
     PYTHONPATH=. python benchmarks/geodesics_speed.py [--shape cat0] [--vertices 10000] [--exact 20]
     PYTHONPATH=. python benchmarks/geodesics_speed.py --writes 3 [--shape cat0] [--vertices 10000] [--out DIR]
 
-Remeshes ``<shape>`` of ``../shared`` TOSCA to ``--vertices`` (becos.remesh), then computes its whole
+Remeshes ``<shape>`` of ``../shared`` TOSCA to ``--vertices`` (becos.build.remesh), then computes its whole
 (V, V) float32 matrix with
 
-- before: potpourri3d's ``MeshHeatMethodDistanceSolver`` one source per call (becos.geodesics.
+- before: potpourri3d's ``MeshHeatMethodDistanceSolver`` one source per call (becos.core.geodesics.
   GeodesicDistances, the export's former ``distance_rows``);
-- after: :class:`becos.geodesics.HeatDistanceSolver` (both systems factored once, blocks of sources
+- after: :class:`becos.core.geodesics.HeatDistanceSolver` (both systems factored once, blocks of sources
   solved as multi-column right-hand sides), i.e. today's ``distance_rows``;
 
 and prints CPU seconds (``time.process_time``, all threads), the matrix size, the relative difference
@@ -46,10 +46,10 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=Path("/tmp/becos-geodesics-writes"), help="folder for --writes")
     args = parser.parse_args()
 
-    from becos.datasets import DatasetSpec, prepare_shape
-    from becos.geodesics import GeodesicDistances, distance_rows
-    from becos.mesh import MeshCache, TriMesh
-    from becos.remesh import remesh
+    from becos.build.remesh import remesh
+    from becos.core.geodesics import GeodesicDistances, distance_rows
+    from becos.core.mesh import MeshCache, TriMesh
+    from becos.sources.datasets import DatasetSpec, prepare_shape
 
     root = Path(__file__).resolve().parents[1]
     code = Path(
@@ -57,7 +57,7 @@ def main() -> None:
         .stdout.strip()
         .splitlines()[-1]
     )
-    from becos.annotations import AnnotationSource
+    from becos.sources.annotations import AnnotationSource
 
     cache = MeshCache(Path("/tmp/becos-geodesics-bench-cache"))
     entries = {e.name: e for e in DatasetSpec.load("tosca").list_shapes(code / "data", AnnotationSource(code))}
@@ -129,8 +129,8 @@ def write_costs(v: np.ndarray, f: np.ndarray, places: int, out: Path, shape: str
     import shutil
 
     from becos.atomic import link_or_copy, save_npy
-    from becos.export.geodesics import GeodesicShape, shape_matrix, symmetric_block
-    from becos.geodesics import distance_rows
+    from becos.core.geodesics import distance_rows
+    from becos.products.export.geodesics import GeodesicShape, shape_matrix, symmetric_block
 
     n = len(v)
     sources = np.arange(n)

@@ -22,7 +22,7 @@ truth becos has, computed here without its composition code:
 4. the error: geodesic distance on the target's full remesh from the predicted vertex to the located
    truth, over sqrt(area of that remesh). Within the 2-ring of the truth's face (mesh connectivity,
    so never across a contact) it is the Euclidean distance, where chord and geodesic agree; beyond, the
-   heat method (:class:`becos.geodesics.GeodesicDistances`), and where that exceeds
+   heat method (:class:`becos.core.geodesics.GeodesicDistances`), and where that exceeds
    :data:`EXACT_ABOVE` exact polyhedral geodesics (libigl's ``exact_geodesic``). The tables count the
    directions above the bound both ways (``heat only``: before the exact re-measure).
 
@@ -85,16 +85,16 @@ REPO = Path(__file__).resolve().parents[1]
 if str(REPO) not in sys.path:
     sys.path.insert(0, str(REPO))
 
-from becos.geometry import (  # noqa: E402
+from becos.build.record import SETTINGS  # noqa: E402
+from becos.build.remesh import Remeshed, load_remeshed  # noqa: E402
+from becos.core.geometry import (  # noqa: E402
     barycentric_coordinates,
     closest_points_on_triangles,
     nearest_along_surface,
     oriented_face_normals,
     surface_area,
 )
-from becos.mesh import TriMesh  # noqa: E402
-from becos.record import SETTINGS  # noqa: E402
-from becos.remesh import Remeshed, load_remeshed  # noqa: E402
+from becos.core.mesh import TriMesh  # noqa: E402
 
 CANDIDATES = 12
 """Remesh faces (nearest centroids, in each pose used) considered when locating a true point on a remesh."""
@@ -140,7 +140,7 @@ TOSCA run is above 0.02 (~0.15 s each)."""
 class ClassPoses:
     """The original meshes of a run's catalog, grouped by (dataset, class); loaded on first use.
 
-    Meshes are in the workflow's common frame (:func:`becos.datasets.prepare_shape`), the frame of its
+    Meshes are in the workflow's common frame (:func:`becos.sources.datasets.prepare_shape`), the frame of its
     remesh files; each pose has its own centre, which the worst-pose distances do not mind."""
 
     def __init__(self, catalog: pd.DataFrame):
@@ -154,7 +154,7 @@ class ClassPoses:
 
     def mesh(self, dataset: str, name: str) -> TriMesh:
         """The shape's original mesh in the common frame the workflow remeshes (scaled, centred, rotated)."""
-        from becos.datasets import prepare_shape
+        from becos.sources.datasets import prepare_shape
         from becos.workflow import shape_entry
 
         key = (dataset, name)
@@ -368,7 +368,7 @@ class RemeshTarget:
         far = np.flatnonzero(~self.in_ring(predicted, corners))
         if len(far):
             if self._geodesics is None:
-                from becos.geodesics import GeodesicDistances
+                from becos.core.geodesics import GeodesicDistances
 
                 self._geodesics = GeodesicDistances(self.mesh, "heat", cache_bytes=64 << 20)
             out[far] = np.maximum(self._geodesics.between(predicted[far], face[far], weights[far]), out[far])
@@ -390,7 +390,7 @@ class Run:
     """A finished run's ``results`` folder: catalog, remesh files, stores."""
 
     def __init__(self, results: Path):
-        from becos.catalog import read_catalog
+        from becos.sources.catalog import read_catalog
 
         self.results = Path(results)
         self.poses = ClassPoses(read_catalog(self.results / "catalog.csv"))
@@ -563,14 +563,14 @@ def measure_direction(run: Run, record, setting: str, s: str, t: str) -> Directi
 def store_records(path: Path):
     """The pair records of a setting's store, in store order.
 
-    A store of format 2 (this becos) is read by :func:`becos.store.open_benchmark`. A store of
+    A store of format 2 (this becos) is read by :func:`becos.products.store.open_benchmark`. A store of
     format 1 (becos before the int32 store of issue #15; same record schema, same node layout,
     int64 indices) is read here through zarr, so that a run of an older checkout can be audited
     with this script's truth (issue #20's before/after table)."""
     import zarr
 
-    from becos.record import PairRecord
-    from becos.store import open_benchmark
+    from becos.build.record import PairRecord
+    from becos.products.store import open_benchmark
 
     info = dict(zarr.open_group(str(path), mode="r", zarr_format=3).attrs).get("becos_store") if path.is_dir() else None
     if not isinstance(info, dict) or info.get("format") != 1:

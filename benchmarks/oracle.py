@@ -12,7 +12,7 @@ true`` on TOSCA (resolved config, catalog, published manifest written and read b
   reference's output frame, against ``0_<x>.off`` / ``1_<y>.off``: max |Δ| (vertices in output units);
 - ``undo``: the oracle's vertices carried back (rotation, alignment undone) against our re-centred
   remesh: max |Δ|;
-- ``bitwise``: the reference's remesh of the file (:func:`becos.reference_remesh.reference_remesh`)
+- ``bitwise``: the reference's remesh of the file (:func:`becos.build.reference_remesh.reference_remesh`)
   carried forward exactly as the reference computes it: max |Δ| (0 = bit for bit);
 - ``faces``: identical face arrays; ``rot``: the manifest's rotation (the one the pairs stage applies)
   bitwise equal to the info pickle's ``random_rotation``; ``area``: relative difference of our
@@ -68,7 +68,7 @@ def oracle_side(folder: Path, side: int) -> tuple[str, np.ndarray, np.ndarray, d
 def published_setup(root: Path, results: Path, settings: tuple[str, ...]) -> dict:
     """The resolved ``original_settings`` config on TOSCA, its plan and manifests (written and read
     back as the chunk jobs read them)."""
-    from becos.sampling import read_manifest, write_manifest
+    from becos.build.sampling import read_manifest, write_manifest
     from becos.workflow import Plan, build_catalog, build_manifest, resolve_config
 
     config = resolve_config(
@@ -109,7 +109,7 @@ class StageRemeshes:
         self._done: dict[tuple[str, str], object] = {}
 
     def get(self, dataset: str, name: str, token: str):
-        from becos.remesh import load_remeshed
+        from becos.build.remesh import load_remeshed
         from becos.workflow import remesh_stage
 
         key = (name, token)
@@ -125,7 +125,7 @@ class StageRemeshes:
 
 def compare_full_side(remeshed, oracle_vertices: np.ndarray, oracle_faces: np.ndarray, info: dict) -> dict:
     """Our remesh file vs one side of an oracle full_full pair (see the module docstring)."""
-    from becos.reference_remesh import reference_output, sqrt_area, undo_reference_output
+    from becos.build.reference_remesh import reference_output, sqrt_area, undo_reference_output
 
     ours = remeshed.mesh.vertices - np.mean(remeshed.mesh.vertices, axis=0)
     align = (info["align_rotation"], info["align_translation"]) if info["align_rotation"] is not None else (None, None)
@@ -147,8 +147,8 @@ def bitwise_side(
 ):
     """The reference's remesh of the file carried forward exactly as the reference does:
     (max |Δ| to the oracle's vertices, the :class:`ReferenceRemesh`, seconds)."""
-    from becos.mesh import read_mesh
-    from becos.reference_remesh import open3d_rotation, reference_output, reference_pose, reference_remesh
+    from becos.build.reference_remesh import open3d_rotation, reference_output, reference_pose, reference_remesh
+    from becos.core.mesh import read_mesh
 
     start = time.perf_counter()
     ref = reference_remesh(read_mesh(root / "data" / "tosca-off" / f"{name}.off"), target_faces)
@@ -164,8 +164,8 @@ def casting_frames(root: Path, row: dict, infos: tuple[dict, dict], spec) -> tup
     """The reference's remeshes of a pair's shapes in its casting frame (facts §7.4): posed, Y aligned as
     the info pickle records, each divided by its sqrt-area. Returns ((vertices, faces, ReferenceRemesh)
     of x, of y)."""
-    from becos.mesh import read_mesh
-    from becos.reference_remesh import open3d_rotation, reference_pose, reference_remesh
+    from becos.build.reference_remesh import open3d_rotation, reference_pose, reference_remesh
+    from becos.core.mesh import read_mesh
 
     out = []
     for side, info in zip(("x", "y"), infos):
@@ -192,8 +192,8 @@ def compare_partial_pair(
     frame; for Y also in its own unaligned frame: a shipped file of a train shape may come from a pair
     where it was X); with ``stage`` (the
     remesh files), the overlap masks (:func:`compare_masks`)."""
-    from becos.reference_remesh import open3d_rotation, reference_pose
-    from becos.reference_views import (
+    from becos.build.reference_remesh import open3d_rotation, reference_pose
+    from becos.build.reference_views import (
         cast_pinhole,
         full_faces_covering,
         full_triangles,
@@ -276,12 +276,12 @@ def pair_ground_truth(setup: dict, stage: StageRemeshes, row: dict):
 
 
 def compare_published_try(root: Path, setup: dict, stage: StageRemeshes, row: dict, folder: Path) -> dict:
-    """becos's own run of a published P2P pair (:func:`becos.reference_views.published_p2p`: its casting
+    """becos's own run of a published P2P pair (:func:`becos.build.reference_views.published_p2p`: its casting
     frames from the remesh files and its exact ground truth, views from the shipped files or cast) vs the
     oracle: the kept try, the recorded camera's try, the reference rule's overlaps against the info
     pickles' ``overlap_percentage``, the kept full faces, becos's exact rule's try, and the angle
     between our alignment and the recorded ``align_rotation``."""
-    from becos.reference_views import PublishedViews, casting_frames, full_faces_covering, published_p2p
+    from becos.build.reference_views import PublishedViews, casting_frames, full_faces_covering, published_p2p
 
     remeshed, gt = pair_ground_truth(setup, stage, row)
     x, y = remeshed[0].mesh, remeshed[1].mesh
@@ -333,7 +333,7 @@ def compare_masks(setup: dict, stage: StageRemeshes, row: dict, folder: Path, co
     (identity hop); otherwise it is known only where its partial correspondence is not -1.
     ``share_differ_at_border``: of the vertices whose ground truths agree but masks differ, the share
     whose reference target vertex lies on partial B's border (the two overlap rules differ there)."""
-    from becos.partiality import cut, overlap_mask
+    from becos.build.partiality import cut, overlap_mask
 
     plan = setup["plan"]
     names = (row["x_name"], row["y_name"])
@@ -384,7 +384,7 @@ def compare_masks(setup: dict, stage: StageRemeshes, row: dict, folder: Path, co
 
 def _published_cameras(setup: dict) -> dict:
     """``{pair_id: (2, 10, 3)}`` cameras of the published partial_partial list."""
-    from becos.published import import_published
+    from becos.build.published import import_published
 
     if "cameras" not in setup:
         config = setup["config"]
@@ -408,7 +408,7 @@ def rotation_identical(row: dict, info_x: dict, info_y: dict) -> bool:
 
 
 def run(results: Path) -> dict:
-    from becos.datasets import DatasetSpec
+    from becos.sources.datasets import DatasetSpec
     from becos.workflow import remesh_token
 
     root = becos_code()

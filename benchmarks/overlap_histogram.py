@@ -3,10 +3,10 @@
 For each ``STORE`` (a ``partial_partial`` ``benchmark.zarr``, or a workflow folder holding
 ``results/partial_partial/benchmark.zarr``) prints, as one JSON document (also written to ``--out``):
 the camera regime its pairs were drawn with (from the pair metas), pairs, directions, the counts and
-shares per bin (:func:`becos.report.overlap_histogram`, both directions), the share of pairs
+shares per bin (:func:`becos.products.report.overlap_histogram`, both directions), the share of pairs
 accepted (both overlaps in range), mean tries, mean overlap, and the total variation distance to the
-published histogram (:func:`becos.report.published_overlap_comparison`); and the published
-histogram itself (:data:`becos.published.P2P_OVERLAP_HISTOGRAM`).
+published histogram (:func:`becos.products.report.published_overlap_comparison`); and the published
+histogram itself (:data:`becos.build.published.P2P_OVERLAP_HISTOGRAM`).
 
 Run from the repository root, e.g. after two TOSCA runs that differ only in ``cam_pos_regime``::
 
@@ -27,9 +27,9 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 from becos.atomic import write_text  # noqa: E402
-from becos.published import P2P_OVERLAP_HISTOGRAM  # noqa: E402
-from becos.report import overlap_histogram, published_overlap_comparison  # noqa: E402
-from becos.store import open_benchmark  # noqa: E402
+from becos.build.published import P2P_OVERLAP_HISTOGRAM  # noqa: E402
+from becos.products.report import overlap_histogram, published_overlap_comparison  # noqa: E402
+from becos.products.store import open_benchmark  # noqa: E402
 
 
 def store_path(path: Path) -> Path:

@@ -15,7 +15,7 @@ Measures, and prints as JSON (also written to ``--out`` if given):
   any pixel ray hits it first — the reference's Open3D cast), and the time ratio dense / ours.
 
 Run from the repository root: ``/work/venv/bin/python benchmarks/partiality.py [--pairs 204]``.
-The TOSCA meshes come from ``../shared/unpack``. Remeshing uses ``becos.remesh`` when it exists,
+The TOSCA meshes come from ``../shared/unpack``. Remeshing uses ``becos.build.remesh`` when it exists,
 else a pymeshlab decimation (ground truth then by closest points).
 """
 
@@ -35,12 +35,12 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from becos.cameras import draw_camera  # noqa: E402
-from becos.mesh import MeshCache, TriMesh  # noqa: E402
-from becos.partiality import Scanner, cast_p2f, cast_p2p  # noqa: E402
+from becos.build.cameras import draw_camera  # noqa: E402
+from becos.build.partiality import Scanner, cast_p2f, cast_p2p  # noqa: E402
+from becos.build.visibility import VisibilityScene  # noqa: E402
+from becos.core.mesh import MeshCache, TriMesh  # noqa: E402
+from becos.core.surface_map import SurfaceMap, compose_path  # noqa: E402
 from becos.seeding import rng_for  # noqa: E402
-from becos.surface_map import SurfaceMap, compose_path  # noqa: E402
-from becos.visibility import VisibilityScene  # noqa: E402
 
 SHAPE_PAIRS = [
     ("cat0", "cat3"),
@@ -64,10 +64,10 @@ def y_up(mesh: TriMesh) -> TriMesh:
 
 
 def remeshed(mesh: TriMesh) -> tuple[TriMesh, SurfaceMap, SurfaceMap, str]:
-    from becos.remesh import remesh
+    from becos.build.remesh import remesh
 
     r = remesh(mesh, target_vertices=TARGET_VERTICES)
-    return r.mesh, r.to_original, r.from_original, "becos.remesh"
+    return r.mesh, r.to_original, r.from_original, "becos.build.remesh"
 
 
 def load_pairs(folder: Path) -> tuple[list, str]:

@@ -4,9 +4,9 @@ For each shape (cat, dog, horse, wolf, centaur; 37 shapes) the prepared common-f
 at its variant-0 target (``variant_target_vertices(42, 'tosca', name, 0)``), then
 
 - A: labels propagated directly to the remeshed vertices (composition ending on the remesh's
-  ``to_original`` map, :func:`becos.propagation.propagate_labels` with ``remesh``);
+  ``to_original`` map, :func:`becos.build.propagation.propagate_labels` with ``remesh``);
 - B: labels propagated to the original triangulation, carried to the remeshed vertices through
-  ``to_original`` (largest-weight corner, :func:`becos.propagation.labels_through_remesh`);
+  ``to_original`` (largest-weight corner, :func:`becos.build.propagation.labels_through_remesh`);
 
 and the agreement = share of remeshed vertices labelled in A or B whose labels are equal.
 Requirement: >= 0.98 on every shape.
@@ -41,12 +41,12 @@ def _becos_code() -> Path:
 
 def propagation_benchmark(names: list[str] | None = None) -> dict:
     """Agreement of A and B (module docstring) per shape, and a summary. JSON-ready."""
-    from becos.annotations import AnnotationSource
-    from becos.datasets import DatasetSpec, prepare_shape
-    from becos.mesh import MeshCache
-    from becos.network import ShapeNetwork
-    from becos.propagation import NO_LABEL, agreement, labels_through_remesh, nearest_annotated, propagate_labels
-    from becos.remesh import remesh, variant_target_vertices
+    from becos.build.network import ShapeNetwork
+    from becos.build.propagation import NO_LABEL, agreement, labels_through_remesh, nearest_annotated, propagate_labels
+    from becos.build.remesh import remesh, variant_target_vertices
+    from becos.core.mesh import MeshCache
+    from becos.sources.annotations import AnnotationSource
+    from becos.sources.datasets import DatasetSpec, prepare_shape
 
     root = _becos_code()
     annotations = AnnotationSource(root)

@@ -7,7 +7,7 @@ class only. All distances are relative to the input's bounding-box diagonal.
 remesh``, one process per variant, as Snakemake runs it, on one core), by step: ``startup``
 (interpreter, imports, config), ``load`` (parsing the mesh file; the first variant of a shape
 parses it, later ones read the job cache), ``prepare`` (common frame), the remesh's own steps
-(``stats["cpu_seconds"]`` of :func:`becos.remesh.remesh_with_stats`: shape (repair and
+(``stats["cpu_seconds"]`` of :func:`becos.build.remesh.remesh_with_stats`: shape (repair and
 orientation), jitter, subdivide (pre-decimation + Loop), decimate, snap, from_original), ``save`` (npz + PLY) and ``other`` (the rest of the
 process's CPU: exit, ...). ``total`` is the process's own CPU (user + system, from ``wait4``).
 Per tree it prints the median and max of every step over the variants, and the guarantees checked on
@@ -61,15 +61,15 @@ def remesh_benchmark(names: list[str] | None = None, variant_shapes: list[str] |
             (default: one per class).
     Returns a JSON-ready dict: per-shape rows and a summary.
     """
-    from becos.geometry import SurfaceLocator, points_on_surface
-    from becos.mesh import MeshCache
-    from becos.remesh import (
+    from becos.build.remesh import (
         intrinsic_coincidence,
         mesh_checks,
         remesh_with_stats,
         shared_vertex_share,
         variant_target_vertices,
     )
+    from becos.core.geometry import SurfaceLocator, points_on_surface
+    from becos.core.mesh import MeshCache
 
     tosca = _tosca_dir()
     all_names = sorted(p.stem for p in tosca.glob("*.off"))
@@ -261,7 +261,7 @@ def _job_cpu(tree: Path, config: dict, row: dict, token: str, out: Path) -> tupl
 def _triangle_quality(mesh) -> dict:
     """Longest and 99.9th-percentile edge over the median edge, smallest angle (degrees), faces with
     an angle under 10 degrees."""
-    from becos.mesh import undirected_edges
+    from becos.core.mesh import undirected_edges
 
     v, f = mesh.vertices, mesh.faces
     e, _ = undirected_edges(f)
@@ -282,7 +282,7 @@ def _triangle_quality(mesh) -> dict:
 
 
 def _guarantees(original, r, target: int) -> dict:
-    from becos.remesh import mesh_checks
+    from becos.build.remesh import mesh_checks
 
     facts = mesh_checks(r.mesh)
     d = float(np.linalg.norm(np.ptp(original.vertices, axis=0)))
@@ -313,7 +313,7 @@ def step_benchmark(
     jobs interleaved over labels; ``decimators``: label -> config ``decimator`` (absent: the default)."""
     import tempfile
 
-    from becos.remesh import intrinsic_coincidence, load_remeshed, shared_vertex_share
+    from becos.build.remesh import intrinsic_coincidence, load_remeshed, shared_vertex_share
     from becos.workflow import ShapeStore, build_catalog, remesh_target, resolve_config
 
     becos_code = _tosca_dir().parents[1]

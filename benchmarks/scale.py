@@ -30,7 +30,7 @@ vertex to the true point) of a seeded random sample of ``--gt-sample`` pairs per
 fewer) among the pairs whose truth the construction gives: two poses of one class share one
 triangulation (vertex i is vertex i), so the true map is the identity of the original vertices. Other
 pairs (two classes, or a class of each dataset) have no such truth: the construction's cross-class map is
-the template correspondence itself (charts matched part by part, :mod:`becos.synthetic.collection`),
+the template correspondence itself (charts matched part by part, :mod:`becos.sources.synthetic.collection`),
 which becos composes into its ground truth, so it is no independent check; those pairs are counted.
 
 Usage::

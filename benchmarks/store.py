@@ -2,9 +2,9 @@
 
 One pair record is built (``--record PATH`` to use a saved one instead): a full_full pair of an
 icosphere (subdivision 5: 10,242 vertices, 20,480 faces — the size of a remeshed TOSCA pair) with
-itself, identity ground truth, through :func:`becos.pairs.build_pair`; it is saved ``--n`` times
+itself, identity ground truth, through :func:`becos.build.pairs.build_pair`; it is saved ``--n`` times
 with different pair ids (splits train/val/test in turn; vertex coordinates jittered by 1e-4 per
-copy unless ``--no-jitter``, so compression does not see identical copies), then :func:`becos.store.write_store`
+copy unless ``--no-jitter``, so compression does not see identical copies), then :func:`becos.products.store.write_store`
 collects them. Prints JSON ``{n_pairs, write_seconds, read_all_seconds, n_files, ...}``;
 ``read_all_seconds`` is one pass of :meth:`Benchmark.records` over every pair.
 
@@ -41,17 +41,17 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from becos.record import PairRecord  # noqa: E402
-from becos.store import count_files, open_benchmark, write_store  # noqa: E402
+from becos.build.record import PairRecord  # noqa: E402
+from becos.products.store import count_files, open_benchmark, write_store  # noqa: E402
 
 
 def sphere_record(subdivisions: int = 5) -> PairRecord:
     """A schema-complete full_full record of an icosphere paired with itself (identity ground truth)."""
     import trimesh
 
-    from becos.mesh import TriMesh
-    from becos.pairs import PairOptions, ShapeInstance, build_pair
-    from becos.surface_map import SurfaceMap
+    from becos.build.pairs import PairOptions, ShapeInstance, build_pair
+    from becos.core.mesh import TriMesh
+    from becos.core.surface_map import SurfaceMap
 
     sphere = trimesh.creation.icosphere(subdivisions=subdivisions)
     mesh = TriMesh(np.asarray(sphere.vertices, dtype=np.float64), np.asarray(sphere.faces, dtype=np.int64))
@@ -82,7 +82,7 @@ def _np_load(path: Path) -> dict:
 def _save_format_1(record: PairRecord, path: Path) -> None:
     """A record file as store format 1 wrote it: uncompressed np.savez, int64 indices, identity maps."""
     from becos.atomic import save_npz
-    from becos.record import content_digest
+    from becos.build.record import content_digest
 
     meta = dict(record.meta, content_digest=content_digest(record.arrays, record.meta))
     save_npz(path, __meta__=np.array(json.dumps(meta, sort_keys=True)), **record.arrays)

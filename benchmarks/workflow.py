@@ -201,7 +201,7 @@ def plan_run(run: Path, config: dict, quiet: bool = True) -> dict:
     (``--until manifest``), then time ``snakemake -n`` (and ``-n --quiet``); pairs per split."""
     from standin import PUBLISHED_PAIRS, PUBLISHED_SETTINGS
 
-    from becos.sampling import read_manifest
+    from becos.build.sampling import read_manifest
     from becos.workflow import settings_of
 
     run.mkdir(parents=True)

@@ -34,23 +34,23 @@ def tosca_dir(becos_code: Path) -> Path:
 @pytest.fixture(scope="session")
 def mesh_cache(tmp_path_factory):
     """One parsed-mesh cache for the whole test session."""
-    from becos.mesh import MeshCache
+    from becos.core.mesh import MeshCache
 
     return MeshCache(tmp_path_factory.mktemp("mesh-cache"))
 
 
 @pytest.fixture(scope="session")
 def annotations(becos_code, tmp_path_factory):
-    """The BeCoS annotation folder (``becos.annotations.AnnotationSource``, full template table)."""
-    from becos.annotations import AnnotationSource
+    """The BeCoS annotation folder (``becos.sources.annotations.AnnotationSource``, full template table)."""
+    from becos.sources.annotations import AnnotationSource
 
     return AnnotationSource(becos_code, cache_dir=tmp_path_factory.mktemp("edge-cache"))
 
 
 @pytest.fixture(scope="session")
 def tosca_entries(becos_code, annotations) -> dict:
-    """The 76 TOSCA shapes as ``becos.datasets.ShapeEntry``, by name."""
-    from becos.datasets import DatasetSpec
+    """The 76 TOSCA shapes as ``becos.sources.datasets.ShapeEntry``, by name."""
+    from becos.sources.datasets import DatasetSpec
 
     return {e.name: e for e in DatasetSpec.load("tosca").list_shapes(becos_code / "data", annotations)}
 
@@ -58,7 +58,7 @@ def tosca_entries(becos_code, annotations) -> dict:
 @pytest.fixture(scope="session")
 def tosca_network(annotations, tosca_dir, mesh_cache):
     """A shape network that knows TOSCA only (FAUST, DT4D absent, as on a fresh machine)."""
-    from becos.network import ShapeNetwork
+    from becos.build.network import ShapeNetwork
 
     def meshes(dataset, name):
         path = tosca_dir / f"{name}.off"
@@ -70,12 +70,12 @@ def tosca_network(annotations, tosca_dir, mesh_cache):
 def remeshed_cat_pair(entries, network, mesh_cache, targets: tuple[int, int]):
     """TOSCA cat0 and cat3 remeshed to ``targets`` vertices, with network ground truth both ways.
 
-    Returns ``(x, y, gt_xy, gt_yx)``: two :class:`becos.pairs.ShapeInstance` and two
-    :class:`becos.surface_map.SurfaceMap`.
+    Returns ``(x, y, gt_xy, gt_yx)``: two :class:`becos.build.pairs.ShapeInstance` and two
+    :class:`becos.core.surface_map.SurfaceMap`.
     """
-    from becos.datasets import prepare_shape
-    from becos.pairs import ShapeInstance
-    from becos.remesh import remesh
+    from becos.build.pairs import ShapeInstance
+    from becos.build.remesh import remesh
+    from becos.sources.datasets import prepare_shape
 
     shapes, remeshes = {}, {}
     for name, target in zip(("cat0", "cat3"), targets):
@@ -109,7 +109,7 @@ def cat_pair(tosca_entries, tosca_network, mesh_cache):
 def small_cat_records(cat_pair) -> dict:
     """Per setting (all three): two test pairs cat0 -> cat3 (seeds 1, 2: the same two full meshes,
     different scans) and one train pair, cat0 and cat3 remeshed to ~1,500 vertices; in-memory records."""
-    from becos.pairs import PairOptions, build_pair
+    from becos.build.pairs import PairOptions, build_pair
 
     x, y, gt_xy, gt_yx = cat_pair((1500, 1400))
     return {
@@ -142,7 +142,7 @@ def pair_record_files(tosca_pair_inputs, tmp_path_factory) -> dict[str, list[Pat
 
     ``{setting: [path, path]}``; files are ``<pair_id>.npz`` in one folder per setting.
     """
-    from becos.pairs import PairOptions, build_pair
+    from becos.build.pairs import PairOptions, build_pair
 
     x, y, gt_xy, gt_yx = tosca_pair_inputs
     out = {}
@@ -164,7 +164,7 @@ def pair_record_files(tosca_pair_inputs, tmp_path_factory) -> dict[str, list[Pat
 @pytest.fixture
 def store_of(tmp_path):
     """``store_of(records, setting) -> Path``: save PairRecords and write them into one Zarr store."""
-    from becos.store import write_store
+    from becos.products.store import write_store
 
     def build(records, setting: str) -> Path:
         folder = tmp_path / f"{setting}-records"

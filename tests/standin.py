@@ -8,7 +8,7 @@ writes a small, valid mesh at every file path the published pair lists name
 frame of ``data/info_dt4d_{animals,humanoids}.json`` (4 frames there are used by no published pair,
 but the registry lists the whole info file): 2,537 files below ``<out>/data``.
 
-Which meshes are real-sized. The dataset check (:func:`becos.check.check_datasets`) compares every
+Which meshes are real-sized. The dataset check (:func:`becos.sources.check.check_datasets`) compares every
 network edge file with the template meshes it connects: one row per source-template vertex, face
 indices below the target template's face count. So each template shape gets its real vertex count
 (the edge files' row count; FAUST ``tr_reg_000``: 6,890), shared by DT4D classes with one
@@ -100,7 +100,7 @@ def mesh_bytes(vertices: np.ndarray, faces: np.ndarray, file_type: str) -> bytes
 def published_file_paths(annotations: Path) -> dict[tuple[str, str], str]:
     """``(dataset, name) -> file_path`` of every shape of the two published pair lists (2,533), the
     path relative to the reference checkout (``data/MPI-FAUST/training/registrations/tr_reg_015.ply``)."""
-    from becos.published import load_published
+    from becos.build.published import load_published
 
     out: dict[tuple[str, str], str] = {}
     for setting in PUBLISHED_SETTINGS:
@@ -135,7 +135,7 @@ def template_needs(annotations: Path, cache_dir: Path | None = None) -> dict[tup
     """
     import networkx as nx
 
-    from becos.annotations import AnnotationSource
+    from becos.sources.annotations import AnnotationSource
 
     source = AnnotationSource(annotations, cache_dir=cache_dir)
     rows: dict[str, int] = {}
@@ -226,7 +226,7 @@ def standin_shapes(
     """``(dataset, name) -> path relative to the reference checkout`` of every stand-in shape: the
     published ones (``published``: :func:`published_file_paths`, read if not given), plus DT4D frames
     of the info files that no published pair uses (at the path the registry lists them)."""
-    from becos.datasets import DatasetSpec
+    from becos.sources.datasets import DatasetSpec
 
     shapes = dict(published_file_paths(annotations) if published is None else published)
     for dataset in ("dt4d_animal", "dt4d_human"):
@@ -244,7 +244,7 @@ def build_standin_tree(out: str | Path, annotations: str | Path, cache_dir: str 
     """Write the stand-in meshes below ``out/data`` (see the module docstring); returns the tree.
 
     ``annotations``: the BeCoS annotation folder (``../shared/unpack`` prints it). ``cache_dir``: the
-    edge-file cache (:class:`becos.annotations.AnnotationSource`). Existing files are overwritten.
+    edge-file cache (:class:`becos.sources.annotations.AnnotationSource`). Existing files are overwritten.
     """
     start = time.perf_counter()
     out, annotations = Path(out), Path(annotations)

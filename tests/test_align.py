@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from becos.align import RigidTransform, procrustes
-from becos.mesh import TriMesh
-from becos.partiality import align_to
-from becos.surface_map import SurfaceMap
+from becos.build.partiality import align_to
+from becos.core.align import RigidTransform, procrustes
+from becos.core.mesh import TriMesh
+from becos.core.surface_map import SurfaceMap
 
 
 def _random_rotation(rng: np.random.Generator) -> np.ndarray:

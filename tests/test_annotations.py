@@ -9,8 +9,8 @@ import time
 import numpy as np
 import pytest
 
-from becos.annotations import AnnotationSource, file_name_part, parse_edge_file
 from becos.errors import BecosError, InputFileError
+from becos.sources.annotations import AnnotationSource, file_name_part, parse_edge_file
 
 ZERO_WEIGHT_EDGES = {  # facts §3.3: the 11 used files whose weights were truncated to 0/1
     ("dt4d_animal_bear3EP", "dt4d_animal_pumaRW"),
@@ -104,7 +104,7 @@ def test_template_rows_and_nodes(source, becos_code):
 
 def test_zero_weight_rows_match_the_reference_facts(source, caplog):
     total, files = 0, set()
-    with caplog.at_level(logging.WARNING, logger="becos.annotations"):
+    with caplog.at_level(logging.WARNING, logger="becos.sources.annotations"):
         for e in source.edge_sources():
             if e.kind != "file":
                 continue
@@ -198,7 +198,7 @@ def test_real_edges_into_tosca_templates_have_no_outlier_rows(source, tosca_dir,
     TOSCA template whose source faces are known (TOSCA mesh, else default faces), every row's jump (median
     distance to its neighbours' mapped points, x sqrt(target area)) stays below EDGE_ROW_MAX_JUMP. Measured:
     largest per file 0.019-0.060, shrec20_dog -> tosca_dog0 0.218."""
-    from becos.check import EDGE_ROW_MAX_JUMP, edge_plausibility, require_plausible_edge
+    from becos.sources.check import EDGE_ROW_MAX_JUMP, edge_plausibility, require_plausible_edge
 
     jumps = {}
     for e in source.edge_sources():

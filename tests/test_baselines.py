@@ -8,11 +8,11 @@ import time
 import numpy as np
 import pytest
 
-from becos.baselines import BASELINES, ZoomOutOptions, nearest_neighbour, run_baseline, wks_zoomout
-from becos.evaluate import evaluate_record, full_shape, open_predictions
-from becos.geodesics import dijkstra_to_points
-from becos.record import PairRecord
-from becos.surface_map import SurfaceMap
+from becos.build.record import PairRecord
+from becos.core.geodesics import dijkstra_to_points
+from becos.core.surface_map import SurfaceMap
+from becos.evaluation.baselines import BASELINES, ZoomOutOptions, nearest_neighbour, run_baseline, wks_zoomout
+from becos.evaluation.evaluate import evaluate_record, full_shape, open_predictions
 
 SETTINGS = ("full_full", "partial_full", "partial_partial")
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from becos.cameras import (
+from becos.build.cameras import (
     CAMERA_REGIMES,
     ELEVATION_MAX,
     ELEVATION_MIN,
@@ -240,7 +240,7 @@ def test_regime_names_are_the_schema_enum():
 
 def test_reference_camera_looking_along_the_up_axis_keeps_a_valid_up():
     """A reference camera straight above or below the shape (its up +y is then the view axis) gets e1."""
-    from becos.cameras import _camera_at
+    from becos.build.cameras import _camera_at
 
     for direction in ([0.0, 1.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.6, 0.8]):
         cam = _camera_at(np.array(direction), "y", 1.0)

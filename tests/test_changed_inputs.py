@@ -212,7 +212,7 @@ def test_deleted_pair_records_are_written_again_by_the_next_store_rebuild(copy_o
     """POOR: results/<setting>/pairs/ deleted after a finished run is fine while the store is intact
     ("Nothing to be done"); a later store rebuild writes the records again, the same bytes. A single
     record deleted (its chunk index kept) likewise: the workflow drops the index that lists it."""
-    from becos.store import open_benchmark
+    from becos.products.store import open_benchmark
 
     records = _records(copy_of)
     folder = copy_of / "results" / "full_full" / "pairs"

@@ -18,12 +18,12 @@ from pathlib import Path
 import pytest
 import yaml
 
-from becos.annotations import AnnotationSource
-from becos.check import DatasetCheckError, check_datasets, check_mesh_file
 from becos.cli import main as becos_main
-from becos.datasets import CONFIG_DIR
-from becos.download import RECORD_NAME, fetch_annotations
 from becos.errors import ConfigError, InputFileError
+from becos.sources.annotations import AnnotationSource
+from becos.sources.check import DatasetCheckError, check_datasets, check_mesh_file
+from becos.sources.datasets import CONFIG_DIR
+from becos.sources.download import RECORD_NAME, fetch_annotations
 
 # what AnnotationSource needs (plus a few small files), copied into the served archive
 ANNOTATION_FILES = (

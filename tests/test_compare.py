@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 import zarr
 
+from becos.build.record import PairRecord
 from becos.cli import main
-from becos.compare import REASONS, compare_stores, key_reason
-from becos.record import PairRecord
-from becos.store import open_benchmark, write_store
+from becos.products.compare import REASONS, compare_stores, key_reason
+from becos.products.store import open_benchmark, write_store
 
 
 @pytest.fixture(scope="module")

@@ -11,7 +11,8 @@ import pytest
 from scipy.spatial.transform import Rotation
 from standin import SHREC20_MODELS
 
-from becos.datasets import (
+from becos.errors import BecosError, ConfigError, InputFileError
+from becos.sources.datasets import (
     DatasetSpec,
     available_datasets,
     frame_rotation_matrix,
@@ -19,7 +20,6 @@ from becos.datasets import (
     reference_sort_key,
     up_vector,
 )
-from becos.errors import BecosError, ConfigError, InputFileError
 
 TOSCA_CLASSES = {"cat": 11, "centaur": 6, "david": 7, "dog": 9, "horse": 8, "michael": 20, "victoria": 12, "wolf": 3}
 

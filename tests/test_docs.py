@@ -8,18 +8,24 @@ import ast
 import re
 from pathlib import Path
 
+from test_imports import LAYERS
+
 REPO = Path(__file__).resolve().parents[1]
 PACKAGE = REPO / "becos"
 
 
-def _package_tree() -> dict[str, set[str]]:
-    """``{top-level module or subpackage: its modules}`` of ``becos`` (no ``__init__``/``__main__``)."""
+def _package_tree(package: Path = PACKAGE, prefix: str = "") -> dict[str, set[str]]:
+    """``{module or subpackage, dotted below becos: its modules}`` (no ``__init__``/``__main__``); a layer
+    package (:data:`test_imports.LAYERS`) has no row of its own: its modules and subpackages have."""
     tree: dict[str, set[str]] = {}
-    for path in PACKAGE.iterdir():
+    for path in package.iterdir():
         if path.is_dir() and (path / "__init__.py").exists():
-            tree[path.name] = {p.stem for p in path.glob("*.py")} - {"__init__", "__main__"}
+            if not prefix and path.name in LAYERS:
+                tree.update(_package_tree(path, f"{path.name}."))
+            else:
+                tree[prefix + path.name] = {p.stem for p in path.glob("*.py")} - {"__init__", "__main__"}
         elif path.suffix == ".py" and path.stem not in ("__init__", "__main__"):
-            tree[path.stem] = set()
+            tree[prefix + path.stem] = set()
     return tree
 
 
@@ -28,7 +34,7 @@ def _module_table() -> dict[str, set[str]]:
     rows: dict[str, set[str]] = {}
     for line in (REPO / "docs" / "architecture.md").read_text().splitlines():
         cells = [c.strip() for c in line.strip().strip("|").split("|")]
-        match = re.fullmatch(r"`becos\.(\w+)`", cells[0]) if line.startswith("| `becos.") else None
+        match = re.fullmatch(r"`becos\.([\w.]+)`", cells[0]) if line.startswith("| `becos.") else None
         if match and len(cells) == 3:
             assert match[1] not in rows, f"docs/architecture.md: {match[1]} has two rows"
             rows[match[1]] = set(re.findall(r"`(\w+)`", cells[1]))

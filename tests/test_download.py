@@ -28,10 +28,11 @@ from archive_server import ArchiveServer
 from snakemake_cmd import snakemake_cmd
 from standin import SHREC20_MODELS
 
-from becos.check import DatasetCheckError, check_datasets
 from becos.cli import main as becos_main
-from becos.datasets import CONFIG_DIR, DatasetSpec
-from becos.download import (
+from becos.errors import ConfigError, InputFileError
+from becos.sources.check import DatasetCheckError, check_datasets
+from becos.sources.datasets import CONFIG_DIR, DatasetSpec
+from becos.sources.download import (
     RECORD_NAME,
     ArchiveLayoutError,
     ChecksumMismatchError,
@@ -41,7 +42,6 @@ from becos.download import (
     download_dataset,
     partial_path,
 )
-from becos.errors import ConfigError, InputFileError
 from becos.workflow import resolve_config
 
 REPO = Path(__file__).resolve().parents[1]

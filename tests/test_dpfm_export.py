@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 import yaml
 
-from becos.export import DPFM_NONE_MAPS, write_dpfm
+from becos.products.export import DPFM_NONE_MAPS, write_dpfm
 
 SETTINGS = ("full_full", "partial_full", "partial_partial")
 N_FMAP = 30  # ShrecPartialDataset(n_fmap=30), the default DPFM trains with
@@ -117,7 +117,7 @@ def _own_mask(out: Path, split: str, a: str, b: str) -> np.ndarray:
 
 @pytest.mark.parametrize("setting", SETTINGS)
 def test_dpfm_loader_builds_the_true_ground_truth(setting, tiny_tosca_run, tmp_path):
-    from becos.store import open_benchmark
+    from becos.products.store import open_benchmark
 
     bench = open_benchmark(tiny_tosca_run / "results" / setting / "benchmark.zarr")
     records = {r.pair_id: r for r in bench.records()}

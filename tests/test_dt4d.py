@@ -108,7 +108,7 @@ def run_cli(capsys, *args) -> tuple[int, str, str]:
 def test_prepared_frames_equal_the_reference_procedure(tmp_path, capsys):
     import trimesh
 
-    from becos.mesh import read_mesh
+    from becos.core.mesh import read_mesh
 
     data = tmp_path / "data"
     make_download(data, "animals", {"catBG": {"run": 50, "walk": 12}})
@@ -270,7 +270,7 @@ def dt4d_registry(root: Path, info: dict) -> Path:
     """A dataset registry whose dt4d_animal.yaml expects the shapes ``info`` lists."""
     import yaml
 
-    from becos.datasets import CONFIG_DIR
+    from becos.sources.datasets import CONFIG_DIR
 
     raw = yaml.safe_load((CONFIG_DIR / "dt4d_animal.yaml").read_text())
     raw["expected_count"] = sum(len(frames) for actions in info.values() for frames in actions.values())
@@ -289,7 +289,7 @@ def test_workflow_prepares_catalogs_remeshes_and_pairs_dt4d(becos_code, tmp_path
     from test_workflow import jobs_planned
     from tiny_tosca import write_config_file
 
-    from becos.store import open_benchmark
+    from becos.products.store import open_benchmark
 
     data, workdir = tmp_path / "data", tmp_path / "run"
     first = {"catBG": {"run": [43, 7, 12]}}
@@ -369,7 +369,7 @@ def test_workflow_prepares_catalogs_remeshes_and_pairs_dt4d(becos_code, tmp_path
 
 
 def test_check_without_dt4d_says_what_to_request_and_where_to_put_it(becos_code, tmp_path):
-    from becos.check import DatasetCheckError, check_datasets
+    from becos.sources.check import DatasetCheckError, check_datasets
 
     data = tmp_path / "data"
     data.mkdir()
@@ -388,7 +388,7 @@ def test_check_without_dt4d_says_what_to_request_and_where_to_put_it(becos_code,
 
 
 def test_the_plan_has_one_job_per_class_and_leaves_a_missing_anime_to_the_job(tmp_path):
-    from becos.dt4d import preparation_plan
+    from becos.sources.dt4d import preparation_plan
 
     data, annotations = tmp_path / "data", tmp_path / "becos-code"
     info = {"catBG": {"run": [1, 2]}, "leopardSLM": {"roam": [3], "walk": [4]}}

@@ -8,7 +8,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from becos.evaluate import (
+from becos.build.record import PairRecord
+from becos.core.geodesics import GeodesicsCache
+from becos.evaluation.evaluate import (
     Prediction,
     PredictionError,
     evaluate_record,
@@ -19,9 +21,7 @@ from becos.evaluate import (
     write_evaluation,
     write_prediction,
 )
-from becos.geodesics import GeodesicsCache
-from becos.metrics import DEFAULT_AUC_PRESET, PAPER_PRESET
-from becos.record import PairRecord
+from becos.evaluation.metrics import DEFAULT_AUC_PRESET, PAPER_PRESET
 
 SETTINGS = ("full_full", "partial_full", "partial_partial")
 
@@ -313,7 +313,7 @@ def test_bad_predictions_are_reported(records, tmp_path):
 def test_store_level_evaluate_command(records, store_of, tmp_path):
     """``becos evaluate STORE PRED --out DIR`` end to end."""
     from becos.cli import main
-    from becos.store import open_benchmark
+    from becos.products.store import open_benchmark
 
     store = store_of([label_left_right(r) for r in records["partial_full"]], "partial_full")
     bench = open_benchmark(store)

@@ -13,8 +13,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from becos.export import ExportError, write_geodesics, write_psmal, write_released
-from becos.record import PairRecord
+from becos.build.record import PairRecord
+from becos.products.export import ExportError, write_geodesics, write_psmal, write_released
 
 SETTINGS = ("full_full", "partial_full", "partial_partial")
 
@@ -132,7 +132,7 @@ def test_released_round_trip(setting, records, tmp_path):
     rows = read_ids(out)
     _check_numbering(out, rows, recs, set())
     log = (out / "logs" / "config.yaml").read_text()
-    assert "becos.export.write_released" in log and f"setting: {setting}" in log
+    assert "becos.products.export.write_released" in log and f"setting: {setting}" in log
 
     by_id = {r.pair_id: r for r in recs}
     for (split, index), pair in load_released(out).items():
@@ -319,9 +319,9 @@ def test_psmal_round_trip(setting, records, tmp_path):
 def small_record() -> PairRecord:
     import trimesh
 
-    from becos.mesh import TriMesh
-    from becos.pairs import PairOptions, ShapeInstance, build_pair
-    from becos.surface_map import SurfaceMap
+    from becos.build.pairs import PairOptions, ShapeInstance, build_pair
+    from becos.core.mesh import TriMesh
+    from becos.core.surface_map import SurfaceMap
 
     sphere = trimesh.creation.icosphere(subdivisions=3)
     v, f = np.asarray(sphere.vertices) * 0.5, np.asarray(sphere.faces)
@@ -338,8 +338,8 @@ def small_record() -> PairRecord:
 def _edge_dijkstra(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     from scipy.sparse.csgraph import dijkstra
 
-    from becos.geodesics import edge_graph
-    from becos.mesh import TriMesh
+    from becos.core.geodesics import edge_graph
+    from becos.core.mesh import TriMesh
 
     return dijkstra(edge_graph(TriMesh(vertices, faces)), directed=False)
 
@@ -383,7 +383,7 @@ def test_geodesics_on_full_shape(small_record, tmp_path):
 
 
 def test_cli_exports_a_store(records, pair_record_files, small_record, tmp_path, capsys):
-    import becos.store as store
+    import becos.products.store as store
     from becos.cli import main
 
     setting = "partial_partial"
@@ -431,9 +431,9 @@ def _ball_records(setting: str) -> list[PairRecord]:
     import trimesh
     from scipy.spatial import cKDTree
 
-    from becos.mesh import TriMesh
-    from becos.pairs import PairOptions, ShapeInstance, build_pair
-    from becos.surface_map import SurfaceMap
+    from becos.build.pairs import PairOptions, ShapeInstance, build_pair
+    from becos.core.mesh import TriMesh
+    from becos.core.surface_map import SurfaceMap
 
     coarse, fine = trimesh.creation.icosphere(subdivisions=2), trimesh.creation.icosphere(subdivisions=3)
     fv, ff = np.asarray(fine.vertices), np.asarray(fine.faces)
@@ -510,7 +510,7 @@ def geolora_cached_geodesics_path(full_file: str) -> str:
 def test_geodesic_matrices_where_loaders_read_them(tmp_path, monkeypatch):
     import trimesh
 
-    from becos.export import GEODESIC_FOLDER, write_geodesic_matrices
+    from becos.products.export import GEODESIC_FOLDER, write_geodesic_matrices
 
     recs = _ball_records("partial_full")
     recs[2] = _copy(recs[2], recs[2].pair_id, "train")  # ball v1 in train: left out by splits=["test"]
@@ -596,7 +596,7 @@ def ulrssm_pair(data_root: Path, first: int, second: int, with_dist: bool) -> di
 
 @pytest.mark.parametrize("setting", SETTINGS)
 def test_ulrssm_layout_reads_like_ulrssm(setting, records, tmp_path):
-    from becos.export import write_ulrssm
+    from becos.products.export import write_ulrssm
 
     recs = records[setting][:2]  # a train and a test pair (the OFF text of 9k-vertex shapes dominates)
     out = write_ulrssm(_shuffled(recs, 2), tmp_path / "ulrssm")
@@ -640,7 +640,7 @@ def dpfm_pairs(data_root: Path, name: str = "") -> dict:
 
 @pytest.mark.parametrize("setting", SETTINGS)
 def test_dpfm_layout_reads_like_dpfm(setting, records, tmp_path):
-    from becos.export import DPFM_NONE_MAPS, write_dpfm
+    from becos.products.export import DPFM_NONE_MAPS, write_dpfm
 
     recs = records[setting][:2]
     out = write_dpfm(_shuffled(recs, 3), tmp_path / "dpfm")
@@ -673,7 +673,7 @@ def test_dpfm_layout_reads_like_dpfm(setting, records, tmp_path):
 
 
 def test_ulrssm_dist_matches_the_geodesic_export(small_record, tmp_path):
-    from becos.export import GEODESIC_FOLDER, write_geodesic_matrices, write_ulrssm
+    from becos.products.export import GEODESIC_FOLDER, write_geodesic_matrices, write_ulrssm
 
     recs = [small_record, *_ball_records("partial_full")[:1]]
     recs[1] = _copy(recs[1], recs[1].pair_id, "test")

@@ -25,15 +25,15 @@ import pytest
 import scipy.sparse as sp
 import yaml
 
-from becos.annotations import AnnotationSource
-from becos.check import DatasetCheckError, check_datasets
+from becos.build.network import ShapeNetwork
+from becos.build.remesh import mesh_checks, remesh, remesh_with_stats
 from becos.cli import main as becos_main
-from becos.datasets import CONFIG_DIR
+from becos.core.geometry import points_on_surface
+from becos.core.mesh import TriMesh, read_mesh
 from becos.errors import BecosError, ConfigError, InputFileError
-from becos.geometry import points_on_surface
-from becos.mesh import TriMesh, read_mesh
-from becos.network import ShapeNetwork
-from becos.remesh import mesh_checks, remesh, remesh_with_stats
+from becos.sources.annotations import AnnotationSource
+from becos.sources.check import DatasetCheckError, check_datasets
+from becos.sources.datasets import CONFIG_DIR
 
 N_WOLF = 4344
 SPREAD = np.arange(0, 8684, 997)[:8]  # face rows spread over the wolf
@@ -186,7 +186,7 @@ def test_repaired_mesh_fault_keeps_ground_truth_exact(
     assert np.array_equal(faulty.vertices, v) and np.array_equal(faulty.faces, f)
     assert faulty.n_vertices == N_WOLF  # the class's vertex order is intact
 
-    with caplog.at_level(logging.INFO, logger="becos.remesh"):
+    with caplog.at_level(logging.INFO, logger="becos.build.remesh"):
         r, stats = remesh_with_stats(faulty, target_vertices=1000, source=path)
     said = [rec for rec in caplog.records if rec.getMessage().startswith(f"{path}: ")]
     assert len(said) == 1 and said[0].levelno == info["level"] and info["words"] in said[0].getMessage()
@@ -243,9 +243,9 @@ def test_messy_download_through_the_workflow_remesh_stage(
     -> remesh -> .npz), then the network's ground truth from the saved remesh."""
     from dataclasses import replace
 
-    from becos.catalog import catalog_table
-    from becos.datasets import prepare_shape
-    from becos.remesh import load_remeshed
+    from becos.build.remesh import load_remeshed
+    from becos.sources.catalog import catalog_table
+    from becos.sources.datasets import prepare_shape
     from becos.workflow import RemeshOptions, remesh_stage
 
     v, f = wolves["wolf1"].vertices.copy(), wolves["wolf1"].faces.copy()
@@ -262,7 +262,7 @@ def test_messy_download_through_the_workflow_remesh_stage(
     entry = replace(tosca_entries["wolf1"], path=path)
     row = catalog_table([entry]).iloc[0].to_dict()
     out = tmp_path / "results" / "wolf1-f2000.npz"
-    with caplog.at_level(logging.WARNING, logger="becos.remesh"):
+    with caplog.at_level(logging.WARNING, logger="becos.build.remesh"):
         options = RemeshOptions(
             results=str(tmp_path / "results"), seed=42, remesh=True, remesher="becos", decimator="pymeshlab"
         )
@@ -693,7 +693,7 @@ def test_edge_file_with_three_moved_rows_is_refused_naming_exactly_them(
 ):
     """Three rows of tosca_wolf0_tosca_dog0_corres.txt moved to the dog0 face farthest from their mapped
     point (face index in range, weights 1/3): `becos check` names exactly their line numbers (exit 2)."""
-    from becos.mesh import read_mesh as read
+    from becos.core.mesh import read_mesh as read
 
     dog = read(tosca_dir / "dog0.off")
     centroids = dog.vertices[dog.faces].mean(axis=1)

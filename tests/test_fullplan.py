@@ -20,11 +20,11 @@ from standin import (
     mesh_bytes,
 )
 
-from becos.catalog import read_catalog
-from becos.check import check_datasets
-from becos.mesh import read_mesh
-from becos.published import load_published
-from becos.sampling import read_manifest
+from becos.build.published import load_published
+from becos.build.sampling import read_manifest
+from becos.core.mesh import read_mesh
+from becos.sources.catalog import read_catalog
+from becos.sources.check import check_datasets
 from becos.workflow import resolve_config, write_catalog_stage, write_manifest_stage
 
 
@@ -125,7 +125,7 @@ def test_original_settings_import_the_published_counts(tree, catalog_path, setti
 
 def test_catalog_order_puts_a_name_before_its_extensions():
     # SMAL has cows/cow_alph and cows/cow_alph5: the catalog's sort key must order them, not raise
-    from becos.catalog import natural_key
+    from becos.sources.catalog import natural_key
 
     names = ["cows/cow_alph5", "cows/cow_alph", "cows/cow_alph10", "cows/Cow_alph"]
     assert sorted(names, key=natural_key) == ["cows/Cow_alph", "cows/cow_alph", "cows/cow_alph5", "cows/cow_alph10"]

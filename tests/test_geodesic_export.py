@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from becos.cli import main
-from becos.geodesics import GeodesicDistances, HeatDistanceSolver, distance_rows
+from becos.core.geodesics import GeodesicDistances, HeatDistanceSolver, distance_rows
 
 SETTINGS = ("full_full", "partial_full", "partial_partial")
 
@@ -125,7 +125,7 @@ def geolora_path(off_file_name: str) -> str:
 
 def _expected(record, s: str) -> np.ndarray:
     """The shape's matrix computed directly: rows of its full mesh, cut to its vertices, symmetrised."""
-    from becos.export import full_shape
+    from becos.products.export import full_shape
 
     fv, ff = full_shape(record, s)
     p2f = np.asarray(record[f"{s}_partial_to_full"])
@@ -136,7 +136,7 @@ def _expected(record, s: str) -> np.ndarray:
 
 
 def test_plan_rows_and_layouts_read_by_the_loaders(small_records, store_of, tmp_path, monkeypatch, capsys):
-    from becos.export import write_released
+    from becos.products.export import write_released
 
     stores = [store_of(small_records[s], s) for s in SETTINGS]
     plan, parts = tmp_path / "plan", 3
@@ -267,7 +267,7 @@ def test_workflow_plans_one_geodesic_plan_parallel_rows_and_one_layout_job_per_s
     from test_workflow import jobs_planned, write_config
     from tiny_tosca import TINY_SHAPES
 
-    from becos.geodesic_jobs import WORKFLOW_PARTS
+    from becos.products.geodesic_jobs import WORKFLOW_PARTS
 
     workdir = write_config(
         tmp_path / "geo", becos_code, shapes=TINY_SHAPES, exports={"geodesics": True, "geodesic_splits": ["test"]}
@@ -313,7 +313,7 @@ def test_matrix_files_are_written_once_then_linked_or_copied_across_devices(tmp_
 def test_the_geodesics_export_estimates_its_disk_first_and_stops_above_the_free_space(small_records, tmp_path, capsys):
     """export-geodesics prints its disk estimate before computing anything; above the free space it
     stops with DiskEstimateError and writes nothing; the estimate's matrices are the bytes it writes."""
-    from becos.export import DiskEstimateError, write_geodesic_matrices
+    from becos.products.export import DiskEstimateError, write_geodesic_matrices
 
     records = small_records["partial_partial"]
     out = tmp_path / "geo"

@@ -1,4 +1,4 @@
-"""The lazy route (issue #33): :class:`becos.store.GeodesicView` gives a pair's geodesic errors and a
+"""The lazy route (issue #33): :class:`becos.products.store.GeodesicView` gives a pair's geodesic errors and a
 shape's matrix rows on demand, equal to the geodesics export's files, with no matrix written."""
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ from becos.cli import main
 
 
 def test_the_lazy_route_gives_the_exported_distances_on_demand(small_cat_records, store_of, tmp_path, capsys):
-    from becos.store import GeodesicView, TrainingView
+    from becos.products.store import GeodesicView, TrainingView
 
     setting = "partial_partial"
     store = store_of(small_cat_records[setting], setting)

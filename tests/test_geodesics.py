@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from becos.geodesics import GeodesicDistances, dijkstra_to_points, edge_graph, geodesics_for
-from becos.geometry import surface_area
-from becos.mesh import TriMesh
+from becos.core.geodesics import GeodesicDistances, dijkstra_to_points, edge_graph, geodesics_for
+from becos.core.geometry import surface_area
+from becos.core.mesh import TriMesh
 
 SHAPES = ["cat0", "horse0", "michael0"]
 
@@ -267,7 +267,7 @@ def test_point_to_vertices_reads_rows_from_the_points_side(method, small_tosca):
 
 
 def test_geodesics_cache_per_shape(small_tosca):
-    from becos.geodesics import GeodesicsCache, shape_key
+    from becos.core.geodesics import GeodesicsCache, shape_key
 
     mesh = small_tosca["cat0"]
     angle = 1.1

@@ -1,11 +1,11 @@
-"""becos.geometry helpers that other tests do not reach through the pipeline."""
+"""becos.core.geometry helpers that other tests do not reach through the pipeline."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from becos.geometry import nearest_along_surface
-from becos.mesh import TriMesh
+from becos.core.geometry import nearest_along_surface
+from becos.core.mesh import TriMesh
 
 
 def _strip(n: int, offset: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -37,7 +37,7 @@ def test_sparse_pairs_keys_are_the_sorted_unique_non_zeros():
     (row, column) pairs, for canonical products and for matrices with unsorted or repeated entries."""
     import scipy.sparse as sp
 
-    from becos.geometry import SparsePairs
+    from becos.core.geometry import SparsePairs
 
     rng = np.random.default_rng(7)
     rows, cols = rng.integers(0, 50, 400), rng.integers(0, 70, 400)  # repeats included
@@ -62,7 +62,7 @@ def test_vertex_rings_pattern_and_diagonal():
     """VertexRings holds the canonical 0/1 CSR of the non-zeros of ``(A + I) ** r`` (the same matrix
     as thresholding each product), and every vertex is within the rings of itself (compose accepts a
     face that shares a corner with an image face without a lookup)."""
-    from becos.geometry import VertexRings, vertex_adjacency
+    from becos.core.geometry import VertexRings, vertex_adjacency
 
     vertices, faces = _strip(12, np.zeros(3))
     n = len(vertices)

@@ -10,15 +10,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from becos.geodesics import dijkstra_to_points
-from becos.geometry import SurfaceLocator, oriented_face_normals, surface_area
-from becos.surface_map import compose
+from becos.core.geodesics import dijkstra_to_points
+from becos.core.geometry import SurfaceLocator, oriented_face_normals, surface_area
+from becos.core.surface_map import compose
 
 
 @pytest.fixture(scope="session")
 def remeshed(tosca_dir, mesh_cache):
     """Remeshes of the same-class test shapes, each with its own vertex target."""
-    from becos.remesh import remesh
+    from becos.build.remesh import remesh
 
     targets = {"cat0": 9100, "cat3": 9900, "michael0": 9300, "michael3": 9700, "horse0": 9200, "horse5": 9800}
     return {name: remesh(mesh_cache.load(tosca_dir / f"{name}.off"), target_vertices=t) for name, t in targets.items()}
@@ -36,7 +36,7 @@ def true_point_on_remesh(ry, oy, points, y_face, y_weights, normals):
     (:data:`TRUE_POINT_RINGS`, by ``ry.to_original``). The plain normal-aware closest point can lie on
     a part that touches the true point's part (TOSCA horse5's tail tip against its hind leg: 0.003
     sqrt(area) away in space, 0.1 along the surface). Returns face (N,), weights (N, 3), distance (N,)."""
-    from becos.geometry import VertexRings
+    from becos.core.geometry import VertexRings
 
     near = VertexRings(oy.faces, oy.n_vertices, TRUE_POINT_RINGS)
     true_vertex = oy.faces[y_face, np.argmax(y_weights, axis=1)]
@@ -175,11 +175,11 @@ def test_identity_path_is_exact(tosca_network, tosca_entries, tosca_dir, mesh_ca
 
 
 def test_wrong_vertex_count_in_a_class_is_an_error(tosca_network, tosca_entries, tmp_path, tosca_dir):
+    from becos.build.network import ShapeNetwork
     from becos.errors import BecosError
-    from becos.network import ShapeNetwork
 
     def meshes(dataset, name):
-        from becos.mesh import TriMesh, read_mesh
+        from becos.core.mesh import TriMesh, read_mesh
 
         mesh = read_mesh(tosca_dir / f"{name}.off")
         if name == "cat3":  # a shape whose file lost its last vertex
@@ -196,7 +196,7 @@ def test_shared_path_tail_leaves_each_pair_unchanged(annotations, tosca_entries,
     """Two cats onto one remeshed horse share the composed tail of their paths (cat0's template ->
     dog0 -> horse0 -> remeshed horse0, :meth:`ShapeNetwork._tail`): composed once, and each pair's
     ground truth is bit for bit what a job computing that pair alone gets."""
-    from becos.network import ShapeNetwork
+    from becos.build.network import ShapeNetwork
 
     def meshes(dataset, name):
         path = tosca_dir / f"{name}.off"

@@ -57,8 +57,8 @@ def exact_truth_errors(network, entries, prepared, remeshes, x: str, y: str):
     "x, y, variant", [("victoria12", "victoria25", 1), ("victoria2", "victoria1", 0), ("horse10", "horse5", 1)]
 )
 def test_no_vertex_crosses_a_contact(x, y, variant, tosca_entries, tosca_network, mesh_cache):
-    from becos.datasets import prepare_shape
-    from becos.remesh import remesh, variant_target_vertices
+    from becos.build.remesh import remesh, variant_target_vertices
+    from becos.sources.datasets import prepare_shape
 
     prepared = {n: prepare_shape(tosca_entries[n], mesh_cache).mesh for n in (x, y)}
     remeshes = {
@@ -80,10 +80,10 @@ def test_a_thin_tip_is_located_on_its_own_sheet(tosca_entries, mesh_cache):
     the other sheet's are 0.055 away (before the same-sheet rule, 3 of the 711 vertices were)."""
     from scipy.sparse.csgraph import dijkstra
 
-    from becos.datasets import prepare_shape
-    from becos.geodesics import edge_graph
-    from becos.geometry import surface_area
-    from becos.remesh import remesh, variant_target_vertices
+    from becos.build.remesh import remesh, variant_target_vertices
+    from becos.core.geodesics import edge_graph
+    from becos.core.geometry import surface_area
+    from becos.sources.datasets import prepare_shape
 
     original = prepare_shape(tosca_entries["horse0"], mesh_cache).mesh
     remeshed = remesh(original, target_vertices=variant_target_vertices(SEED, "tosca", "horse0", 0))
@@ -109,7 +109,7 @@ def test_a_thin_tip_is_located_on_its_own_sheet(tosca_entries, mesh_cache):
 def test_exact_point_distances_follow_the_surface():
     """The exact re-measure (errors above EXACT_ABOVE): on a grid bent 90 degrees along x = 2 the
     distance from (0, 0) to the grid point (5, 0) is 5 along the surface, not the 3.61 chord."""
-    from becos.mesh import TriMesh
+    from becos.core.mesh import TriMesh
 
     n = 6
     xs, ys = np.meshgrid(np.arange(n, dtype=float), np.arange(n, dtype=float))

@@ -45,7 +45,7 @@ def test_stage_options_carry_no_defaults_and_match_the_schema():
                 field.name,
             )
             assert field.name in defaults or field.name in ("data_dir", "annotations", "datasets"), field.name
-    from becos.pairs import PairOptions
+    from becos.build.pairs import PairOptions
 
     for field in dataclasses.fields(PairOptions):  # the library's pair options default to the config's
         assert field.name == "setting" or field.default == defaults[field.name], field.name

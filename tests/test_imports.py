@@ -3,8 +3,8 @@
 The test parses every module of the package (``ast``, nothing is imported) and collects its imports of
 ``becos`` modules: ``import`` and ``from ... import`` at module level and inside functions alike
 (function-local imports break a circle at run time but not in the design), relative ones resolved.
-``from becos.export import write_dpfm`` is an edge to ``becos.export``; ``from becos import export`` and
-``import becos.export.dpfm`` to the module named. Imports under ``if TYPE_CHECKING:`` are left out
+``from becos.products.export import write_dpfm`` is an edge to ``becos.products.export``; ``from becos import export`` and
+``import becos.products.export.dpfm`` to the module named. Imports under ``if TYPE_CHECKING:`` are left out
 (they never run). One rule for packages: an edge from a package's ``__init__`` to one of its own
 submodules is left out (the package re-exporting its parts is no circle); an edge from a submodule to
 its package still counts. A circle is a strongly connected component of more than one module.
@@ -16,6 +16,19 @@ import ast
 from pathlib import Path
 
 PACKAGE = Path(__file__).resolve().parents[1] / "becos"
+
+# The floors of the package, lowest first: "base" is the small top-level modules (errors, atomic files,
+# seeding, settings, defaults, ...); each layer subpackage imports only from its own floor or lower ones.
+LAYERS = ("core", "sources", "build", "products", "evaluation")
+FLOORS = ("base", *LAYERS, "workflow", "cli")
+# Upward imports that stay, with the reason: ``python -m`` entry points call the command line; the
+# dataset check names missing files from the published pair lists, whose reader lives beside their
+# conversion to manifests (build.published).
+UPWARD_ALLOWED = {
+    ("becos.__main__", "becos.cli"),
+    ("becos.sources.synthetic.__main__", "becos.cli"),
+    ("becos.sources.check.datasets", "becos.build.published"),
+}
 
 
 def package_modules(package: Path) -> dict[str, Path]:
@@ -146,7 +159,7 @@ def test_the_graph_sees_imports_of_every_kind(tmp_path):
     (tmp_path / "pkg" / "c.py").write_text("def g():\n    import pkg.a.q\n")  # pkg.a.q: its module pkg.a
     assert import_circles(import_graph(tmp_path / "pkg")) == [["pkg.a", "pkg.b", "pkg.c"]]
     real = import_graph()
-    assert "becos.errors" in real["becos.datasets"] and "becos.atomic" in real["becos.geodesic_jobs"]
+    assert "becos.errors" in real["becos.sources.datasets"] and "becos.atomic" in real["becos.products.geodesic_jobs"]
     assert len(real) > 50
 
 
@@ -158,3 +171,27 @@ def test_becos_has_no_import_circle():
         for c in circles
     )
     assert not circles, f"import circles in becos: {detail}"
+
+
+def floor(module: str) -> str:
+    """The floor of a ``becos`` module (:data:`FLOORS`)."""
+    parts = module.split(".")
+    return parts[1] if len(parts) > 1 and parts[1] in FLOORS else "base"
+
+
+def upward_imports(graph: dict[str, set[str]]) -> list[tuple[str, str]]:
+    """Imports from a floor to a higher one (the package root ``becos`` itself counts as base)."""
+    return sorted(
+        (name, target)
+        for name, targets in graph.items()
+        for target in targets
+        if FLOORS.index(floor(target)) > FLOORS.index(floor(name))
+    )
+
+
+def test_layers_import_only_downward():
+    assert sorted(p.name for p in PACKAGE.iterdir() if p.name in LAYERS) == sorted(LAYERS)
+    upward = [edge for edge in upward_imports(import_graph()) if edge not in UPWARD_ALLOWED]
+    assert upward == [], f"imports to a higher floor ({' < '.join(FLOORS)}): {upward}"
+    # the check sees an upward import: the workflow importing the command line would be one
+    assert upward_imports({"becos.workflow.plan": {"becos.cli"}}) == [("becos.workflow.plan", "becos.cli")]

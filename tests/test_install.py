@@ -104,7 +104,7 @@ def test_the_installed_wheel_runs_outside_the_repository(installed, tmp_path):
         [
             str(installed / "bin" / "python"),
             "-c",
-            "import becos.workflow as w, becos.datasets as d; print(w.SCHEMA_PATH); print(d.CONFIG_DIR)",
+            "import becos.workflow as w, becos.sources.datasets as d; print(w.SCHEMA_PATH); print(d.CONFIG_DIR)",
         ],
         cwd=tmp_path,
         capture_output=True,

@@ -5,8 +5,8 @@ import shutil
 import numpy as np
 import pytest
 
+from becos.core.mesh import MeshCache, read_mesh
 from becos.errors import InputFileError
-from becos.mesh import MeshCache, read_mesh
 
 
 def test_read_keeps_file_order_and_cache_returns_same_arrays(tosca_dir, tmp_path):
@@ -63,7 +63,7 @@ def test_plain_off_reader_gives_trimeshs_arrays_and_other_files_fall_back(name, 
     the bytes trimesh reads; a file with a comment, a quad or a ragged vertex line goes to trimesh."""
     import trimesh
 
-    from becos.formats.off import read_plain_off
+    from becos.core.formats.off import read_plain_off
 
     path = tosca_dir / f"{name}.off"
     loaded = trimesh.load(path, process=False, maintain_order=True, force="mesh", skip_materials=True)

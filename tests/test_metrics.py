@@ -6,9 +6,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from becos.geodesics import GeodesicDistances
-from becos.geometry import surface_area
-from becos.metrics import (
+from becos.core.geodesics import GeodesicDistances
+from becos.core.geometry import surface_area
+from becos.core.surface_map import SurfaceMap
+from becos.evaluation.metrics import (
     AUC_PRESETS,
     DEFAULT_AUC_PRESET,
     PAPER_PRESET,
@@ -24,7 +25,6 @@ from becos.metrics import (
     preset_name,
     summarise,
 )
-from becos.surface_map import SurfaceMap
 
 
 @pytest.fixture(scope="module")

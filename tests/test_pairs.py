@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from becos.pairs import PairOptions, build_pair
-from becos.record import PairRecord
-from becos.visibility import largest_component
+from becos.build.pairs import PairOptions, build_pair
+from becos.build.record import PairRecord
+from becos.build.visibility import largest_component
 
 
 @pytest.fixture(scope="module")
@@ -73,7 +73,7 @@ def test_same_seed_same_record_and_other_id_other_cameras(pair_inputs):
 
 
 def test_full_shape_travels_with_a_partial_record(pair_inputs):
-    from becos.record import full_shape
+    from becos.build.record import full_shape
 
     x, y, gt_xy, gt_yx = pair_inputs
     record = build_pair(

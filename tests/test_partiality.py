@@ -2,7 +2,7 @@
 
 Pairs are two poses of one TOSCA class (same vertex order), remeshed to ~10k vertices; the ground
 truth between the remeshes is honest: remesh A -> points on A, identity to B, B -> remesh B
-(``becos.remesh`` when available, else a pymeshlab decimation whose maps are closest points).
+(``becos.build.remesh`` when available, else a pymeshlab decimation whose maps are closest points).
 Overlaps are checked against a recomputation from the saved *positions and faces* only.
 """
 
@@ -11,12 +11,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from becos.align import RigidTransform
-from becos.cameras import REGIMES, camera_angles
-from becos.mesh import TriMesh, edge_neighbours
-from becos.partiality import Partial, Scanner, cast_p2f, cast_p2p, cut, overlap_mask, partial_map, whole
+from becos.build.cameras import REGIMES, camera_angles
+from becos.build.partiality import Partial, Scanner, cast_p2f, cast_p2p, cut, overlap_mask, partial_map, whole
+from becos.core.align import RigidTransform
+from becos.core.mesh import TriMesh, edge_neighbours
+from becos.core.surface_map import SurfaceMap, VertexRounding, compose_path
 from becos.seeding import rng_for
-from becos.surface_map import SurfaceMap, VertexRounding, compose_path
 
 TARGET_VERTICES = 10_000
 _CACHE: dict = {}
@@ -30,7 +30,7 @@ def y_up(mesh: TriMesh) -> TriMesh:
 
 def remeshed(mesh: TriMesh) -> tuple[TriMesh, SurfaceMap, SurfaceMap]:
     """(remeshed mesh, remeshed -> original map, original -> remeshed map)."""
-    from becos.remesh import remesh
+    from becos.build.remesh import remesh
 
     r = remesh(mesh, target_vertices=TARGET_VERTICES)
     return r.mesh, r.to_original, r.from_original

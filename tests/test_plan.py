@@ -229,7 +229,7 @@ def test_stored_input_keys(tmp_path):
 def test_the_overlap_range_has_one_default():
     schema = yaml.safe_load(bw.SCHEMA_PATH.read_text())["properties"]
     assert schema["min_overlap"]["default"] == MIN_OVERLAP and schema["max_overlap"]["default"] == MAX_OVERLAP
-    from becos.pairs import PairOptions
+    from becos.build.pairs import PairOptions
 
     assert (PairOptions().min_overlap, PairOptions().max_overlap) == (MIN_OVERLAP, MAX_OVERLAP)
     assert overlap_range_problem(MIN_OVERLAP, MAX_OVERLAP) is None

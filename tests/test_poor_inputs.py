@@ -11,9 +11,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from becos.build.record import PairRecord
 from becos.errors import BecosError, InputFileError
-from becos.record import PairRecord
-from becos.store import DamagedStoreError, PairKeyError, open_benchmark, write_store
+from becos.products.store import DamagedStoreError, PairKeyError, open_benchmark, write_store
 
 
 @pytest.fixture
@@ -121,7 +121,7 @@ def _wolves(tmp_path: Path, tosca_dir: Path, edit) -> tuple[Path, str]:
     """data/tosca-off with links to wolf0/1/2, ``edit(folder)`` applied; the dataset check's message."""
     from test_faults import small_registry
 
-    from becos.check import DatasetCheckError, check_datasets
+    from becos.sources.check import DatasetCheckError, check_datasets
 
     folder = tmp_path / "data" / "tosca-off"
     folder.mkdir(parents=True)
@@ -165,7 +165,7 @@ def test_a_dangling_symlink_is_named_as_such(tosca_dir, tmp_path):
 
 
 def test_a_quad_face_is_named_not_called_truncated(tosca_dir, tmp_path):
-    from becos.mesh import read_mesh
+    from becos.core.mesh import read_mesh
 
     def quad(lines):
         a, b, c, d = lines[-1].split()
@@ -180,7 +180,7 @@ def test_a_quad_face_is_named_not_called_truncated(tosca_dir, tmp_path):
 
 
 def test_a_vertex_line_with_two_coordinates_is_named_with_its_line(tosca_dir, tmp_path):
-    from becos.mesh import read_mesh
+    from becos.core.mesh import read_mesh
 
     def two(lines):
         lines[2 + 100] = " ".join(lines[2 + 100].split()[:2])
@@ -199,7 +199,7 @@ def test_a_vertex_line_with_two_coordinates_is_named_with_its_line(tosca_dir, tm
 def test_a_flattened_mesh_is_refused(tosca_dir, tmp_path):
     from test_faults import write_off
 
-    from becos.mesh import read_mesh
+    from becos.core.mesh import read_mesh
 
     wolf = read_mesh(tosca_dir / "wolf1.off")
     flat = wolf.vertices.copy()
@@ -218,8 +218,8 @@ def test_a_flattened_mesh_is_refused(tosca_dir, tmp_path):
 
 def test_a_non_manifold_vertex_is_refused(tosca_dir, tmp_path):
     """Two far-apart vertices of wolf1 welded into one: its two fans touch only there (a bow-tie)."""
-    from becos.mesh import non_manifold_vertices, read_mesh, surface_for_remeshing
-    from becos.remesh import remesh
+    from becos.build.remesh import remesh
+    from becos.core.mesh import non_manifold_vertices, read_mesh, surface_for_remeshing
 
     wolf = read_mesh(tosca_dir / "wolf1.off")
     a, b = 100, int(np.argmax(np.linalg.norm(wolf.vertices - wolf.vertices[100], axis=1)))
@@ -320,8 +320,8 @@ sys.exit(main(["write-config", "--options", '{"data_dir": "d", "annotations": "a
 
 def test_an_ascii_ply_header_announcing_fewer_faces_than_the_file_holds(tosca_dir, tmp_path):
     """BAD 2 for ASCII PLY: the header says one face fewer than the file holds."""
-    from becos.check import check_mesh_file
-    from becos.mesh import read_mesh
+    from becos.core.mesh import read_mesh
+    from becos.sources.check import check_mesh_file
 
     wolf = read_mesh(tosca_dir / "wolf0.off")
     header = [
@@ -400,16 +400,16 @@ def test_an_entry_that_is_no_regular_file_is_named_not_called_missing(becos_code
 
 
 def test_what_an_entry_that_is_no_regular_file_is(tosca_dir, tmp_path):
-    """:func:`becos.formats.not_a_regular_file` by ``stat`` alone (a FIFO is never opened: the calls would
+    """:func:`becos.core.formats.not_a_regular_file` by ``stat`` alone (a FIFO is never opened: the calls would
     block; an alarm fails the test instead), and the readers of a single mesh (the cheap check,
     ``read_mesh`` of the remesh job) name it."""
     import os
     import signal
     import socket
 
-    from becos.check import check_mesh_file
-    from becos.formats import not_a_regular_file
-    from becos.mesh import read_mesh
+    from becos.core.formats import not_a_regular_file
+    from becos.core.mesh import read_mesh
+    from becos.sources.check import check_mesh_file
 
     os.mkfifo(tmp_path / "fifo.off")
     (tmp_path / "folder.off").mkdir()

@@ -109,8 +109,8 @@ def test_the_finder_sees_every_kind(tmp_path):
         "pkg: from pkg.a import _x",
     ]
     smk = tmp_path / "x.smk"
-    smk.write_text("params: bw._entry(x), bw.entry(y), becos.store._read(z)\n")
-    assert [line.split(": ", 1)[1] for line in snake_private_uses([smk])] == ["bw._entry", "becos.store._read"]
+    smk.write_text("params: bw._entry(x), bw.entry(y), becos.products.store._read(z)\n")
+    assert [line.split(": ", 1)[1] for line in snake_private_uses([smk])] == ["bw._entry", "becos.products.store._read"]
 
 
 def test_no_private_name_crosses_a_module():

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
-from becos.propagation import (
+from becos.build.propagation import (
     LABEL_NAMES,
     NO_LABEL,
     agreement,
@@ -26,7 +26,7 @@ from becos.propagation import (
 
 @pytest.fixture(scope="module")
 def prepared(tosca_entries, mesh_cache):
-    from becos.datasets import prepare_shape
+    from becos.sources.datasets import prepare_shape
 
     cache = {}
 
@@ -41,7 +41,7 @@ def prepared(tosca_entries, mesh_cache):
 @pytest.fixture(scope="module")
 def remeshed(prepared):
     """Remesh variant 0 (seed 42) of the prepared (common-frame) mesh, as the workflow makes it."""
-    from becos.remesh import remesh, variant_target_vertices
+    from becos.build.remesh import remesh, variant_target_vertices
 
     cache = {}
 

@@ -1,4 +1,4 @@
-"""Published pair lists (config/pairings_original_*.pkl) <-> manifests (becos.published)."""
+"""Published pair lists (config/pairings_original_*.pkl) <-> manifests (becos.build.published)."""
 
 from __future__ import annotations
 
@@ -11,9 +11,7 @@ import pandas as pd
 import pytest
 from test_sampling import template_rows, tosca_entries
 
-from becos.catalog import catalog_table
-from becos.errors import ConfigError, InputFileError
-from becos.published import (
+from becos.build.published import (
     SHAPE_FIELDS,
     import_published,
     load_cameras,
@@ -24,7 +22,9 @@ from becos.published import (
     write_published_pickle,
     y_rotation,
 )
-from becos.sampling import MANIFEST_COLUMNS, read_manifest, sample_pairs, write_manifest
+from becos.build.sampling import MANIFEST_COLUMNS, read_manifest, sample_pairs, write_manifest
+from becos.errors import ConfigError, InputFileError
+from becos.sources.catalog import catalog_table
 
 SETTINGS = ("full_full", "partial_partial")
 EXPECTED_SHAPES = {
@@ -178,7 +178,7 @@ def test_rotation_helpers():
 
 
 def _manifest_of(records) -> pd.DataFrame:
-    from becos.sampling import sort_manifest
+    from becos.build.sampling import sort_manifest
 
     rows = [
         {
@@ -213,11 +213,11 @@ def reference_shape_path(file_path: str, data_dir: str) -> str:
 def test_store_pickle_round_trip(
     setting, pair_record_files, store_of, becos_code, tosca_catalog, tmp_path, monkeypatch
 ):
-    from becos.cameras import draw_camera_pair
-    from becos.published import N_CAMERAS, store_pair_facts
-    from becos.record import PairRecord
+    from becos.build.cameras import draw_camera_pair
+    from becos.build.published import N_CAMERAS, store_pair_facts
+    from becos.build.record import PairRecord
+    from becos.products.store import open_benchmark
     from becos.seeding import rng_for
-    from becos.store import open_benchmark
 
     records = [PairRecord.load(p) for p in pair_record_files[setting]]
     records[1].meta["x_token"] = "f18765"  # a published face target: written as is

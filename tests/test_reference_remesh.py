@@ -17,15 +17,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from becos.errors import ConfigError, InputFileError
-from becos.mesh import TriMesh
-from becos.reference_remesh import (
+from becos.build.reference_remesh import (
     open3d_rotation,
     reference_output,
     reference_pose,
     reference_remesh,
     undo_reference_output,
 )
+from becos.core.mesh import TriMesh
+from becos.errors import ConfigError, InputFileError
 from becos.workflow import resolve_config
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
@@ -111,8 +111,8 @@ def test_reference_remesh_is_the_reference_bit_for_bit_and_its_maps_give_its_cor
 ):
     """centaur3 / centaur1 (train 477): the reference's own chain on our remesh of the file gives its
     vertices to a few ulps, and its rounded vertex maps composed give its saved correspondences."""
-    from becos.datasets import DatasetSpec
-    from becos.mesh import read_mesh
+    from becos.core.mesh import read_mesh
+    from becos.sources.datasets import DatasetSpec
 
     spec = DatasetSpec.load("tosca")
     folder = becos_code / "reference_oracle" / "full_full" / "train" / "477"
@@ -163,14 +163,14 @@ def test_views_from_the_published_cameras_keep_the_oracle_partials(published, be
     component fills a 4-edge hole along the other diagonal than the reference's trimesh did, so its
     triangle rows differ while the kept full faces do not. A 5000² cast from X's published camera
     gives the shipped file's triangle set up to grazing rays."""
-    from becos.datasets import DatasetSpec
-    from becos.reference_views import (
+    from becos.build.reference_views import (
         cast_pinhole,
         full_faces_covering,
         pair_view_files,
         read_triangle_ids,
         reference_component,
     )
+    from becos.sources.datasets import DatasetSpec
 
     folder = becos_code / "reference_oracle" / "partial_partial" / "train" / "384"
     row = oracle.manifest_row(published["manifests"]["partial_partial"], "train", 384)
@@ -197,7 +197,7 @@ def test_views_from_the_published_cameras_keep_the_oracle_partials(published, be
 def test_a_triangle_id_file_of_another_remesh_is_a_named_error(tmp_path):
     path = tmp_path / "cat0_cam_0.100_0.200_0.300.npy"
     np.save(path, np.array([0, 5, 99], dtype=np.uint32))
-    from becos.reference_views import read_triangle_ids
+    from becos.build.reference_views import read_triangle_ids
 
     assert list(read_triangle_ids(path, 100)) == [0, 5, 99]
     with pytest.raises(InputFileError, match="remesher: reference") as info:
@@ -228,8 +228,8 @@ def test_published_p2p_keeps_the_try_and_the_faces_the_reference_kept(published,
 def test_published_p2p_without_an_accepted_try_keeps_the_last_geometry_and_the_best_camera():
     """The reference's quirk (facts §7.5) on a synthetic pair: tries 0-2 all have a too-small overlap;
     the recorded camera is the try with the smallest shortfall (1), the geometry is the last try's (2)."""
-    from becos.reference_views import published_p2p
-    from becos.surface_map import SurfaceMap
+    from becos.build.reference_views import published_p2p
+    from becos.core.surface_map import SurfaceMap
 
     # a strip of 8 squares (16 faces); ground truth = identity onto the same strip
     xs = np.arange(9, dtype=float)
@@ -271,10 +271,10 @@ def test_store_metadata_says_which_parts_follow_the_published_lists():
 
 def test_pairs_stage_builds_published_p2p_pairs_from_the_published_views(published, stage, becos_code):
     """train 384 through the pairs stage's own pieces (manifest row with its cameras read back from CSV,
-    pair options, :func:`becos.pairs.build_pair`): the record keeps the oracle's full faces on both
+    pair options, :func:`becos.build.pairs.build_pair`): the record keeps the oracle's full faces on both
     sides, the published rotations, the try the reference kept; masks are becos's exact ones."""
-    from becos.pairs import build_pair
-    from becos.reference_views import full_faces_covering
+    from becos.build.pairs import build_pair
+    from becos.build.reference_views import full_faces_covering
     from becos.workflow import ShapeStore, pair_published_rotations, pair_published_views, pairs_options, remesh_token
 
     config = published["config"]

@@ -7,10 +7,7 @@ import logging
 import numpy as np
 import pytest
 
-from becos.errors import InputFileError
-from becos.geometry import SurfaceLocator, points_on_surface
-from becos.mesh import TriMesh
-from becos.remesh import (
+from becos.build.remesh import (
     Remeshed,
     RemeshInput,
     coincident_original_vertices,
@@ -24,6 +21,9 @@ from becos.remesh import (
     variant_target_vertices,
     write_ply,
 )
+from becos.core.geometry import SurfaceLocator, points_on_surface
+from becos.core.mesh import TriMesh
+from becos.errors import InputFileError
 
 SEED = 42
 # one shape per class (8 classes); michael0, david0, horse5 and centaur3 have inconsistently wound faces
@@ -159,7 +159,7 @@ def test_a_fast_simplification_result_that_breaks_a_guarantee_is_made_with_pymes
     monkeypatch.setattr(fast_simplification, "simplify", with_a_speck)
     original = tosca("wolf0")
     target = variant_target_vertices(SEED, "tosca", "wolf0", 0)
-    with caplog.at_level(logging.WARNING, logger="becos.remesh"):
+    with caplog.at_level(logging.WARNING, logger="becos.build.remesh"):
         r, stats = remesh_with_stats(original, target, decimator="fast-simplification")
     assert stats["decimator_fallbacks"] == ["decimation: 1 components beyond the first"]
     assert "made it with pymeshlab" in caplog.text
@@ -170,10 +170,10 @@ def test_a_fast_simplification_result_that_breaks_a_guarantee_is_made_with_pymes
 
 def test_the_decimator_key_reaches_the_remesh_job(tosca_entries, tmp_path, capsys):
     """Config ``decimator`` -> the remesh job's options (its Snakemake params: a change reruns it) ->
-    :func:`becos.remesh.remesh_with_stats`; face-target mode with fast-simplification."""
+    :func:`becos.build.remesh.remesh_with_stats`; face-target mode with fast-simplification."""
     import json
 
-    from becos.catalog import catalog_table
+    from becos.sources.catalog import catalog_table
     from becos.workflow import job_options, remesh_stage, resolve_config
 
     base = {"synthetic": {"enabled": False}, "data_dir": "data", "annotations": "ann", "datasets": ["tosca"]}
@@ -294,7 +294,7 @@ def test_loop_subdivision_splits_only_edges_longer_than_the_remeshs(tosca):
     """Step 4 (issue #31): centaur3's coarse parts are refined, not every edge (the decimation then
     removes far fewer faces); where that leaves too few faces for the target (wolf0 asked for
     15,000 vertices) every edge is split."""
-    from becos.remesh.decimate import SUBDIVISION_MIN_FACES, loop_subdivided
+    from becos.build.remesh.decimate import SUBDIVISION_MIN_FACES, loop_subdivided
 
     (cv, cf), (wv, wf) = (RemeshInput(tosca(name)).oriented for name in ("centaur3", "wolf0"))
     refined, every_edge = loop_subdivided(cv, cf, 19000), loop_subdivided(wv, wf, 30000)  # (kept: own the meshes)
@@ -373,7 +373,7 @@ def test_load_errors_name_the_file(tmp_path):
 
 def test_coincidence_detector_finds_vertices_on_vertices(tosca):
     """coincident_original_vertices recognises a remeshed vertex that sits on an original vertex."""
-    from becos.surface_map import SurfaceMap
+    from becos.core.surface_map import SurfaceMap
 
     original = tosca("wolf0")
     picks = np.array([5, 17, 400])

@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 from matplotlib.image import imread
 
+from becos.build.record import PairRecord
 from becos.cli.report import configure_parser, run_cli
-from becos.record import PairRecord
-from becos.report import (
+from becos.products.report import (
     CAPTIONS,
     NO_MATCH_GREY,
     common_vertices,
@@ -243,7 +243,7 @@ def test_cli_arguments_and_missing_store(tmp_path):
 
 
 def test_cli_on_a_store(pair_record_files, tmp_path, capsys):
-    import becos.store as store
+    import becos.products.store as store
     from becos.cli import main
 
     path = store.write_store(

@@ -154,7 +154,7 @@ def test_cores_1_and_cores_2_give_identical_results(reference_run, becos_code, t
 
 
 def test_store_metadata_names_the_library_versions_and_the_config_hash(reference_run):
-    from becos.store import open_benchmark
+    from becos.products.store import open_benchmark
     from becos.workflow import digest
 
     workdir, _ = reference_run

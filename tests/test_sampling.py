@@ -1,4 +1,4 @@
-"""Catalog table and pair manifests (becos.catalog, becos.sampling) on the TOSCA shapes.
+"""Catalog table and pair manifests (becos.sources.catalog, becos.build.sampling) on the TOSCA shapes.
 
 The TOSCA catalog is built from the shipped file names and the facts of ``config/tosca.yaml``
 (categories and splits per class, usage 70, scale 0.0095, rot [90, 0, 0]).
@@ -14,8 +14,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from becos.catalog import catalog_table, natural_key, read_catalog, write_catalog
-from becos.sampling import (
+from becos.build.sampling import (
     MANIFEST_COLUMNS,
     N_BUCKETS,
     appearance_counts,
@@ -30,6 +29,7 @@ from becos.sampling import (
     write_manifest,
 )
 from becos.seeding import stable_hash
+from becos.sources.catalog import catalog_table, natural_key, read_catalog, write_catalog
 
 TOSCA_CLASSES = {  # class -> (category, split), config/tosca.yaml
     "michael": ("human", "train"),
@@ -46,7 +46,7 @@ RX90 = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
 
 @dataclass
 class Entry:
-    """ShapeEntry-like record (the fields of becos.datasets.ShapeEntry)."""
+    """ShapeEntry-like record (the fields of becos.sources.datasets.ShapeEntry)."""
 
     dataset: str
     name: str
@@ -395,9 +395,9 @@ def test_benchmark_size_pair_counts():
 
 
 def test_with_real_dataset_and_annotation_modules(becos_code, catalog, tmp_path):
-    """The real becos.datasets / becos.annotations listing."""
-    import becos.annotations as annotations
-    import becos.datasets as datasets
+    """The real becos.sources.datasets / becos.sources.annotations listing."""
+    import becos.sources.annotations as annotations
+    import becos.sources.datasets as datasets
 
     source = annotations.AnnotationSource(becos_code, template_table="templates_tosca_demo.csv")
     entries = datasets.DatasetSpec.load("tosca").list_shapes(becos_code / "data", source)
@@ -414,9 +414,9 @@ def test_with_real_dataset_and_annotation_modules(becos_code, catalog, tmp_path)
 
 @pytest.mark.parametrize("table", ["templates_tosca_demo.csv", "templates_all.csv"])
 def test_partial_full_with_annotation_source(becos_code, catalog, table):
-    """becos.annotations.AnnotationSource (object with template_row, or its template_rows() dict)
+    """becos.sources.annotations.AnnotationSource (object with template_row, or its template_rows() dict)
     gives the same P2F manifest as the plain table rows."""
-    import becos.annotations as annotations
+    import becos.sources.annotations as annotations
 
     source = annotations.AnnotationSource(becos_code, template_table=table)
     plain = sample_pairs(

@@ -21,7 +21,7 @@ from tiny_tosca import tosca_config
 from becos import workflow as bw
 from becos.cli import main as becos_main
 from becos.errors import InputFileError
-from becos.store import read_record_index
+from becos.products.store import read_record_index
 
 SHAPES = ["tosca/wolf0", "tosca/wolf1", "tosca/horse0", "tosca/horse5"]  # train classes; path wolf0-dog0-horse0
 EDGE = "tosca_dog0_tosca_wolf0_corres.txt"
@@ -192,8 +192,8 @@ def test_a_hand_edited_ground_truth_file_is_recomputed_and_never_reaches_a_recor
 def test_an_edge_file_with_moved_rows_after_the_check_is_refused_by_the_ground_truth_job(built, becos_code):
     """Issue #29, BAD 5 after a finished run: three rows of tosca_dog0_tosca_wolf0_corres.txt moved to the
     wolf0 face farthest from their mapped point. The ground-truth job checks each edge file it reads row by
-    row (``becos.check.edges.edge_plausibility``) and refuses it, naming the lines; restored, it runs again."""
-    from becos.mesh import read_mesh
+    row (``becos.sources.check.edges.edge_plausibility``) and refuses it, naming the lines; restored, it runs again."""
+    from becos.core.mesh import read_mesh
 
     work, config = built
     edge = Path(config["annotations"]) / "precomputed_corr_templates" / EDGE

@@ -8,10 +8,10 @@ import os
 import numpy as np
 import pytest
 
+from becos.build.record import SCHEMA_VERSION, PairRecord
 from becos.cli import main
 from becos.errors import InputFileError
-from becos.record import SCHEMA_VERSION, PairRecord
-from becos.store import TABLE_COLUMNS, count_files, expand_inputs, open_benchmark, write_store
+from becos.products.store import TABLE_COLUMNS, count_files, expand_inputs, open_benchmark, write_store
 
 MAX_FILES = 150  # ~2 files per array (zarr.json + one shard) + groups, whatever the pair count
 
@@ -204,7 +204,7 @@ def test_training_view_in_worker_processes(stores, pair_record_files, method):
     import operator
     import pickle
 
-    from becos.store import TrainingView
+    from becos.products.store import TrainingView
 
     view = TrainingView(stores["partial_partial"], keys=["x_vertices", "corr_01", "y_faces"])
     assert len(view) == 2 and len(TrainingView(stores["partial_partial"], split="test")) == 1
@@ -240,7 +240,7 @@ def test_training_view_in_worker_processes(stores, pair_record_files, method):
 def test_record_files_hold_int32_indices_and_no_identity_maps(pair_record_files, tmp_path):
     """A full shape's identity maps are left out of the file and derived on load; index keys are int32
     on disk and int64 again after loading; values, dtypes and shapes round-trip exactly."""
-    from becos.record import IDENTITY_MEMBER, RECORD_SCHEMA, encode_arrays
+    from becos.build.record import IDENTITY_MEMBER, RECORD_SCHEMA, encode_arrays
 
     record = PairRecord.load(pair_record_files["partial_full"][0])  # X full, Y partial
     path = tmp_path / "r.npz"
@@ -256,14 +256,14 @@ def test_record_files_hold_int32_indices_and_no_identity_maps(pair_record_files,
     wide = dict(record.arrays, corr_01=record["corr_01"] + (1 << 40))  # does not fit int32: kept int64
     assert encode_arrays(wide)[0]["corr_01"].dtype == np.int64
     # the one schema table drives the store layout and the validator's expectations
-    from becos.store import SCHEMA_GROUPS
-    from becos.validate import expected_schema
+    from becos.products.store import SCHEMA_GROUPS
+    from becos.products.validate import expected_schema
 
     assert expected_schema()["x_faces"] == ("int32", (3,)) and SCHEMA_GROUPS["corr_10_face"] == "y_vertex"
     assert set(expected_schema()) == set(RECORD_SCHEMA) == set(record.arrays)
-    import becos.record
+    import becos.build.record
 
-    assert all(f"s_{k}" in becos.record.__doc__ for k in becos.record.SHAPE_KEYS)
+    assert all(f"s_{k}" in becos.build.record.__doc__ for k in becos.build.record.SHAPE_KEYS)
 
 
 def test_direct_reads_equal_zarr_reads_and_damage_is_named(stores, pair_record_files, tmp_path, monkeypatch):
@@ -271,17 +271,17 @@ def test_direct_reads_equal_zarr_reads_and_damage_is_named(stores, pair_record_f
     chunk file ends in DamagedStoreError (through zarr), never in another pair's or garbage values."""
     import shutil
 
-    from becos.store import DamagedStoreError
+    from becos.products.store import DamagedStoreError
 
     bench = open_benchmark(stores["partial_partial"])
     for i in range(len(bench)):
         assert_same_record(bench.record(i), bench.read_block(i, i + 1).record(0))
     assert bench._files, "the direct reader was not used"
     assert bench.record(1).arrays["x_faces"].dtype == np.int64
-    import becos.store.write
+    import becos.products.store.write
 
-    monkeypatch.setattr(becos.store.write, "CHUNK_BYTES", 4096)  # many chunks over several shards per array
-    monkeypatch.setattr(becos.store.write, "SHARD_BYTES", 32768)
+    monkeypatch.setattr(becos.products.store.write, "CHUNK_BYTES", 4096)  # many chunks over several shards per array
+    monkeypatch.setattr(becos.products.store.write, "SHARD_BYTES", 32768)
     small = open_benchmark(
         write_store(
             pair_record_files["partial_partial"], tmp_path / "small.zarr", setting="partial_partial", progress=False
@@ -362,7 +362,7 @@ def test_a_truncated_chunk_raises_one_damaged_store_error_and_no_pending_task_no
         chunk.write_bytes(chunk.read_bytes()[: chunk.stat().st_size // 2])
     script = (
         "import sys\n"
-        "from becos.store import DamagedStoreError, open_benchmark\n"
+        "from becos.products.store import DamagedStoreError, open_benchmark\n"
         "try:\n"
         "    open_benchmark(sys.argv[1]).record(0)\n"
         "except DamagedStoreError as exc:\n"

@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from becos.geometry import SurfaceLocator
-from becos.mesh import TriMesh, edge_neighbours, edge_neighbours_by_part
-from becos.surface_map import SurfaceMap, VertexRounding, compose, compose_path
+from becos.core.geometry import SurfaceLocator
+from becos.core.mesh import TriMesh, edge_neighbours, edge_neighbours_by_part
+from becos.core.surface_map import SurfaceMap, VertexRounding, compose, compose_path
 
 
 def grid(n: int = 6, z: float = 0.0) -> TriMesh:

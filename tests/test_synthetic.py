@@ -1,4 +1,4 @@
-"""The built-in synthetic collection (becos.synthetic, issue 5): files, meshes, network, correspondences.
+"""The built-in synthetic collection (becos.sources.synthetic, issue 5): files, meshes, network, correspondences.
 
 One collection is generated per test session (session fixture ``synthetic_collection``, default
 arguments) while a second one is generated at the same time in a fresh process through the CLI the
@@ -30,7 +30,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
 from becos.errors import ConfigError
-from becos.synthetic import (
+from becos.sources.synthetic import (
     CHIRALITY_TEMPLATES,
     CLASSES,
     DATASETS,
@@ -41,7 +41,7 @@ from becos.synthetic import (
     generate_collection,
     poses_at_fraction,
 )
-from becos.synthetic.bodies import semantic_part
+from becos.sources.synthetic.bodies import semantic_part
 
 REPO = Path(__file__).resolve().parents[1]
 POSES = 4
@@ -192,8 +192,8 @@ def test_fraction_scales_the_collection_and_the_registry_counts_its_manifest(tmp
     """``synthetic.fraction`` (config/scale.yaml): one knob sets every class's shapes, modelled on the
     published benchmark; the registry counts the shapes a collection's manifest lists, at any size
     (a manifest listing 1/16's files is enough here: no meshes are generated)."""
-    from becos.datasets import DatasetSpec
     from becos.errors import InputFileError
+    from becos.sources.datasets import DatasetSpec
 
     split_of = {}
     for name in DATASETS:
@@ -220,7 +220,7 @@ def test_fraction_scales_the_collection_and_the_registry_counts_its_manifest(tmp
         for k in range(poses[f"{c.dataset}_{c.name}"])
     }
     files["annotations/config/templates_all.csv"] = "-"
-    (tmp_path / "synthetic.json").write_text(json.dumps({"generator": "becos.synthetic", "files": files}))
+    (tmp_path / "synthetic.json").write_text(json.dumps({"generator": "becos.sources.synthetic", "files": files}))
     for name in DATASETS:
         expected = {c.name: poses[f"{name}_{c.name}"] for c in CLASSES if c.dataset == name}
         assert DatasetSpec.load(name).expected_counts(tmp_path / "data") == (sum(expected.values()), expected)
@@ -266,19 +266,19 @@ def signed_volume(vertices: np.ndarray, faces: np.ndarray) -> float:
 
 class FastOffReader:
     """A mesh loader for ``prepare_shape(entry, mesh_cache)`` that parses OFF files with pandas
-    (~15x faster than the trimesh-based ``becos.mesh.read_mesh``; checked equal on the templates)."""
+    (~15x faster than the trimesh-based ``becos.core.mesh.read_mesh``; checked equal on the templates)."""
 
     def load(self, path):
-        from becos.mesh import TriMesh
+        from becos.core.mesh import TriMesh
 
         return TriMesh(*read_off(Path(path)))
 
 
 def test_meshes_closed_manifold_upright_one_triangulation_per_class(collection):
     """Through the registry: every shape, after the dataset's scale and frame rotation
-    (becos.datasets.prepare_shape), is an outward-oriented closed 2-manifold of 5k-30k vertices,
+    (becos.sources.datasets.prepare_shape), is an outward-oriented closed 2-manifold of 5k-30k vertices,
     upright (+y) with its feet at the bottom, four-legged bodies facing +z; poses share faces."""
-    from becos.datasets import DatasetSpec, prepare_shape
+    from becos.sources.datasets import DatasetSpec, prepare_shape
 
     reader = FastOffReader()
 
@@ -301,7 +301,7 @@ def test_meshes_closed_manifold_upright_one_triangulation_per_class(collection):
                 if template is None:
                     assert entry.name == spec.template
                     template = mesh
-                    reference = prepare_shape(entry).mesh  # parsed by becos.mesh.read_mesh
+                    reference = prepare_shape(entry).mesh  # parsed by becos.core.mesh.read_mesh
                     assert np.array_equal(reference.faces, mesh.faces)
                     assert np.allclose(reference.vertices, mesh.vertices, atol=1e-9)
                     topo = mesh_topology(mesh.n_vertices, mesh.faces)
@@ -520,20 +520,20 @@ def test_correspondences_land_on_the_same_body_part(edge_data):
 
 @pytest.fixture(scope="session")
 def annotation_source(collection, tmp_path_factory):
-    from becos.annotations import AnnotationSource
+    from becos.sources.annotations import AnnotationSource
 
     return AnnotationSource(collection / "annotations", cache_dir=tmp_path_factory.mktemp("edge-cache"))
 
 
 @pytest.fixture(scope="session")
 def entries(collection, annotation_source):
-    from becos.datasets import DatasetSpec
+    from becos.sources.datasets import DatasetSpec
 
     return {name: DatasetSpec.load(name).list_shapes(collection / "data", annotation_source) for name in DATASETS}
 
 
 def test_dataset_registry_lists_the_collection_with_class_held_out_splits(entries):
-    from becos.datasets import DatasetSpec, frame_rotation_matrix
+    from becos.sources.datasets import DatasetSpec, frame_rotation_matrix
 
     splits_of_class: dict[tuple[str, str], set] = {}
     per_category: dict[str, set] = {}
@@ -589,8 +589,8 @@ def test_network_ground_truth_across_datasets(collection, annotation_source, ent
     """ShapeNetwork ground truth between posed shapes of two datasets: a centaur against a
     four-legged class misses exactly its human upper body; cat-like lynx -> dog-like hound misses
     nothing; matched vertices land on the same body part."""
-    from becos.mesh import read_mesh
-    from becos.network import ShapeNetwork
+    from becos.build.network import ShapeNetwork
+    from becos.core.mesh import read_mesh
 
     @cache
     def meshes(dataset, name):

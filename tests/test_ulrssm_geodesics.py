@@ -15,8 +15,8 @@ import scipy.io
 
 from becos.cli import main
 from becos.errors import DiskFullError
-from becos.export import DiskEstimateError, mat_size, write_symmetric_mat, write_ulrssm
-from becos.export.geodesics import _compute_geodesic_rows, geodesic_plan, shape_matrix
+from becos.products.export import DiskEstimateError, mat_size, write_symmetric_mat, write_ulrssm
+from becos.products.export.geodesics import _compute_geodesic_rows, geodesic_plan, shape_matrix
 
 SETTINGS = ("full_full", "partial_full")
 
@@ -104,11 +104,11 @@ def test_ulrssm_dist_same_bytes_in_parallel_and_from_the_workflow_rows(
     """jobs=2 with several tasks per mesh (blocks filled across tasks in a bounded window), and the
     blocks of ``becos geodesic-plan`` / ``geodesic-rows`` read through ``export-ulrssm --rows``: the same
     files as one process computing them."""
-    import becos.export.geodesics
+    import becos.products.export.geodesics
 
     recs = cat_records["partial_full"]
     one = write_ulrssm(recs, tmp_path / "one", geodesics=True, splits=["test"])
-    monkeypatch.setattr(becos.export.geodesics, "_GEODESIC_TASK_ROWS", 300)  # ~5 tasks per mesh
+    monkeypatch.setattr(becos.products.export.geodesics, "_GEODESIC_TASK_ROWS", 300)  # ~5 tasks per mesh
     two = write_ulrssm(recs, tmp_path / "two", geodesics=True, splits=["test"], jobs=2)
 
     store = store_of(recs, "partial_full")

@@ -1,4 +1,4 @@
-"""Store validation: real stores validate clean; every check of :mod:`becos.validate` catches a store
+"""Store validation: real stores validate clean; every check of :mod:`becos.products.validate` catches a store
 corrupted in exactly one way (one case per check, :data:`CORRUPTIONS`), with a message naming the
 check, what is wrong, how many pairs and an example pair; damaged stores are reported, never a
 traceback."""
@@ -16,10 +16,10 @@ import numpy as np
 import pytest
 import zarr
 
+from becos.build.record import PairRecord
 from becos.cli import main
-from becos.record import PairRecord
-from becos.store import TABLE_COLUMNS, open_benchmark, table_row, write_pairs, write_store
-from becos.validate import validate, validate_store
+from becos.products.store import TABLE_COLUMNS, open_benchmark, table_row, write_pairs, write_store
+from becos.products.validate import validate, validate_store
 
 CHECKS = (
     "checksum",
@@ -47,7 +47,7 @@ CHECKS = (
     "split_classes",
     "centaur",
 )
-"""Every check in docs/design/validate.md's table of becos.validate (``store``: test_damaged_store_is_reported)."""
+"""Every check in docs/design/validate.md's table of becos.products.validate (``store``: test_damaged_store_is_reported)."""
 
 
 @pytest.fixture(scope="module")
@@ -121,7 +121,7 @@ def _reseal(store):
 
     The corruptions below stand for a buggy writer, caught by the invariant they break; ``checksum``
     stands for damage after writing (a deleted chunk file), caught by the digests alone."""
-    from becos.store import ContentDigests
+    from becos.products.store import ContentDigests
 
     root = zarr.open_group(str(store), mode="r+")
     info = dict(root.attrs["becos_store"])
@@ -403,7 +403,7 @@ CORRUPTIONS = (
 
 def test_every_check_has_a_corruption():
     page = (Path(__file__).resolve().parents[1] / "docs" / "design" / "validate.md").read_text()
-    section = page.split("## `becos.validate`")[1].split("\n## ")[0]
+    section = page.split("## `becos.products.validate`")[1].split("\n## ")[0]
     documented = re.findall(r"^``(\w+)``", section, flags=re.MULTILINE)
     assert set(documented) == set(CHECKS) | {"store"}
     assert [c.check for c in CORRUPTIONS] == list(CHECKS)
@@ -444,7 +444,7 @@ def test_a_store_of_an_older_becos_validates_with_its_own_rounding(clean_stores,
     """Records of an older becos validate by the rounding they were written with: without meta
     ``vertex_rounding`` (before issue #20) the largest-weight corner, with ``nearest_corner`` the corner
     nearest in 3D. Today's rounding in a record that says neither is reported as not its rounding."""
-    from becos.record import NEAREST_CORNER_VERTEX_MAP_ROUNDING
+    from becos.build.record import NEAREST_CORNER_VERTEX_MAP_ROUNDING
 
     def older(store, pick, edit_metas):
         shutil.copytree(clean_stores["partial_partial"], store)

@@ -7,19 +7,25 @@ import time
 import numpy as np
 import pytest
 
-from becos.cameras import camera_from_angles, draw_camera, normalise_to_unit_box
-from becos.geometry import face_areas
-from becos.mesh import TriMesh
+from becos.build.cameras import camera_from_angles, draw_camera, normalise_to_unit_box
+from becos.build.visibility import (
+    SAMPLE_BARYCENTRICS,
+    VisibilityScene,
+    face_adjacency,
+    largest_component,
+    visible_faces,
+)
+from becos.core.geometry import face_areas
+from becos.core.mesh import TriMesh
 from becos.seeding import rng_for
-from becos.visibility import SAMPLE_BARYCENTRICS, VisibilityScene, face_adjacency, largest_component, visible_faces
 
 
 def _remeshed_unit_box(tosca_dir, mesh_cache, name: str) -> TriMesh:
-    """A TOSCA shape, y-up, remeshed to ~10k vertices (becos.remesh if present, else pymeshlab), in its unit box."""
+    """A TOSCA shape, y-up, remeshed to ~10k vertices (becos.build.remesh if present, else pymeshlab), in its unit box."""
     m = mesh_cache.load(tosca_dir / f"{name}.off")
     m = TriMesh(np.c_[m.vertices[:, 0], m.vertices[:, 2], -m.vertices[:, 1]], m.faces)
     try:
-        from becos.remesh import remesh
+        from becos.build.remesh import remesh
     except ImportError:
         remesh = None
     if remesh is not None:

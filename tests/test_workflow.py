@@ -38,7 +38,7 @@ def jobs_planned(dry_run_output: str) -> dict[str, int]:
 
 
 def test_every_setting_is_built_and_validated(tiny_tosca_run):
-    from becos.store import open_benchmark
+    from becos.products.store import open_benchmark
 
     for setting in SETTINGS:
         base = tiny_tosca_run / "results" / setting
@@ -59,8 +59,8 @@ def test_every_setting_is_built_and_validated(tiny_tosca_run):
 
 
 def test_store_round_trips_the_pair_records(tiny_tosca_run):
-    from becos.record import PairRecord
-    from becos.store import open_benchmark
+    from becos.build.record import PairRecord
+    from becos.products.store import open_benchmark
 
     for setting in SETTINGS:
         base = tiny_tosca_run / "results" / setting
@@ -184,8 +184,8 @@ def test_a_bad_config_fails_before_any_job(becos_code, tmp_path):
 
 
 def test_pairs_chunks_are_fixed_by_the_pair_id(tiny_tosca_run):
-    """A pair's chunk job is its fixed hash bucket's range (becos.sampling.assign_chunks)."""
-    from becos.sampling import N_BUCKETS, chunk_jobs, read_manifest
+    """A pair's chunk job is its fixed hash bucket's range (becos.build.sampling.assign_chunks)."""
+    from becos.build.sampling import N_BUCKETS, chunk_jobs, read_manifest
     from becos.seeding import stable_hash
 
     config = json.loads((tiny_tosca_run / "results" / "config.json").read_text())
@@ -229,11 +229,11 @@ def test_chunk_files_do_not_depend_on_the_shapes_a_job_keeps(tiny_tosca_run, tmp
     at a time (every remesh, locator and scanner rebuilt per pair) instead of reusing them."""
     import shutil
 
-    import becos.network
+    import becos.build.network
     import becos.workflow as bw
 
     monkeypatch.setattr(bw.shapes, "SHAPES_KEPT", 1)  # read where ShapeStore is defined
-    monkeypatch.setattr(becos.network.ShapeNetwork, "MESHES_KEPT", 1)
+    monkeypatch.setattr(becos.build.network.ShapeNetwork, "MESHES_KEPT", 1)
     source = tiny_tosca_run / "results"
     results = tmp_path / "results"
     shutil.copytree(source, results, ignore=shutil.ignore_patterns("*.zarr", "released", "report", "psmal"))
@@ -365,7 +365,7 @@ def test_released_export_of_the_workflow_loads_with_the_documented_layout(tiny_t
     """The workflow's released-layout export, read by the loader written to docs/released-layout.md."""
     from test_export import load_released
 
-    from becos.store import open_benchmark
+    from becos.products.store import open_benchmark
 
     for setting in SETTINGS:
         base = tiny_tosca_run / "results" / setting
@@ -423,8 +423,8 @@ def test_ulrssm_and_dpfm_exports_are_rules_with_cached_outputs(tiny_tosca_run, t
     ``dist/``), and a second call does nothing."""
     import shutil
 
-    from becos.export import DPFM_NONE_MAPS, IDS_FILE, write_dpfm, write_ulrssm
-    from becos.store import open_benchmark
+    from becos.products.export import DPFM_NONE_MAPS, IDS_FILE, write_dpfm, write_ulrssm
+    from becos.products.store import open_benchmark
 
     run = tmp_path / "run"  # a copy (modification times kept): other tests read the shared run meanwhile
     shutil.copytree(tiny_tosca_run, run, symlinks=True)

@@ -65,11 +65,11 @@ def results_fingerprint(workdir: Path, settings=SETTINGS) -> dict[str, str]:
     Files under ``results/`` by path: catalog, manifests, remeshes, ground truth, pair files and
     chunk indices (not ``config.json``, ``validation.json``, the reports, which quote the store's
     creation time, or hidden temporary files). Per Zarr store
-    (:func:`becos.store.open_benchmark`): each array key (dtype, shape and bytes of all pairs' rows),
+    (:func:`becos.products.store.open_benchmark`): each array key (dtype, shape and bytes of all pairs' rows),
     each offsets group, the pair metas, the pairs table and the root metadata without ``created``
     (the export's wall-clock time).
     """
-    from becos.store import open_benchmark
+    from becos.products.store import open_benchmark
 
     results = Path(workdir) / "results"
     out = {}

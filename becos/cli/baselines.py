@@ -1,4 +1,4 @@
-"""``becos baseline``: run a baseline matcher on a benchmark store (:mod:`becos.baselines`)."""
+"""``becos baseline``: run a baseline matcher on a benchmark store (:mod:`becos.evaluation.baselines`)."""
 
 from __future__ import annotations
 
@@ -6,8 +6,8 @@ import argparse
 import json
 from pathlib import Path
 
-from becos.baselines import BASELINES, run_baseline
 from becos.errors import InputFileError
+from becos.evaluation.baselines import BASELINES, run_baseline
 
 
 def configure_parser(parser: argparse.ArgumentParser) -> None:
@@ -23,7 +23,7 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
 
 
 def run_cli(args: argparse.Namespace) -> int:
-    from becos.store import open_benchmark
+    from becos.products.store import open_benchmark
 
     benchmark = open_benchmark(args.store)
     if args.split != "all" and args.split not in benchmark.splits():

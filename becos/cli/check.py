@@ -1,4 +1,4 @@
-"""``becos check`` (:mod:`becos.check`) and ``becos fetch-annotations`` (:func:`becos.download.fetch_annotations`)."""
+"""``becos check`` (:mod:`becos.sources.check`) and ``becos fetch-annotations`` (:func:`becos.sources.download.fetch_annotations`)."""
 
 from __future__ import annotations
 
@@ -9,8 +9,8 @@ import time
 from pathlib import Path
 
 from becos.atomic import write_text
-from becos.check import DatasetCheckError, check_datasets
-from becos.download import fetch_annotations
+from becos.sources.check import DatasetCheckError, check_datasets
+from becos.sources.download import fetch_annotations
 
 
 def check_arguments(parser: argparse.ArgumentParser) -> None:

@@ -1,4 +1,4 @@
-"""``becos download-dataset``: download and unpack a dataset's public archive (:mod:`becos.download`)."""
+"""``becos download-dataset``: download and unpack a dataset's public archive (:mod:`becos.sources.download`)."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import json
 from pathlib import Path
 
 from becos.atomic import write_text
-from becos.download import download_dataset
+from becos.sources.download import download_dataset
 
 
 def configure_parser(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:

@@ -1,4 +1,4 @@
-"""``becos prepare-dt4d``: DeformingThings4D frames as OBJ files (:mod:`becos.dt4d`)."""
+"""``becos prepare-dt4d``: DeformingThings4D frames as OBJ files (:mod:`becos.sources.dt4d`)."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import json
 import sys
 from pathlib import Path
 
-from becos.dt4d import KINDS, output_folder, prepare_dt4d
+from becos.sources.dt4d import KINDS, output_folder, prepare_dt4d
 
 
 def configure_parser(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:

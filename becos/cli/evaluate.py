@@ -1,12 +1,14 @@
-"""``becos evaluate``: score predictions against a benchmark store (:mod:`becos.evaluate`)."""
+"""``becos evaluate``: score predictions against a benchmark store (:mod:`becos.evaluation.evaluate`)."""
 
 from __future__ import annotations
 
 import argparse
 from pathlib import Path
 
+from becos.core.geodesics import METHODS as GEODESIC_METHODS
+from becos.core.geodesics import GeodesicsCache
 from becos.errors import BecosError, InputFileError
-from becos.evaluate import (
+from becos.evaluation.evaluate import (
     DEFAULT_AUC_PRESET,
     DIRECTIONS,
     PAPER_PRESET,
@@ -17,8 +19,6 @@ from becos.evaluate import (
     open_predictions,
     write_evaluation,
 )
-from becos.geodesics import METHODS as GEODESIC_METHODS
-from becos.geodesics import GeodesicsCache
 
 
 def configure_parser(parser: argparse.ArgumentParser) -> None:
@@ -104,7 +104,7 @@ def run_cli(args: argparse.Namespace) -> int:
 
 
 def _open_store(path: Path):
-    from becos.store import open_benchmark
+    from becos.products.store import open_benchmark
 
     return open_benchmark(path)
 

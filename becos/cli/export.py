@@ -1,5 +1,5 @@
 """``becos export-released``, ``export-psmal``, ``export-ulrssm``, ``export-dpfm`` and ``export-geodesics``
-(:mod:`becos.export`)."""
+(:mod:`becos.products.export`)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import json
 import sys
 from pathlib import Path
 
-from becos.export import (
+from becos.products.export import (
     DSMK_FOLDER,
     GEODESIC_FOLDER,
     GEODESIC_LAYOUTS,
@@ -30,7 +30,7 @@ def _store(parser: argparse.ArgumentParser) -> None:
 
 def _geodesic_options(parser: argparse.ArgumentParser) -> None:
     """``--geodesic-method``, ``--splits``, ``--jobs``: the exports that compute geodesic matrices."""
-    from becos.geodesics import METHODS
+    from becos.core.geodesics import METHODS
 
     parser.add_argument("--geodesic-method", choices=METHODS, default="heat", help="geodesic estimator (default: heat)")
     parser.add_argument(
@@ -51,8 +51,8 @@ def _force(parser: argparse.ArgumentParser) -> None:
 
 
 def _open(args: argparse.Namespace):
-    """The store of ``args.store`` (:func:`becos.store.open_benchmark`); ``--jobs`` checked."""
-    from becos.store import open_benchmark
+    """The store of ``args.store`` (:func:`becos.products.store.open_benchmark`); ``--jobs`` checked."""
+    from becos.products.store import open_benchmark
 
     bench = open_benchmark(args.store)
     if getattr(args, "jobs", 1) < 1:

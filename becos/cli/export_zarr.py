@@ -1,4 +1,4 @@
-"""``becos export-zarr``: collect a setting's pair records into one Zarr store (:mod:`becos.store`)."""
+"""``becos export-zarr``: collect a setting's pair records into one Zarr store (:mod:`becos.products.store`)."""
 
 from __future__ import annotations
 
@@ -8,8 +8,8 @@ import time
 from pathlib import Path
 
 from becos.errors import InputFileError
+from becos.products.store import count_files, expand_inputs, open_benchmark, write_store
 from becos.settings import SETTINGS
-from becos.store import count_files, expand_inputs, open_benchmark, write_store
 
 
 def configure_parser(parser: argparse.ArgumentParser) -> None:

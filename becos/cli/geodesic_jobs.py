@@ -1,4 +1,4 @@
-"""``becos geodesic-plan`` and ``becos geodesic-rows`` (:mod:`becos.geodesic_jobs`)."""
+"""``becos geodesic-plan`` and ``becos geodesic-rows`` (:mod:`becos.products.geodesic_jobs`)."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import argparse
 import json
 from pathlib import Path
 
-from becos.geodesic_jobs import GeodesicJobError, solve_part, write_plan
+from becos.products.geodesic_jobs import GeodesicJobError, solve_part, write_plan
 
 
 def plan_arguments(parser: argparse.ArgumentParser) -> None:
@@ -34,7 +34,7 @@ def run_plan(args: argparse.Namespace) -> int:
 
 
 def rows_arguments(parser: argparse.ArgumentParser) -> None:
-    from becos.geodesics import METHODS
+    from becos.core.geodesics import METHODS
 
     parser.add_argument("part", type=Path, help="a part file of `becos geodesic-plan`")
     parser.add_argument("out", type=Path, help="output folder (<key>.npy rows, <key>.sources.npy)")

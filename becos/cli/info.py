@@ -1,4 +1,4 @@
-"""``becos info``: summarise a BeCoS annotation folder (:mod:`becos.annotations`)."""
+"""``becos info``: summarise a BeCoS annotation folder (:mod:`becos.sources.annotations`)."""
 
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
 
 def run_cli(args: argparse.Namespace) -> int:
     """Summarise an annotation folder: network, edges, template rows, available TOSCA shapes."""
-    from becos.annotations import AnnotationSource
+    from becos.sources.annotations import AnnotationSource
 
     source = AnnotationSource(args.annotations)
     edges = source.edge_sources()

@@ -1,4 +1,4 @@
-"""``becos report``: counts, overlap histogram and renders of a store (:mod:`becos.report`)."""
+"""``becos report``: counts, overlap histogram and renders of a store (:mod:`becos.products.report`)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import sys
 import time
 from pathlib import Path
 
-from becos.report import select_render_ids, write_report
+from becos.products.report import select_render_ids, write_report
 
 
 def configure_parser(parser: argparse.ArgumentParser) -> None:
@@ -28,7 +28,7 @@ def run_cli(args: argparse.Namespace) -> int:
         )
     if args.renders < 0:
         raise InputFileError(args.store, f"--renders must be >= 0, got {args.renders}", "pass a count such as 8")
-    from becos.store import open_benchmark
+    from becos.products.store import open_benchmark
 
     start = time.perf_counter()
     bench = open_benchmark(args.store)

@@ -1,11 +1,11 @@
-"""``becos synthetic``: generate the built-in synthetic shape collection (:mod:`becos.synthetic`)."""
+"""``becos synthetic``: generate the built-in synthetic shape collection (:mod:`becos.sources.synthetic`)."""
 
 from __future__ import annotations
 
 import argparse
 from pathlib import Path
 
-from becos.synthetic import CLASSES, DEFAULT_POSES, generate_collection
+from becos.sources.synthetic import CLASSES, DEFAULT_POSES, generate_collection
 
 
 def configure_parser(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
@@ -25,7 +25,7 @@ def configure_parser(parser: argparse.ArgumentParser) -> argparse.ArgumentParser
         type=float,
         default=None,
         help="instead of --poses: this fraction (0, 1] of the BeCoS-size collection (2,537 shapes at 1; "
-        "per-class counts: becos.synthetic.FULL_SCALE_POSES), e.g. 0.0625 for 1/16",
+        "per-class counts: becos.sources.synthetic.FULL_SCALE_POSES), e.g. 0.0625 for 1/16",
     )
     return parser
 
@@ -36,7 +36,7 @@ def run_cli(args: argparse.Namespace) -> int:
     import sys
     import time
 
-    from becos.synthetic import MANIFEST
+    from becos.sources.synthetic import MANIFEST
 
     start = time.perf_counter()
     out = generate_collection(

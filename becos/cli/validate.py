@@ -1,5 +1,5 @@
-"""``becos validate``: check a benchmark store, optionally compare it with another (:mod:`becos.validate`,
-:mod:`becos.compare`)."""
+"""``becos validate``: check a benchmark store, optionally compare it with another (:mod:`becos.products.validate`,
+:mod:`becos.products.compare`)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import sys
 from pathlib import Path
 
 from becos.errors import BecosError
-from becos.validate import validate
+from becos.products.validate import validate
 
 
 def configure_parser(parser: argparse.ArgumentParser) -> None:
@@ -72,7 +72,7 @@ def run_cli(args: argparse.Namespace) -> int:
     status = 0 if report.valid else 1
     against = getattr(args, "against", None)
     if against is not None:
-        from becos.compare import compare_stores
+        from becos.products.compare import compare_stores
 
         if any(problem.startswith("store:") for problem in report.problems):
             out["comparison"] = None

@@ -1,8 +1,8 @@
 """The workflow's stages as library functions: config -> plan -> the work of one job.
 
 Snakemake only names files; every job runs one ``becos`` sub-command, which calls one function of
-:mod:`becos.workflow.stages` (or of :mod:`becos.store`, :mod:`becos.export`, :mod:`becos.validate`,
-:mod:`becos.report`). Modules: ``config`` (the schema, the only statement of the defaults; config
+:mod:`becos.workflow.stages` (or of :mod:`becos.products.store`, :mod:`becos.products.export`, :mod:`becos.products.validate`,
+:mod:`becos.products.report`). Modules: ``config`` (the schema, the only statement of the defaults; config
 files), ``digests`` (input files by content), ``options`` (the one reader of the resolved config: a
 frozen dataclass per stage), ``layout`` (every path under ``results``), ``plan`` (catalog, manifests,
 jobs), ``shapes`` (a chunk job's shapes), ``stages`` (one function per job kind). Every public name is

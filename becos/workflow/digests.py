@@ -33,7 +33,7 @@ ANNOTATION_INPUTS = (
     "data/*.json",
 )
 """Glob patterns, relative to the annotation folder, of the files the dataset check and the chunk jobs
-read from it (:mod:`becos.annotations`); the published views (``precomputed_triangle_ids``) are added
+read from it (:mod:`becos.sources.annotations`); the published views (``precomputed_triangle_ids``) are added
 for ``original_settings``."""
 
 
@@ -110,8 +110,8 @@ def generated_folders(config) -> list[Path]:
     """Folders whose files a rule of the run writes: the synthetic collection, a fetched annotation
     folder, the class folders of the DeformingThings4D preparation jobs and downloaded dataset folders.
     ``config``: a resolved config or its :class:`SourceOptions` (so for the functions below)."""
-    from becos.datasets import DatasetSpec
-    from becos.dt4d import preparation_plan
+    from becos.sources.datasets import DatasetSpec
+    from becos.sources.dt4d import preparation_plan
 
     src = SourceOptions.of(config)
     folders = [Path(src.synthetic["out"])] if src.synthetic["enabled"] else []
@@ -136,11 +136,11 @@ def _outside(folders: list[Path]):
 
 def dataset_input_files(config) -> list[Path]:
     """Each enabled dataset's mesh files that no job of the run writes (:func:`generated_folders`), as
-    :meth:`becos.datasets.DatasetSpec.list_names` finds them, non-regular entries included (so that the
+    :meth:`becos.sources.datasets.DatasetSpec.list_names` finds them, non-regular entries included (so that the
     check runs again and names them). A dataset folder that does not exist contributes nothing (the
     check reports it)."""
-    from becos.datasets import DatasetSpec
     from becos.errors import BecosError
+    from becos.sources.datasets import DatasetSpec
 
     src = SourceOptions.of(config)
     outside = _outside(generated_folders(src))

@@ -86,7 +86,7 @@ class Layout:
         return pair_file(self.ground_truth_folder(setting), pair_id)
 
     def pairs_folder(self, setting: str) -> Path:
-        """A setting's pair records ``<pair_id>.npz`` (:mod:`becos.record`) and their chunk indices."""
+        """A setting's pair records ``<pair_id>.npz`` (:mod:`becos.build.record`) and their chunk indices."""
         return self.results / setting / "pairs"
 
     def pairs_index(self, setting: str, chunk: int | str) -> Path:
@@ -100,7 +100,7 @@ class Layout:
         return self.results / setting / "metadata.json"
 
     def store(self, setting: str) -> Path:
-        """A setting's Zarr store (:mod:`becos.store`)."""
+        """A setting's Zarr store (:mod:`becos.products.store`)."""
         return self.results / setting / "benchmark.zarr"
 
     def validation(self, setting: str) -> Path:

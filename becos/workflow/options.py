@@ -161,9 +161,9 @@ class PairsOptions(StageOptions):
         return self.setting == "partial_partial" and self.original_settings and self.remesher == "reference"
 
     def pair_options(self):
-        """:class:`becos.pairs.PairOptions` of the setting; a key the setting does not read takes its
+        """:class:`becos.build.pairs.PairOptions` of the setting; a key the setting does not read takes its
         default (the schema's)."""
-        from becos.pairs import PairOptions
+        from becos.build.pairs import PairOptions
 
         names = [f.name for f in fields(PairOptions) if f.name != "setting" and hasattr(self, f.name)]
         return PairOptions(setting=self.setting, **{k: getattr(self, k) for k in names})
@@ -332,7 +332,7 @@ def _dataset_problems(config: dict) -> list[str]:
     """Datasets not in the registry; bad ``download`` / ``download_urls`` entries."""
     import difflib
 
-    from becos.datasets import available_datasets
+    from becos.sources.datasets import available_datasets
 
     problems = []
     known = sorted(available_datasets())
@@ -345,7 +345,7 @@ def _dataset_problems(config: dict) -> list[str]:
                 f"Fix: {hint}use one of {', '.join(known)}"
             )
     if config["download"] or config["download_urls"]:
-        from becos.download import download_config_problems
+        from becos.sources.download import download_config_problems
 
         problems += download_config_problems(config["download"], config["download_urls"], config["datasets"])
     return problems

@@ -31,7 +31,7 @@ def annotation_source(options, cache: str | Path | None = None):
     """The annotation folder of ``options`` (a resolved config or any options with ``annotations``,
     ``template_file`` and ``results``), its parsed edge files cached in the folder ``cache`` (default
     ``results/cache/annotations``, the Snakemake process's)."""
-    from becos.annotations import AnnotationSource
+    from becos.sources.annotations import AnnotationSource
 
     options = AnnotationOptions.of(options)
     return AnnotationSource(
@@ -42,10 +42,10 @@ def annotation_source(options, cache: str | Path | None = None):
 
 
 def build_catalog(options, annotations=None) -> pd.DataFrame:
-    """The catalog of every enabled dataset's shapes (:mod:`becos.catalog`); ``options``: the catalog's
+    """The catalog of every enabled dataset's shapes (:mod:`becos.sources.catalog`); ``options``: the catalog's
     (:class:`CatalogOptions`, or a resolved config)."""
-    from becos.catalog import catalog_table
-    from becos.datasets import DatasetSpec
+    from becos.sources.catalog import catalog_table
+    from becos.sources.datasets import DatasetSpec
 
     options = CatalogOptions.of(options)
     annotations = annotations or annotation_source(options)
@@ -67,9 +67,9 @@ def build_catalog(options, annotations=None) -> pd.DataFrame:
 
 
 def build_manifest(options, setting: str, catalog: pd.DataFrame, annotations=None) -> pd.DataFrame:
-    """The pair manifest of ``setting`` (:mod:`becos.sampling`, or the published lists); ``options``: the
+    """The pair manifest of ``setting`` (:mod:`becos.build.sampling`, or the published lists); ``options``: the
     manifest's (:class:`ManifestOptions`, or a resolved config)."""
-    from becos.sampling import sample_pairs
+    from becos.build.sampling import sample_pairs
 
     o = ManifestOptions.of(options)
     if o.original_settings:
@@ -94,8 +94,8 @@ def _published_manifest(o: ManifestOptions, setting: str, catalog: pd.DataFrame)
     """The published pair list of ``setting`` (with its cameras), restricted to the catalog and the caps."""
     import pandas as pd
 
-    from becos.published import import_published
-    from becos.sampling import assign_chunks
+    from becos.build.published import import_published
+    from becos.build.sampling import assign_chunks
 
     path = Path(o.annotations) / "config" / f"pairings_original_{setting}.pkl"
     imported = import_published(
@@ -117,7 +117,7 @@ def _restrict_published(
 ) -> pd.DataFrame:
     """Published pairs whose two shapes are in the catalog (``shapes`` filter), then the per-split caps
     (pairs ranked by a keyed hash of their id, as for sampled pairs)."""
-    from becos.sampling import sort_manifest
+    from becos.build.sampling import sort_manifest
     from becos.seeding import stable_hash
 
     known = set(zip(catalog["dataset"], catalog["name"]))
@@ -276,8 +276,8 @@ def chunk_remesh_files(manifest: pd.DataFrame, options) -> dict[str, list[list[s
 
 
 def remesh_target(seed: int, dataset: str, name: str, token: str) -> dict:
-    """Arguments of :func:`becos.remesh.remesh` for a token (``seed``: config ``seed``)."""
-    from becos.remesh import variant_target_vertices
+    """Arguments of :func:`becos.build.remesh.remesh` for a token (``seed``: config ``seed``)."""
+    from becos.build.remesh import variant_target_vertices
 
     if token.startswith("f"):
         return {"target_faces": int(token[1:])}
@@ -292,11 +292,11 @@ def uses_published_views(config, setting: str) -> bool:
 
 def published_views_folder(config, setting: str) -> Path | None:
     """The folder of shipped triangle-id files the pairs stage of ``setting`` reads
-    (:func:`becos.reference_views.triangle_ids_folder`), or None: the stage reads none (it draws its
+    (:func:`becos.build.reference_views.triangle_ids_folder`), or None: the stage reads none (it draws its
     cameras, or the annotation folder ships no views and every published view is cast)."""
     if not uses_published_views(config, setting):
         return None
-    from becos.reference_views import triangle_ids_folder
+    from becos.build.reference_views import triangle_ids_folder
 
     folder = triangle_ids_folder(PairsOptions.of(config).annotations, setting)
     return folder if folder.is_dir() else None

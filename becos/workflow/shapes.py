@@ -22,12 +22,12 @@ SHAPES_KEPT = 16
 """Shapes (prepared, remeshed, locators, scanners) a chunk job keeps in memory at most; each is dropped
 as soon as the chunk's remaining pairs no longer use it (:meth:`ShapeStore.release`)."""
 MESHES_KEPT = 12
-"""Original meshes a chunk job keeps parsed in memory (:class:`becos.mesh.MeshCache`)."""
+"""Original meshes a chunk job keeps parsed in memory (:class:`becos.core.mesh.MeshCache`)."""
 
 
 def shape_entry(row) -> object:
-    from becos.catalog import frame_rotation
-    from becos.datasets import ShapeEntry
+    from becos.sources.catalog import frame_rotation
+    from becos.sources.datasets import ShapeEntry
 
     return ShapeEntry(
         dataset=row["dataset"],
@@ -140,7 +140,7 @@ class ShapeStore:
         edge files are kept across jobs (benchmarks, tests); default None: a job parses the files its
         rule declares, keeping them in memory only (parsed edge files in a temporary folder of its own),
         so it reads no file its rule does not name."""
-        from becos.mesh import MeshCache
+        from becos.core.mesh import MeshCache
 
         self.layout = Layout.of(options)
         self._annotation_options = options
@@ -177,15 +177,15 @@ class ShapeStore:
                 self._prepared.pop((dataset, name), None)
 
     def scanner(self, dataset: str, name: str, token: str, mesh):
-        """The :class:`becos.partiality.Scanner` of a pair side's ``mesh`` (built once while kept)."""
-        from becos.partiality import Scanner
+        """The :class:`becos.build.partiality.Scanner` of a pair side's ``mesh`` (built once while kept)."""
+        from becos.build.partiality import Scanner
 
         return self._scanners.get_or_make((dataset, name, token), lambda: Scanner(mesh))
 
     def centre(self, dataset: str, name: str) -> np.ndarray:
-        """(3,) the shape's centre in scaled file coordinates (:attr:`becos.datasets.PreparedShape.centre`),
+        """(3,) the shape's centre in scaled file coordinates (:attr:`becos.sources.datasets.PreparedShape.centre`),
         without preparing the whole mesh."""
-        from becos.datasets import shape_centre
+        from becos.sources.datasets import shape_centre
 
         key = (dataset, name)
         if key in self._prepared:
@@ -210,15 +210,15 @@ class ShapeStore:
         return None if entry is None else self.mesh_cache.load(entry.path)
 
     def prepared(self, dataset: str, name: str):
-        from becos.datasets import prepare_shape
+        from becos.sources.datasets import prepare_shape
 
         return self._prepared.get_or_make(
             (dataset, name), lambda: prepare_shape(self.entry(dataset, name), self.mesh_cache)
         )
 
     def remeshed(self, dataset: str, name: str, token: str):
-        """The remesh variant (:class:`becos.remesh.Remeshed`), or None for ``original``."""
-        from becos.remesh import load_remeshed
+        """The remesh variant (:class:`becos.build.remesh.Remeshed`), or None for ``original``."""
+        from becos.build.remesh import load_remeshed
 
         if token == "original":
             return None
@@ -247,9 +247,9 @@ class ShapeStore:
     def edge_digests(self, x, y) -> list[str]:
         """Digests of the edge files the ground truth between entries ``x`` and ``y`` reads (both ways),
         for its input key. Each file is checked once per job for geometric plausibility where its
-        target template's mesh is available (:func:`becos.check.edges.edge_plausibility`, whole map and row
+        target template's mesh is available (:func:`becos.sources.check.edges.edge_plausibility`, whole map and row
         by row), since a file changed after the dataset check is only seen here."""
-        from becos.check.edges import edge_plausibility, require_plausible_edge
+        from becos.sources.check.edges import edge_plausibility, require_plausible_edge
 
         annotations = self.network.annotations
         out = []
@@ -285,7 +285,7 @@ class ShapeStore:
 
     @property
     def network(self):
-        from becos.network import ShapeNetwork
+        from becos.build.network import ShapeNetwork
 
         if self._network is None:
             if self._cache is not None:
@@ -299,12 +299,12 @@ class ShapeStore:
         return self._network
 
     def instance(self, dataset: str, name: str, token: str):
-        """A :class:`becos.pairs.ShapeInstance` (common frame, dataset scale; remeshed unless ``original``),
+        """A :class:`becos.build.pairs.ShapeInstance` (common frame, dataset scale; remeshed unless ``original``),
         the same object while the shape is kept (so its surface area is computed once)."""
         return self._instances.get_or_make((dataset, name, token), lambda: self._make_instance(dataset, name, token))
 
     def _make_instance(self, dataset: str, name: str, token: str):
-        from becos.pairs import ShapeInstance
+        from becos.build.pairs import ShapeInstance
 
         entry, remeshed = self.entry(dataset, name), self.remeshed(dataset, name, token)
         if remeshed is None:

@@ -39,7 +39,7 @@ from becos.workflow.shapes import RemeshFiles, ShapeKey, ShapeStore, visit_order
 if TYPE_CHECKING:
     import pandas as pd  # imported where used: write-config, metadata and remesh jobs start without it
 
-    from becos.surface_map import SurfaceMap
+    from becos.core.surface_map import SurfaceMap
 
 
 def _log(message: str) -> None:
@@ -48,7 +48,7 @@ def _log(message: str) -> None:
 
 def write_catalog_stage(options: CatalogOptions | dict, out: Path) -> pd.DataFrame:
     """Write the catalog (``options``: the catalog's, or a resolved config) to ``out``."""
-    from becos.catalog import write_catalog
+    from becos.sources.catalog import write_catalog
 
     catalog = build_catalog(CatalogOptions.of(options))
     write_catalog(catalog, out)
@@ -62,8 +62,8 @@ def write_manifest_stage(
 ) -> pd.DataFrame:
     """Write the pair manifest of ``setting`` (``options``: the manifest's, or a resolved config) to ``out``
     and, to ``remesh_files``, the remesh files each of its chunks reads (:func:`chunk_remesh_files`, JSON)."""
-    from becos.catalog import read_catalog
-    from becos.sampling import write_manifest
+    from becos.build.sampling import write_manifest
+    from becos.sources.catalog import read_catalog
 
     manifest = build_manifest(ManifestOptions.of(options), setting, read_catalog(catalog_path))
     write_manifest(manifest, out)
@@ -80,13 +80,13 @@ def remesh_stage(
 ) -> None:
     """Remesh one shape variant (prepared, common-frame mesh) and write the maps (+ a PLY to look at).
 
-    ``shape_row`` is the shape's catalog row (:mod:`becos.catalog` columns). With ``remesher:
-    reference`` the reference's remesh of the file coordinates (:mod:`becos.reference_remesh`; a vertex
+    ``shape_row`` is the shape's catalog row (:mod:`becos.sources.catalog` columns). With ``remesher:
+    reference`` the reference's remesh of the file coordinates (:mod:`becos.build.reference_remesh`; a vertex
     target n becomes the face target 2n). Else becos's remesh, with the quadric decimator of config
-    ``decimator`` (:data:`becos.remesh.DECIMATORS`; its fallbacks to pymeshlab are logged). ``options``:
+    ``decimator`` (:data:`becos.build.remesh.DECIMATORS`; its fallbacks to pymeshlab are logged). ``options``:
     the remesh stage's (or a resolved config).
     """
-    from becos.remesh import remesh_with_stats, save_remeshed, write_ply
+    from becos.build.remesh import remesh_with_stats, save_remeshed, write_ply
 
     options = RemeshOptions.of(options)
     cpu = {"job_start": time.process_time()}  # CPU seconds by step, logged for benchmarks/remesh.py
@@ -100,7 +100,7 @@ def remesh_stage(
     cpu["prepare"], lap = time.process_time() - lap, time.process_time()
     start = time.perf_counter()
     if options.remesher == "reference":
-        from becos.reference_remesh import remesh_like_reference
+        from becos.build.reference_remesh import remesh_like_reference
 
         faces = target.get("target_faces") or 2 * int(target["target_vertices"])
         result, _ = remesh_like_reference(shapes.mesh(dataset, name), prepared, faces, source=prepared.entry.path)
@@ -137,7 +137,7 @@ def stored_key(path: Path, member: str) -> str | None:
 
 
 def _chunk_rows(manifest_path: Path, chunk: int) -> pd.DataFrame:
-    from becos.sampling import read_manifest
+    from becos.build.sampling import read_manifest
 
     manifest = read_manifest(manifest_path)
     return manifest[manifest["chunk"] == int(chunk)]
@@ -225,7 +225,7 @@ def ground_truth_stage(
     declares) and the original meshes the catalog names; writes ``<pair_id>.npz`` beside ``out_index``.
     ``options``: the ground-truth stage's (or a resolved config).
     """
-    from becos.catalog import read_catalog
+    from becos.sources.catalog import read_catalog
 
     started = time.perf_counter()
     options = GroundTruthOptions.of(options)
@@ -305,7 +305,7 @@ def save_ground_truth(path: Path, key: str, gt_xy: SurfaceMap, gt_yx: SurfaceMap
 
 
 def _ground_truth_digest(arrays: dict[str, np.ndarray]) -> str:
-    from becos.record import content_digest
+    from becos.build.record import content_digest
 
     return content_digest({k: v for k, v in arrays.items() if k != "content_digest"}, {})
 
@@ -328,12 +328,12 @@ def narrow_faces(face: np.ndarray) -> np.ndarray:
 
 
 def load_ground_truth(path: Path):
-    """``(gt_xy, gt_yx)`` :class:`becos.surface_map.SurfaceMap` from a ground-truth file (a .npz,
+    """``(gt_xy, gt_yx)`` :class:`becos.core.surface_map.SurfaceMap` from a ground-truth file (a .npz,
     :func:`becos.atomic.save_npz` compressed:
     ``input_key``, ``xy_face`` (V_x,) int32, ``xy_weights`` (V_x, 3), ``xy_distance`` (V_x,), the same
     for ``yx``, and ``content_digest`` (:func:`ground_truth_intact`); files of older becos hold int64
     faces, uncompressed, and no digest, so the ground-truth stage recomputes them)."""
-    from becos.surface_map import SurfaceMap
+    from becos.core.surface_map import SurfaceMap
 
     with np.load(path, allow_pickle=False) as d:
         return (
@@ -361,8 +361,8 @@ def pairs_stage(
     folder ``triangle_ids`` (None: every view is cast); writes ``<pair_id>.npz`` beside ``out_index``.
     ``options``: the pairs stage's of ``setting`` (or a resolved config).
     """
-    from becos.catalog import read_catalog
-    from becos.record import is_intact
+    from becos.build.record import is_intact
+    from becos.sources.catalog import read_catalog
 
     started = time.perf_counter()
     stage = pairs_options(options, setting)
@@ -436,8 +436,8 @@ class _RecordBuilder:
         )
 
     def record(self, row: dict, gt: dict, key: str):
-        """The pair's :class:`becos.record.PairRecord` (ground truth from the file ``gt`` indexes)."""
-        from becos.pairs import build_pair
+        """The pair's :class:`becos.build.record.PairRecord` (ground truth from the file ``gt`` indexes)."""
+        from becos.build.pairs import build_pair
 
         shapes, (tx, ty) = self.shapes, self.tokens(row)
         x = shapes.instance(row["x_dataset"], row["x_name"], tx)
@@ -495,14 +495,14 @@ def _require_indexed(path: Path, recorded: str, index: Path, shapes: ShapeStore)
 
 def pair_published_views(config, row: dict, options, triangle_ids: Path | None = None):
     """``original_settings`` P2P with the reference remesh: the views of the pair's published cameras
-    (:func:`becos.reference_views.published_scan`), else None (the pairs stage draws cameras).
+    (:func:`becos.build.reference_views.published_scan`), else None (the pairs stage draws cameras).
 
     ``triangle_ids``: the folder of the shipped view files (:func:`published_views_folder`, as the rule
     declares it); None: where the config's annotation folder has them (a view without its file is cast).
     """
     if not uses_published_views(config, options.setting) or "x_cam_pos_0" not in row:
         return None
-    from becos.reference_views import published_scan
+    from becos.build.reference_views import published_scan
 
     n = sum(1 for k in row if k.startswith("x_cam_pos_"))
     cameras = np.array([[row[f"{side}_cam_pos_{i}"] for i in range(n)] for side in "xy"], dtype=np.float64).reshape(
@@ -537,7 +537,7 @@ def pair_published_rotations(row: dict):
 
 def _labeller(shapes: ShapeStore):
     """``labels(dataset, name, token) -> (V,) int8 or None``: propagated left/right labels of a full shape."""
-    from becos.propagation import labels_for_instance
+    from becos.build.propagation import labels_for_instance
 
     cache: dict = {}
 
@@ -554,7 +554,7 @@ def _labeller(shapes: ShapeStore):
 
 def store_metadata(config: dict, setting: str) -> dict:
     """Metadata for a setting's store: config and its digest, datasets with licence and citation."""
-    from becos.datasets import DatasetSpec
+    from becos.sources.datasets import DatasetSpec
 
     datasets = {}
     for name in SourceOptions.of(config).datasets:
@@ -573,7 +573,7 @@ def store_metadata(config: dict, setting: str) -> dict:
 def published_parts(config, setting: str) -> dict[str, bool | None]:
     """Per part of a setting's benchmark, whether it follows the published pair lists (None: the
     setting has no such part). P2P views follow them with the reference remesh (their triangle ids
-    index its faces; :mod:`becos.reference_views`); P2F has no published list. ``config``: a resolved
+    index its faces; :mod:`becos.build.reference_views`); P2F has no published list. ``config``: a resolved
     config or the pairs stage's options."""
     options = PairsOptions.of(config)
     original, remesh = options.original_settings, options.remesh
@@ -593,10 +593,10 @@ def export_pairings_stage(
     """The manifest in the published pickle schema (share a benchmark as pair lists + code), with the
     random rotations, cameras and face counts the store's records actually used (docs/released-layout.md,
     section "Published pair lists"). Reads the setting's ``manifest``, the ``catalog`` and ``store``."""
-    from becos.catalog import read_catalog
-    from becos.published import store_pair_facts, write_published_pickle
-    from becos.sampling import read_manifest
-    from becos.store import open_benchmark
+    from becos.build.published import store_pair_facts, write_published_pickle
+    from becos.build.sampling import read_manifest
+    from becos.products.store import open_benchmark
+    from becos.sources.catalog import read_catalog
 
     facts = store_pair_facts(open_benchmark(store))
     write_published_pickle(

@@ -10,10 +10,10 @@ from pathlib import Path
 
 from snakemake.exceptions import IncompleteCheckpointException
 
-from becos import dt4d as bdt4d
+from becos.sources import dt4d as bdt4d
 from becos import progress_panel
 from becos import workflow as bw
-from becos.download import archive_url
+from becos.sources.download import archive_url
 from becos.errors import BecosError
 from becos.resources import RuleResources
 
@@ -80,15 +80,15 @@ def setting_pairs(wildcards):
 
 @functools.cache
 def geodesics_disk_mb():
-    """The geodesics export's disk in MB, an upper bound from the manifests (becos.export.geodesics.
+    """The geodesics export's disk in MB, an upper bound from the manifests (becos.products.export.geodesics.
     manifest_disk_estimate), printed once per Snakemake call with the free space, a dry run included,
     and a warning above it; 0 before the dataset check, and where no vertex bound is known before
     remeshing (the geodesic_plan job's log then has the estimate)."""
     import shutil
 
-    from becos.export.geodesics import manifest_disk_estimate
-    from becos.export.staging import gigabytes
-    from becos.remesh import VERTEX_TARGET_RANGE
+    from becos.products.export.geodesics import manifest_disk_estimate
+    from becos.products.export.staging import gigabytes
+    from becos.build.remesh import VERTEX_TARGET_RANGE
 
     if not LAYOUT.checks.exists() or not (config["remesh"] and config["remesher"] == "becos"):
         return 0

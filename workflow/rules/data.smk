@@ -54,7 +54,7 @@ if config["annotations_archive"]:
 
 
 # DeformingThings4D: one job per class of each enabled dt4d dataset whose DATA/DeformingThings4D/<kind>
-# and info file exist at planning time (becos.dt4d.preparation_plan). Output: the class's stamp, which
+# and info file exist at planning time (becos.sources.dt4d.preparation_plan). Output: the class's stamp, which
 # records each .anime's size, mtime and sha256 (update(): Snakemake must not delete it before the job,
 # so the job rewrites only the OBJs whose .anime changed). The info file is ancient() and the class's
 # own entry a parameter: editing one class's entry (or adding a class) reruns that class only.

@@ -123,7 +123,7 @@ rule dpfm_layout:
         "becos export-dpfm {input.store:q} {output:q} > {log:q} 2>&1"
 
 
-from becos.geodesic_jobs import WORKFLOW_PARTS as GEODESIC_PARTS
+from becos.products.geodesic_jobs import WORKFLOW_PARTS as GEODESIC_PARTS
 
 GEODESIC_SPLITS = " ".join(["--splits", *EXPORTS["geodesic_splits"]]) if EXPORTS["geodesic_splits"] else ""
 

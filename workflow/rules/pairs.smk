@@ -45,7 +45,7 @@ rule remesh:
         runtime=RESOURCES.runtime("remesh"),
     params:
         # a rerun trigger only (the job derives the target from --token and the seed): a change to the
-        # variant's target vertex count (becos.remesh.variant_target_vertices) reruns it
+        # variant's target vertex count (becos.build.remesh.variant_target_vertices) reruns it
         rerun_key=lambda w: plan().remesh_target(w.dataset, w.name, w.token),
         # and the mesh file's content (becos.workflow.digests): a replaced file reruns it whatever its time
         source=mesh_digest,

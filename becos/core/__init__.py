@@ -1,0 +1,1 @@
+"""Meshes and maps between surfaces: the types and geometry every stage shares."""

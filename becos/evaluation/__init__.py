@@ -1,0 +1,1 @@
+"""Scoring correspondences against a benchmark: metrics, tables, baselines."""

@@ -1,0 +1,1 @@
+"""What a run delivers: the store, its validation and comparison, exports and the report."""

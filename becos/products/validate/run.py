@@ -1,0 +1,105 @@
+""":func:`validate`: every check of the :mod:`becos.products.validate` table on one store, in order: the store
+opens (``store``), root attributes and table order, the schema, then block by block the row-wise checks
+(:class:`~becos.products.validate.block.BlockChecker`), the metas and the content digests, and last the
+checks over all pairs (``checksum``, ``pair_id``, ``split_classes``, ``centaur``)."""
+
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from becos.products.validate.block import BlockChecker
+from becos.products.validate.content import check_digests, digests_to_check
+from becos.products.validate.opening import open_for_validation, unreadable_rows
+from becos.products.validate.report import Problems, ValidationReport
+from becos.products.validate.tables import (
+    check_metadata,
+    check_metas,
+    check_order,
+    check_pair_ids,
+    check_schema,
+    check_splits,
+)
+
+VALIDATE_BLOCK_BYTES = 16 << 20
+"""Uncompressed bytes checked at once (the checks make several temporaries per block, so the
+block size sets the validator's memory, independent of the store's size)."""
+
+
+def validate(path: str | Path, progress: bool = False) -> ValidationReport:
+    """Run every check on a store; see docs/design/validate.md. Never raises for a bad store: a store that
+    is missing or does not open gives one ``store`` problem."""
+    started = time.perf_counter()
+    path = Path(path)
+    bench, problems = open_for_validation(path)
+    if bench is None:
+        return ValidationReport(path, problems, seconds=time.perf_counter() - started)
+    found = Problems()
+    table = bench.table
+    n = len(bench)
+    ids = table["pair_id"].to_numpy().astype(str)
+    check_metadata(bench, problems)
+    if list(table["index"]) != list(range(n)):
+        problems.append("table: the index column is not 0..N-1")
+    check_order(table, problems)
+
+    if check_schema(bench, problems):
+        check_blocks(bench, ids, problems, found, started if progress else None)
+    else:  # the arrays cannot be trusted: check the metas and the table only
+        check_metas_only(bench, ids, problems, found)
+    check_pair_ids(ids, found)
+    check_splits(table, bench.setting, found)
+    problems.extend(found.messages())
+    splits = {str(k): int(v) for k, v in table["split"].value_counts().items()}
+    return ValidationReport(path, problems, n, bench.setting, splits, time.perf_counter() - started)
+
+
+def check_metas_only(bench, ids: np.ndarray, problems: list[str], found: Problems) -> None:
+    """The ``meta`` and ``table`` checks of a store whose arrays fail ``schema`` (``ids``: (N,) str)."""
+    from becos.products.store import Block
+
+    n = len(bench)
+    try:
+        metas = bench.read_metas()
+    except Exception as exc:
+        problems.append(unreadable_rows(bench, 0, n, exc, ids))
+    else:
+        check_metas(Block(0, n, {}, {}, bench.layout, metas), bench.setting, bench.table, found)
+
+
+def check_blocks(bench, ids: np.ndarray, problems: list[str], found: Problems, started: float | None) -> None:
+    """Row-wise checks and metas block by block, then ``checksum`` if every block read
+    (``ids``: (N,) str; ``started``: :func:`time.perf_counter` of the run to print progress about
+    every 10 % on stderr, None for none)."""
+    n = len(bench)
+    reported = 0
+    digests = digests_to_check(bench)
+    for start, stop in bench.block_ranges(max_bytes=VALIDATE_BLOCK_BYTES):
+        try:  # straight from the chunk files; any problem is read again, and reported, through zarr
+            block = bench.read_rows(start, stop)
+        except Exception as exc:  # a damaged chunk: name it, check the other blocks
+            problems.append(unreadable_rows(bench, start, stop, exc, ids))
+            digests = None
+            continue
+        if digests is not None:
+            for key in bench.layout:
+                digests.update(f"arrays/{key}", block.arrays[key])
+        BlockChecker(block, bench.setting, ids[start:stop], found).run()
+        check_metas(block, bench.setting, bench.table, found)
+        if started is not None and (10 * stop // n > reported or stop == n):  # about every 10 %
+            reported = 10 * stop // n
+            print(
+                f"validate: {stop}/{n} pairs checked ({time.perf_counter() - started:.1f} s)",
+                file=sys.stderr,
+                flush=True,
+            )
+    if digests is not None:
+        check_digests(bench, digests, problems)
+
+
+def validate_store(path: str | Path) -> list[str]:
+    """Human-readable problems of a benchmark store; empty = valid (checks: docs/design/validate.md)."""
+    return validate(path).problems

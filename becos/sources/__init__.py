@@ -1,0 +1,1 @@
+"""The inputs of a benchmark: datasets, their download and preparation, the annotation folder, their check."""

@@ -1,0 +1,106 @@
+"""Shapes of one class: every shape that shares its class template's triangulation (the network's
+identity hop: vertex i is vertex i) is compared with the template (:func:`compare_with_class_template`:
+faces as vertex sets, median edge-length ratio, flatness); :func:`check_classes` runs the comparison
+over a dataset's shapes for the dataset check.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from becos.errors import BecosError
+from becos.sources.check.meshes import mesh_arrays
+
+CLASS_EDGE_RATIO = 1.5
+"""Shapes that share their class template's triangulation (the network's identity hop: vertex i is
+vertex i) must have a median edge length within this factor of the template's (and its inverse).
+Measured on the 76 TOSCA meshes: every pose's median ratio to its class template is 1 ± 6e-5 (the
+poses are near-isometric), while a file in other units is off by its unit factor (10, 100, 1000,
+2.54...). 1.5 also leaves room for classes of different bodies on one template (FAUST subjects)."""
+
+
+def compare_with_class_template(path: Path, template_path: Path, shape_arrays, template_arrays) -> str | None:
+    """Why the mesh in ``path`` cannot share the triangulation of its class template, or None.
+
+    Faces are compared as vertex SETS (sorted triples; TOSCA poses of a class hold the same triples,
+    some rows with reversed winding); faces the shape lacks, duplicates and rows with a repeated index
+    are left to the remesh's repairs, a triple the template lacks is an error. Scale as the median
+    ratio of the lengths of the template's edges in the two meshes (:data:`CLASS_EDGE_RATIO`)."""
+    from becos.core.mesh import FLAT_RTOL, flatness, repeated_index_faces, undirected_edges, vertex_set_keys
+
+    (v, f), (tv, tf) = shape_arrays, template_arrays
+    if flatness(v) <= FLAT_RTOL:
+        return (
+            f"all its {len(v)} vertices lie in one plane (thickness {flatness(v):.2g} of its largest extent): a "
+            f"flattened or 2-D mesh, and becos matches 3-D surfaces"
+        )
+    if len(v) != len(tv):
+        return (
+            f"has {len(v)} vertices but its class template {template_path} has {len(tv)}; the shapes of a class "
+            f"share one triangulation (vertex i = vertex i)"
+        )
+    # faces as vertex sets; rows that remeshing drops or ignores (a repeated index, duplicates) and faces
+    # the file lost (a subset) are repairs, a triple the template lacks is not
+    f = np.asarray(f, dtype=np.int64)
+    f = f[~repeated_index_faces(f)] if len(f) else f
+    keys, template_keys = np.unique(vertex_set_keys(f, len(v))), np.unique(vertex_set_keys(tf, len(tv)))
+    foreign = len(np.setdiff1d(keys, template_keys, assume_unique=True))
+    if foreign:
+        return (
+            f"has the vertex count of its class template {template_path} but {foreign} of its {len(keys)} "
+            f"distinct faces name vertex triples the template has not: its vertex lines are re-ordered (or it "
+            f"was re-triangulated), so vertex i no longer corresponds to vertex i of the class"
+        )
+    edges, _ = undirected_edges(tf)
+    lengths = np.linalg.norm(v[edges[:, 0]] - v[edges[:, 1]], axis=1)
+    template_lengths = np.linalg.norm(tv[edges[:, 0]] - tv[edges[:, 1]], axis=1)
+    ratio = float(np.median(lengths[template_lengths > 0] / template_lengths[template_lengths > 0]))
+    if not 1 / CLASS_EDGE_RATIO <= ratio <= CLASS_EDGE_RATIO:
+        return (
+            f"its edges are {ratio:.3g} times as long as those of its class template {template_path} "
+            f"(median; poses of a class keep edge lengths, within {CLASS_EDGE_RATIO}x): the file is "
+            f"scaled or in other units"
+        )
+    return None
+
+
+CLASS_FIX = (
+    "restore the original file (re-download or re-extract it); never rescale or re-order a dataset's "
+    "files: becos applies each dataset's scale itself (`scale` in config/datasets/<dataset>.yaml)"
+)
+"""The fix named for a shape that does not fit its class template (:func:`check_classes`)."""
+
+
+def check_classes(shapes: list, annotations, skip: set[str]) -> list[dict]:
+    """``[{"path", "template", "problem", "fix"}]`` for shapes that differ from their class template.
+
+    Only shapes the ground truth joins to their template by vertex identity are compared: the
+    template is a shape of the same dataset (:meth:`becos.build.network.ShapeNetwork.hop`). Files in
+    ``skip`` (already reported) are left out."""
+    by_name = {e.name: e for e in shapes}
+    groups: dict[str, list] = {}
+    for e in shapes:
+        groups.setdefault(e.template_key, []).append(e)
+    bad = []
+    for key, members in groups.items():
+        try:
+            dataset, template_name = annotations.node_template(annotations.node_of_key(key))
+        except BecosError:
+            continue  # reported by the annotation check
+        template = by_name.get(template_name)
+        if template is None or template.dataset != members[0].dataset or str(template.path) in skip:
+            continue
+        others = [e for e in members if e.name != template_name and str(e.path) not in skip]
+        if not others:
+            continue
+        template_arrays = mesh_arrays(template.path)
+        for e in others:
+            try:
+                problem = compare_with_class_template(e.path, template.path, mesh_arrays(e.path), template_arrays)
+            except (BecosError, ValueError) as exc:
+                problem = f"could not be read to compare with its class template ({exc})"
+            if problem is not None:
+                bad.append({"path": str(e.path), "template": str(template.path), "problem": problem, "fix": CLASS_FIX})
+    return bad
