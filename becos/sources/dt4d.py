@@ -264,21 +264,9 @@ def prepare_class(
         todo = [k for k, t in targets.items() if not (same and t.is_file())]
         sha = record.get("sha256") if same else None
         if todo:
-            try:
-                animation = read_anime(source)
-            except InputFileError as exc:
-                raise InputFileError(exc.path, exc.problem + listed, exc.fix) from None
+            animation = _listed_animation(source, todo, listed, f"{cls}/{action}", info_path)
             counts["animations_read"] += 1
             sha = animation.sha256
-            for k in todo:
-                if not 0 <= k < animation.n_frames:
-                    raise InputFileError(
-                        source,
-                        f"frame {k} of {cls}/{action} is listed in "
-                        f"{info_path or 'the info file'} but the animation has {animation.n_frames} "
-                        f"frames (ids 0..{animation.n_frames - 1})",
-                        "use the annotation folder's unmodified info file with the original DeformingThings4D download",
-                    )
             for k in todo:
                 mesh = make_frame(animation, k)
                 write_text(targets[k], obj_text(mesh))
@@ -303,6 +291,24 @@ def prepare_class(
     if not actions:
         write_text(spath, json.dumps(stamp, indent=1, sort_keys=True) + "\n")
     return counts
+
+
+def _listed_animation(source: Path, frames: list[int], listed: str, name: str, info_path: Path | None):
+    """The animation ``source`` (class/action ``name``), checked to hold every frame id in ``frames``;
+    ``listed`` says where the info file lists it (appended to a read error)."""
+    try:
+        animation = read_anime(source)
+    except InputFileError as exc:
+        raise InputFileError(exc.path, exc.problem + listed, exc.fix) from None
+    for k in frames:
+        if not 0 <= k < animation.n_frames:
+            raise InputFileError(
+                source,
+                f"frame {k} of {name} is listed in {info_path or 'the info file'} but the animation has "
+                f"{animation.n_frames} frames (ids 0..{animation.n_frames - 1})",
+                "use the annotation folder's unmodified info file with the original DeformingThings4D download",
+            )
+    return animation
 
 
 def prepare_dt4d(
