@@ -3,7 +3,7 @@ of a file, and for OFF the one reader of becos.
 
 Modules: ``off`` (header, :func:`~becos.core.formats.off.check_off`, :func:`~becos.core.formats.off.read_off`),
 ``ply`` (ASCII and binary check from header and file size), ``obj``, ``text`` (data lines and the
-line-numbered checks OFF and ASCII PLY share), ``problems``. PLY, OBJ and irregular OFF files are read by
+line-numbered checks OFF and ASCII PLY share), ``problems``, ``write`` (OFF and VTS text). PLY, OBJ and irregular OFF files are read by
 trimesh (:func:`becos.core.mesh.read_mesh`). :func:`check_file` dispatches on the suffix;
 :func:`not_a_regular_file` names an entry that is no file, from ``stat`` alone. In detail:
 docs/design/data.md.

@@ -8,6 +8,7 @@ the OFF/VTS text. Layouts, files and keys: ``docs/released-layout.md``.
 """
 
 from becos.build.record import full_shape
+from becos.core.formats.write import off_text, vts_text
 from becos.products.export.dpfm import DPFM_NONE_MAPS, dpfm_shape_id, write_dpfm
 from becos.products.export.dsmk import DSMK_FOLDER, dsmk_cache_name
 from becos.products.export.geodesics import (
@@ -30,7 +31,6 @@ from becos.products.export.released import (
     write_released,
 )
 from becos.products.export.staging import IDS_FILE, LAYOUT_VERSION, LOGS_DIR, SIDES, DiskEstimateError, ExportError
-from becos.products.export.text import off_text, vts_text
 from becos.products.export.ulrssm import ulrssm_geodesic_estimate, ulrssm_template_vts, write_ulrssm
 
 __all__ = [

@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from becos.build.record import PairRecord
+from becos.core.formats.write import off_text, vts_text
 from becos.products.export.staging import (
     IDS_FILE,
     SIDES,
@@ -22,7 +23,6 @@ from becos.products.export.staging import (
     write_ids,
     write_log,
 )
-from becos.products.export.text import off_text, vts_text
 
 
 def psmal_shape_id(index: int, side: int, dataset: str, name: str) -> str:

@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from becos.build.record import SETTINGS, PairRecord
+from becos.core.formats.write import off_text
 from becos.products.export.staging import (
     IDS_FILE,
     SIDES,
@@ -27,7 +28,6 @@ from becos.products.export.staging import (
     write_ids,
     write_log,
 )
-from becos.products.export.text import off_text
 
 PICKLE_PROTOCOL = 4
 

@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from becos.build.record import PairRecord
+from becos.core.formats.write import off_text, vts_text
 from becos.products.export.geodesics import (
     GeodesicShape,
     cut_chunks,
@@ -35,7 +36,6 @@ from becos.products.export.staging import (
     write_ids,
     write_log,
 )
-from becos.products.export.text import off_text, vts_text
 
 
 def ulrssm_template_vts(record: PairRecord) -> tuple[str, str]:

@@ -1,4 +1,4 @@
-"""OFF and VTS text of the exports.
+"""OFF and VTS text, as the exports write them (:mod:`becos.products.export`).
 
 Vertices are written exactly as stored in the record (its final frame, dataset scale unless the record
 is area-normalised), as shortest round-trip decimal strings, so that parsing the text gives back the
