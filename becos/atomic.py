@@ -61,11 +61,16 @@ def remove_stale_temporaries(folder: str | Path, names: Iterable[str]) -> int:
     except FileNotFoundError:
         return 0
     for entry in entries:
-        if not entry.name.startswith(".") or ".tmp" not in entry.name:
+        if not entry.name.startswith(".") or ".tmp" not in entry.name and ".old-" not in entry.name:
             continue
-        # ".<name>.<mkstemp's random part, no dots><suffix starting .tmp>"
-        target = entry.name[1 : entry.name.rindex(".tmp")].rpartition(".")[0]
-        if target in names:
+        targets = {
+            # ".<name>.<mkstemp's random part, no dots><suffix starting .tmp>"
+            entry.name[1 : entry.name.rindex(".tmp")].rpartition(".")[0] if ".tmp" in entry.name else "",
+            # a folder built aside, ".<name>.tmp-<random>", or the old one it replaces, ".<name>.old-<random>"
+            entry.name[1:].split(".tmp-")[0],
+            entry.name[1:].split(".old-")[0],
+        }
+        if targets & names:
             if entry.is_dir(follow_symlinks=False):
                 shutil.rmtree(entry.path, ignore_errors=True)
             else:

@@ -130,6 +130,12 @@ def test_a_killed_write_leaves_a_temporary_file_the_next_writer_removes(tmp_path
     assert remove_stale_temporaries(tmp_path, ["mine.npz"]) == 2
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted(n for n in left if not n.startswith(".mine.npz."))
     assert remove_stale_temporaries(tmp_path / "absent", ["mine.npz"]) == 0
+    # a folder built aside and renamed into place (an export, the synthetic collection): a killed run
+    # leaves ".<name>.tmp-<random>" or, between the two renames, the replaced ".<name>.old-<random>"
+    for name in (".released.tmp-k1", ".released.old-k2", ".released-extra.tmp-k3", ".psmal.tmp-k4"):
+        (tmp_path / name).mkdir()
+    assert remove_stale_temporaries(tmp_path, ["released"]) == 2
+    assert sorted(p.name for p in tmp_path.glob(".*-k*")) == [".psmal.tmp-k4", ".released-extra.tmp-k3"]
 
 
 @pytest.fixture(scope="module")

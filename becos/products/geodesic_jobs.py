@@ -126,11 +126,12 @@ def solve_part(part: Path, out: Path, method: str = "heat", progress: bool = Fal
     """Write the normalised symmetric block of every mesh of ``part`` into the folder ``out`` (built
     aside, renamed in). Returns ``{key: {n_vertices, n_rows, sqrt_area, cpu_s, write_s, bytes}}`` (also
     ``out/timings.json``; ``write_s``: wall seconds of symmetrising and writing the block)."""
-    from becos.atomic import save_npy
+    from becos.atomic import remove_stale_temporaries, save_npy
     from becos.core.geodesics import distance_rows
 
     meshes = read_part(part)
     out.parent.mkdir(parents=True, exist_ok=True)
+    remove_stale_temporaries(out.parent, [out.name])  # one job solves a part
     tmp = Path(tempfile.mkdtemp(dir=out.parent, prefix=f".{out.name}.tmp-"))
     try:
         timings = {}

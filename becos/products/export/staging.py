@@ -24,6 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
+from becos.atomic import remove_stale_temporaries
 from becos.build.record import PairRecord
 from becos.errors import BecosError, DiskFullError, InputFileError
 
@@ -99,6 +100,7 @@ def staged_dir(out: Path, overwrite: bool) -> Iterator[Path]:
     """Yield a temporary folder beside ``out``; on success it replaces ``out``, else it is removed."""
     _check_target(out, overwrite)
     out.parent.mkdir(parents=True, exist_ok=True)
+    remove_stale_temporaries(out.parent, [out.name])  # one job writes an export: these are a killed one's
     tmp = Path(tempfile.mkdtemp(dir=out.parent, prefix=f".{out.name}.tmp-"))
     try:
         yield tmp

@@ -23,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
+from becos.atomic import remove_stale_temporaries
 from becos.core.geometry import barycentric_coordinates
 from becos.core.mesh import TriMesh
 from becos.errors import ConfigError
@@ -628,6 +629,7 @@ def generate_collection(
             f"overwrite it. Fix: choose an empty or new folder"
         )
     out_dir.parent.mkdir(parents=True, exist_ok=True)
+    remove_stale_temporaries(out_dir.parent, [out_dir.name])  # one job writes the collection
     tmp = Path(tempfile.mkdtemp(dir=out_dir.parent, prefix=f".{out_dir.name}.tmp-"))
     try:
         models = {spec.node: build_class(spec.dataset, spec.name) for spec in CLASSES}
