@@ -25,10 +25,14 @@ quote the working directory's path are compared by content or skipped). Wall tim
 other users' load: compare runs made back to back. Status checks every ``--status-seconds`` (the
 plugin's defaults, 40 s before the first and 10 s between, add up to 10 s per dependent step).
 
+``--compare LOCAL SLURM`` only compares two finished runs' folders (no cluster, no run): e.g. a SLURM
+run with the local run brought to the same code by Snakemake.
+
 Usage (root)::
 
     python benchmarks/slurm.py --workdir /tmp/becos-slurm-bench [--configfile config/config.yaml]
         [--modes local,grouped,ungrouped] [--local DIR] [--repo PATH] [--state DIR] [--config KEY=VALUE ...]
+    python benchmarks/slurm.py --compare LOCAL_RUN SLURM_RUN
 """
 
 from __future__ import annotations
@@ -215,7 +219,7 @@ def slurm_figures(harness, run: dict, local: dict) -> dict:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--workdir", type=Path, required=True, help="one folder per mode is made below it")
+    parser.add_argument("--workdir", type=Path, help="one folder per mode is made below it")
     parser.add_argument("--configfile", type=Path, default=REPO / "config" / "config.yaml")
     parser.add_argument("--config", nargs="*", default=[], help="extra --config KEY=VALUE for every run")
     parser.add_argument("--modes", default="local,grouped,ungrouped")
@@ -225,7 +229,18 @@ def main() -> None:
     parser.add_argument("--repo", type=Path, default=REPO, help="the checkout whose Snakefile and profile run")
     parser.add_argument("--state", type=Path, help="state folder of a running harness cluster (else one is started)")
     parser.add_argument("--status-seconds", default="2", help="seconds before the first and between status checks")
+    parser.add_argument(
+        "--compare", nargs=2, type=Path, metavar=("LOCAL", "SLURM"), help="only compare two finished runs' folders"
+    )
     args = parser.parse_args()
+    if args.compare:
+        local, slurm = (results_fingerprint(path) for path in args.compare)
+        print(
+            json.dumps({"local": str(args.compare[0]), "slurm": str(args.compare[1])} | compare(local, slurm), indent=1)
+        )
+        return
+    if args.workdir is None:
+        parser.error("--workdir is required (unless --compare)")
 
     repo = args.repo.resolve()
     modes = args.modes.split(",")
