@@ -16,6 +16,7 @@ from becos import workflow as bw
 from becos.sources.download import archive_url
 from becos.errors import BecosError
 from becos.resources import RuleResources
+from becos.workflow.scheduling import one_pending_reevaluation
 
 SETTINGS = bw.settings_of(config)
 # Every path of the rules is stated once, in becos.workflow.layout.Layout. Outputs are LAYOUT patterns;
@@ -25,6 +26,9 @@ EXPORTS = config["exports"]
 BASELINES = config["evaluation"]["baselines"]
 # mem_mb / runtime per rule from measured peaks (benchmarks/resources.py); x attempt on retries
 RESOURCES = RuleResources.load(Path(workflow.basedir) / "workflow" / "resources.yaml")
+# Snakemake's scheduler keeps at most one re-evaluation timer pending: its own CPU then grows linearly
+# with the job count, not with its square (becos.workflow.scheduling)
+one_pending_reevaluation()
 
 
 # bookkeeping rules run in the Snakemake process's machine, never as cluster jobs
