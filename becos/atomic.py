@@ -48,6 +48,39 @@ def atomic_path(path: str | Path, suffix: str = ".tmp") -> Iterator[Path]:
         raise
 
 
+@contextmanager
+def atomic_folder(path: str | Path) -> Iterator[Path]:
+    """Yield a new temporary folder beside ``path`` (``.<name>.tmp-<random>``); on success it replaces
+    ``path`` (mode 0755; an existing folder is moved aside to ``.<name>.old-<random>``, then removed), else
+    it is removed. The temporaries a killed write of ``path`` left are removed first: only the one job
+    that writes ``path`` may call it (:func:`remove_stale_temporaries`). A reader sees the old folder,
+    none, or the whole new one."""
+    path = Path(path)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        remove_stale_temporaries(path.parent, [path.name])
+        tmp = Path(tempfile.mkdtemp(dir=path.parent, prefix=f".{path.name}.tmp-"))
+    except OSError as exc:
+        if exc.errno in (errno.ENOSPC, errno.EDQUOT):
+            raise DiskFullError(path, exc) from exc
+        raise
+    try:
+        yield tmp
+        os.chmod(tmp, 0o755)  # mkdtemp creates 0700; results are meant to be shared
+        if path.exists():
+            old = Path(tempfile.mkdtemp(dir=path.parent, prefix=f".{path.name}.old-"))
+            os.replace(path, old / path.name)
+            os.replace(tmp, path)
+            shutil.rmtree(old, ignore_errors=True)
+        else:
+            os.replace(tmp, path)
+    except BaseException as exc:
+        shutil.rmtree(tmp, ignore_errors=True)
+        if isinstance(exc, OSError) and exc.errno in (errno.ENOSPC, errno.EDQUOT):
+            raise DiskFullError(path, exc) from exc
+        raise
+
+
 def remove_stale_temporaries(folder: str | Path, names: Iterable[str]) -> int:
     """Delete the hidden temporary files (or folders, e.g. a Zarr store's) that killed writes of
     ``names`` (in ``folder``) left behind; the number deleted. Only the one job that writes ``names``

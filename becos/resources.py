@@ -1,9 +1,10 @@
 """Per-rule scheduler resources (memory in MiB, run time in minutes) from measured peaks.
 
 ``workflow/resources.yaml`` holds per rule ``mem_mb`` and ``runtime`` from the peaks ``benchmarks/resources.py``
-measured on a real run (with margins), and for chunk rules ``seconds_per_pair``: their run time grows with
+measured on a real run (with margins), for chunk rules ``seconds_per_pair``: their run time grows with
 the chunk's pairs, their memory does not (at most :data:`becos.workflow.shapes.SHAPES_KEPT` shapes
-loaded). A rule missing from the file gets :data:`DEFAULT`. Snakemake calls the functions returned here
+loaded), and for the remesh rule ``seconds_per_variant``: a job remeshes every variant of its shape, one
+after the other. A rule missing from the file gets :data:`DEFAULT`. Snakemake calls the functions returned here
 with the job's wildcards and ``attempt`` (1, 2, ... when a profile sets ``retries``), so a retried job,
 killed for exceeding its request, asks for ``attempt`` times the memory and time.
 """
@@ -66,17 +67,26 @@ class RuleResources:
 
         return mem_mb
 
-    def runtime(self, rule: str, n_pairs: Callable[[object], int] | None = None) -> Callable[..., int]:
+    def runtime(
+        self,
+        rule: str,
+        n_pairs: Callable[[object], int] | None = None,
+        n_variants: Callable[[object], int] | None = None,
+    ) -> Callable[..., int]:
         """``runtime`` of ``rule`` (minutes), times the attempt. For a chunk rule give ``n_pairs``
         (wildcards -> pairs in the job's chunk): then it is the larger of the table's runtime and
-        ``seconds_per_pair`` × pairs."""
+        ``seconds_per_pair`` × pairs. For the remesh rule give ``n_variants`` (wildcards -> variants the
+        job writes): then it is the larger of the table's runtime and ``seconds_per_variant`` × variants."""
         entry = self.entry(rule)
-        base, per_pair = int(entry["runtime"]), float(entry.get("seconds_per_pair", 0.0))
+        base = int(entry["runtime"])
+        per_pair, per_variant = float(entry.get("seconds_per_pair", 0.0)), float(entry.get("seconds_per_variant", 0.0))
 
         def runtime(wildcards, attempt: int = 1) -> int:
             minutes = base
             if n_pairs is not None and per_pair > 0:
-                minutes = max(base, math.ceil(per_pair * n_pairs(wildcards) / 60))
+                minutes = max(minutes, math.ceil(per_pair * n_pairs(wildcards) / 60))
+            if n_variants is not None and per_variant > 0:
+                minutes = max(minutes, math.ceil(per_variant * n_variants(wildcards) / 60))
             return minutes * attempt
 
         return runtime

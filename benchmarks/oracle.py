@@ -114,12 +114,12 @@ class StageRemeshes:
 
         key = (name, token)
         if key not in self._done:
-            out = self.plan.layout.remeshed(dataset, name, token)
+            folder = self.plan.layout.remeshed_folder(dataset, name) / token  # a folder of one variant
             start = time.perf_counter()
             row = {**json.loads(self.plan.shape_json(dataset, name)), "file": self.plan.files[(dataset, name)]}
-            remesh_stage(self.options, row, token, out)
+            remesh_stage(self.options, row, [token], folder, ply=False)
             self.seconds[key] = time.perf_counter() - start
-            self._done[key] = load_remeshed(out)
+            self._done[key] = load_remeshed(folder / f"{token}.npz")
         return self._done[key]
 
 

@@ -4,7 +4,11 @@ Run: ``python benchmarks/remesh.py [--sample]`` (JSON on stdout). ``--sample`` r
 class only. All distances are relative to the input's bounding-box diagonal.
 
 ``--steps`` measures instead the CPU seconds per shape variant of the real remesh JOB (``becos
-remesh``, one process per variant, as Snakemake runs it, on one core), by step: ``startup``
+remesh``, one process per variant; with ``--per-shape`` one process per shape making all its variants,
+as the workflow runs it, for a checkout whose job does that: its shared steps ``startup``, ``load``,
+``prepare``, ``shape`` and ``other`` are divided evenly over the variants, so a variant's ``total`` is
+its own steps plus its share, and ``job_total_per_variant`` is each job's CPU over its variants; on
+one core), by step: ``startup``
 (interpreter, imports, config), ``load`` (parsing the mesh file; the first variant of a shape
 parses it, later ones read the job cache), ``prepare`` (common frame), the remesh's own steps
 (``stats["cpu_seconds"]`` of :func:`becos.build.remesh.remesh_with_stats`: shape (repair and
@@ -26,7 +30,7 @@ pymeshlab (``decimator_fallbacks``, from the job logs). Variants are compared by
 first label's (``variants_byte_identical``)::
 
     python benchmarks/remesh.py --steps [--before PATH] [--decimators pymeshlab,fast-simplification]
-        [--shapes cat0,michael0] [--variants 2]
+        [--shapes cat0,michael0] [--variants 2] [--per-shape]
 """
 
 from __future__ import annotations
@@ -208,54 +212,70 @@ STEPS = (
 )
 
 
-def _run_job(tree: Path, config: dict, row: dict, token: str, out: Path) -> str:
-    """One ``becos remesh`` process with ``tree`` first on the path (one thread); its log."""
+def _per_shape_cli(tree: Path) -> bool:
+    """Whether ``tree``'s ``becos remesh`` remeshes several variants of a shape in one job (``--tokens``
+    and ``--out-dir``; before: one variant per job, ``--token``, ``--out`` and ``--ply``)."""
+    return "--tokens" in (tree / "becos" / "cli" / "workflow.py").read_text()
+
+
+def _run_job(tree: Path, config: dict, row: dict, tokens: list[str], folder: Path) -> str:
+    """One ``becos remesh`` process with ``tree`` first on the path (one thread) writing the variants
+    ``tokens`` into ``folder`` (``<token>.npz`` and ``.ply``); its log. A tree of one variant per job
+    (:func:`_per_shape_cli` false) takes one token."""
     import os
 
     from becos.workflow import job_options
 
-    cmd = [
-        sys.executable,
-        "-m",
-        "becos",
-        "remesh",
-        "--options",
-        job_options(config, "remesh"),
-        "--shape",
-        json.dumps(row, sort_keys=True),
-        "--token",
-        token,
-        "--out",
-        str(out),
-        "--ply",
-        str(out.with_suffix(".ply")),
-    ]
+    cmd = [sys.executable, "-m", "becos", "remesh", "--options", job_options(config, "remesh")]
+    cmd += ["--shape", json.dumps(row, sort_keys=True)]
+    if _per_shape_cli(tree):
+        cmd += ["--tokens", ",".join(tokens), "--out-dir", str(folder)]
+    else:
+        (token,) = tokens
+        folder.mkdir(parents=True, exist_ok=True)
+        cmd += ["--token", token, "--out", str(folder / f"{token}.npz"), "--ply", str(folder / f"{token}.ply")]
     env = {**os.environ, "PYTHONPATH": str(tree), "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
     # cwd: ``python -m`` puts the working directory first on the path, before PYTHONPATH
     proc = subprocess.run(cmd, env=env, cwd=tree, capture_output=True, text=True, check=False)
     if proc.returncode:
-        raise SystemExit(f"becos remesh {row['name']} {token} ({tree}) failed:\n{proc.stderr[-3000:]}")
+        raise SystemExit(f"becos remesh {row['name']} {','.join(tokens)} ({tree}) failed:\n{proc.stderr[-3000:]}")
     return proc.stderr
 
 
-def _job_cpu(tree: Path, config: dict, row: dict, token: str, out: Path) -> tuple[dict, list[str]]:
-    """The job's CPU seconds by step (:data:`STEPS`) and its decimator fallbacks (empty if none or
-    not logged)."""
+SHARED_STEPS = ("startup", "load", "prepare", "shape", "other")
+"""The steps a job of several variants does once for its shape (``shape``: the repaired, re-oriented
+copy; ``other``: exit and the rest), shared out evenly over its variants."""
+
+
+def _job_cpu(tree: Path, config: dict, row: dict, tokens: list[str], folder: Path) -> tuple[list[dict], list[str]]:
+    """Per variant of the job (``tokens``) its CPU seconds by step (:data:`STEPS`): its own steps as
+    logged, the job's :data:`SHARED_STEPS` divided by the number of variants, so that the variants'
+    totals add up to the job's; and the job's decimator fallbacks (empty if none or not logged)."""
     import resource
 
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
-    stderr = _run_job(tree, config, row, token, out)
+    stderr = _run_job(tree, config, row, tokens, folder)
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     total = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
-    line = [ln for ln in stderr.splitlines() if ln.startswith("remesh cpu seconds: ")]
+    lines = [ln for ln in stderr.splitlines() if ln.startswith("remesh cpu seconds: ")]
     # a tree whose job logs no steps (before they were logged) is measured by its total alone
-    steps = json.loads(line[-1].split(": ", 1)[1]) if line else {"job_start": 0.0}
-    steps["startup"] = steps.pop("job_start")
-    steps["other"] = total - sum(steps.values())
-    steps["total"] = total
+    logged = [json.loads(ln.split(": ", 1)[1]) for ln in lines] or [{"job_start": 0.0}]
+    for steps in logged:
+        steps["startup"] = steps.pop("job_start", 0.0)
+    other = total - sum(sum(steps.values()) for steps in logged)
+    n = len(tokens)
+    shared = {
+        k: (sum(steps.get(k, 0.0) for steps in logged) + (other if k == "other" else 0.0)) / n for k in SHARED_STEPS
+    }
+    variants = []
+    for steps in logged + [{}] * (n - len(logged)):
+        own = {k: v for k, v in steps.items() if k not in SHARED_STEPS}
+        variant = {**own, **shared}
+        variant["total"] = sum(variant.values())
+        variants.append(variant)
     decimator = [ln for ln in stderr.splitlines() if ln.startswith("remesh decimator: ")]
-    fallbacks = json.loads(decimator[-1].split(": ", 1)[1])["decimator_fallbacks"] if decimator else []
-    return steps, fallbacks
+    fallbacks = [f for ln in decimator for f in json.loads(ln.split(": ", 1)[1])["decimator_fallbacks"]]
+    return variants, fallbacks
 
 
 def _triangle_quality(mesh) -> dict:
@@ -308,9 +328,11 @@ def step_benchmark(
     variants: int,
     workdir: Path,
     decimators: dict[str, str] | None = None,
+    per_shape: bool = False,
 ) -> dict:
     """The ``--steps`` figures (module docstring) for each label's code tree (``trees``: label -> tree),
-    jobs interleaved over labels; ``decimators``: label -> config ``decimator`` (absent: the default)."""
+    jobs interleaved over labels; ``decimators``: label -> config ``decimator`` (absent: the default);
+    ``per_shape``: a tree whose job takes several variants runs one job per shape (else one per variant)."""
     import tempfile
 
     from becos.build.remesh import intrinsic_coincidence, load_remeshed, shared_vertex_share
@@ -347,23 +369,39 @@ def step_benchmark(
     # (with its own mesh cache: the jobs' caches stay empty, so each shape's first variant parses its file)
     config = {**configs[next(iter(trees))], "results": str(work / "prepared" / "results")}
     prepared = {name: ShapeStore(config, [rows[name]]).prepared("tosca", name).mesh for name in names}
+    per_shape_jobs: dict[str, list[float]] = {label: [] for label in trees}
+    tokens = [f"v{v}" for v in range(variants)]
     for name in names:
         original = prepared[name]
-        for v in range(variants):
-            token = f"v{v}"
+        # one job per variant, or (per_shape, a tree whose job takes several variants) one per shape
+        batches = {
+            label: [tokens] if per_shape and _per_shape_cli(tree) else [[t] for t in tokens]
+            for label, tree in trees.items()
+        }
+        for round_ in range(max(len(b) for b in batches.values())):
             for label, tree in trees.items():
-                config = configs[label]
-                out = work / label.replace(":", "_") / f"{name}_{token}.npz"
-                out.parent.mkdir(parents=True, exist_ok=True)
-                steps, fell_back = _job_cpu(tree, config, rows[name], token, out)
-                if fell_back:
-                    fallbacks[label][f"{name}/{token}"] = fell_back
-                jobs[label].append({"variant": f"{name}/{token}", **{k: round(steps.get(k, 0.0), 3) for k in STEPS}})
-                r = load_remeshed(out)
-                target = remesh_target(config["seed"], "tosca", name, token)["target_vertices"]
-                guarantees[label][f"{name}/{token}"] = _guarantees(original, r, target)
-                files[label][(name, v)] = r
-                print(f"{label} {name} {token}: {steps['total']:.2f} CPU-s", file=sys.stderr, flush=True)
+                if round_ >= len(batches[label]):
+                    continue
+                config, batch = configs[label], batches[label][round_]
+                folder = work / label.replace(":", "_") / "_".join([name, *batch])
+                steps, fell_back = _job_cpu(tree, config, rows[name], batch, folder)
+                for token, variant in zip(batch, steps):
+                    if fell_back:
+                        fallbacks[label][f"{name}/{token}"] = fell_back
+                    jobs[label].append(
+                        {"variant": f"{name}/{token}", **{k: round(variant.get(k, 0.0), 3) for k in STEPS}}
+                    )
+                    r = load_remeshed(folder / f"{token}.npz")
+                    target = remesh_target(config["seed"], "tosca", name, token)["target_vertices"]
+                    guarantees[label][f"{name}/{token}"] = _guarantees(original, r, target)
+                    files[label][(name, int(token[1:]))] = r
+                job_total = sum(variant["total"] for variant in steps)
+                per_shape_jobs[label].append(job_total / len(batch))
+                print(
+                    f"{label} {name} {','.join(batch)}: {job_total:.2f} CPU-s ({job_total / len(batch):.2f} per variant)",
+                    file=sys.stderr,
+                    flush=True,
+                )
     out: dict = {"shapes": names, "variants_per_shape": variants, "cpu_seconds_per_variant": {}, "guarantees": {}}
     for label in trees:
         table = {k: np.array([j[k] for j in jobs[label]]) for k in STEPS}
@@ -372,6 +410,12 @@ def step_benchmark(
             "median": {k: round(float(np.median(x)), 3) for k, x in table.items()},
             "max": {k: round(float(x.max()), 3) for k, x in table.items()},
             "median_without_startup": round(float(np.median(remesh_only)), 3),
+            "jobs_per_shape": len(per_shape_jobs[label]) // len(names),
+            # each job's CPU over its variants (start-up included): median and max over the jobs
+            "job_total_per_variant": {
+                "median": round(float(np.median(per_shape_jobs[label])), 3),
+                "max": round(float(max(per_shape_jobs[label])), 3),
+            },
             "jobs": jobs[label],
         }
         g = guarantees[label]
@@ -455,6 +499,12 @@ if __name__ == "__main__":
     parser.add_argument("--before", type=Path, help="with --steps: another checkout to compare with")
     parser.add_argument("--shapes", help="with --steps: comma-separated TOSCA names (default: STEP_SAMPLE)")
     parser.add_argument("--variants", type=int, default=2, help="with --steps: variants per shape")
+    parser.add_argument(
+        "--per-shape",
+        action="store_true",
+        help="with --steps: one job per shape making all its variants, as the workflow runs it (a tree "
+        "whose job takes one variant still runs one job per variant)",
+    )
     parser.add_argument("--workdir", type=Path, default=Path("/tmp"), help="with --steps: where jobs write")
     parser.add_argument(
         "--decimators",
@@ -471,6 +521,7 @@ if __name__ == "__main__":
             if decimator is not None:
                 decimators[label] = decimator
         names = args.shapes.split(",") if args.shapes else STEP_SAMPLE
-        print(json.dumps(step_benchmark(trees, names, args.variants, args.workdir, decimators), indent=1))
+        figures = step_benchmark(trees, names, args.variants, args.workdir, decimators, args.per_shape)
+        print(json.dumps(figures, indent=1))
     else:
         print(json.dumps(remesh_benchmark(SAMPLE if args.sample else None), indent=1))

@@ -5,9 +5,9 @@ per setting, ``--chunks`` chunks per setting) on ``--cores 2`` and samples every
 process every 0.1 s: each workflow job is one ``becos <sub-command>`` process, so the sub-command
 names the rule. Per rule it reports the jobs, the peak RSS of the largest job (MiB), the longest
 job's wall time (s), and for rules whose time grows with pairs the seconds per pair (largest over
-jobs of time / pairs of the job's chunk or setting). ``--write`` rewrites
-``workflow/resources.yaml`` from the peaks (memory × 1.5 rounded up to 250 MiB, at least 500; time
-× 3, at least 5 min; seconds per pair × 3).
+jobs of time / pairs of the job's chunk or setting), and for remesh (one job per shape) the seconds
+per variant. ``--write`` rewrites ``workflow/resources.yaml`` from the peaks (memory × 1.5 rounded up
+to 250 MiB, at least 500; time × 3, at least 5 min; seconds per pair or variant × 3).
 
 Usage::
 
@@ -144,6 +144,10 @@ def summarise(workdir: Path, jobs: list[dict]) -> dict:
         if n:
             r["max_pairs_per_job"] = max(r.get("max_pairs_per_job", 0), n)
             r["seconds_per_pair"] = round(max(r.get("seconds_per_pair", 0.0), seconds / n), 4)
+        if job["rule"] == "remesh":  # one job per shape: --tokens lists its variants
+            n = len(job["cmd"][job["cmd"].index("--tokens") + 1].split(","))
+            r["max_variants_per_job"] = max(r.get("max_variants_per_job", 0), n)
+            r["seconds_per_variant"] = round(max(r.get("seconds_per_variant", 0.0), seconds / n), 4)
     return dict(sorted(per_rule.items()))
 
 
@@ -164,7 +168,8 @@ def resources_yaml(measured: dict, source: str) -> str:
         "# Per-rule resources for schedulers (mem_mb: MiB, runtime: minutes), from measured peaks.",
         f"# Measured by benchmarks/resources.py: {source}.",
         "# memory = peak x 1.5, time = longest x 3",
-        "# (rules with seconds_per_pair: at least that x 3 x the pairs of the job's chunk or setting).",
+        "# (rules with seconds_per_pair: at least that x 3 x the pairs of the job's chunk or setting;",
+        "# remesh, seconds_per_variant: at least that x 3 x the variants of the job's shape).",
         "# A retried job gets attempt x these (profiles set retries). Rules not listed get",
         "# becos.resources.DEFAULT. Override one rule with --set-resources RULE:mem_mb=N.",
         "rules:",
@@ -172,8 +177,9 @@ def resources_yaml(measured: dict, source: str) -> str:
     for rule, r in measured.items():
         mem = max(500, math.ceil(r["peak_rss_mb"] * 1.5 / 250) * 250)
         entry = f"  {rule}: {{mem_mb: {mem}, runtime: {max(5, math.ceil(r['max_seconds'] * 3 / 60))}"
-        if "seconds_per_pair" in r:
-            entry += f", seconds_per_pair: {round(r['seconds_per_pair'] * 3, 3)}"
+        for key in ("seconds_per_pair", "seconds_per_variant"):
+            if key in r:
+                entry += f", {key}: {round(r[key] * 3, 3)}"
         lines.append(entry + "}" + f"  # peak {r['peak_rss_mb']} MiB, longest {r['max_seconds']} s, {r['jobs']} jobs")
     for rule, r in ESTIMATES.items():
         if rule not in measured:

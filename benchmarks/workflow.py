@@ -296,7 +296,8 @@ def plan_build_profile(config: dict) -> dict:
     return {
         "seconds": timings,
         "shapes": len(plan.catalog),
-        "remesh_jobs": len(plan.remesh_jobs),
+        "remesh_jobs": len(plan.remesh_jobs),  # one per shape
+        "remesh_variants": len(plan.remesh_variants),
         "chunks_per_stage": {s: len(plan.chunks(s)) for s in plan.manifests},
         "remesh_inputs_over_all_chunks": n_inputs,
     }

@@ -261,12 +261,12 @@ def test_messy_download_through_the_workflow_remesh_stage(
 
     entry = replace(tosca_entries["wolf1"], path=path)
     row = catalog_table([entry]).iloc[0].to_dict()
-    out = tmp_path / "results" / "wolf1-f2000.npz"
+    folder = tmp_path / "results" / "wolf1"
     with caplog.at_level(logging.WARNING, logger="becos.build.remesh"):
         options = RemeshOptions(
             results=str(tmp_path / "results"), seed=42, remesh=True, remesher="becos", decimator="pymeshlab"
         )
-        remesh_stage(options, row, "f2000", out)
+        remesh_stage(options, row, ["f2000"], folder)
     assert path.read_bytes() == written
     message = " ".join(rec.getMessage() for rec in caplog.records)
     for words in (
@@ -279,7 +279,7 @@ def test_messy_download_through_the_workflow_remesh_stage(
         assert words in message
     assert str(path) in message  # the warning names the user's file
 
-    r = load_remeshed(out)
+    r = load_remeshed(folder / "f2000.npz")
     assert abs(r.mesh.n_faces - 2000) <= 1 and mesh_checks(r.mesh)["misoriented_edges"] == 0
     prepared = prepare_shape(entry)  # the geometry the stage remeshed
     t = r.to_original

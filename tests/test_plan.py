@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -173,36 +174,40 @@ def _plan(config: dict) -> bw.Plan:
     return bw.Plan(config, catalog, {"full_full": manifest})
 
 
-def test_chunk_inputs_are_the_remeshes_the_chunk_reads(config):
+def test_chunk_inputs_are_the_remesh_folders_the_chunk_reads(config):
+    """A chunk job declares its shapes' remesh folders (the remesh jobs' outputs, one job per shape making
+    every token some pair uses), its list file names the files in them (chunk_remesh_files)."""
     plan = _plan(config)
-    remeshed = plan.layout.remeshed
+    folder = plan.layout.remeshed_folder
     assert plan.chunks("full_full") == [0, 5]
-    assert plan.chunk_inputs("full_full", 0) == sorted(
-        str(remeshed("tosca", n, t)) for n, t in [("cat0", "v0"), ("cat1", "v1"), ("dog0", "v0")]
-    )
-    # cat1 v1 appears on both sides of chunk 0 and is listed once; the published target is its own file
-    assert plan.chunk_inputs("full_full", 5) == [
-        str(remeshed("tosca", "cat0", "f12000")),
-        str(remeshed("tosca", "dog1", "v2")),
-    ]
+    assert plan.chunk_inputs("full_full", 0) == [str(folder("tosca", n)) for n in ("cat0", "cat1", "dog0")]
+    # cat1 appears on both sides of chunk 0 and is listed once; a published target is a token of its shape
+    assert plan.chunk_inputs("full_full", 5) == [str(folder("tosca", "cat0")), str(folder("tosca", "dog1"))]
     assert plan.chunk_inputs("full_full", 3) == []  # a chunk without pairs reads nothing
     assert plan.chunk_inputs("full_full", 0) is not plan.chunk_inputs("full_full", 0)  # callers get a copy
-    assert plan.remesh_jobs == sorted(
-        {
-            ("tosca", "cat0", "v0"),
-            ("tosca", "cat1", "v1"),
-            ("tosca", "dog0", "v0"),
-            ("tosca", "cat0", "f12000"),
-            ("tosca", "dog1", "v2"),
-        }
-    )
+    from becos.workflow.plan import chunk_remesh_files
+
+    listed = chunk_remesh_files(plan.manifests["full_full"], config)
+    remeshed = plan.layout.remeshed
+    assert listed["0"] == [
+        ["tosca", n, t, str(remeshed("tosca", n, t))] for n, t in [("cat0", "v0"), ("cat1", "v1"), ("dog0", "v0")]
+    ]
+    assert all(Path(p).parent == folder(d, n) for rows in listed.values() for d, n, _, p in rows)
+    assert plan.remesh_jobs == {
+        ("tosca", "cat0"): ["f12000", "v0"],
+        ("tosca", "cat1"): ["v1"],
+        ("tosca", "dog0"): ["v0"],
+        ("tosca", "dog1"): ["v2"],
+    }
+    targets = plan.remesh_targets("tosca", "cat0")  # the remesh rule's rerun trigger: every token's target
+    assert targets["f12000"] == {"target_faces": 12000} and set(targets["v0"]) == {"target_vertices"}
     assert "file" not in json.loads(plan.shape_json("tosca", "dog0"))  # the rule passes the mesh itself
     assert plan.files[("tosca", "dog0")] == "data/dog0.off"
 
 
 def test_without_remeshing_a_chunk_reads_no_remesh_file(config):
     plan = _plan({**config, "remesh": False})
-    assert plan.chunk_inputs("full_full", 0) == [] and plan.remesh_jobs == []
+    assert plan.chunk_inputs("full_full", 0) == [] and plan.remesh_jobs == {}
 
 
 def test_stored_input_keys(tmp_path):

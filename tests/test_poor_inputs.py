@@ -80,7 +80,10 @@ def test_a_store_rewritten_under_a_reader_is_a_named_error(store, pair_record_fi
             ["catalog", "--options", "{}", "--data-dir", "RESULTS", "--annotations", "RESULTS"],
             "becos catalog: --options: lacks the key 'results' (given keys: []). Fix: ",
         ),
-        (["remesh", "--options", "{}", "--shape", "{x", "--token", "v0"], "becos remesh: --shape: not valid JSON"),
+        (
+            ["remesh", "--options", "{}", "--shape", "{x", "--tokens", "v0", "--out-dir", "RESULTS"],
+            "becos remesh: --shape: not valid JSON",
+        ),
         (
             [
                 "ground-truth",
@@ -109,7 +112,8 @@ def test_bad_options_of_a_stage_command_are_one_line_errors(argv, message, tmp_p
     from becos.cli import main
 
     results = str(tmp_path / "nothing")
-    argv = [a.replace("RESULTS", results) for a in argv] + ["--out", str(tmp_path / "out")]
+    argv = [a.replace("RESULTS", results) for a in argv]
+    argv += [] if "--out-dir" in argv else ["--out", str(tmp_path / "out")]
     assert main(argv) == 2
     err = capsys.readouterr().err
     assert err.startswith(message.replace("RESULTS", results)), err

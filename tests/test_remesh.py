@@ -182,11 +182,12 @@ def test_the_decimator_key_reaches_the_remesh_job(tosca_entries, tmp_path, capsy
     options = json.loads(job_options(config, "remesh"))
     assert options["decimator"] == "fast-simplification"
     row = catalog_table([tosca_entries["wolf0"]]).iloc[0].to_dict()
-    out = tmp_path / "wolf0-f2000.npz"
-    remesh_stage(options, row, "f2000", out)
+    out = tmp_path / "wolf0"
+    remesh_stage(options, row, ["f2000"], out, ply=False)
     logged = [ln for ln in capsys.readouterr().err.splitlines() if ln.startswith("remesh decimator: ")]
     assert json.loads(logged[0].split(": ", 1)[1]) == {"decimator": "fast-simplification", "decimator_fallbacks": []}
-    r = load_remeshed(out)
+    assert sorted(p.name for p in out.iterdir()) == ["f2000.npz"]
+    r = load_remeshed(out / "f2000.npz")
     assert r.mesh.n_faces in (1999, 2000) and mesh_checks(r.mesh)["components"] == 1
 
 

@@ -56,8 +56,8 @@ def built(becos_code, tmp_path_factory):
     )
     plan = bw.Plan.build(config)
     rows = {(r["dataset"], r["name"]): r for r in plan.catalog.to_dict("records")}
-    for dataset, name, token in plan.remesh_jobs:
-        bw.remesh_stage(config, rows[(dataset, name)], token, layout.remeshed(dataset, name, token))
+    for (dataset, name), tokens in plan.remesh_jobs.items():
+        bw.remesh_stage(config, rows[(dataset, name)], tokens, layout.remeshed_folder(dataset, name))
     bw.ground_truth_stage(config, "full_full", 0, layout.ground_truth_index("full_full", 0), **_inputs(config))
     bw.pairs_stage(
         config,

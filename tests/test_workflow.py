@@ -108,21 +108,20 @@ def test_snakemake_report_packs_each_settings_report_with_its_caption(tiny_tosca
 
 
 def test_a_deleted_remesh_output_is_rebuilt(tiny_tosca_run, tmp_path):
-    """Issue #21: every remesh output (the .ply nothing else reads included) is a target of the run."""
+    """Issue #21: every remesh output (the .ply nothing else reads included) is a target of the run: a
+    shape folder missing one of its files is removed, and its remesh job (one per shape) planned again."""
     import shutil
 
     run = tmp_path / "run"  # a copy (modification times kept): other tests read the shared run meanwhile
     shutil.copytree(tiny_tosca_run, run, symlinks=True)
-    ply = sorted((run / "results" / "remeshed").rglob("*.ply"))[0]
-    kept = ply.with_name(ply.name + ".kept")
-    shutil.copy2(ply, kept)
+    folders = sorted(p for p in (run / "results" / "remeshed").glob("*/*") if p.is_dir())
+    ply = sorted(folders[0].glob("*.ply"))[0]
     ply.unlink()
-    dry = snakemake(run, "-n").stdout
-    assert jobs_planned(dry).get("remesh") == 1, dry[-3000:]
-    assert str(ply.relative_to(run)) in dry
-    shutil.move(kept, ply)
-    after = snakemake(run, "-n")
-    assert "Nothing to be done" in after.stdout + after.stderr
+    result = snakemake(run, "-n")
+    assert jobs_planned(result.stdout).get("remesh") == 1, result.stdout[-3000:]
+    assert f"output: {folders[0].relative_to(run)}\n" in result.stdout, result.stdout[-3000:]
+    assert f"{folders[0].relative_to(run)} lacks 1 file(s) its remesh job writes (e.g. {ply.name})" in result.stderr
+    assert not folders[0].exists() and all(f.is_dir() for f in folders[1:])  # the other shapes' are kept
 
 
 def test_a_dry_run_before_any_job_lists_the_first_stages(becos_code, tmp_path):
@@ -294,12 +293,13 @@ def test_incremental_rebuild(becos_code, tmp_path):
     snakemake(workdir, "--cores", "2")
     pairs_dir = workdir / "results" / "partial_partial" / "pairs"
     before = {p.name: (p.stat().st_mtime_ns, p.read_bytes()) for p in pairs_dir.glob("*.npz")}
-    remeshed_before = {str(p.relative_to(workdir)) for p in (workdir / "results" / "remeshed").rglob("*.npz")}
+    # the remesh jobs' outputs: one folder per shape
+    remeshed_before = {str(p.parent.relative_to(workdir)) for p in (workdir / "results" / "remeshed").rglob("*.npz")}
     assert before and remeshed_before
 
     write_config(workdir, becos_code, combinations="all", **common)
     dry = snakemake(workdir, "-n", "--cores", "2").stdout
-    planned_remesh = set(re.findall(r"output: (results/remeshed/\S+\.npz)", dry))
+    planned_remesh = set(re.findall(r"output: (results/remeshed/\S+)\n", dry))
     assert planned_remesh and not planned_remesh & remeshed_before  # new shapes only
     snakemake(workdir, "--cores", "2")
     after = {p.name: (p.stat().st_mtime_ns, p.read_bytes()) for p in pairs_dir.glob("*.npz")}

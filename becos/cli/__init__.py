@@ -28,7 +28,7 @@ SUBCOMMANDS: tuple[tuple[str, str, str], ...] = (
     ("write-config", "becos.cli.workflow", "validate a configuration and write it with defaults filled in"),
     ("catalog", "becos.cli.workflow", "write the shape catalog of a workflow config"),
     ("manifest", "becos.cli.workflow", "write the pair manifest of one setting"),
-    ("remesh", "becos.cli.workflow", "remesh one shape variant"),
+    ("remesh", "becos.cli.workflow", "remesh the variants of one shape"),
     ("ground-truth", "becos.cli.workflow", "compute the ground truth of one chunk of pairs"),
     ("pairs", "becos.cli.workflow", "build the pair records of one chunk of pairs"),
     ("metadata", "becos.cli.workflow", "metadata of a setting's store (config digest, dataset licences)"),

@@ -173,9 +173,31 @@ def remesh_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--mesh", type=Path, help="the shape's mesh file (the workflow's rule passes it; default: the row's file)"
     )
-    parser.add_argument("--token", required=True, help="v<k> (variant k) or f<n> (target faces n)")
-    parser.add_argument("--ply", type=Path, help="also write the remeshed mesh as PLY")
-    _out(parser)
+    parser.add_argument(
+        "--tokens",
+        required=True,
+        type=_tokens,
+        help="the variants to write, comma-separated: v<k> (variant k) or f<n> (target faces n), e.g. v0,v1",
+    )
+    parser.add_argument(
+        "--out-dir",
+        required=True,
+        type=Path,
+        help="the shape's remesh folder, written whole: <token>.npz and <token>.ply per token",
+    )
+
+
+def _tokens(text: str) -> list[str]:
+    """``--tokens``: comma-separated remesh tokens, each ``v<k>`` or ``f<n>``."""
+    import re
+
+    tokens = [t.strip() for t in text.split(",") if t.strip()]
+    bad = [t for t in tokens if not re.fullmatch(r"[vf][0-9]+", t)]
+    if not tokens or bad:
+        raise argparse.ArgumentTypeError(
+            f"{text!r}: give comma-separated tokens v<k> (remesh variant k) or f<n> (face target n), e.g. v0,v1"
+        )
+    return tokens
 
 
 @_stage
@@ -183,7 +205,7 @@ def run_remesh(args: argparse.Namespace, config: dict) -> None:
     shape = parse_json_option(args.shape, "--shape", args.command)
     if args.mesh is not None:
         shape["file"] = str(args.mesh)
-    remesh_stage(config, shape, args.token, args.out, args.ply)
+    remesh_stage(config, shape, args.tokens, args.out_dir)
 
 
 def ground_truth_arguments(parser: argparse.ArgumentParser) -> None:

@@ -31,6 +31,7 @@ from becos.workflow.layout import (
     pair_file,
     remesh_token,
     remeshed_file,
+    variant_file,
 )
 from becos.workflow.options import (
     GROUND_TRUTH_VERSION,
@@ -104,6 +105,7 @@ __all__ = [
     "annotation_input_files",
     "pair_file",
     "remeshed_file",
+    "variant_file",
     "published_views_folder",
     "uses_published_views",
     "GROUND_TRUTH_VERSION",

@@ -68,6 +68,10 @@ class Layout:
         """The folder of every remesh variant (:func:`remeshed_file`)."""
         return self.results / "remeshed"
 
+    def remeshed_folder(self, dataset: str, name: str) -> Path:
+        """A shape's remesh variants (one remesh job writes the folder: :func:`variant_file`)."""
+        return self.remeshed_root / dataset / name
+
     def remeshed(self, dataset: str, name: str, token: str) -> Path:
         return remeshed_file(self.remeshed_root, dataset, name, token)
 
@@ -152,7 +156,13 @@ def _chunk_index_name(chunk: int | str) -> str:
 
 def remeshed_file(root: str | Path, dataset: str, name: str, token: str) -> Path:
     """A remesh variant's .npz under the remesh folder ``root`` (:attr:`Layout.remeshed_root`)."""
-    return Path(root) / dataset / name / f"{token}.npz"
+    return variant_file(Path(root) / dataset / name, token)
+
+
+def variant_file(folder: str | Path, token: str) -> Path:
+    """The .npz of the remesh variant ``token`` in its shape's folder (:meth:`Layout.remeshed_folder`);
+    its PLY is the same path with the suffix ``.ply``."""
+    return Path(folder) / f"{token}.npz"
 
 
 def pair_file(folder: str | Path, pair_id: str) -> Path:

@@ -173,14 +173,23 @@ class Plan:
         return side_shapes(rows, self.options.remesh)
 
     @cached_property
-    def remesh_jobs(self) -> list[tuple[str, str, str]]:
+    def remesh_variants(self) -> list[tuple[str, str, str]]:
         """Every (dataset, name, token) some pair uses, remeshing only (not ``original``)."""
         if not self.options.remesh:
             return []
-        jobs = set()
+        variants = set()
         for manifest in self.manifests.values():
-            jobs.update(self._side_files(manifest))
-        return sorted(jobs)
+            variants.update(self._side_files(manifest))
+        return sorted(variants)
+
+    @cached_property
+    def remesh_jobs(self) -> dict[tuple[str, str], list[str]]:
+        """The remesh jobs, one per shape: ``{(dataset, name): [token, ...]}``, the sorted tokens of the
+        shape's :attr:`remesh_variants` (the variants the job writes into :meth:`Layout.remeshed_folder`)."""
+        jobs: dict[tuple[str, str], list[str]] = {}
+        for dataset, name, token in self.remesh_variants:
+            jobs.setdefault((dataset, name), []).append(token)
+        return jobs
 
     @cached_property
     def _chunk_groups(self) -> dict[str, dict[int, pd.DataFrame]]:
@@ -195,13 +204,14 @@ class Plan:
         return self.manifests[setting].iloc[:0] if rows is None else rows
 
     def chunk_inputs(self, setting: str, chunk: int) -> list[str]:
-        """Remesh files the chunk reads (none without remeshing); computed once per chunk."""
+        """The remesh folders (:meth:`Layout.remeshed_folder`, one per shape: its remesh job's output) that
+        hold the remesh files the chunk reads, sorted (none without remeshing); computed once per chunk."""
         if not self.options.remesh:
             return []
         key = (setting, int(chunk))
         if key not in self._chunk_inputs:
-            rows = self.chunk_rows(setting, chunk)
-            self._chunk_inputs[key] = [str(self.layout.remeshed(*k)) for k in self._side_files(rows)]
+            shapes = {(d, n) for d, n, _ in self._side_files(self.chunk_rows(setting, chunk))}
+            self._chunk_inputs[key] = [str(self.layout.remeshed_folder(d, n)) for d, n in sorted(shapes)]
         return list(self._chunk_inputs[key])
 
     def chunk_original_files(self, setting: str, chunk: int) -> list[str]:
@@ -233,8 +243,9 @@ class Plan:
         row = self._catalog_rows[(dataset, name)]
         return json.dumps({k: v for k, v in row.items() if k != "file"}, sort_keys=True)
 
-    def remesh_target(self, dataset: str, name: str, token: str) -> dict:
-        return remesh_target(self.options.seed, dataset, name, token)
+    def remesh_targets(self, dataset: str, name: str) -> dict[str, dict]:
+        """``{token: target}`` of the shape's remesh job (:func:`remesh_target` of each of its tokens)."""
+        return {t: remesh_target(self.options.seed, dataset, name, t) for t in self.remesh_jobs[(dataset, name)]}
 
     @cached_property
     def _annotations(self):

@@ -13,7 +13,7 @@ import numpy as np
 
 from becos.atomic import remove_stale_temporaries, write_text
 from becos.errors import ConfigError
-from becos.workflow.layout import pair_file, remesh_token
+from becos.workflow.layout import pair_file, remesh_token, variant_file
 from becos.workflow.options import (
     GROUND_TRUTH_VERSION,
     RECORD_VERSION,
@@ -76,52 +76,70 @@ def write_manifest_stage(
 
 
 def remesh_stage(
-    options: RemeshOptions | dict, shape_row: dict, token: str, out: Path, ply: Path | None = None
+    options: RemeshOptions | dict, shape_row: dict, tokens: list[str], out_dir: Path, ply: bool = True
 ) -> None:
-    """Remesh one shape variant (prepared, common-frame mesh) and write the maps (+ a PLY to look at).
+    """Remesh the variants ``tokens`` of one shape (prepared, common-frame mesh) into the folder ``out_dir``:
+    per token its maps (:func:`becos.workflow.layout.variant_file`) and, with ``ply``, a PLY to look at.
 
-    ``shape_row`` is the shape's catalog row (:mod:`becos.sources.catalog` columns). With ``remesher:
-    reference`` the reference's remesh of the file coordinates (:mod:`becos.build.reference_remesh`; a vertex
-    target n becomes the face target 2n). Else becos's remesh, with the quadric decimator of config
-    ``decimator`` (:data:`becos.build.remesh.DECIMATORS`; its fallbacks to pymeshlab are logged). ``options``:
-    the remesh stage's (or a resolved config).
+    One process per shape: the mesh is loaded and prepared once and the per-shape part of the remesh
+    (:class:`becos.build.remesh.RemeshInput`) is shared by the variants, each variant byte-identical to
+    one remeshed alone. The folder is built aside and renamed into place when every variant is written
+    (:func:`becos.atomic.atomic_folder`): a killed job leaves no ``out_dir``. ``shape_row`` is the shape's
+    catalog row (:mod:`becos.sources.catalog` columns). With ``remesher: reference`` the reference's
+    remesh of the file coordinates (:mod:`becos.build.reference_remesh`; a vertex target n becomes the face
+    target 2n). Else becos's remesh, with the quadric decimator of config ``decimator``
+    (:data:`becos.build.remesh.DECIMATORS`; its fallbacks to pymeshlab are logged). ``options``: the remesh
+    stage's (or a resolved config). Logs per variant its CPU seconds by step (``remesh cpu seconds``, for
+    ``benchmarks/remesh.py``; the shape's own steps, ``job_start``, ``load``, ``prepare``, with its first
+    variant) and a progress line.
     """
-    from becos.build.remesh import remesh_with_stats, save_remeshed, write_ply
+    from becos.atomic import atomic_folder
+    from becos.build.remesh import RemeshInput, remesh_with_stats, save_remeshed, write_ply
 
     options = RemeshOptions.of(options)
-    cpu = {"job_start": time.process_time()}  # CPU seconds by step, logged for benchmarks/remesh.py
+    shared = {"job_start": time.process_time()}  # CPU seconds of the shape's steps, logged with its first variant
     dataset, name = shape_row["dataset"], shape_row["name"]
     shapes = ShapeStore(options, [shape_row])
-    target = remesh_target(options.seed, dataset, name, token)
     lap = time.process_time()
     shapes.mesh(dataset, name)
-    cpu["load"], lap = time.process_time() - lap, time.process_time()
+    shared["load"], lap = time.process_time() - lap, time.process_time()
     prepared = shapes.prepared(dataset, name)
-    cpu["prepare"], lap = time.process_time() - lap, time.process_time()
-    start = time.perf_counter()
-    if options.remesher == "reference":
-        from becos.build.reference_remesh import remesh_like_reference
+    shared["prepare"], lap = time.process_time() - lap, time.process_time()
+    shape = None if options.remesher == "reference" else RemeshInput(prepared.mesh, source=prepared.entry.path)
+    shared["shape"] = time.process_time() - lap
+    with atomic_folder(out_dir) as folder:
+        for i, token in enumerate(tokens):
+            cpu = dict(shared) if i == 0 else {}  # CPU seconds by step, logged for benchmarks/remesh.py
+            target = remesh_target(options.seed, dataset, name, token)
+            lap = time.process_time()
+            start = time.perf_counter()
+            if shape is None:
+                from becos.build.reference_remesh import remesh_like_reference
 
-        faces = target.get("target_faces") or 2 * int(target["target_vertices"])
-        result, _ = remesh_like_reference(shapes.mesh(dataset, name), prepared, faces, source=prepared.entry.path)
-        cpu["remesh"] = time.process_time() - lap
-    else:
-        result, stats = remesh_with_stats(
-            prepared.mesh, **target, source=prepared.entry.path, decimator=options.decimator
-        )
-        cpu.update(stats["cpu_seconds"])
-        _log(f"remesh decimator: {json.dumps({k: stats[k] for k in ('decimator', 'decimator_fallbacks')})}")
-    lap = time.process_time()
-    _remove_killed_writes([Path(p) for p in (out, ply) if p is not None])
-    save_remeshed(Path(out), result)
-    if ply is not None:
-        write_ply(Path(ply), result.mesh)
-    cpu["save"] = time.process_time() - lap
-    _log(f"remesh cpu seconds: {json.dumps({k: round(v, 4) for k, v in cpu.items()})}")
-    _log(
-        f"remesh {dataset}/{name} {token} ({options.remesher}): {prepared.mesh.n_vertices} -> "
-        f"{result.mesh.n_vertices} vertices ({target}) in {time.perf_counter() - start:.1f} s"
-    )
+                faces = target.get("target_faces") or 2 * int(target["target_vertices"])
+                result, _ = remesh_like_reference(
+                    shapes.mesh(dataset, name), prepared, faces, source=prepared.entry.path
+                )
+                cpu["remesh"] = time.process_time() - lap
+            else:
+                result, stats = remesh_with_stats(
+                    prepared.mesh, **target, source=prepared.entry.path, shape=shape, decimator=options.decimator
+                )
+                for step, seconds in stats["cpu_seconds"].items():
+                    cpu[step] = cpu.get(step, 0.0) + seconds
+                _log(f"remesh decimator: {json.dumps({k: stats[k] for k in ('decimator', 'decimator_fallbacks')})}")
+            lap = time.process_time()
+            out = variant_file(folder, token)
+            save_remeshed(out, result)
+            if ply:
+                write_ply(out.with_suffix(".ply"), result.mesh)
+            cpu["save"] = time.process_time() - lap
+            _log(f"remesh cpu seconds: {json.dumps({k: round(v, 4) for k, v in cpu.items()})}")
+            _log(
+                f"remesh {dataset}/{name} {token} ({options.remesher}), variant {i + 1}/{len(tokens)}: "
+                f"{prepared.mesh.n_vertices} -> {result.mesh.n_vertices} vertices ({target}) in "
+                f"{time.perf_counter() - start:.1f} s"
+            )
 
 
 def stored_key(path: Path, member: str) -> str | None:

@@ -70,6 +70,11 @@ def chunk_pairs(wildcards):
     return len(plan().chunk_rows(wildcards.setting, int(wildcards.chunk)))
 
 
+def shape_variants(wildcards):
+    """Remesh variants a remesh job writes (its run time grows with them)."""
+    return len(plan().remesh_jobs[(wildcards.dataset, wildcards.name)])
+
+
 def setting_pairs(wildcards):
     """Pairs of a setting (the run time of its store, export and evaluation jobs grows with them);
     0 while the dataset check has not run (a dry run before it, or one after its inputs changed), then
@@ -185,11 +190,40 @@ def all_targets(wildcards):
                 targets.append(str(path(setting)))
         if BASELINES:
             targets.append(str(LAYOUT.evaluation(setting) / "summary.csv"))
-    # every remesh output is a target once the dataset check has run, so a deleted one (e.g. the PLY that no
-    # job reads) is rebuilt; before the check the targets above are listed (a first dry run shows them all)
+    # every remesh folder is a target once the dataset check has run, so a deleted one, or one missing a file
+    # (e.g. the PLY that no job reads; drop_incomplete_remesh_folders), is rebuilt; before the check the
+    # targets above are listed (a first dry run shows them all)
     if LAYOUT.checks.exists():
-        targets += [str(LAYOUT.remeshed_ply(*job)) for job in plan().remesh_jobs]
+        drop_incomplete_remesh_folders()
+        targets += [str(LAYOUT.remeshed_folder(*shape)) for shape in plan().remesh_jobs]
     return targets
+
+
+@functools.cache
+def drop_incomplete_remesh_folders():
+    """Remove each remesh folder that lacks a file its job writes (a .npz or .ply deleted after a finished
+    run), so that its remesh job runs again and writes the folder whole: Snakemake itself does not rerun a
+    job whose output folder exists, for a file deleted inside it. Once per Snakemake call."""
+    import shutil
+
+    for (dataset, name), tokens in plan().remesh_jobs.items():
+        folder = LAYOUT.remeshed_folder(dataset, name)
+        if not folder.is_dir():
+            continue
+        files = [bw.variant_file(folder, t) for t in tokens]
+        missing = [p for f in files for p in (f, f.with_suffix(".ply")) if not p.is_file()]
+        if missing:
+            try:
+                shutil.rmtree(folder)
+            except OSError as exc:  # a read-only results folder: the chunk job reading it names the file
+                print(f"becos: {folder} lacks {missing[0].name}, and cannot be removed ({exc})", file=sys.stderr)
+                continue
+            print(
+                f"becos: {folder} lacks {len(missing)} file(s) its remesh job writes (e.g. {missing[0].name}); "
+                "removed it, so that the job writes the folder again",
+                file=sys.stderr,
+                flush=True,
+            )
 
 
 # Content digests of the input files (becos.workflow.digests): the jobs that read a dataset or annotation

@@ -1,4 +1,4 @@
-# Stage 3-4: pair manifests, remeshing per shape variant, ground truth and pair records per chunk.
+# Stage 3-4: pair manifests, remeshing per shape (all its variants), ground truth and pair records per chunk.
 # A remesh job gets its shape's catalog row as a parameter (not the catalog file), so rewriting the
 # catalog never reruns a remesh; a chunk job reruns whenever the manifest is rewritten, but keeps
 # every pair file whose input key is unchanged (becos.workflow).
@@ -28,38 +28,38 @@ rule remesh:
     input:
         mesh=lambda w: plan().files[(w.dataset, w.name)],
     output:
-        npz=LAYOUT.remeshed("{dataset}", "{name}", "{token}"),
-        ply=LAYOUT.remeshed_ply("{dataset}", "{name}", "{token}"),
+        # the shape's folder, written whole: <token>.npz and .ply per variant some pair uses
+        directory(LAYOUT.remeshed_folder("{dataset}", "{name}")),
     log:
-        "logs/remesh/{dataset}/{name}/{token}.log",
+        "logs/remesh/{dataset}/{name}.log",
     wildcard_constraints:
         dataset="[a-z0-9_]+",
         name=".+",
-        token="v[0-9]+|f[0-9]+",
     group:
         "remesh"
     conda:
         "../envs/becos.yaml"
     resources:
         mem_mb=RESOURCES.mem_mb("remesh"),
-        runtime=RESOURCES.runtime("remesh"),
+        runtime=RESOURCES.runtime("remesh", n_variants=shape_variants),
     params:
-        # a rerun trigger only (the job derives the target from --token and the seed): a change to the
-        # variant's target vertex count (becos.build.remesh.variant_target_vertices) reruns it
-        rerun_key=lambda w: plan().remesh_target(w.dataset, w.name, w.token),
+        tokens=lambda w: ",".join(plan().remesh_jobs[(w.dataset, w.name)]),
+        # a rerun trigger only (the job derives each target from its token and the seed): a changed token
+        # set or target vertex count (becos.build.remesh.variant_target_vertices) reruns the shape
+        rerun_key=lambda w: plan().remesh_targets(w.dataset, w.name),
         # and the mesh file's content (becos.workflow.digests): a replaced file reruns it whatever its time
         source=mesh_digest,
         shape=lambda w: plan().shape_json(w.dataset, w.name),
         options=bw.job_options(config, "remesh"),
     shell:
         "becos remesh --options {params.options:q} --shape {params.shape:q} --mesh {input.mesh:q}"
-        " --token {wildcards.token} --out {output.npz:q} --ply {output.ply:q} > {log:q} 2>&1"
+        " --tokens {params.tokens} --out-dir {output:q} > {log:q} 2>&1"
 
 
-# A chunk job's remesh files are declared one by one (input.remeshed) and passed in a list file that the
-# manifest job writes (input.remesh_files, every chunk's list): a chunk may read hundreds, more than one
-# shell command line holds. Both are named by becos.workflow.plan.side_shapes of the chunk's manifest rows,
-# and the job opens only the listed files. Its original meshes (input.meshes) are named by the catalog's
+# A chunk job's remesh files are declared by their shapes' folders (input.remeshed, the remesh jobs'
+# outputs) and passed one by one in a list file that the manifest job writes (input.remesh_files, every
+# chunk's list): a chunk may read hundreds, more than one shell command line holds. Both are named by
+# becos.workflow.plan.side_shapes of the chunk's manifest rows, and the job opens only the listed files. Its original meshes (input.meshes) are named by the catalog's
 # rows; the annotation folder is passed.
 rule ground_truth:
     input:

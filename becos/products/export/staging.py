@@ -16,7 +16,6 @@ import os
 import re
 import shutil
 import sys
-import tempfile
 from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -24,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from becos.atomic import remove_stale_temporaries
+from becos.atomic import atomic_folder
 from becos.build.record import PairRecord
 from becos.errors import BecosError, DiskFullError, InputFileError
 
@@ -97,31 +96,12 @@ def _check_target(out: Path, overwrite: bool) -> None:
 
 @contextmanager
 def staged_dir(out: Path, overwrite: bool) -> Iterator[Path]:
-    """Yield a temporary folder beside ``out``; on success it replaces ``out``, else it is removed."""
+    """Yield a temporary folder beside ``out``; on success it replaces ``out``, else it is removed
+    (:func:`becos.atomic.atomic_folder`)."""
     _check_target(out, overwrite)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    remove_stale_temporaries(out.parent, [out.name])  # one job writes an export: these are a killed one's
-    tmp = Path(tempfile.mkdtemp(dir=out.parent, prefix=f".{out.name}.tmp-"))
-    try:
+    with atomic_folder(out) as tmp:
         yield tmp
-        os.chmod(tmp, 0o755)  # mkdtemp creates 0700; exports are meant to be shared
-        _replace_dir(tmp, out, overwrite)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
-
-
-def _replace_dir(tmp: Path, out: Path, overwrite: bool) -> None:
-    if out.is_dir() and _is_empty_dir(out):
-        out.rmdir()
-    if out.exists():
         _check_target(out, overwrite)  # appeared meanwhile
-        old = Path(tempfile.mkdtemp(dir=out.parent, prefix=f".{out.name}.old-"))
-        os.replace(out, old / out.name)
-        os.replace(tmp, out)
-        shutil.rmtree(old, ignore_errors=True)
-    else:
-        os.replace(tmp, out)
 
 
 @dataclass(frozen=True)
