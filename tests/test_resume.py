@@ -138,6 +138,30 @@ def test_a_killed_write_leaves_a_temporary_file_the_next_writer_removes(tmp_path
     assert sorted(p.name for p in tmp_path.glob(".*-k*")) == [".psmal.tmp-k4", ".released-extra.tmp-k3"]
 
 
+def test_a_folder_is_written_whole_or_not_at_all(tmp_path):
+    """:func:`becos.atomic.atomic_folder` (a remesh job's shape folder): nothing under the final name until
+    the folder is complete, a failed write keeps the old folder, a new one replaces it whole (a token
+    gone from it goes with it), and a killed write's temporary folder is removed by the next write."""
+    from becos.atomic import atomic_folder
+
+    out = tmp_path / "tosca" / "cat0"
+    (tmp_path / "tosca" / ".cat0.tmp-killed").mkdir(parents=True)  # what a SIGKILLed job leaves
+    with atomic_folder(out) as folder:
+        (folder / "v0.npz").write_bytes(b"first")
+        assert not out.exists()
+    assert [p.name for p in (tmp_path / "tosca").iterdir()] == ["cat0"] and out.stat().st_mode & 0o777 == 0o755
+    with pytest.raises(RuntimeError):
+        with atomic_folder(out) as folder:
+            (folder / "v0.npz").write_bytes(b"half")
+            raise RuntimeError("the job failed")
+    assert [p.name for p in (tmp_path / "tosca").iterdir()] == ["cat0"]
+    assert (out / "v0.npz").read_bytes() == b"first"
+    with atomic_folder(out) as folder:
+        (folder / "v1.npz").write_bytes(b"second")
+    assert [p.name for p in (tmp_path / "tosca").iterdir()] == ["cat0"]
+    assert [p.name for p in out.iterdir()] == ["v1.npz"]
+
+
 @pytest.fixture(scope="module")
 def reference_run(tiny_tosca_reference) -> tuple[Path, dict]:
     """The uninterrupted ``--cores 2`` run and its fingerprint."""

@@ -355,7 +355,7 @@ def test_original_settings_plan_uses_the_published_pairs(becos_code, tmp_path):
     assert counts["train"] == 3 and counts.get("val", 0) <= 1 and counts.get("test", 0) <= 1
     assert set(manifest["x_dataset"]) == set(manifest["y_dataset"]) == {"tosca"}
     # published face targets become remesh tokens; published rotations travel with the pair
-    assert plan.remesh_jobs and all(re.fullmatch(r"f\d+", t) for _, _, t in plan.remesh_jobs)
+    assert plan.remesh_jobs and all(re.fullmatch(r"f\d+", t) for _, _, t in plan.remesh_variants)
     rotations = bw.pair_published_rotations(manifest.iloc[0].to_dict())
     for r in rotations:
         assert np.allclose(r @ r.T, np.eye(3), atol=1e-6)
