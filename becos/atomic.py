@@ -52,13 +52,21 @@ def atomic_path(path: str | Path, suffix: str = ".tmp") -> Iterator[Path]:
 def atomic_folder(path: str | Path) -> Iterator[Path]:
     """Yield a new temporary folder beside ``path`` (``.<name>.tmp-<random>``); on success it replaces
     ``path`` (mode 0755; an existing folder is moved aside to ``.<name>.old-<random>``, then removed), else
-    it is removed. The temporaries a killed write of ``path`` left are removed first: only the one job
-    that writes ``path`` may call it (:func:`remove_stale_temporaries`). A reader sees the old folder,
-    none, or the whole new one."""
+    it is removed. The two folders a killed write of ``path`` left are removed first: only the one job
+    that writes ``path`` may call it. A reader sees the old folder, none, or the whole new one."""
     path = Path(path)
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        remove_stale_temporaries(path.parent, [path.name])
+        # exactly ".<name>.tmp-*" and ".<name>.old-*": other jobs write their folders beside this one (the
+        # remesh folders of a dataset), and the file rule of remove_stale_temporaries would take a running
+        # write of "<name>.<suffix>" (a shape named "a.1" beside "a") for a killed one of "<name>"
+        for entry in os.scandir(path.parent):
+            if not entry.name.startswith((f".{path.name}.tmp-", f".{path.name}.old-")):
+                continue
+            if entry.is_dir(follow_symlinks=False):
+                shutil.rmtree(entry.path, ignore_errors=True)
+            else:
+                Path(entry.path).unlink(missing_ok=True)
         tmp = Path(tempfile.mkdtemp(dir=path.parent, prefix=f".{path.name}.tmp-"))
     except OSError as exc:
         if exc.errno in (errno.ENOSPC, errno.EDQUOT):

@@ -146,10 +146,13 @@ def test_a_folder_is_written_whole_or_not_at_all(tmp_path):
 
     out = tmp_path / "tosca" / "cat0"
     (tmp_path / "tosca" / ".cat0.tmp-killed").mkdir(parents=True)  # what a SIGKILLed job leaves
+    (tmp_path / "tosca" / ".cat0.1.tmp-running").mkdir()  # another shape's job, writing beside it
     with atomic_folder(out) as folder:
         (folder / "v0.npz").write_bytes(b"first")
         assert not out.exists()
-    assert [p.name for p in (tmp_path / "tosca").iterdir()] == ["cat0"] and out.stat().st_mode & 0o777 == 0o755
+    assert sorted(p.name for p in (tmp_path / "tosca").iterdir()) == [".cat0.1.tmp-running", "cat0"]
+    assert out.stat().st_mode & 0o777 == 0o755
+    (tmp_path / "tosca" / ".cat0.1.tmp-running").rmdir()
     with pytest.raises(RuntimeError):
         with atomic_folder(out) as folder:
             (folder / "v0.npz").write_bytes(b"half")

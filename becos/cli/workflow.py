@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 import functools
 import json
+import re
 from pathlib import Path
 
 from becos.atomic import write_text
@@ -189,8 +190,6 @@ def remesh_arguments(parser: argparse.ArgumentParser) -> None:
 
 def _tokens(text: str) -> list[str]:
     """``--tokens``: comma-separated remesh tokens, each ``v<k>`` or ``f<n>``."""
-    import re
-
     tokens = [t.strip() for t in text.split(",") if t.strip()]
     bad = [t for t in tokens if not re.fullmatch(r"[vf][0-9]+", t)]
     if not tokens or bad:
