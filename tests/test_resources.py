@@ -42,6 +42,10 @@ def test_retries_ask_for_more_and_chunk_time_grows_with_pairs():
     assert runtime(Wildcards, attempt=1) == 20 and runtime(Wildcards, attempt=3) == 60  # 200 x 6 s = 20 min
     assert table.runtime("pairs", n_pairs=lambda w: 3)(Wildcards) == 5  # never below the table's
     assert table.mem_mb("unlisted")(Wildcards) == DEFAULT["mem_mb"]
+    # a remesh job makes every variant of its shape: its time grows with them (the shipped table's 105 s each)
+    remesh = RuleResources.load(TABLE).runtime("remesh", n_variants=lambda w: 5)
+    assert remesh(Wildcards) == 9 and remesh(Wildcards, attempt=2) == 18  # 5 x 105 s = 8.75 min
+    assert RuleResources.load(TABLE).runtime("remesh", n_variants=lambda w: 2)(Wildcards) == 5
 
 
 @pytest.mark.parametrize(
