@@ -34,7 +34,8 @@ rule remesh:
         "logs/remesh/{dataset}/{name}.log",
     wildcard_constraints:
         dataset="[a-z0-9_]+",
-        name=".+",
+        # any shape name, but not a file in a shape's folder (asked for by name, it is there or not)
+        name=r"(?!.*/[vf][0-9]+\.(?:npz|ply)$).+",
     group:
         "remesh"
     conda:
