@@ -28,7 +28,9 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import pickle
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -114,12 +116,16 @@ class StageRemeshes:
 
         key = (name, token)
         if key not in self._done:
-            folder = self.plan.layout.remeshed_folder(dataset, name) / token  # a folder of one variant
+            # the stage writes a folder whole: one variant's, whose file then goes where the layout puts it
+            folder = self.plan.layout.remeshed_folder(dataset, name) / f".{token}"
+            out = self.plan.layout.remeshed(dataset, name, token)
             start = time.perf_counter()
             row = {**json.loads(self.plan.shape_json(dataset, name)), "file": self.plan.files[(dataset, name)]}
             remesh_stage(self.options, row, [token], folder, ply=False)
+            os.replace(folder / out.name, out)
+            shutil.rmtree(folder)
             self.seconds[key] = time.perf_counter() - start
-            self._done[key] = load_remeshed(folder / f"{token}.npz")
+            self._done[key] = load_remeshed(out)
         return self._done[key]
 
 
