@@ -11,10 +11,8 @@ layouts. File contents and shapes per step: docs/design/evaluate.md.
 from __future__ import annotations
 
 import json
-import os
 import shutil
 import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -126,14 +124,11 @@ def solve_part(part: Path, out: Path, method: str = "heat", progress: bool = Fal
     """Write the normalised symmetric block of every mesh of ``part`` into the folder ``out`` (built
     aside, renamed in). Returns ``{key: {n_vertices, n_rows, sqrt_area, cpu_s, write_s, bytes}}`` (also
     ``out/timings.json``; ``write_s``: wall seconds of symmetrising and writing the block)."""
-    from becos.atomic import remove_stale_temporaries, save_npy
+    from becos.atomic import atomic_folder, save_npy
     from becos.core.geodesics import distance_rows
 
     meshes = read_part(part)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    remove_stale_temporaries(out.parent, [out.name])  # one job solves a part
-    tmp = Path(tempfile.mkdtemp(dir=out.parent, prefix=f".{out.name}.tmp-"))
-    try:
+    with atomic_folder(out) as tmp:  # one job solves a part
         timings = {}
         for key, (vertices, faces, sources, sqrt_area) in meshes.items():
             started = time.process_time()
@@ -156,9 +151,4 @@ def solve_part(part: Path, out: Path, method: str = "heat", progress: bool = Fal
             if progress:
                 print(json.dumps({key: timings[key]}), file=sys.stderr, flush=True)
         (tmp / "timings.json").write_text(json.dumps(timings, indent=1, sort_keys=True) + "\n", encoding="utf-8")
-        if out.exists():
-            shutil.rmtree(out)
-        os.replace(tmp, out)
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
     return timings

@@ -14,16 +14,13 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-import os
-import shutil
-import tempfile
 from dataclasses import dataclass
 from functools import cache
 from pathlib import Path
 
 import numpy as np
 
-from becos.atomic import remove_stale_temporaries
+from becos.atomic import atomic_folder
 from becos.core.geometry import barycentric_coordinates
 from becos.core.mesh import TriMesh
 from becos.errors import ConfigError
@@ -628,10 +625,7 @@ def generate_collection(
             f"{out_dir} exists and is not a synthetic collection (no {MANIFEST}); refusing to "
             f"overwrite it. Fix: choose an empty or new folder"
         )
-    out_dir.parent.mkdir(parents=True, exist_ok=True)
-    remove_stale_temporaries(out_dir.parent, [out_dir.name])  # one job writes the collection
-    tmp = Path(tempfile.mkdtemp(dir=out_dir.parent, prefix=f".{out_dir.name}.tmp-"))
-    try:
+    with atomic_folder(out_dir) as tmp:  # one job writes the collection
         models = {spec.node: build_class(spec.dataset, spec.name) for spec in CLASSES}
         for spec in CLASSES:
             ds = DATASETS[spec.dataset]
@@ -642,11 +636,6 @@ def generate_collection(
         _write_annotations(tmp / "annotations", models)
         manifest = _manifest(tmp, models, seed, poses_per_class, poses, fraction)
         _write(tmp / MANIFEST, json.dumps(manifest, indent=1, sort_keys=True) + "\n")
-        os.chmod(tmp, 0o755)
-        _replace(out_dir, tmp)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
     return out_dir
 
 
@@ -689,15 +678,3 @@ def _manifest(tmp: Path, models: dict, seed: int, poses_per_class: int, poses: d
     if fraction is not None:
         manifest["fraction"] = float(fraction)
     return manifest
-
-
-def _replace(out_dir: Path, tmp: Path) -> None:
-    """Rename the finished folder ``tmp`` to ``out_dir``, an existing collection there moved aside first
-    and removed after."""
-    if out_dir.exists():
-        old = Path(tempfile.mkdtemp(dir=out_dir.parent, prefix=f".{out_dir.name}.old-"))
-        os.replace(out_dir, old / "collection")
-        os.replace(tmp, out_dir)
-        shutil.rmtree(old, ignore_errors=True)
-    else:
-        os.replace(tmp, out_dir)
