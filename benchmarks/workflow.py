@@ -52,13 +52,17 @@ pairs/s next to the reference's and the issue's target (10x the reference at 150
 as ``--stages`` (``snakemake``: the Snakemake process itself; ``other``: non-Python processes such as
 the jobs' shells), with CPU seconds per pair for ``ground-truth`` and ``pairs``. ``--repo`` and
 ``--remeshed`` work as for ``--stages`` (with ``--remeshed`` the remesh jobs are skipped, so pairs/s is
-not from scratch; the JSON says so).
+not from scratch; the JSON says so). ``--decimator NAME`` sets the config key ``decimator`` of every run
+(issue #31: ``fast-simplification`` beside the default ``pymeshlab``). Ratios are given against the
+reference's rate of issue 16 (``times_reference``) and the one measured beside becos for issue #31
+(``times_reference_side_by_side``, the faster reference).
 
 Usage::
 
     python benchmarks/workflow.py [--workdir /tmp/becos-bench] [--variants 1] [--skip-run] [--full-plan [--profile]]
     python benchmarks/workflow.py --stages [--repo PATH] [--remeshed DIR] [--workdir /tmp/becos-bench]
     python benchmarks/workflow.py --scaling [--sizes 150,1000] [--settings full_full,...] [--repo PATH] [--remeshed DIR]
+        [--decimator fast-simplification]
 """
 
 from __future__ import annotations
@@ -428,16 +432,28 @@ def stages(workdir: Path, code: Path, repo: Path, remeshed: Path | None = None) 
 
 REFERENCE_PAIRS_PER_SECOND = {"full_full": 0.248, "partial_full": 0.174, "partial_partial": 0.113}
 """The reference generator's pairs/s on this machine (n_jobs 2, 30 pairs per setting; issue 16)."""
+REFERENCE_PAIRS_PER_SECOND_SIDE_BY_SIDE = {"full_full": 0.307, "partial_full": 0.233, "partial_partial": 0.128}
+"""The reference's pairs/s measured again on this machine beside becos (issue #31): the faster of its two
+measurements, so ``times_reference_side_by_side`` is the stricter ratio."""
 TARGET_FACTOR = {150: 10, 1000: 30}
 """Issue 16's end-to-end targets: this many times the reference's pairs/s at 150 and 1,000 pairs."""
 
 
 def scaling(
-    workdir: Path, code: Path, repo: Path, sizes: list[int], settings: list[str], remeshed: Path | None = None
+    workdir: Path,
+    code: Path,
+    repo: Path,
+    sizes: list[int],
+    settings: list[str],
+    remeshed: Path | None = None,
+    decimator: str | None = None,
 ) -> dict:
-    """Pairs/s and CPU seconds by stage per (setting, size) (module docstring, ``--scaling``)."""
+    """Pairs/s and CPU seconds by stage per (setting, size) (module docstring, ``--scaling``); ``decimator``:
+    the config key ``decimator`` (None: its default)."""
+    overrides = {"decimator": decimator} if decimator else {}
     out: dict = {
         "repo": str(repo),
+        "decimator": decimator or "default",
         "remeshed_copied_from": str(remeshed) if remeshed else None,
         "from_scratch": remeshed is None,
         "runs": {},
@@ -454,6 +470,7 @@ def scaling(
                 usage_scale=0.5,
                 remesh_variants=1,
                 n_chunks=64,
+                **overrides,
             )
             result = measured_run(workdir, run, repo, remeshed)
             pairs = len((run / "results" / setting / "manifest.csv").read_text().splitlines()) - 1
@@ -466,6 +483,7 @@ def scaling(
                 "pairs_per_second": round(per_second, 3),
                 "reference_pairs_per_second": reference,
                 "times_reference": round(per_second / reference, 2),
+                "times_reference_side_by_side": round(per_second / REFERENCE_PAIRS_PER_SECOND_SIDE_BY_SIDE[setting], 2),
                 "cpu_seconds_by_stage": {k: v["cpu_seconds"] for k, v in kinds.items()},
                 "cpu_seconds_other": round(result["cpu_seconds_total"] - python_cpu, 1),
                 "cpu_seconds_per_pair": {
@@ -514,6 +532,10 @@ def main() -> None:
         default="full_full,partial_full,partial_partial",
         help="with --scaling: the settings (comma-separated)",
     )
+    parser.add_argument(
+        "--decimator",
+        help="with --scaling: the config key decimator (pymeshlab, fast-simplification; default: its default)",
+    )
     args = parser.parse_args()
     code = becos_code()
     result: dict = {"machine_cores": os.cpu_count()}
@@ -525,6 +547,7 @@ def main() -> None:
             [int(n) for n in args.sizes.split(",")],
             args.settings.split(","),
             args.remeshed,
+            args.decimator,
         )
         print(json.dumps(result, indent=1))
         return
