@@ -197,19 +197,9 @@ class VertexRounding:
             self._row = np.full(len(self.faces), -1, dtype=np.int64)
             self._row[only] = np.arange(len(only))
             used, neighbour, far = used[only], neighbour[only], far[only]
-        start = self.vertices[used]  # (F, 3, 3): edge k runs from corner k ...
-        edge = start[:, [1, 2, 0]] - start  # ... to corner k + 1
-        to_far = self.vertices[far] - start  # rows with far == -1 are never used
-        with np.errstate(divide="ignore", invalid="ignore"):
-            length2 = np.einsum("fkd,fkd->fk", edge, edge)
-            length = np.sqrt(length2)
-            far2 = np.einsum("fkd,fkd->fk", to_far, to_far)
-            beyond = to_far - edge
-            # the far corner in the face's plane: x along the edge from its start, y < 0 (across it)
-            far_x = (far2 - np.einsum("fkd,fkd->fk", beyond, beyond) + length2) / (2 * length)
-            far_y = -np.sqrt(np.maximum(far2 - far_x**2, 0.0))
-            # (F, 3, 6) per face and edge: unit direction (3), length, far corner x, y; one gather per query
-            self._edges = np.concatenate([edge / length[..., None], np.stack([length, far_x, far_y], axis=2)], axis=2)
+        unit, length, far_x, far_y = _edge_data(self.vertices, used, far)
+        # (F, 3, 6) per face and edge: unit direction (3), length, far corner x, y; one gather per query
+        self._edges = np.concatenate([unit, np.stack([length, far_x, far_y], axis=2)], axis=2)
         self._indices = np.stack([used, far, neighbour], axis=2)  # (F, 3, 3)
 
     def candidates(
@@ -236,26 +226,79 @@ class VertexRounding:
         corners, across = indices[..., 0], indices[..., 1]
         if kept_faces is not None:
             across = np.where(kept_faces[np.maximum(indices[..., 2], 0)], across, -1)
-        start = np.take(self.vertices, corners, axis=0)  # (M, 3, 3)
-        to_point = np.einsum("mk,mkd->md", weights, start)[:, None] - start
         edges = np.take(self._edges, row, axis=0)  # (M, 3, 6)
-        length, qx, qy = edges[..., 3], edges[..., 4], edges[..., 5]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            corner2 = np.einsum("mkd,mkd->mk", to_point, to_point)
-            px = np.einsum("mkd,mkd->mk", to_point, edges[..., :3])
-            py = np.sqrt(np.maximum(corner2 - px * px, 0.0))  # the point's distance from the edge's line
-            crossing = px + py / (py - qy) * (qx - px)  # where the straight line meets the edge's line
-            straight = np.hypot(px - qx, py - qy)
-            ok = (across >= 0) & (py - qy > 0) & (crossing >= 0) & (crossing <= length) & np.isfinite(straight)
-            distance = np.concatenate([np.sqrt(corner2), np.where(ok, straight, np.inf)], axis=1)
-        distance[~np.isfinite(distance)] = np.inf
-        return np.concatenate([corners, across], axis=1), distance
+        return _candidates(
+            self.vertices, corners, across, weights, edges[..., :3], edges[..., 3], edges[..., 4], edges[..., 5]
+        )
+
+    @staticmethod
+    def candidates_once(
+        vertices: np.ndarray, faces: np.ndarray, far: np.ndarray, face: np.ndarray, weights: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`candidates` without the per-face table, for a caller whose points lie on distinct faces
+        mostly (each point's face data is computed for it, by the same operations: the same values).
+
+        Args:
+            vertices: (V, 3) float64; faces: (F, 3) int64; far: (F, 3) int64 the far corners of
+                ``edge_neighbours(faces)``; face: (M,) int64 >= 0 and weights: (M, 3) as :meth:`candidates`.
+        """
+        vertices = np.asarray(vertices, dtype=np.float64)
+        corners, across = np.take(faces, face, axis=0), np.take(far, face, axis=0)
+        unit, length, far_x, far_y = _edge_data(vertices, corners, across)
+        return _candidates(vertices, corners, across, weights, unit, length, far_x, far_y)
 
     def nearest(self, face: np.ndarray, weights: np.ndarray, kept_faces: np.ndarray | None = None) -> np.ndarray:
         """(M,) int64 the candidate nearest each point along the surface (ties: the first candidate);
         arguments as :meth:`candidates`."""
         candidates, distance = self.candidates(face, weights, kept_faces)
         return candidates[np.arange(len(candidates)), distance.argmin(axis=1)]
+
+
+def _edge_data(
+    vertices: np.ndarray, corners: np.ndarray, far: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Per face (rows of ``corners`` (F, 3) and ``far`` (F, 3) int64: its corners and the far corners of
+    its edge neighbours, -1 for none) and edge k (corners k, k + 1): (F, 3, 3) unit direction, (F, 3)
+    length, and the far corner unfolded into the face's plane, (F, 3) x along the edge from its start and
+    (F, 3) y < 0 (across it); :class:`VertexRounding`."""
+    start = vertices[corners]  # (F, 3, 3): edge k runs from corner k ...
+    edge = start[:, [1, 2, 0]] - start  # ... to corner k + 1
+    to_far = vertices[far] - start  # rows with far == -1 are never used
+    with np.errstate(divide="ignore", invalid="ignore"):
+        length2 = np.einsum("fkd,fkd->fk", edge, edge)
+        length = np.sqrt(length2)
+        far2 = np.einsum("fkd,fkd->fk", to_far, to_far)
+        beyond = to_far - edge
+        far_x = (far2 - np.einsum("fkd,fkd->fk", beyond, beyond) + length2) / (2 * length)
+        far_y = -np.sqrt(np.maximum(far2 - far_x**2, 0.0))
+        unit = edge / length[..., None]
+    return unit, length, far_x, far_y
+
+
+def _candidates(
+    vertices: np.ndarray,
+    corners: np.ndarray,
+    across: np.ndarray,
+    weights: np.ndarray,
+    unit: np.ndarray,
+    length: np.ndarray,
+    qx: np.ndarray,
+    qy: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """:meth:`VertexRounding.candidates` from each point's (M, 3) corners, (M, 3) far corners (-1: none),
+    (M, 3) weights and its face's :func:`_edge_data` (M rows)."""
+    start = np.take(vertices, corners, axis=0)  # (M, 3, 3)
+    to_point = np.einsum("mk,mkd->md", weights, start)[:, None] - start
+    with np.errstate(divide="ignore", invalid="ignore"):
+        corner2 = np.einsum("mkd,mkd->mk", to_point, to_point)
+        px = np.einsum("mkd,mkd->mk", to_point, unit)
+        py = np.sqrt(np.maximum(corner2 - px * px, 0.0))  # the point's distance from the edge's line
+        crossing = px + py / (py - qy) * (qx - px)  # where the straight line meets the edge's line
+        straight = np.hypot(px - qx, py - qy)
+        ok = (across >= 0) & (py - qy > 0) & (crossing >= 0) & (crossing <= length) & np.isfinite(straight)
+        distance = np.concatenate([np.sqrt(corner2), np.where(ok, straight, np.inf)], axis=1)
+    distance[~np.isfinite(distance)] = np.inf
+    return np.concatenate([corners, across], axis=1), distance
 
 
 def compose(

@@ -7,10 +7,12 @@ Arrays of a block are concatenated over its pairs: a ragged group's rows (vertic
 
 from __future__ import annotations
 
+from collections import OrderedDict
+
 import numpy as np
 
 from becos.build.record import LEGACY_VERTEX_MAP_ROUNDING, NEAREST_CORNER_VERTEX_MAP_ROUNDING, VERTEX_MAP_ROUNDING
-from becos.core.mesh import edge_neighbours_by_part
+from becos.core.mesh import edge_neighbours
 from becos.core.surface_map import VertexRounding
 from becos.products.validate.report import Problems
 
@@ -18,13 +20,66 @@ WEIGHT_TOL = 1e-6
 """Barycentric weights may be this far below 0 and their sum this far from 1."""
 ROTATION_TOL = 1e-6
 """Largest entry of R R^T - I and |det R - 1| of a rotation."""
+NEIGHBOUR_CACHE_BYTES = 64 << 20
+"""Bytes of edge neighbours a validation keeps for meshes met again (:class:`EdgeNeighbourCache`)."""
+
+
+class EdgeNeighbourCache:
+    """:func:`becos.core.mesh.edge_neighbours` of the meshes of a store, computed once per distinct face
+    array: the pairs of a store share their remeshes (a 1,000-pair TOSCA store holds 68 distinct face
+    arrays in its 2,000 shapes). An entry is used only for a face array equal to the one it was computed
+    from (compared in full), so the result is the function's own. Least recently used entries go beyond
+    ``max_bytes`` (the faces and both results are kept, as int32)."""
+
+    def __init__(self, max_bytes: int = NEIGHBOUR_CACHE_BYTES):
+        self.max_bytes, self.bytes = max_bytes, 0
+        self._entries: OrderedDict[bytes, list[tuple[np.ndarray, np.ndarray, np.ndarray]]] = OrderedDict()
+
+    def part(self, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``edge_neighbours(faces)`` of one mesh: (F, 3) int64 faces in its own vertex numbers."""
+        if not len(faces) or faces.min() < 0 or faces.max() >= 1 << 31:
+            return edge_neighbours(faces)
+        step = max(len(faces) // 32, 1)
+        key = np.int64(len(faces)).tobytes() + faces[::step].tobytes()  # equal faces, equal key
+        entries = self._entries.get(key, [])
+        for stored, neighbour, far in entries:
+            if np.array_equal(stored, faces):
+                self._entries.move_to_end(key)
+                return neighbour.astype(np.int64), far.astype(np.int64)
+        neighbour, far = edge_neighbours(faces)
+        entry = (faces.astype(np.int32), neighbour.astype(np.int32), far.astype(np.int32))
+        self._entries[key] = [*entries, entry]
+        self._entries.move_to_end(key)
+        self.bytes += sum(e.nbytes for e in entry)
+        while self.bytes > self.max_bytes and len(self._entries) > 1:
+            _, dropped = self._entries.popitem(last=False)
+            self.bytes -= sum(e.nbytes for stored in dropped for e in stored)
+        return neighbour, far
+
+    def by_part(
+        self, faces: np.ndarray, face_offsets: np.ndarray, vertex_offsets: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """:func:`becos.core.mesh.edge_neighbours_by_part` through the cache: ``faces`` (F, 3) int64 in
+        each part's own vertex numbers (not the stack's), parts as there; neighbours and far corners
+        in the stack's numbers."""
+        neighbour, far = np.full(faces.shape, -1, dtype=np.int64), np.full(faces.shape, -1, dtype=np.int64)
+        for first, last, vertex_start in zip(face_offsets[:-1], face_offsets[1:], vertex_offsets[:-1], strict=True):
+            if last > first:
+                part_neighbour, part_far = self.part(faces[first:last])
+                neighbour[first:last] = np.where(part_neighbour >= 0, part_neighbour + first, -1)
+                far[first:last] = np.where(part_far >= 0, part_far + vertex_start, -1)
+        return neighbour, far
 
 
 class BlockChecker:
-    """The row-wise checks of one :class:`becos.products.store.Block`."""
+    """The row-wise checks of one :class:`becos.products.store.Block` (``neighbours``: an
+    :class:`EdgeNeighbourCache` shared by the blocks of a store, or None for one of this block's own)."""
 
-    def __init__(self, block, setting: str, ids: np.ndarray, problems: Problems):
+    def __init__(
+        self, block, setting: str, ids: np.ndarray, problems: Problems, neighbours: EdgeNeighbourCache | None = None
+    ):
         self.b, self.setting, self.ids, self.p = block, setting, ids, problems
+        self.neighbours = EdgeNeighbourCache() if neighbours is None else neighbours
         self.a = block.arrays
         self.n = len(block)
         self.cnt = {g: block.counts(g) for g in block.offsets}
@@ -141,43 +196,57 @@ class BlockChecker:
             block_faces = local_faces + vertex_start[:, None]
             wr = np.nan_to_num(w[rows])
             wr = wr / np.where(np.abs(wr.sum(axis=1)) > 0, wr.sum(axis=1), 1.0)[:, None]  # sums: the weights check
-            # the per-face data of the faces holding a point only (a full shape's points hold under half)
-            held = np.zeros(len(block_faces), dtype=bool)
-            held[gface] = True
-            neighbours = edge_neighbours_by_part(block_faces, self.b.offsets[go_f], self.b.offsets[go_v])
-            rounding_mesh = VertexRounding(
-                a[f"{o}_vertices"], block_faces, only=np.flatnonzero(held), neighbours=neighbours
-            )
-            candidates, along = rounding_mesh.candidates(gface, wr)
-            corners = candidates[:, :3] - vertex_start[gface, None]  # (R, 3) vertices of the other shape, per pair
-            target = c[rows, None] + vertex_start[gface, None]
-            dist = along[:, :3]  # to the corners: the straight line, as the nearest-corner rule measures
+            _, far = self.neighbours.by_part(local_faces, self.b.offsets[go_f], self.b.offsets[go_v])
+            # each face's data per point on it: few faces hold two points (a full shape's hold under half)
+            candidates, along = VertexRounding.candidates_once(a[f"{o}_vertices"], block_faces, far, gface, wr)
+            target = c[rows] + vertex_start[gface]
             # the record rounds in the remesh frame: a near tie may fall either way in this frame
-            rounding = np.array([m.get("vertex_rounding", LEGACY_VERTEX_MAP_ROUNDING) for m in self.b.metas])
-            rule = self.rep(rounding, gv)[rows] if len(rounding) else np.zeros(len(rows), dtype=rounding.dtype)
-            current, nearest_corner = rule == VERTEX_MAP_ROUNDING, rule == NEAREST_CORNER_VERTEX_MAP_ROUNDING
-            own = np.where(candidates == target, along, np.inf).min(axis=1)
-            tol = 1e-9 * (dist.max(axis=1) + 1e-12)
-            wrong = own > along.min(axis=1) + tol
-            own_corner = np.where(candidates[:, :3] == target, dist, np.inf).min(axis=1)
-            wrong_corner = own_corner > dist.min(axis=1) + tol
-            largest = corners[np.arange(len(rows)), np.nan_to_num(w[rows], nan=-1.0).argmax(axis=1)]
+            rounding = [m.get("vertex_rounding", LEGACY_VERTEX_MAP_ROUNDING) for m in self.b.metas]
+            current = self.rep(np.array([r == VERTEX_MAP_ROUNDING for r in rounding], dtype=bool), gv)[rows]
+            nearest_corner = self.rep(
+                np.array([r == NEAREST_CORNER_VERTEX_MAP_ROUNDING for r in rounding], dtype=bool), gv
+            )[rows]
             legacy = ~current & ~nearest_corner
+            wrong = self.rounded_wrong(candidates, along, target, np.flatnonzero(current), 6)
             self.report(
                 "corr_face",
                 f"{corr} is not the vertex nearest its point along the surface (corners of {corr}_face and far corners of its neighbours)",
-                np.unique(self.pair_of[gv][rows[wrong & current]]),
+                np.unique(self.pair_of[gv][rows[wrong]]),
             )
+            # dist: to the corners, the straight line, as the nearest-corner rule measures
+            wrong_corner = self.rounded_wrong(candidates, along, target, np.flatnonzero(nearest_corner), 3)
             self.report(
                 "corr_face",
                 f"{corr} is not the corner of {corr}_face nearest its point (a record of an older becos, vertex_rounding nearest_corner)",
-                np.unique(self.pair_of[gv][rows[wrong_corner & nearest_corner]]),
+                np.unique(self.pair_of[gv][rows[wrong_corner]]),
             )
+            old = np.flatnonzero(legacy)
+            corners = candidates[old, :3] - vertex_start[gface[old], None]  # vertices of the other shape, per pair
+            largest = corners[np.arange(len(old)), np.nan_to_num(w[rows[old]], nan=-1.0).argmax(axis=1)]
             self.report(
                 "corr_face",
                 f"{corr} is not the largest-weight corner of {corr}_face (a record of an older becos, no meta vertex_rounding)",
-                np.unique(self.pair_of[gv][rows[legacy & (largest != c[rows])]]),
+                np.unique(self.pair_of[gv][rows[old[largest != c[rows[old]]]]]),
             )
+
+    @staticmethod
+    def rounded_wrong(
+        candidates: np.ndarray, along: np.ndarray, target: np.ndarray, rows: np.ndarray, first: int
+    ) -> np.ndarray:
+        """Rows ``rows`` of (R, 6) ``candidates`` / ``along`` (:meth:`VertexRounding.candidates`) whose
+        ``target`` (R,) is not nearest (beyond a relative 1e-9 of the corners' distances) among their
+        first ``first`` candidates. Returns indices into the R rows."""
+        if not len(rows):
+            return rows
+        cand, dist = candidates[rows, :first], along[rows, :first]
+        nearest = dist.argmin(axis=1)
+        # where the nearest candidate is the target, its distance is the minimum: never wrong (the
+        # tolerance is > 0, no distance is NaN); the others are measured as in full
+        rows = rows[cand[np.arange(len(rows)), nearest] != target[rows]]
+        cand, dist, corner = candidates[rows, :first], along[rows, :first], along[rows, :3]
+        own = np.where(cand == target[rows, None], dist, np.inf).min(axis=1)
+        tol = 1e-9 * (corner.max(axis=1) + 1e-12)
+        return rows[own > dist.min(axis=1) + tol]
 
     def side_overlap(self, s: str) -> None:
         """``overlap``: the stored overlap is the mask's mean; accepted partial_partial pairs inside

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from becos.products.validate.block import BlockChecker
+from becos.products.validate.block import BlockChecker, EdgeNeighbourCache
 from becos.products.validate.content import check_digests, digests_to_check
 from becos.products.validate.opening import open_for_validation, unreadable_rows
 from becos.products.validate.report import Problems, ValidationReport
@@ -77,6 +77,7 @@ def check_blocks(bench, ids: np.ndarray, problems: list[str], found: Problems, s
     n = len(bench)
     reported = 0
     digests = digests_to_check(bench)
+    neighbours = EdgeNeighbourCache()  # the blocks share the store's remeshes
     for start, stop in bench.block_ranges(max_bytes=VALIDATE_BLOCK_BYTES):
         try:  # straight from the chunk files; any problem is read again, and reported, through zarr
             block = bench.read_rows(start, stop)
@@ -87,7 +88,7 @@ def check_blocks(bench, ids: np.ndarray, problems: list[str], found: Problems, s
         if digests is not None:
             for key in bench.layout:
                 digests.update(f"arrays/{key}", block.arrays[key])
-        BlockChecker(block, bench.setting, ids[start:stop], found).run()
+        BlockChecker(block, bench.setting, ids[start:stop], found, neighbours).run()
         check_metas(block, bench.setting, bench.table, found)
         if started is not None and (10 * stop // n > reported or stop == n):  # about every 10 %
             reported = 10 * stop // n
