@@ -170,10 +170,13 @@ def test_a_fast_simplification_result_that_breaks_a_guarantee_is_made_with_pymes
 
 def test_the_decimator_key_reaches_the_remesh_job(tosca_entries, tmp_path, capsys):
     """Config ``decimator`` -> the remesh job's options (its Snakemake params: a change reruns it) ->
-    :func:`becos.build.remesh.remesh_with_stats`; face-target mode with fast-simplification."""
+    :func:`becos.build.remesh.remesh_with_stats`; face-target mode with fast-simplification. The job also
+    writes the shape's centre for the chunk jobs."""
     import json
 
+    from becos.core.mesh import read_mesh
     from becos.sources.catalog import catalog_table
+    from becos.sources.datasets import shape_centre
     from becos.workflow import job_options, remesh_stage, resolve_config
 
     base = {"synthetic": {"enabled": False}, "data_dir": "data", "annotations": "ann", "datasets": ["tosca"]}
@@ -186,7 +189,11 @@ def test_the_decimator_key_reaches_the_remesh_job(tosca_entries, tmp_path, capsy
     remesh_stage(options, row, ["f2000"], out, ply=False)
     logged = [ln for ln in capsys.readouterr().err.splitlines() if ln.startswith("remesh decimator: ")]
     assert json.loads(logged[0].split(": ", 1)[1]) == {"decimator": "fast-simplification", "decimator_fallbacks": []}
-    assert sorted(p.name for p in out.iterdir()) == ["f2000.npz"]
+    assert sorted(p.name for p in out.iterdir()) == ["centre.npy", "f2000.npz"]
+    # the chunk jobs read this centre instead of parsing the original: the very float64 values
+    entry = tosca_entries["wolf0"]
+    expected = shape_centre(read_mesh(entry.path), entry.scale)
+    assert np.load(out / "centre.npy").tobytes() == expected.tobytes()
     r = load_remeshed(out / "f2000.npz")
     assert r.mesh.n_faces in (1999, 2000) and mesh_checks(r.mesh)["components"] == 1
 

@@ -165,6 +165,13 @@ def variant_file(folder: str | Path, token: str) -> Path:
     return Path(folder) / f"{token}.npz"
 
 
+def centre_file(folder: str | Path) -> Path:
+    """The shape's centre in its remesh folder (:meth:`Layout.remeshed_folder`): (3,) float64, the
+    :attr:`becos.sources.datasets.PreparedShape.centre` its remesh job computed, which the chunk jobs read
+    instead of parsing the original mesh for it. Folders of remesh jobs before it have none."""
+    return Path(folder) / "centre.npy"
+
+
 def pair_file(folder: str | Path, pair_id: str) -> Path:
     """A pair's file in a chunk stage's folder, beside the chunk indices (ground truth or record)."""
     return Path(folder) / f"{pair_id}.npz"

@@ -13,7 +13,7 @@ import numpy as np
 
 from becos.atomic import remove_stale_temporaries, write_text
 from becos.errors import ConfigError
-from becos.workflow.layout import pair_file, remesh_token, variant_file
+from becos.workflow.layout import centre_file, pair_file, remesh_token, variant_file
 from becos.workflow.options import (
     GROUND_TRUTH_VERSION,
     RECORD_VERSION,
@@ -79,7 +79,8 @@ def remesh_stage(
     options: RemeshOptions | dict, shape_row: dict, tokens: list[str], out_dir: Path, ply: bool = True
 ) -> None:
     """Remesh the variants ``tokens`` of one shape (prepared, common-frame mesh) into the folder ``out_dir``:
-    per token its maps (:func:`becos.workflow.layout.variant_file`) and, with ``ply``, a PLY to look at.
+    per token its maps (:func:`becos.workflow.layout.variant_file`) and, with ``ply``, a PLY to look at; and
+    the shape's centre (:func:`becos.workflow.layout.centre_file`).
 
     One process per shape: the mesh is loaded and prepared once and the per-shape part of the remesh
     (:class:`becos.build.remesh.RemeshInput`) is shared by the variants, each variant byte-identical to
@@ -108,6 +109,7 @@ def remesh_stage(
     shape = None if options.remesher == "reference" else RemeshInput(prepared.mesh, source=prepared.entry.path)
     shared["shape"] = time.process_time() - lap
     with atomic_folder(out_dir) as folder:
+        np.save(centre_file(folder), prepared.centre, allow_pickle=False)  # inside the folder built aside
         for i, token in enumerate(tokens):
             cpu = dict(shared) if i == 0 else {}  # CPU seconds by step, logged for benchmarks/remesh.py
             target = remesh_target(options.seed, dataset, name, token)
