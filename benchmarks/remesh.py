@@ -339,6 +339,8 @@ def step_benchmark(
     from becos.workflow import ShapeStore, build_catalog, remesh_target, resolve_config
 
     becos_code = _tosca_dir().parents[1]
+    if workdir is not None:
+        Path(workdir).mkdir(parents=True, exist_ok=True)
     work = Path(tempfile.mkdtemp(prefix="remesh-steps-", dir=workdir))
     configs = {
         label: resolve_config(

