@@ -60,6 +60,8 @@ sys.path.insert(0, str(REPO / "tests"))  # snakemake_cmd, tiny_tosca.results_fin
 from snakemake_cmd import snakemake_cmd  # noqa: E402
 from tiny_tosca import fingerprint_differences, results_fingerprint  # noqa: E402
 
+from becos.settings import SETTINGS  # noqa: E402
+
 UNGROUPED = [
     "--group-components",
     "remesh=1",
@@ -234,7 +236,17 @@ def main() -> None:
     )
     args = parser.parse_args()
     if args.compare:
-        local, slurm = (results_fingerprint(path) for path in args.compare)
+        # the settings whose store the first run has (a one-setting run compares that setting)
+        stores = [s for s in SETTINGS if (args.compare[0] / "results" / s / "benchmark.zarr" / "zarr.json").is_file()]
+        missing = [
+            f"{path}/results/{s}"
+            for path in args.compare[1:]
+            for s in stores
+            if not (path / "results" / s / "benchmark.zarr" / "zarr.json").is_file()
+        ]
+        if missing:
+            sys.exit(f"--compare: no store in {', '.join(missing)}; the first run has one (finish that run first)")
+        local, slurm = (results_fingerprint(path, stores) for path in args.compare)
         print(
             json.dumps({"local": str(args.compare[0]), "slurm": str(args.compare[1])} | compare(local, slurm), indent=1)
         )
