@@ -727,7 +727,9 @@ def main(argv=None) -> int:
         default=None,
         help="instead: print the tables of --json files of earlier runs (e.g. one per --pairs part)",
     )
-    parser.add_argument("--settings", default=",".join(SETTINGS))
+    parser.add_argument(
+        "--settings", default=None, help="comma-separated settings (default: each setting whose store the run has)"
+    )
     parser.add_argument("--pairs", default=None, help="comma-separated pair ids (default: every same-class pair)")
     parser.add_argument("--worst", type=int, default=25, help="how many worst vertices to list per setting")
     parser.add_argument("--show", default=None, help="comma-separated pair ids: print both directions side by side")
@@ -742,10 +744,17 @@ def main(argv=None) -> int:
         _print_tables(summaries, show)
         return 0
     run = Run(args.results)
+    stored = [s for s in SETTINGS if (run.results / s / "benchmark.zarr").is_dir()]
+    settings = args.settings.split(",") if args.settings else stored
+    missing = [s for s in settings if s not in stored]
+    if missing or not settings:
+        where = ", ".join(str(run.results / s / "benchmark.zarr") for s in missing) or f"{run.results}/<setting>"
+        print(f"gt_error: no store at {where}; the run has {stored or 'none'}", file=sys.stderr)
+        return 2
     pair_ids = set(args.pairs.split(",")) if args.pairs else None
     results = []
     log = lambda m: print(m, file=sys.stderr, flush=True)  # noqa: E731
-    for setting in args.settings.split(","):
+    for setting in settings:
         results += audit_setting(run, setting, pair_ids, log)
     _print_tables([r.summary() for r in results], show)
     for setting in dict.fromkeys(r.setting for r in results):

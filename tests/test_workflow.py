@@ -406,6 +406,18 @@ def test_every_same_class_pair_is_within_the_ground_truth_bound(tiny_tosca_run):
         assert s["mean"] <= 1.05 * s["best_mean"], s
 
 
+def test_gt_error_names_a_store_the_run_lacks(tiny_tosca_run, capsys):
+    """``benchmarks/gt_error.py`` audits the settings whose store a run has; a setting asked for
+    without a store ends in one line naming its path (it once tracebacked after auditing the others)."""
+    sys.path.insert(0, str(REPO / "benchmarks"))
+    import gt_error
+
+    results = tiny_tosca_run / "results"
+    assert gt_error.main([str(results), "--settings", "full_full,partial_partial_x"]) == 2
+    err = capsys.readouterr().err
+    assert str(results / "partial_partial_x" / "benchmark.zarr") in err and "Traceback" not in err
+
+
 def _tree(root: Path) -> dict[str, bytes]:
     """Every file under ``root`` by relative path, but ``logs/config.yaml`` (it quotes its creation time) and
     Snakemake's ``.snakemake_timestamp`` of a directory output."""
