@@ -22,7 +22,8 @@ SNAP_ROUNDS = 4
 
 
 def _off_part(shape: RemeshInput, remesh_edges: np.ndarray, n: int, anchor: np.ndarray) -> np.ndarray:
-    """(n,) bool: the remeshed vertex sits on another part of ``surface`` than most of its neighbours.
+    """(n,) bool: the remeshed vertex sits on another part of ``surface`` than most of its neighbours,
+    or its consistent edges do not join it to the largest piece of the remesh (a patch snapped across).
 
     ``anchor`` (n,): each remeshed vertex's snapped point as a surface vertex (its largest weight).
     The anchors' geodesic Voronoi cells on the surface are adjacent (share a surface edge) where the
