@@ -29,6 +29,11 @@ truth becos has, computed here without its composition code:
 The "best possible vertex map" sends each vertex to the remesh vertex nearest its truth (within the
 2-ring); ``mean / best`` says how far a pair's mean is above it.
 
+The truth is the source remesh's ``to_original`` points, so it cannot show a remesh vertex snapped
+onto another part where that shape is the source; every remesh file of the run is therefore checked
+too (:func:`audit_remeshes`): carried into every pose of its class, no remesh edge may be longer than
+:data:`STRETCH_BOUND` mean edge lengths.
+
 Everything is measured in the remesh files' own frame and units (the record's rotations, alignment
 and scale are rigid motions and a uniform scale; the script checks the record's full shapes against
 the remesh files, up to those transforms).
@@ -124,6 +129,13 @@ LOCAL_RINGS = 2
 BOUND = 0.04
 """Issue #20: the largest error (x sqrt area) allowed on any pair."""
 
+STRETCH_BOUND = 20.0
+"""The truth here is the source remesh's ``to_original`` points, so a remesh vertex snapped onto another
+part (a contact in its own pose) is invisible where that shape is the source. Carried into every pose
+of the class, such a vertex is a body length from its mesh neighbours: each remesh's longest edge over
+the poses, in mean edge lengths, is checked against this (TOSCA, seed 42, 76 shapes x variants 0-3: at
+most 13.8; michael13 variant 0 with a patch of four vertices snapped onto the hand, before 3058dad: 96.9)."""
+
 EXACT_ABOVE = 0.02
 """Errors (x sqrt area) the heat method puts above this are measured again with exact polyhedral
 geodesics (libigl's ``exact_geodesic``, the MMP algorithm). On issue #20's TOSCA run the heat method
@@ -177,6 +189,24 @@ class ClassPoses:
                 )
             self._stacks[key] = np.stack(stack)
         return self._stacks[key]
+
+
+def longest_edge_in_poses(remeshed: Remeshed, original_faces: np.ndarray, poses: np.ndarray) -> float:
+    """The longest edge of ``remeshed`` over the (P, V_o, 3) ``poses`` of its class, its vertices carried
+    into each by their ``to_original`` points (``original_faces``: the faces those index), in mean
+    edge lengths of the remesh (see :data:`STRETCH_BOUND`)."""
+    from becos.core.mesh import undirected_edges
+
+    edges, _ = undirected_edges(remeshed.mesh.faces)
+    v = remeshed.mesh.vertices
+    mean_edge = float(np.linalg.norm(v[edges[:, 0]] - v[edges[:, 1]], axis=1).mean())
+    m = remeshed.to_original
+    corners = np.asarray(original_faces)[m.face]
+    longest = 0.0
+    for pose in poses:  # one pose at a time: (V_r, 3) images
+        images = np.einsum("vk,vkd->vd", m.weights, pose[corners])
+        longest = max(longest, float(np.linalg.norm(images[edges[:, 0]] - images[edges[:, 1]], axis=1).max()))
+    return longest / mean_edge
 
 
 def _adjacency(faces: np.ndarray, n: int) -> sp.csr_matrix:
@@ -611,6 +641,31 @@ def audit_setting(run: Run, setting: str, pair_ids: set[str] | None = None, log=
     return out
 
 
+def audit_remeshes(run: Run, log=None) -> pd.DataFrame:
+    """Every remesh file of the run whose class shares one triangulation: :func:`longest_edge_in_poses`
+    over the class's poses, a row per file (dataset, name, variant, longest), longest first."""
+    rows = []
+    for row in run.poses.catalog.to_dict("records"):
+        dataset, name = row["dataset"], row["name"]
+        folder = run.results / "remeshed" / dataset / name
+        files = sorted(folder.glob("v*.npz")) if folder.is_dir() else []
+        if not files or len(run.class_names(dataset, str(row["class"]))) < 2:
+            continue
+        try:
+            poses = run.poses.poses(dataset, str(row["class"]))
+        except ValueError:  # poses of different triangulations: no vertex identity to carry points by
+            continue
+        faces = run.poses.mesh(dataset, name).faces
+        for path in files:
+            variant = int(path.stem[1:])
+            longest = longest_edge_in_poses(run.remeshed(dataset, name, variant), faces, poses)
+            rows.append({"dataset": dataset, "name": name, "variant": variant, "longest_edge_in_poses": longest})
+            if log is not None:
+                log(f"remesh {dataset}/{name} v{variant}: longest edge over the poses {longest:.1f} mean edges")
+    columns = ["dataset", "name", "variant", "longest_edge_in_poses"]
+    return pd.DataFrame(rows, columns=columns).sort_values("longest_edge_in_poses", ascending=False)
+
+
 # ----------------------------------------------------------------------------------------------
 # reporting
 
@@ -757,6 +812,13 @@ def main(argv=None) -> int:
     for setting in settings:
         results += audit_setting(run, setting, pair_ids, log)
     _print_tables([r.summary() for r in results], show)
+    remeshes = audit_remeshes(run, log)
+    above = remeshes[remeshes["longest_edge_in_poses"] > STRETCH_BOUND]
+    print(
+        f"\nRemeshes: longest edge over the class's poses, in mean edge lengths (bound {STRETCH_BOUND:g}): "
+        f"{len(above)} of {len(remeshes)} above; the longest five:"
+    )
+    print(remeshes.head(5).to_string(index=False, float_format=lambda v: f"{v:.1f}"))
     for setting in dict.fromkeys(r.setting for r in results):
         print(
             f"\n{setting}: worst {args.worst} vertices (locations: bounding-box fractions on the class's first pose):"

@@ -404,6 +404,9 @@ def test_every_same_class_pair_is_within_the_ground_truth_bound(tiny_tosca_run):
         assert s["max"] <= gt_error.BOUND, s
         # along-surface rounding: at most 1.023 per pair (nearest corner in 3D: 1.02-1.06; largest weight: 1.10-1.19)
         assert s["mean"] <= 1.05 * s["best_mean"], s
+    remeshes = gt_error.audit_remeshes(run)  # the truth's own source: no vertex snapped onto another part
+    assert len(remeshes) > 0
+    assert (remeshes["longest_edge_in_poses"] <= gt_error.STRETCH_BOUND).all(), remeshes.head()
 
 
 def test_gt_error_names_a_store_the_run_lacks(tiny_tosca_run, capsys):
