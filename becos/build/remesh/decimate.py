@@ -29,6 +29,13 @@ SUBDIVISION_MIN_FACES = 1.2
 input at most about as fine as the remesh; TOSCA's wolves are not) is replaced by a subdivision of
 every edge, so the decimation always has faces to remove."""
 
+LONG_EDGE = 6.0
+"""A large input (decimated directly: :data:`PRE_DECIMATION_FACTOR`) with an edge longer than this × the
+remesh's edge length is Loop-subdivided like a small one (:func:`has_long_edges`). The decimation only
+lengthens edges, so an input's long edge stays in the remesh, and a true point at its middle is half
+its length from every vertex: TOSCA horse7's original has an edge of 10.5 × (0.12 × sqrt(area)), kept
+by its remesh, where the best possible vertex map is 0.056 × sqrt(area) off (issue #20's bound: 0.04)."""
+
 DECIMATORS = ("pymeshlab", "fast-simplification")
 """The quadric decimators of steps 3-4 (config ``decimator``); the first is the default."""
 
@@ -71,6 +78,20 @@ def meshset_arrays(ms) -> tuple[np.ndarray, np.ndarray]:
     )
 
 
+def remesh_edge_length(vertices: np.ndarray, faces: np.ndarray, face_goal: int) -> float:
+    """The edge length of an equilateral triangulation of the surface's area with ``face_goal`` faces
+    (input units): the remesh's typical edge."""
+    return float(np.sqrt(4.0 * face_areas(TriMesh(vertices, faces)).sum() / (np.sqrt(3.0) * face_goal)))
+
+
+def has_long_edges(vertices: np.ndarray, faces: np.ndarray, face_goal: int) -> bool:
+    """Whether an edge of the (V, 3) / (F, 3) surface is longer than :data:`LONG_EDGE` × the remesh's
+    edge length (:func:`remesh_edge_length`)."""
+    tri = vertices[faces]
+    longest = float(np.linalg.norm(tri - np.roll(tri, 1, axis=1), axis=2).max())
+    return longest > LONG_EDGE * remesh_edge_length(vertices, faces, face_goal)
+
+
 def loop_subdivided(vertices: np.ndarray, faces: np.ndarray, face_goal: int):
     """A pymeshlab mesh set holding ONE Loop subdivision of (V, 3) ``vertices`` / (F, 3) ``faces``
     (input units) that splits the edges longer than :data:`SUBDIVISION_EDGE` × the edge length of
@@ -83,9 +104,7 @@ def loop_subdivided(vertices: np.ndarray, faces: np.ndarray, face_goal: int):
     median, faces with an angle under 10 degrees 391 vs 825)."""
     import pymeshlab
 
-    edge = SUBDIVISION_EDGE * float(
-        np.sqrt(4.0 * face_areas(TriMesh(vertices, faces)).sum() / (np.sqrt(3.0) * face_goal))
-    )
+    edge = SUBDIVISION_EDGE * remesh_edge_length(vertices, faces, face_goal)
     ms = meshset(vertices, faces)
     ms.meshing_surface_subdivision_loop(iterations=1, threshold=pymeshlab.PureValue(edge))
     if ms.current_mesh().face_number() < SUBDIVISION_MIN_FACES * face_goal:

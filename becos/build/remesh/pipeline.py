@@ -12,6 +12,7 @@ from becos.build.remesh.decimate import (
     DECIMATORS,
     PRE_DECIMATION_FACTOR,
     fast_decimate,
+    has_long_edges,
     loop_subdivided,
     meshset,
     meshset_arrays,
@@ -179,7 +180,9 @@ def _remesh_surface(
     large = len(f) > PRE_DECIMATION_FACTOR * face_goal
     if fast and large:
         v, f = fast_decimate(v, f, int(PRE_DECIMATION_FACTOR * face_goal), topology, stats, "pre-decimation")
-    if fast or not large:  # pymeshlab decimates a large input directly (:mod:`becos.build.remesh`, step 3)
+    # pymeshlab decimates a large input directly (:mod:`becos.build.remesh`, step 3), unless an edge of it
+    # is so long that the remesh would keep it
+    if fast or not large or has_long_edges(v, f, face_goal):
         ms = loop_subdivided(v, f, face_goal)
     else:
         ms = meshset(v, f)
