@@ -432,6 +432,8 @@ def test_corruption_is_caught(case, clean_stores, tmp_path):
         _reseal(store)
     problems = validate_store(store)
     assert problems, "the corruption went unnoticed"
+    # one block per pair, checked by two threads: the same report
+    assert validate(store, threads=2, block_bytes=1).problems == problems
     assert {p.split(":")[0] for p in problems} == {case.check}, problems
     hit = next((p for p in problems if p.startswith(case.message)), None)
     assert hit is not None, problems

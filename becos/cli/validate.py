@@ -20,6 +20,14 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
         help="also write the summary and the problems (and with --against the full comparison) to this JSON file",
     )
     parser.add_argument(
+        "--threads",
+        type=int,
+        default=1,
+        metavar="N",
+        help="check N blocks of pairs at once (default 1; about N times the memory of one block's checks); "
+        "the result does not depend on N",
+    )
+    parser.add_argument(
         "--against",
         type=Path,
         metavar="OTHER",
@@ -63,7 +71,7 @@ def run_cli(args: argparse.Namespace) -> int:
     from becos.atomic import write_text
 
     keep_freed_memory()
-    report = validate(args.store, progress=True)
+    report = validate(args.store, progress=True, threads=max(1, args.threads))
     summary = report.summary()
     out = {**summary, "problems": report.problems}
     print(json.dumps(summary))

@@ -46,11 +46,12 @@ rule validate_store:
         "logs/validate_store/{setting}.log",
     conda:
         "../envs/becos.yaml"
+    threads: RESOURCES.threads("validate_store")
     resources:
         mem_mb=RESOURCES.mem_mb("validate_store"),
         runtime=RESOURCES.runtime("validate_store", n_pairs=setting_pairs),
     shell:
-        "becos validate {input:q} --json {output:q} > {log:q} 2>&1"
+        "becos validate {input:q} --threads {threads} --json {output:q} > {log:q} 2>&1"
 
 
 rule released_layout:

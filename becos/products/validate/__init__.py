@@ -2,7 +2,7 @@
 
 :func:`validate_store` returns human-readable problems (empty = valid); each starts with the name of
 the check that failed, then says what is wrong, in how many pairs, with example pair ids (problems of
-the whole store name the store, array or attribute). ``becos validate STORE [--json OUT] [--against
+the whole store name the store, array or attribute). ``becos validate STORE [--threads N] [--json OUT] [--against
 OTHER [--atol TOL]]`` exits 1 on problems or differing stores (:mod:`becos.products.compare`), 2 when OTHER
 cannot be opened. Modules: ``run`` (the order of the checks), ``opening``, ``tables``, ``block``,
 ``content``, ``report``. The checks, one by one: docs/design/validate.md.

@@ -30,6 +30,14 @@ class Problems:
         entry["values"] += int(values)
         entry["examples"].extend(pair_ids[: MAX_EXAMPLES - len(entry["examples"])])
 
+    def merge(self, other: Problems) -> None:
+        """Add ``other``'s problems, found after this one's: the same result as adding them here."""
+        for key, e in other.items.items():
+            entry = self.items.setdefault(key, {"n": 0, "examples": [], "detail": e["detail"], "values": 0})
+            entry["n"] += e["n"]
+            entry["values"] += e["values"]
+            entry["examples"].extend(e["examples"][: MAX_EXAMPLES - len(entry["examples"])])
+
     def messages(self) -> list[str]:
         """One line per (check, what), in the order first found: ``check: what in N pair(s), e.g. ids (notes)``."""
         out = []

@@ -6,7 +6,10 @@ checks over all pairs (``checksum``, ``pair_id``, ``split_classes``, ``centaur``
 from __future__ import annotations
 
 import sys
+import threading
 import time
+from collections import deque
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -29,9 +32,13 @@ VALIDATE_BLOCK_BYTES = 16 << 20
 block size sets the validator's memory, independent of the store's size)."""
 
 
-def validate(path: str | Path, progress: bool = False) -> ValidationReport:
+def validate(
+    path: str | Path, progress: bool = False, threads: int = 1, block_bytes: int = VALIDATE_BLOCK_BYTES
+) -> ValidationReport:
     """Run every check on a store; see docs/design/validate.md. Never raises for a bad store: a store that
-    is missing or does not open gives one ``store`` problem."""
+    is missing or does not open gives one ``store`` problem. ``threads`` > 1 checks that many blocks at
+    once (numpy releases the GIL in the checks' array work); the report is the same for any ``threads``.
+    ``block_bytes``: uncompressed bytes of pairs checked as one block (at least one pair)."""
     started = time.perf_counter()
     path = Path(path)
     bench, problems = open_for_validation(path)
@@ -47,7 +54,7 @@ def validate(path: str | Path, progress: bool = False) -> ValidationReport:
     check_order(table, problems)
 
     if check_schema(bench, problems):
-        check_blocks(bench, ids, problems, found, started if progress else None)
+        check_blocks(bench, ids, problems, found, started if progress else None, threads, block_bytes)
     else:  # the arrays cannot be trusted: check the metas and the table only
         check_metas_only(bench, ids, problems, found)
     check_pair_ids(ids, found)
@@ -70,26 +77,37 @@ def check_metas_only(bench, ids: np.ndarray, problems: list[str], found: Problem
         check_metas(Block(0, n, {}, {}, bench.layout, metas), bench.setting, bench.table, found)
 
 
-def check_blocks(bench, ids: np.ndarray, problems: list[str], found: Problems, started: float | None) -> None:
+def check_blocks(
+    bench,
+    ids: np.ndarray,
+    problems: list[str],
+    found: Problems,
+    started: float | None,
+    threads: int = 1,
+    block_bytes: int = VALIDATE_BLOCK_BYTES,
+) -> None:
     """Row-wise checks and metas block by block, then ``checksum`` if every block read
     (``ids``: (N,) str; ``started``: :func:`time.perf_counter` of the run to print progress about
-    every 10 % on stderr, None for none)."""
+    every 10 % on stderr, None for none). This thread reads the blocks in order and feeds the digests;
+    ``threads`` workers check them, each into its own :class:`Problems`, merged in block order so the
+    messages are those of one thread."""
     n = len(bench)
     reported = 0
     digests = digests_to_check(bench)
-    neighbours = EdgeNeighbourCache()  # the blocks share the store's remeshes
-    for start, stop in bench.block_ranges(max_bytes=VALIDATE_BLOCK_BYTES):
-        try:  # straight from the chunk files; any problem is read again, and reported, through zarr
-            block = bench.read_rows(start, stop)
-        except Exception as exc:  # a damaged chunk: name it, check the other blocks
-            problems.append(unreadable_rows(bench, start, stop, exc, ids))
-            digests = None
-            continue
-        if digests is not None:
-            for key in bench.layout:
-                digests.update(f"arrays/{key}", block.arrays[key])
-        BlockChecker(block, bench.setting, ids[start:stop], found, neighbours).run()
-        check_metas(block, bench.setting, bench.table, found)
+    local = threading.local()  # one edge-neighbour cache per worker: the blocks share the store's remeshes
+
+    def check(block) -> Problems:
+        if not hasattr(local, "neighbours"):
+            local.neighbours = EdgeNeighbourCache()
+        block_found = Problems()
+        BlockChecker(block, bench.setting, ids[block.start : block.stop], block_found, local.neighbours).run()
+        check_metas(block, bench.setting, bench.table, block_found)
+        return block_found
+
+    def merge_oldest() -> None:
+        nonlocal reported
+        stop, future = pending.popleft()
+        found.merge(future.result())
         if started is not None and (10 * stop // n > reported or stop == n):  # about every 10 %
             reported = 10 * stop // n
             print(
@@ -97,6 +115,24 @@ def check_blocks(bench, ids: np.ndarray, problems: list[str], found: Problems, s
                 file=sys.stderr,
                 flush=True,
             )
+
+    pending: deque = deque()
+    with ThreadPoolExecutor(max(1, threads)) as pool:
+        for start, stop in bench.block_ranges(max_bytes=block_bytes):
+            try:  # straight from the chunk files; any problem is read again, and reported, through zarr
+                block = bench.read_rows(start, stop)
+            except Exception as exc:  # a damaged chunk: name it, check the other blocks
+                problems.append(unreadable_rows(bench, start, stop, exc, ids))
+                digests = None
+                continue
+            if digests is not None:  # before the checks see the block
+                for key in bench.layout:
+                    digests.update(f"arrays/{key}", block.arrays[key])
+            pending.append((stop, pool.submit(check, block)))
+            while len(pending) > max(1, threads):  # bounds the blocks held in memory
+                merge_oldest()
+        while pending:
+            merge_oldest()
     if digests is not None:
         check_digests(bench, digests, problems)
 
