@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from becos.core.mesh import TriMesh
+from becos.core.mesh import ZERO_AREA_RTOL, TriMesh
 
 
 def face_areas(mesh: TriMesh) -> np.ndarray:
@@ -90,10 +90,16 @@ def vertex_normals(mesh: TriMesh) -> np.ndarray:
     return np.divide(out, length, out=np.zeros_like(out), where=length > 0)
 
 
-def closest_points_on_triangles(points: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
+def closest_points_on_triangles(
+    points: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray, *, nondegenerate: bool = False
+) -> np.ndarray:
     """(..., 3) closest point of each point to its triangle (a, b, c); all inputs broadcast to (..., 3).
 
-    Ericson, Real-Time Collision Detection, 5.1.5, vectorised over the leading axes.
+    Ericson, Real-Time Collision Detection, 5.1.5, vectorised over the leading axes. A degenerate
+    triangle (zero area, :data:`becos.core.mesh.ZERO_AREA_RTOL`: a segment or a point) gets the closest
+    point of its three sides, where Ericson's regions rest on cross terms that are rounding noise.
+    ``nondegenerate``: the caller knows no triangle is degenerate (e.g. a :class:`SurfaceLocator`'s
+    usable faces), which skips that test (a quarter of the function's time).
     """
     ab, ac, ap = b - a, c - a, points - a
     d1, d2 = (ab * ap).sum(-1), (ac * ap).sum(-1)
@@ -108,7 +114,9 @@ def closest_points_on_triangles(points: np.ndarray, a: np.ndarray, b: np.ndarray
         t_ab = d1 / (d1 - d3)
         t_ac = d2 / (d2 - d6)
         t_bc = (d4 - d3) / ((d4 - d3) + (d5 - d6))
-    result = a + v_in[..., None] * ab + w_in[..., None] * ac
+        # a degenerate triangle (denom 0) gives inf x 0 here: an edge or vertex region below, or the
+        # final isfinite guard, replaces it
+        result = a + v_in[..., None] * ab + w_in[..., None] * ac
     # edge and vertex regions, checked from the most general to the most specific
     on_bc = (va <= 0) & ((d4 - d3) >= 0) & ((d5 - d6) >= 0)
     result = np.where(on_bc[..., None], b + t_bc[..., None] * (c - b), result)
@@ -119,7 +127,33 @@ def closest_points_on_triangles(points: np.ndarray, a: np.ndarray, b: np.ndarray
     result = np.where(((d6 >= 0) & (d5 <= d6))[..., None], c, result)
     result = np.where(((d3 >= 0) & (d4 <= d3))[..., None], b, result)
     result = np.where(((d1 <= 0) & (d2 <= 0))[..., None], a, result)
+    if nondegenerate:
+        return np.where(np.isfinite(result), result, a)
+    doubled_area_sq = (np.cross(ab, ac) ** 2).sum(-1)
+    longest_sq = np.maximum(np.maximum((ab * ab).sum(-1), (ac * ac).sum(-1)), ((c - b) ** 2).sum(-1))
+    degenerate = doubled_area_sq <= (2 * ZERO_AREA_RTOL * longest_sq) ** 2
+    if np.any(degenerate):
+        result = np.where(degenerate[..., None], _closest_points_on_sides(points, a, b, c), result)
     return np.where(np.isfinite(result), result, a)
+
+
+def _closest_points_on_sides(points: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """(..., 3) closest point of each point to the segments ab, bc, ca (inputs broadcast to (..., 3))."""
+    best, best_sq = None, None
+    for p, q in ((a, b), (b, c), (c, a)):
+        pq = q - p
+        length_sq = (pq * pq).sum(-1)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = np.clip(((points - p) * pq).sum(-1) / length_sq, 0.0, 1.0)
+        t = np.where(length_sq > 0, t, 0.0)
+        on_side = p + t[..., None] * pq
+        sq = ((on_side - points) ** 2).sum(-1)
+        if best is None:
+            best, best_sq = on_side, sq
+        else:
+            closer = sq < best_sq
+            best, best_sq = np.where(closer[..., None], on_side, best), np.where(closer, sq, best_sq)
+    return best
 
 
 def points_on_surface(mesh: TriMesh, face: np.ndarray, weights: np.ndarray) -> np.ndarray:
@@ -224,7 +258,13 @@ class SurfaceLocator:
         _, cand = self._centroids.query(points, k=k)
         cand = self._row(np.asarray(cand).reshape(len(points), k))
         tri = self.triangles[cand]  # (M, k, 3, 3)
-        closest = closest_points_on_triangles(points[:, None, :], tri[..., 0, :], tri[..., 1, :], tri[..., 2, :])
+        closest = closest_points_on_triangles(
+            points[:, None, :],
+            tri[..., 0, :],
+            tri[..., 1, :],
+            tri[..., 2, :],
+            nondegenerate=True,  # usable faces only
+        )
         dist = np.linalg.norm(closest - points[:, None, :], axis=2)
         ok = np.einsum("mkd,md->mk", self._normals[cand], normals) > min_cos
         dist = np.where(ok, dist, np.inf)
@@ -336,7 +376,13 @@ class SurfaceLocator:
             _, cand = self._centroids.query(points[todo], k=k)
             cand = self._row(np.asarray(cand).reshape(len(todo), k))
             tri = self.triangles[cand]  # (M, k, 3, 3)
-            closest = closest_points_on_triangles(points[todo, None, :], tri[..., 0, :], tri[..., 1, :], tri[..., 2, :])
+            closest = closest_points_on_triangles(
+                points[todo, None, :],
+                tri[..., 0, :],
+                tri[..., 1, :],
+                tri[..., 2, :],
+                nondegenerate=True,  # usable faces only
+            )
             dist = np.linalg.norm(closest - points[todo, None, :], axis=2)
             dist = np.where(np.asarray(accept(todo, cand), dtype=bool), dist, np.inf)
             best = dist.argmin(axis=1)
