@@ -6,6 +6,8 @@ over a dataset's shapes for the dataset check.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -21,16 +23,49 @@ poses are near-isometric), while a file in other units is off by its unit factor
 2.54...). 1.5 also leaves room for classes of different bodies on one template (FAUST subjects)."""
 
 
-def compare_with_class_template(path: Path, template_path: Path, shape_arrays, template_arrays) -> str | None:
+@dataclass(eq=False)
+class ClassTemplate:
+    """A class template's (V, 3) float64 vertices and (F, 3) int faces, and what every comparison of a
+    shape with it needs, computed once per class (:func:`check_classes`)."""
+
+    vertices: np.ndarray
+    faces: np.ndarray
+
+    @cached_property
+    def face_keys(self) -> np.ndarray:
+        """Sorted distinct vertex-set keys of its faces (:func:`becos.core.mesh.vertex_set_keys`)."""
+        from becos.core.mesh import vertex_set_keys
+
+        return np.unique(vertex_set_keys(self.faces, len(self.vertices)))
+
+    @cached_property
+    def edges(self) -> np.ndarray:
+        """(E, 2) its undirected edges."""
+        from becos.core.mesh import undirected_edges
+
+        return undirected_edges(self.faces)[0]
+
+    @cached_property
+    def edge_lengths(self) -> np.ndarray:
+        """(E,) lengths of :attr:`edges` in its own units."""
+        return np.linalg.norm(self.vertices[self.edges[:, 0]] - self.vertices[self.edges[:, 1]], axis=1)
+
+
+def compare_with_class_template(
+    path: Path, template_path: Path, shape_arrays, template_arrays: ClassTemplate | tuple
+) -> str | None:
     """Why the mesh in ``path`` cannot share the triangulation of its class template, or None.
 
     Faces are compared as vertex SETS (sorted triples; TOSCA poses of a class hold the same triples,
     some rows with reversed winding); faces the shape lacks, duplicates and rows with a repeated index
     are left to the remesh's repairs, a triple the template lacks is an error. Scale as the median
-    ratio of the lengths of the template's edges in the two meshes (:data:`CLASS_EDGE_RATIO`)."""
-    from becos.core.mesh import FLAT_RTOL, flatness, repeated_index_faces, undirected_edges, vertex_set_keys
+    ratio of the lengths of the template's edges in the two meshes (:data:`CLASS_EDGE_RATIO`).
+    ``template_arrays``: the template's (vertices, faces) or its :class:`ClassTemplate`."""
+    from becos.core.mesh import FLAT_RTOL, flatness, repeated_index_faces, vertex_set_keys
 
-    (v, f), (tv, tf) = shape_arrays, template_arrays
+    template = template_arrays if isinstance(template_arrays, ClassTemplate) else ClassTemplate(*template_arrays)
+    v, f = shape_arrays
+    tv = template.vertices
     if flatness(v) <= FLAT_RTOL:
         return (
             f"all its {len(v)} vertices lie in one plane (thickness {flatness(v):.2g} of its largest extent): a "
@@ -45,17 +80,16 @@ def compare_with_class_template(path: Path, template_path: Path, shape_arrays, t
     # the file lost (a subset) are repairs, a triple the template lacks is not
     f = np.asarray(f, dtype=np.int64)
     f = f[~repeated_index_faces(f)] if len(f) else f
-    keys, template_keys = np.unique(vertex_set_keys(f, len(v))), np.unique(vertex_set_keys(tf, len(tv)))
-    foreign = len(np.setdiff1d(keys, template_keys, assume_unique=True))
+    keys = np.unique(vertex_set_keys(f, len(v)))
+    foreign = len(np.setdiff1d(keys, template.face_keys, assume_unique=True))
     if foreign:
         return (
             f"has the vertex count of its class template {template_path} but {foreign} of its {len(keys)} "
             f"distinct faces name vertex triples the template has not: its vertex lines are re-ordered (or it "
             f"was re-triangulated), so vertex i no longer corresponds to vertex i of the class"
         )
-    edges, _ = undirected_edges(tf)
+    edges, template_lengths = template.edges, template.edge_lengths
     lengths = np.linalg.norm(v[edges[:, 0]] - v[edges[:, 1]], axis=1)
-    template_lengths = np.linalg.norm(tv[edges[:, 0]] - tv[edges[:, 1]], axis=1)
     ratio = float(np.median(lengths[template_lengths > 0] / template_lengths[template_lengths > 0]))
     if not 1 / CLASS_EDGE_RATIO <= ratio <= CLASS_EDGE_RATIO:
         return (
@@ -95,7 +129,7 @@ def check_classes(shapes: list, annotations, skip: set[str]) -> list[dict]:
         others = [e for e in members if e.name != template_name and str(e.path) not in skip]
         if not others:
             continue
-        template_arrays = mesh_arrays(template.path)
+        template_arrays = ClassTemplate(*mesh_arrays(template.path))
         for e in others:
             try:
                 problem = compare_with_class_template(e.path, template.path, mesh_arrays(e.path), template_arrays)
