@@ -108,3 +108,16 @@ def test_plain_off_reader_gives_trimeshs_arrays_and_other_files_fall_back(name, 
     again = read_mesh(tmp_path / "comment.off")
     assert np.array_equal(again.vertices, mesh.vertices) and np.array_equal(again.faces, mesh.faces)
     assert n_vertices == mesh.n_vertices
+
+
+@pytest.mark.parametrize("word", [b"nan", b"NaN", b"-inf", b"INF", b"Infinity", b"+iNf"])
+def test_every_spelling_of_a_non_finite_coordinate_is_found(word):
+    """check_finite_text skips its regex when the block holds no n/N: every spelling it must find holds one."""
+    from becos.core.formats.problems import FormatProblem
+    from becos.core.formats.text import check_finite_text
+
+    data = b"OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 " + word + b"\n3 0 1 2\n"
+    line_starts = np.concatenate(([0], np.flatnonzero(np.frombuffer(data, dtype=np.uint8) == 10) + 1))
+    with pytest.raises(FormatProblem, match="vertex line 3 holds a NaN or infinite coordinate"):
+        check_finite_text(data, data.index(b"0 0 0"), data.index(b"3 0 1 2"), 2, line_starts, "vertex line")
+    check_finite_text(data.replace(word, b"1e3"), 0, len(data) - 8, 2, line_starts, "vertex line")  # finite: quiet

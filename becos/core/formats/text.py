@@ -17,6 +17,8 @@ _NON_FINITE = re.compile(rb"\b(?:nan|inf|infinity)\b", re.IGNORECASE)  # whole w
 
 def check_finite_text(data: bytes, start: int, end: int, first_line: int, line_starts: np.ndarray, what: str) -> None:
     """Raise if ``data[start:end]`` (vertex lines) holds a NaN or infinite value (text formats)."""
+    if data.find(b"n", start, end) < 0 and data.find(b"N", start, end) < 0:
+        return  # every word the pattern matches holds an n: two memchr scans instead of the regex's (~12 ms/MB)
     hit = _NON_FINITE.search(data, start, end)
     if hit is not None:
         line = int(np.searchsorted(line_starts, hit.start(), side="right")) - 1
