@@ -57,7 +57,11 @@ def barycentric_coordinates(points: np.ndarray, a: np.ndarray, b: np.ndarray, c:
 
 def face_normals(mesh: TriMesh) -> np.ndarray:
     """(F, 3) unit face normals (right-hand rule on the face's vertex order); zero for degenerate faces."""
-    tri = mesh.vertices[mesh.faces]
+    return _triangle_normals(np.take(mesh.vertices, mesh.faces, axis=0))
+
+
+def _triangle_normals(tri: np.ndarray) -> np.ndarray:
+    """(F, 3) unit normals of the (F, 3, 3) triangles ``tri`` (corner positions), as :func:`face_normals`."""
     n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
     length = np.linalg.norm(n, axis=1, keepdims=True)
     return np.divide(n, length, out=np.zeros_like(n), where=length > 0)
@@ -73,8 +77,8 @@ def oriented_face_normals(mesh: TriMesh) -> np.ndarray:
     import igl
 
     oriented, component = igl.bfs_orient(mesh.faces)
-    normals = face_normals(TriMesh(mesh.vertices, oriented))
-    tri = mesh.vertices[oriented]
+    tri = np.take(mesh.vertices, np.asarray(oriented, dtype=np.int64), axis=0)  # (F, 3, 3) oriented corners
+    normals = _triangle_normals(tri)
     signed = np.einsum("fd,fd->f", tri[:, 0], np.cross(tri[:, 1], tri[:, 2]))  # 6 x signed volume
     volume = np.bincount(component, weights=signed)
     return normals * np.where(volume[component] < 0, -1.0, 1.0)[:, None]
@@ -221,7 +225,7 @@ class SurfaceLocator:
     def triangles(self) -> np.ndarray:
         """(F, 3, 3) float64 corner positions of every row of ``mesh.faces`` (computed once)."""
         if self._triangles is None:
-            self._triangles = self.mesh.vertices[self.mesh.faces]
+            self._triangles = np.take(self.mesh.vertices, self.mesh.faces, axis=0)
         return self._triangles
 
     def _row(self, index: np.ndarray) -> np.ndarray:
@@ -257,7 +261,7 @@ class SurfaceLocator:
         k = min(k, len(self._faces))
         _, cand = self._centroids.query(points, k=k)
         cand = self._row(np.asarray(cand).reshape(len(points), k))
-        tri = self.triangles[cand]  # (M, k, 3, 3)
+        tri = np.take(self.triangles, cand, axis=0)  # (M, k, 3, 3)
         closest = closest_points_on_triangles(
             points[:, None, :],
             tri[..., 0, :],
@@ -266,7 +270,7 @@ class SurfaceLocator:
             nondegenerate=True,  # usable faces only
         )
         dist = np.linalg.norm(closest - points[:, None, :], axis=2)
-        ok = np.einsum("mkd,md->mk", self._normals[cand], normals) > min_cos
+        ok = np.einsum("mkd,md->mk", np.take(self._normals, cand, axis=0), normals) > min_cos
         dist = np.where(ok, dist, np.inf)
         best = dist.argmin(axis=1)
         rows = np.arange(len(points))
@@ -295,7 +299,7 @@ class SurfaceLocator:
         if normals is not None:
             normals = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
             has_normal = np.linalg.norm(normals, axis=1) > 0
-            cosine = (self.face_normals[face] * normals).sum(axis=1)
+            cosine = (np.take(self.face_normals, face, axis=0) * normals).sum(axis=1)
             if np.median(cosine[has_normal]) < 0:  # the queries come from a surface oriented the other way
                 normals, cosine = -normals, -cosine
             flipped = np.flatnonzero(has_normal & (cosine <= min_cos))
@@ -308,7 +312,7 @@ class SurfaceLocator:
                 found = (f >= 0) & (detour <= self.max_detour)
                 face[flipped[found]], closest[flipped[found]] = f[found], c[found]
                 flipped = flipped[(f < 0)]
-        tri = self.triangles[face]
+        tri = np.take(self.triangles, face, axis=0)
         weights = barycentric_coordinates(closest, tri[:, 0], tri[:, 1], tri[:, 2])
         return face, weights, np.linalg.norm(closest - points, axis=1)
 
@@ -375,7 +379,7 @@ class SurfaceLocator:
             k = min(k, len(self._faces))
             _, cand = self._centroids.query(points[todo], k=k)
             cand = self._row(np.asarray(cand).reshape(len(todo), k))
-            tri = self.triangles[cand]  # (M, k, 3, 3)
+            tri = np.take(self.triangles, cand, axis=0)  # (M, k, 3, 3)
             closest = closest_points_on_triangles(
                 points[todo, None, :],
                 tri[..., 0, :],
