@@ -7,6 +7,7 @@ Arrays of a block are concatenated over its pairs: a ragged group's rows (vertic
 
 from __future__ import annotations
 
+import threading
 from collections import OrderedDict
 
 import numpy as np
@@ -29,11 +30,12 @@ class EdgeNeighbourCache:
     array: the pairs of a store share their remeshes (a 1,000-pair TOSCA store holds 68 distinct face
     arrays in its 2,000 shapes). An entry is used only for a face array equal to the one it was computed
     from (compared in full), so the result is the function's own. Least recently used entries go beyond
-    ``max_bytes`` (the faces and both results are kept, as int32)."""
+    ``max_bytes`` (the faces and both results are kept, as int32). Safe to share between threads."""
 
     def __init__(self, max_bytes: int = NEIGHBOUR_CACHE_BYTES):
         self.max_bytes, self.bytes = max_bytes, 0
         self._entries: OrderedDict[bytes, list[tuple[np.ndarray, np.ndarray, np.ndarray]]] = OrderedDict()
+        self._lock = threading.Lock()  # shared by the checking threads; computed outside the lock
 
     def part(self, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``edge_neighbours(faces)`` of one mesh: (F, 3) int64 faces in its own vertex numbers."""
@@ -41,19 +43,26 @@ class EdgeNeighbourCache:
             return edge_neighbours(faces)
         step = max(len(faces) // 32, 1)
         key = np.int64(len(faces)).tobytes() + faces[::step].tobytes()  # equal faces, equal key
-        entries = self._entries.get(key, [])
+        with self._lock:
+            entries = list(self._entries.get(key, []))
         for stored, neighbour, far in entries:
             if np.array_equal(stored, faces):
-                self._entries.move_to_end(key)
+                with self._lock:
+                    if key in self._entries:
+                        self._entries.move_to_end(key)
                 return neighbour.astype(np.int64), far.astype(np.int64)
         neighbour, far = edge_neighbours(faces)
         entry = (faces.astype(np.int32), neighbour.astype(np.int32), far.astype(np.int32))
-        self._entries[key] = [*entries, entry]
-        self._entries.move_to_end(key)
-        self.bytes += sum(e.nbytes for e in entry)
-        while self.bytes > self.max_bytes and len(self._entries) > 1:
-            _, dropped = self._entries.popitem(last=False)
-            self.bytes -= sum(e.nbytes for stored in dropped for e in stored)
+        with self._lock:
+            entries = self._entries.get(key, [])
+            if any(np.array_equal(stored, faces) for stored, _, _ in entries):  # another thread's, meanwhile
+                return neighbour, far
+            self._entries[key] = [*entries, entry]
+            self._entries.move_to_end(key)
+            self.bytes += sum(e.nbytes for e in entry)
+            while self.bytes > self.max_bytes and len(self._entries) > 1:
+                _, dropped = self._entries.popitem(last=False)
+                self.bytes -= sum(e.nbytes for stored in dropped for e in stored)
         return neighbour, far
 
     def by_part(

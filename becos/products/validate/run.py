@@ -6,7 +6,6 @@ checks over all pairs (``checksum``, ``pair_id``, ``split_classes``, ``centaur``
 from __future__ import annotations
 
 import sys
-import threading
 import time
 from collections import deque
 from concurrent.futures import ThreadPoolExecutor
@@ -94,13 +93,11 @@ def check_blocks(
     n = len(bench)
     reported = 0
     digests = digests_to_check(bench)
-    local = threading.local()  # one edge-neighbour cache per worker: the blocks share the store's remeshes
+    neighbours = EdgeNeighbourCache()  # the blocks share the store's remeshes
 
     def check(block) -> Problems:
-        if not hasattr(local, "neighbours"):
-            local.neighbours = EdgeNeighbourCache()
         block_found = Problems()
-        BlockChecker(block, bench.setting, ids[block.start : block.stop], block_found, local.neighbours).run()
+        BlockChecker(block, bench.setting, ids[block.start : block.stop], block_found, neighbours).run()
         check_metas(block, bench.setting, bench.table, block_found)
         return block_found
 
