@@ -71,7 +71,7 @@ def run_cli(args: argparse.Namespace) -> int:
     from becos.atomic import write_text
 
     keep_freed_memory()
-    report = validate(args.store, progress=True, threads=max(1, args.threads))
+    report = validate(args.store, progress=True, threads=args.threads)
     summary = report.summary()
     out = {**summary, "problems": report.problems}
     print(json.dumps(summary))

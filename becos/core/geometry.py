@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from becos.core.mesh import ZERO_AREA_RTOL, TriMesh
+from becos.core.mesh import TriMesh, zero_area_triangles
 
 
 def face_areas(mesh: TriMesh) -> np.ndarray:
@@ -100,7 +100,7 @@ def closest_points_on_triangles(
     """(..., 3) closest point of each point to its triangle (a, b, c); all inputs broadcast to (..., 3).
 
     Ericson, Real-Time Collision Detection, 5.1.5, vectorised over the leading axes. A degenerate
-    triangle (zero area, :data:`becos.core.mesh.ZERO_AREA_RTOL`: a segment or a point) gets the closest
+    triangle (:func:`becos.core.mesh.zero_area_triangles`: a segment or a point) gets the closest
     point of its three sides, where Ericson's regions rest on cross terms that are rounding noise.
     ``nondegenerate``: the caller knows no triangle is degenerate (e.g. a :class:`SurfaceLocator`'s
     usable faces), which skips that test (a quarter of the function's time).
@@ -133,9 +133,7 @@ def closest_points_on_triangles(
     result = np.where(((d1 <= 0) & (d2 <= 0))[..., None], a, result)
     if nondegenerate:
         return np.where(np.isfinite(result), result, a)
-    doubled_area_sq = (np.cross(ab, ac) ** 2).sum(-1)
-    longest_sq = np.maximum(np.maximum((ab * ab).sum(-1), (ac * ac).sum(-1)), ((c - b) ** 2).sum(-1))
-    degenerate = doubled_area_sq <= (2 * ZERO_AREA_RTOL * longest_sq) ** 2
+    degenerate = zero_area_triangles(a, b, c)
     if np.any(degenerate):
         result = np.where(degenerate[..., None], _closest_points_on_sides(points, a, b, c), result)
     return np.where(np.isfinite(result), result, a)

@@ -246,14 +246,19 @@ def repeated_index_faces(faces: np.ndarray) -> np.ndarray:
     return (f[:, 0] == f[:, 1]) | (f[:, 1] == f[:, 2]) | (f[:, 0] == f[:, 2])
 
 
-def zero_area_faces(mesh: TriMesh) -> np.ndarray:
-    """(F,) bool: ``area <= ZERO_AREA_RTOL × longest edge²`` (collinear or coincident corners).
-
-    Faces with a repeated index are included (their area is 0)."""
-    tri = mesh.vertices[mesh.faces]
-    doubled_area = np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
-    longest = (np.diff(tri, axis=1, append=tri[:, :1]) ** 2).sum(axis=2).max(axis=1)
+def zero_area_triangles(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """(...,) bool: triangle (a, b, c) has ``area <= ZERO_AREA_RTOL × longest edge²`` (collinear or
+    coincident corners); corners (..., 3), broadcast."""
+    doubled_area = np.linalg.norm(np.cross(b - a, c - a), axis=-1)
+    longest = np.maximum(np.maximum(((b - a) ** 2).sum(-1), ((c - b) ** 2).sum(-1)), ((a - c) ** 2).sum(-1))
     return 0.5 * doubled_area <= ZERO_AREA_RTOL * longest
+
+
+def zero_area_faces(mesh: TriMesh) -> np.ndarray:
+    """(F,) bool: :func:`zero_area_triangles` of every face (faces with a repeated index included: their
+    area is 0)."""
+    tri = mesh.vertices[mesh.faces]
+    return zero_area_triangles(tri[:, 0], tri[:, 1], tri[:, 2])
 
 
 def degenerate_faces(mesh: TriMesh) -> np.ndarray:

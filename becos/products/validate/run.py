@@ -113,8 +113,9 @@ def check_blocks(
                 flush=True,
             )
 
+    workers = max(1, threads)
     pending: deque = deque()
-    with ThreadPoolExecutor(max(1, threads)) as pool:
+    with ThreadPoolExecutor(workers) as pool:
         for start, stop in bench.block_ranges(max_bytes=block_bytes):
             try:  # straight from the chunk files; any problem is read again, and reported, through zarr
                 block = bench.read_rows(start, stop)
@@ -126,7 +127,7 @@ def check_blocks(
                 for key in bench.layout:
                     digests.update(f"arrays/{key}", block.arrays[key])
             pending.append((stop, pool.submit(check, block)))
-            while len(pending) > max(1, threads):  # bounds the blocks held in memory
+            while len(pending) > workers:  # bounds the blocks held in memory
                 merge_oldest()
         while pending:
             merge_oldest()
