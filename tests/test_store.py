@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import json
 import os
+import struct
+import zipfile
 
 import numpy as np
 import pytest
@@ -153,6 +155,22 @@ def test_bad_inputs_name_the_file(pair_record_files, tmp_path, capsys):
     broken.write_bytes(b"not a zip file")
     with pytest.raises(InputFileError, match="broken.npz.*not a readable pair record"):
         write_store([pp[0], broken], tmp_path / "a.zarr", setting="partial_partial", progress=False)
+    assert not (tmp_path / "a.zarr").exists()
+    # a flipped byte inside a deflated member (the faces): caught by the inflate or the zip's CRC
+    damaged = tmp_path / "damaged.npz"
+    damaged.write_bytes(pp[1].read_bytes())
+    with zipfile.ZipFile(damaged) as z:
+        info = z.getinfo("x_faces.npy")
+    assert info.compress_type == zipfile.ZIP_DEFLATED
+    with open(damaged, "r+b") as fh:
+        fh.seek(info.header_offset + 26)
+        name_len, extra_len = struct.unpack("<HH", fh.read(4))
+        fh.seek(info.header_offset + 30 + name_len + extra_len + info.compress_size // 2)
+        byte = fh.read(1)
+        fh.seek(-1, os.SEEK_CUR)
+        fh.write(bytes([byte[0] ^ 0xFF]))
+    with pytest.raises(InputFileError, match="damaged.npz.*not a readable pair record.*x_faces"):
+        write_store([pp[0], damaged], tmp_path / "a.zarr", setting="partial_partial", progress=False)
     assert not (tmp_path / "a.zarr").exists()
     index = tmp_path / "chunk.json"
     index.write_text(json.dumps({"setting": "full_full", "pairs": [{"path": str(ff[0])}]}))

@@ -6,11 +6,13 @@ from __future__ import annotations
 
 import ast
 import hashlib
+import io
 import json
 import math
 import re
 import struct
 import zipfile
+import zlib
 from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
@@ -58,12 +60,35 @@ def _npy_header(fh) -> tuple[tuple[int, ...], np.dtype, bool]:
     return shape, dtype, fortran
 
 
+def _data_offset(fh, info: zipfile.ZipInfo) -> int:
+    """File offset of a zip member's (possibly compressed) bytes, past its local header."""
+    fh.seek(info.header_offset)
+    local = _LOCAL_HEADER.unpack(fh.read(_LOCAL_HEADER.size))
+    if local[0] != b"PK\x03\x04":
+        raise ValueError(f"bad zip member header of {info.filename}")
+    return info.header_offset + _LOCAL_HEADER.size + local[9] + local[10]
+
+
+def _inflate(fh, info: zipfile.ZipInfo) -> io.BytesIO:
+    """A deflated member's bytes, inflated in one call rather than through zipfile's stream of small
+    reads, and checked against the zip's size and CRC as zipfile checks them."""
+    fh.seek(_data_offset(fh, info))
+    try:
+        data = zlib.decompress(fh.read(info.compress_size), -zlib.MAX_WBITS, info.file_size)
+    except zlib.error as exc:
+        raise ValueError(f"member {info.filename} cannot be inflated ({exc})") from exc
+    if len(data) != info.file_size or zlib.crc32(data) != info.CRC:
+        raise ValueError(f"member {info.filename} is damaged (size or CRC differs from the zip's record)")
+    return io.BytesIO(data)
+
+
 def read_npz(path: Path, load: bool) -> tuple[dict, dict[str, tuple[tuple[int, ...], np.dtype]], dict]:
     """``(meta, {key: (shape, dtype)}, {key: array})`` of a record .npz (arrays only when ``load``), as
     :meth:`PairRecord.load` gives them (:func:`becos.build.record.decode_arrays`: widened, identity maps derived).
 
-    Uncompressed members (``np.savez``, what :meth:`PairRecord.save` writes) are read straight from
-    the file at their offset: no zip CRC pass, one copy; compressed ones through the zip stream.
+    Uncompressed members (``np.savez``, what :meth:`PairRecord.save` writes for float arrays) are
+    read straight from the file at their offset: no zip CRC pass, one copy. Deflated ones are inflated
+    whole when loaded (:func:`_inflate`), else only their header is read through the zip stream.
     """
     shapes, arrays, meta, identity = {}, {}, None, {}
     with open(path, "rb") as fh, zipfile.ZipFile(fh) as z:
@@ -71,19 +96,17 @@ def read_npz(path: Path, load: bool) -> tuple[dict, dict[str, tuple[tuple[int, .
             if not info.filename.endswith(".npy"):
                 continue
             key = info.filename[:-4]
+            special = key in ("__meta__", IDENTITY_MEMBER)
             stored = info.compress_type == zipfile.ZIP_STORED
             if stored:
-                fh.seek(info.header_offset)
-                local = _LOCAL_HEADER.unpack(fh.read(_LOCAL_HEADER.size))
-                if local[0] != b"PK\x03\x04":
-                    raise ValueError(f"bad zip member header of {info.filename}")
-                fh.seek(info.header_offset + _LOCAL_HEADER.size + local[9] + local[10])
+                fh.seek(_data_offset(fh, info))
                 src = fh
+            elif info.compress_type == zipfile.ZIP_DEFLATED and (load or special):
+                src = _inflate(fh, info)
             else:
                 src = z.open(info)
             try:
                 shape, dtype, fortran = _npy_header(src)
-                special = key in ("__meta__", IDENTITY_MEMBER)
                 if not special:
                     shapes[key] = (shape, dtype)
                 if not special and not load:
