@@ -447,13 +447,17 @@ def scaling(
     settings: list[str],
     remeshed: Path | None = None,
     decimator: str | None = None,
+    pairs_per_chunk: int | None = None,
 ) -> dict:
-    """Pairs/s and CPU seconds by stage per (setting, size) (module docstring, ``--scaling``); ``decimator``:
-    the config key ``decimator`` (None: its default)."""
+    """Pairs/s and CPU seconds by stage per (setting, size) (module docstring, ``--scaling``); ``decimator``
+    and ``pairs_per_chunk``: those config keys (None: their defaults)."""
     overrides = {"decimator": decimator} if decimator else {}
+    if pairs_per_chunk:
+        overrides["pairs_per_chunk"] = pairs_per_chunk
     out: dict = {
         "repo": str(repo),
         "decimator": decimator or "default",
+        "pairs_per_chunk": pairs_per_chunk or "default",
         "remeshed_copied_from": str(remeshed) if remeshed else None,
         "from_scratch": remeshed is None,
         "runs": {},
@@ -536,6 +540,11 @@ def main() -> None:
         "--decimator",
         help="with --scaling: the config key decimator (pymeshlab, fast-simplification; default: its default)",
     )
+    parser.add_argument(
+        "--pairs-per-chunk",
+        type=int,
+        help="with --scaling: the config key pairs_per_chunk (the fewest pairs per chunk job; default: its default)",
+    )
     args = parser.parse_args()
     code = becos_code()
     result: dict = {"machine_cores": os.cpu_count()}
@@ -548,6 +557,7 @@ def main() -> None:
             args.settings.split(","),
             args.remeshed,
             args.decimator,
+            args.pairs_per_chunk,
         )
         print(json.dumps(result, indent=1))
         return

@@ -28,6 +28,7 @@ from becos.build.sampling import (
     shape_key,
     write_manifest,
 )
+from becos.defaults import config_default
 from becos.seeding import stable_hash
 from becos.sources.catalog import catalog_table, natural_key, read_catalog, write_catalog
 
@@ -210,8 +211,9 @@ def test_determinism_row_order_and_files(catalog, manifest_all, tmp_path):
     # ids and derived fields
     assert manifest_all["pair_id"].str.fullmatch(r"[0-9a-f]{16}").all()
     assert manifest_all["pair_id"].is_unique
-    jobs = chunk_jobs(len(manifest_all), n_chunks=64, pairs_per_chunk=100)
-    assert 1 < jobs < 64 and 100 <= len(manifest_all) / jobs < 200  # default n_chunks and pairs_per_chunk
+    least = config_default("pairs_per_chunk")  # sample_pairs' default n_chunks and pairs_per_chunk are the config's
+    jobs = chunk_jobs(len(manifest_all), n_chunks=config_default("n_chunks"), pairs_per_chunk=least)
+    assert 1 < jobs < 64 and least <= len(manifest_all) / jobs < 2 * least
     assert manifest_all["x_variant"].between(0, 3).all() and manifest_all["chunk"].between(0, jobs - 1).all()
     assert manifest_all["x_variant"].nunique() == 4 and manifest_all["chunk"].nunique() == jobs
     order = list(zip(manifest_all["split"].map({"train": 0, "val": 1, "test": 2}), manifest_all["pair_id"]))

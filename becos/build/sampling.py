@@ -286,8 +286,8 @@ def sample_pairs(
     combinations: str = "all",
     template_rows=None,
     n_variants: int = 4,
-    n_chunks: int = 64,
-    pairs_per_chunk: int = 100,
+    n_chunks: int | None = None,
+    pairs_per_chunk: int | None = None,
     caps: dict | None = None,
     usage_scale: float = 1.0,
 ) -> pd.DataFrame:
@@ -304,7 +304,7 @@ def sample_pairs(
             object with ``template_row(key)`` (``becos.sources.annotations.AnnotationSource``).
         n_variants: remesh variants per shape (K); ``x_variant``/``y_variant`` lie in ``[0, K)``.
         n_chunks, pairs_per_chunk: the most chunk jobs, the fewest pairs per chunk job
-            (:func:`chunk_jobs`).
+            (:func:`chunk_jobs`; None: the config keys' defaults, :mod:`becos.defaults`).
         caps: optional ``{split: max pairs}``.
         usage_scale: multiplies every dataset's usage count (0.5 ≈ the published pair counts).
 
@@ -316,6 +316,7 @@ def sample_pairs(
         raise ConfigError(f"setting must be one of {SETTINGS}, got {setting!r}")
     if combinations not in COMBINATIONS:
         raise ConfigError(f"combinations must be one of {sorted(COMBINATIONS)}, got {combinations!r}")
+    n_chunks, pairs_per_chunk = _chunk_options(n_chunks, pairs_per_chunk)
     if n_variants < 1 or not 1 <= n_chunks <= N_BUCKETS or pairs_per_chunk < 1:
         raise ConfigError(
             f"n_variants, n_chunks and pairs_per_chunk must be >= 1 (n_chunks <= {N_BUCKETS}), "
@@ -402,6 +403,16 @@ def _finish(rows: _Rows, *, setting, seed, n_variants, caps, skipped: Counter) -
         "n_pairs": {s: int((df["split"] == s).sum()) for s in SPLITS},
     }
     return df
+
+
+def _chunk_options(n_chunks: int | None, pairs_per_chunk: int | None) -> tuple[int, int]:
+    """``n_chunks`` and ``pairs_per_chunk``, the config's defaults for None (:mod:`becos.defaults`)."""
+    from becos.defaults import config_default
+
+    return (
+        config_default("n_chunks") if n_chunks is None else n_chunks,
+        config_default("pairs_per_chunk") if pairs_per_chunk is None else pairs_per_chunk,
+    )
 
 
 def chunk_jobs(n_pairs: int, n_chunks: int, pairs_per_chunk: int) -> int:
