@@ -21,6 +21,11 @@ class InputFileError(BecosError):
         self.fix = fix
         super().__init__(f"{self.path}: {problem}. Fix: {fix}")
 
+    def __reduce__(self):
+        # as the base class rebuilt (a subclass's own arguments differ): it crosses a process boundary
+        # (the store writer's second process) with its path, problem and fix
+        return InputFileError, (self.path, self.problem, self.fix)
+
 
 class ConfigError(BecosError):
     """A configuration value is missing, of the wrong type or inconsistent."""

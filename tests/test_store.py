@@ -6,6 +6,7 @@ import json
 import os
 import struct
 import zipfile
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -413,3 +414,50 @@ def test_a_store_of_an_older_format_says_so_and_how_to_rebuild_it(stores, pair_r
     assert f"becos export-zarr --setting partial_partial --out {old} " in message and f"{pairs}/chunk_*.json" in message
     write_store(pair_record_files["partial_partial"], old, setting="partial_partial", progress=False)
     assert len(open_benchmark(old)) == 2
+
+
+def _tree_bytes(folder: Path) -> dict[str, bytes]:
+    return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+def test_a_second_process_writes_the_same_store(pair_record_files, tmp_path, monkeypatch):
+    """processes=2 (a second process fills half of the arrays) gives the store processes=1 gives, file for
+    file but the root's creation time; an error of a record in the second process's arrays ends in the
+    same InputFileError naming the record."""
+    from becos.products.store import write
+
+    monkeypatch.setattr(write, "SECOND_PROCESS_BYTES", 0)  # the test records are small
+    records = pair_record_files["partial_partial"]
+    one = write_store(records, tmp_path / "one.zarr", setting="partial_partial", progress=False)
+    two = write_store(records, tmp_path / "two.zarr", setting="partial_partial", progress=False, processes=2)
+    a, b = _tree_bytes(one), _tree_bytes(two)
+    assert a.keys() == b.keys() and len(a) > 40
+    assert {k for k in a if a[k] != b[k]} <= {"zarr.json"}
+    meta_a, meta_b = (json.loads(t["zarr.json"]) for t in (a, b))
+    meta_a["attributes"].pop("created"), meta_b["attributes"].pop("created")
+    assert meta_a == meta_b
+
+    import zarr
+
+    arrays = zarr.open_group(str(one / "arrays"), mode="r")
+    layout = meta_a["attributes"]["becos_store"]["layout"]
+    second = write._second_process_keys({k: arrays[k] for k in layout}, 2)
+    assert second and set(second) < set(layout)  # both processes had arrays to fill
+    damaged = tmp_path / "damaged.npz"
+    damaged.write_bytes(records[1].read_bytes())
+    with zipfile.ZipFile(damaged) as z:
+        deflated = [i for i in z.infolist() if i.filename[:-4] in second and i.compress_type == zipfile.ZIP_DEFLATED]
+    assert deflated, second
+    info = deflated[0]
+    with open(damaged, "r+b") as fh:
+        fh.seek(info.header_offset + 26)
+        name_len, extra_len = struct.unpack("<HH", fh.read(4))
+        fh.seek(info.header_offset + 30 + name_len + extra_len + info.compress_size // 2)
+        byte = fh.read(1)
+        fh.seek(-1, os.SEEK_CUR)
+        fh.write(bytes([byte[0] ^ 0xFF]))
+    with pytest.raises(InputFileError, match=f"damaged.npz.*not a readable pair record.*{info.filename}"):
+        write_store(
+            [records[0], damaged], tmp_path / "bad.zarr", setting="partial_partial", progress=False, processes=2
+        )
+    assert not (tmp_path / "bad.zarr").exists()

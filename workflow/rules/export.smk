@@ -29,12 +29,13 @@ rule zarr_store:
         "logs/zarr_store/{setting}.log",
     conda:
         "../envs/becos.yaml"
+    threads: RESOURCES.threads("zarr_store")
     resources:
         mem_mb=RESOURCES.mem_mb("zarr_store"),
         runtime=RESOURCES.runtime("zarr_store", n_pairs=setting_pairs),
     shell:
         "becos export-zarr --setting {wildcards.setting} --out {output:q} --metadata {input.metadata:q}"
-        " {input.pairs:q} > {log:q} 2>&1"
+        " --processes {threads} {input.pairs:q} > {log:q} 2>&1"
 
 
 rule validate_store:

@@ -13,7 +13,7 @@ import re
 import struct
 import zipfile
 import zlib
-from collections.abc import Iterable
+from collections.abc import Collection, Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -82,9 +82,12 @@ def _inflate(fh, info: zipfile.ZipInfo) -> io.BytesIO:
     return io.BytesIO(data)
 
 
-def read_npz(path: Path, load: bool) -> tuple[dict, dict[str, tuple[tuple[int, ...], np.dtype]], dict]:
+def read_npz(
+    path: Path, load: bool, keys: Collection[str] | None = None
+) -> tuple[dict, dict[str, tuple[tuple[int, ...], np.dtype]], dict]:
     """``(meta, {key: (shape, dtype)}, {key: array})`` of a record .npz (arrays only when ``load``), as
     :meth:`PairRecord.load` gives them (:func:`becos.build.record.decode_arrays`: widened, identity maps derived).
+    ``keys``: load only these arrays (None: all); the shapes are those of every array either way.
 
     Uncompressed members (``np.savez``, what :meth:`PairRecord.save` writes for float arrays) are
     read straight from the file at their offset: no zip CRC pass, one copy. Deflated ones are inflated
@@ -101,7 +104,7 @@ def read_npz(path: Path, load: bool) -> tuple[dict, dict[str, tuple[tuple[int, .
             if stored:
                 fh.seek(_data_offset(fh, info))
                 src = fh
-            elif info.compress_type == zipfile.ZIP_DEFLATED and (load or special):
+            elif info.compress_type == zipfile.ZIP_DEFLATED and (special or (load and (keys is None or key in keys))):
                 src = _inflate(fh, info)
             else:
                 src = z.open(info)
@@ -109,7 +112,7 @@ def read_npz(path: Path, load: bool) -> tuple[dict, dict[str, tuple[tuple[int, .
                 shape, dtype, fortran = _npy_header(src)
                 if not special:
                     shapes[key] = (shape, dtype)
-                if not special and not load:
+                if not special and not (load and (keys is None or key in keys)):
                     continue
                 count = math.prod(shape)
                 if stored:
@@ -134,6 +137,8 @@ def read_npz(path: Path, load: bool) -> tuple[dict, dict[str, tuple[tuple[int, .
         f = RECORD_SCHEMA.get(key)
         if f is not None and f.stored is not None and dtype == np.dtype(f.stored):
             shapes[key] = (shape, np.dtype(f.dtype))
+    if keys is not None:
+        identity = {key: n for key, n in identity.items() if key in keys}
     return meta, shapes, decode_arrays(arrays, identity) if load else arrays
 
 

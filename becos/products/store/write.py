@@ -4,6 +4,8 @@ Streams: one pass over the .npz headers and metas (shapes, dtypes, order), then 
 records, buffering at most one shard per array (:data:`SHARD_BYTES`, inner chunks of
 :data:`CHUNK_BYTES` for ragged keys and :data:`STACKED_CHUNK_BYTES` for per-pair keys, Blosc LZ4HC
 with byte shuffle), into a hidden temporary folder beside ``out`` that replaces ``out`` when complete.
+With ``processes=2`` a second process fills about half of the arrays (whole arrays: every shard still
+has one writer) while the first fills the rest and the pairs table; the store is the same.
 """
 
 from __future__ import annotations
@@ -19,7 +21,7 @@ import sys
 import tempfile
 import time
 import zipfile
-from collections.abc import Iterable, Mapping
+from collections.abc import Collection, Iterable, Mapping
 from datetime import UTC, datetime
 from pathlib import Path
 
@@ -30,7 +32,6 @@ from becos.build.record import (
     RECORD_SCHEMA,
     SCHEMA_VERSION,
     SETTINGS,
-    PairRecord,
 )
 from becos.errors import BecosError, DiskFullError, InputFileError
 from becos.products.store.layout import CHUNK_KEYS, SCHEMA_GROUPS, STORE_FORMAT, TABLE_COLUMNS, store_order_key
@@ -49,6 +50,16 @@ decodes 4 KiB per key, not 64."""
 SHARD_BYTES = 4 << 20
 """Uncompressed bytes per shard file (also the most :func:`write_store` buffers per array, so the
 writer's memory stays flat as stores grow: ~40 arrays x 4 MiB)."""
+
+
+ARRAY_CONFIG = {"write_empty_chunks": True}
+"""How the writer opens every array: each chunk is stored, all-zero ones too, so an absent chunk is damage."""
+
+
+SECOND_PROCESS_BYTES = 256 << 20
+"""Uncompressed array bytes above which ``processes=2`` uses its second process: below, its start-up
+(~0.5 CPU-s of imports) costs more than it saves. The writing process is the bottleneck of a large
+store (zarr's encoding of ~25,000 inner chunks per 1,000 TOSCA pairs, one event loop per process)."""
 
 
 VERSION_PACKAGES = ("becos", "numpy", "zarr", "trimesh", "pymeshlab", "embreex", "snakemake")
@@ -132,13 +143,21 @@ class ContentDigests:
     def __init__(self, dtypes: Mapping[str, np.dtype]):
         self.dtypes = {key: np.dtype(dtype) for key, dtype in dtypes.items()}
         self._hashes = {key: hashlib.sha256() for key in self.dtypes}
+        self._done: dict[str, str] = {}
 
     def update(self, key: str, rows: np.ndarray) -> None:
         data = np.ascontiguousarray(rows, dtype=self.dtypes[key])
         self._hashes[key].update(data.reshape(-1).view(np.uint8))
 
     def hexdigests(self) -> dict[str, str]:
-        return {key: h.hexdigest() for key, h in self._hashes.items()}
+        return {key: self._done.get(key) or h.hexdigest() for key, h in self._hashes.items()}
+
+    def merge(self, done: Mapping[str, str]) -> None:
+        """Take the finished digests of keys fed elsewhere (the store writer's second process)."""
+        unknown = set(done) - set(self._hashes)
+        if unknown:
+            raise KeyError(f"digests of unknown store nodes: {sorted(unknown)}")
+        self._done.update(done)
 
 
 class _Writer:
@@ -317,20 +336,29 @@ def _progress(message: str) -> None:
     print(f"export-zarr: {message}", file=sys.stderr, flush=True)
 
 
-def _add_record(info: RecordInfo, sinks: dict, layout: dict, metas: list, rows: list, index: int) -> None:
+_CHANGED_FIX = "re-run export-zarr once the pairs stage is done"
+
+
+def _read_record(info: RecordInfo, keys: Collection[str] | None = None) -> tuple[dict, dict]:
+    """``(meta, arrays)`` of a record (only ``keys``' arrays when given; :func:`read_npz`)."""
     try:
-        meta, _, arrays = read_npz(info.path, load=True)
+        meta, _, arrays = read_npz(info.path, load=True, keys=keys)
     except (zipfile.BadZipFile, ValueError, OSError, KeyError, SyntaxError, struct.error, TypeError) as exc:
         raise InputFileError(
             info.path, f"is not a readable pair record .npz ({exc})", "re-run the pairs stage for this pair"
         ) from exc
-    record = PairRecord(arrays, meta)
+    if meta is None:
+        raise InputFileError(info.path, "changed while the store was written", _CHANGED_FIX)
+    meta.setdefault("schema_version", SCHEMA_VERSION)  # as PairRecord gives it
+    return meta, arrays
+
+
+def _add_arrays(info: RecordInfo, arrays: dict, sinks: dict, layout: dict) -> None:
+    """A record's rows of each sink's key, as the store keeps them (index keys narrowed, checked)."""
     for key, sink in sinks.items():
-        value = record.arrays[key]
-        if value.shape != info.shapes[key][0] or value.dtype != info.shapes[key][1]:
-            raise InputFileError(
-                info.path, "changed while the store was written", "re-run export-zarr once the pairs stage is done"
-            )
+        value = arrays.get(key)
+        if value is None or value.shape != info.shapes[key][0] or value.dtype != info.shapes[key][1]:
+            raise InputFileError(info.path, "changed while the store was written", _CHANGED_FIX)
         disk = sink.array.dtype
         if value.dtype != disk:  # an index key stored narrower: every value must fit
             if value.size and (value.min() < np.iinfo(disk).min or value.max() > np.iinfo(disk).max):
@@ -341,15 +369,26 @@ def _add_record(info: RecordInfo, sinks: dict, layout: dict, metas: list, rows: 
                 )
             value = value.astype(disk)
         sink.add(value[None] if layout[key] is None else value)
-    metas.append(record.meta)
+
+
+def _add_record(
+    info: RecordInfo, sinks: dict, layout: dict, metas: list, rows: list, index: int, keys: Collection[str] | None
+) -> None:
+    """A record's rows into ``sinks``, its meta and table row into ``metas`` and ``rows``; ``keys``: the
+    arrays to read (None: all of them, which the sinks then are)."""
+    meta, arrays = _read_record(info, None if keys is None else {*keys, "x_overlap", "y_overlap"})
+    _add_arrays(info, arrays, sinks, layout)
+    if "x_overlap" not in arrays or "y_overlap" not in arrays:
+        raise InputFileError(info.path, "changed while the store was written", _CHANGED_FIX)
+    metas.append(meta)
     rows.append(
         table_row(
             index,
-            record.meta,
-            len(record["x_vertices"]),
-            len(record["y_vertices"]),
-            record["x_overlap"],
-            record["y_overlap"],
+            meta,
+            info.shapes["x_vertices"][0][0],
+            info.shapes["y_vertices"][0][0],
+            arrays["x_overlap"],
+            arrays["y_overlap"],
         )
     )
 
@@ -424,6 +463,7 @@ def write_store(
     progress: bool = True,
     overwrite: bool = False,
     protect: Iterable[str | Path] = (),
+    processes: int = 1,
 ) -> Path:
     """One Zarr v3 store per setting: every PairRecord concatenated per key (+ offsets), a pairs table,
     metadata. Written to a temp dir then renamed (atomic).
@@ -440,6 +480,8 @@ def write_store(
         overwrite: replace an ``out`` that is not a becos store (deleting what it holds).
         protect: further input files (index files, metadata) that ``out`` must not hold, besides
             ``record_paths``.
+        processes: 2 lets a second process fill about half of the arrays of a store of more than
+            :data:`SECOND_PROCESS_BYTES` (each array has one writer); the same store as with 1.
 
     Returns:
         ``out`` as a Path. Raises :class:`InputFileError` naming the offending record file.
@@ -461,7 +503,7 @@ def write_store(
     remove_stale_temporaries(out.parent, [out.name])  # one job writes a store: these are a killed write's
     tmp = Path(tempfile.mkdtemp(dir=out.parent, prefix=f".{out.name}.", suffix=".tmp"))
     try:
-        _fill_store(tmp, infos, layout, lengths, setting, metadata, progress, started)
+        _fill_store(tmp, infos, layout, lengths, setting, metadata, progress, started, processes)
         os.chmod(tmp, 0o755)
         _replace_dir(tmp, out)
     except BaseException as exc:
@@ -509,9 +551,12 @@ def _scan_records(paths: list[Path], setting: str) -> list:
     return infos
 
 
-def _fill_store(tmp: Path, infos: list, layout: dict, lengths: dict, setting, metadata, progress, started) -> None:
+def _fill_store(
+    tmp: Path, infos: list, layout: dict, lengths: dict, setting, metadata, progress, started, processes: int = 1
+) -> None:
     """Write the store of ``infos`` (in that order) into the new folder ``tmp``: offsets, arrays, pairs
-    table and root attributes (``metadata`` plus what the store is)."""
+    table and root attributes (``metadata`` plus what the store is); ``processes`` 2: a second process
+    fills about half of the arrays (:func:`_second_process_keys`)."""
     import zarr
 
     n = len(infos)
@@ -529,12 +574,19 @@ def _fill_store(tmp: Path, infos: list, layout: dict, lengths: dict, setting, me
             group, data=offsets, chunks=(n + 1,), compressors=_compressors(), chunk_key_encoding=CHUNK_KEYS
         )
         digests.update(f"offsets/{group}", offsets)
+    created = {
+        key: _create_array(arrays, key, group, first[key][0], disk[key], n, lengths) for key, group in layout.items()
+    }
+    other = _second_process_keys(created, processes)
     writer = _Writer()
     sinks = {
-        key: _create_sink(arrays, key, group, first[key][0], disk[key], n, lengths, writer, digests)
-        for key, group in layout.items()
+        key: _Sink(array, _shard_rows(array), writer, digests, f"arrays/{key}")
+        for key, array in created.items()
+        if key not in other
     }
-    metas, rows = _copy_records(infos, sinks, layout, writer, progress, started)
+    with _SecondProcess(tmp, infos, other, layout) as second:
+        metas, rows = _copy_records(infos, sinks, layout, writer, progress, started, None if not other else list(sinks))
+        digests.merge(second.result())
     write_pairs(root, metas, rows)
     splits: dict[str, int] = {}
     for m in metas:
@@ -552,15 +604,15 @@ def _fill_store(tmp: Path, infos: list, layout: dict, lengths: dict, setting, me
     root.attrs.update(attrs)
 
 
-def _create_sink(arrays, key: str, group, shape, dtype, n: int, lengths: dict, writer, digests) -> _Sink:
-    """The array ``key`` of the store (every pair's rows; ``group`` None: one stacked row per pair, of
-    ``shape``) and the sink that fills it."""
+def _create_array(arrays, key: str, group, shape, dtype, n: int, lengths: dict):
+    """The array ``key`` of the store, empty (every pair's rows; ``group`` None: one stacked row per pair,
+    of ``shape``)."""
     total = n if group is None else int(lengths[group].sum())
     row_shape = shape if group is None else shape[1:]
     chunks, shards = _chunking(
         total, row_shape, dtype.itemsize, CHUNK_BYTES if group is not None else STACKED_CHUNK_BYTES
     )
-    array = arrays.create_array(
+    return arrays.create_array(
         key,
         shape=(total, *row_shape),
         dtype=dtype,
@@ -569,21 +621,118 @@ def _create_sink(arrays, key: str, group, shape, dtype, n: int, lengths: dict, w
         compressors=_compressors(),
         fill_value=np.zeros((), dtype).item(),
         chunk_key_encoding=CHUNK_KEYS,
-        # every chunk file exists, even all-zero ones: an absent file is damage
-        config={"write_empty_chunks": True},
+        config=ARRAY_CONFIG,
     )
-    return _Sink(array, (shards or chunks)[0], writer, digests, f"arrays/{key}")
 
 
-def _copy_records(infos: list, sinks: dict, layout: dict, writer, progress, started) -> tuple[list, list]:
+def _shard_rows(array) -> int:
+    """Rows of one shard of a store array (of one chunk when it has no shards): the unit a sink writes."""
+    return (array.shards or array.chunks)[0]
+
+
+def _second_process_keys(arrays: Mapping[str, object], processes: int) -> list[str]:
+    """The keys a second process fills: about half of the bytes, the largest arrays dealt alternately
+    to the lighter side (in a fixed order); none for one process or a small store."""
+    nbytes = {key: int(np.prod(a.shape)) * a.dtype.itemsize for key, a in arrays.items()}
+    if processes < 2 or sum(nbytes.values()) <= SECOND_PROCESS_BYTES:
+        return []
+    sides: tuple[list[str], list[str]] = ([], [])
+    load = [0, 0]
+    for key in sorted(nbytes, key=lambda k: (-nbytes[k], k)):
+        side = 0 if load[0] <= load[1] else 1
+        sides[side].append(key)
+        load[side] += nbytes[key]
+    return sides[1]
+
+
+def _fill_keys(tmp: str, infos: list, keys: list[str], layout: dict) -> dict[str, str]:
+    """The second process's part of :func:`_fill_store`: the arrays ``keys`` of the store being written
+    in ``tmp`` (created empty by the first), from every record; returns their content digests."""
+    import zarr
+
+    group = zarr.open_group(str(Path(tmp) / "arrays"), mode="r+")
+    arrays = {key: group[key].with_config(ARRAY_CONFIG) for key in keys}  # the config is not stored
+    digests = ContentDigests({f"arrays/{key}": a.dtype for key, a in arrays.items()})
+    writer = _Writer()
+    sinks = {key: _Sink(a, _shard_rows(a), writer, digests, f"arrays/{key}") for key, a in arrays.items()}
+    try:
+        for info in infos:
+            _add_arrays(info, _read_record(info, keys)[1], sinks, layout)
+        for sink in sinks.values():
+            sink.close()
+    except BaseException:
+        writer.finish(failed=True)
+        raise
+    writer.finish()
+    return digests.hexdigests()
+
+
+def _second_process_main(conn, tmp: str, infos: list, keys: list[str], layout: dict) -> None:
+    """Entry point of the second process: sends ``("ok", digests)`` or ``("error", exception)``."""
+    try:
+        conn.send(("ok", _fill_keys(tmp, infos, keys, layout)))
+    except BaseException as exc:
+        try:
+            conn.send(("error", exc))
+        except Exception:  # an exception that does not pickle: its text
+            conn.send(("error", RuntimeError(f"{type(exc).__name__}: {exc}")))
+    finally:
+        conn.close()
+
+
+class _SecondProcess:
+    """A second process filling the arrays ``keys`` (:func:`_fill_keys`) while this one fills the rest;
+    nothing when ``keys`` is empty. Leaving the block after an error stops it."""
+
+    def __init__(self, tmp: Path, infos: list, keys: list[str], layout: dict):
+        self.args = (str(tmp), infos, keys, layout)
+        self.process = None
+
+    def __enter__(self) -> _SecondProcess:
+        if self.args[2]:
+            import multiprocessing
+
+            ctx = multiprocessing.get_context("spawn")  # not fork: zarr's event loop thread does not survive it
+            self.conn, child = ctx.Pipe(duplex=False)
+            self.process = ctx.Process(target=_second_process_main, args=(child, *self.args), daemon=True)
+            self.process.start()
+            child.close()
+        return self
+
+    def result(self) -> dict[str, str]:
+        """The second process's digests (re-raising its error); {} without one."""
+        if self.process is None:
+            return {}
+        try:
+            status, value = self.conn.recv()
+        except EOFError:
+            raise RuntimeError(
+                f"the store writer's second process ended without a result (exit code {self.process.exitcode})"
+            ) from None
+        if status == "error":
+            raise value
+        return value
+
+    def __exit__(self, *exc_info) -> None:
+        if self.process is None:
+            return
+        if exc_info[0] is not None and self.process.is_alive():
+            self.process.terminate()
+        self.process.join()
+        self.conn.close()
+
+
+def _copy_records(
+    infos: list, sinks: dict, layout: dict, writer, progress, started, keys: list[str] | None = None
+) -> tuple[list, list]:
     """Every record's arrays into ``sinks`` (closed, and ``writer`` finished, at the end); returns the
-    pair metas and table rows."""
+    pair metas and table rows. ``keys``: the arrays to read (the sinks'; None: every array)."""
     n = len(infos)
     metas, rows = [], []
     step = max(1, math.ceil(n / 10))
     try:
         for i, info in enumerate(infos):
-            _add_record(info, sinks, layout, metas, rows, i)
+            _add_record(info, sinks, layout, metas, rows, i, keys)
             if progress and n >= 50 and ((i + 1) % step == 0 or i + 1 == n):
                 _progress(f"{i + 1}/{n} records read ({time.perf_counter() - started:.1f} s)")
         for sink in sinks.values():
