@@ -22,10 +22,11 @@ from becos.errors import InputFileError
 DEFAULT = {"mem_mb": 2000, "runtime": 30}
 """Resources of a rule the table does not list."""
 
-THREADS = {"validate_store": 2, "zarr_store": 2}
+THREADS = {"validate_store": 2, "zarr_store": 2, "check_datasets": 2}
 """Cores of the rules whose job splits its work (Snakemake gives a job at most ``--cores``); the others
 use one. ``becos validate --threads 2`` on a 1,000-pair TOSCA store: 13.6 -> 10.1 s wall; ``becos
-export-zarr --processes 2`` (a second process fills half of the arrays): see docs/measurements.md."""
+export-zarr --processes 2`` (a second process fills half of the arrays) and ``becos check --processes 2``:
+see docs/measurements.md."""
 
 
 class RuleResources:

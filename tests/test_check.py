@@ -266,3 +266,28 @@ def test_unsafe_archives_are_rejected(tmp_path, kind):
         fetch_annotations(archive.as_uri(), digest, dest)
     assert not dest.exists() and not (tmp_path / "outside.txt").exists()
     assert os.listdir(tmp_path / "deep") == []
+
+
+def test_two_processes_give_the_same_report(becos_code, tosca_dir, tmp_path):
+    """``processes=2`` (mesh files and class comparisons shared with a second process) reports what one
+    process reports, a file off its class template included, in the same order."""
+    import numpy as np
+
+    from becos.core.formats.off import read_off
+
+    data, registry = _small_tosca(tmp_path, tosca_dir, ("wolf0", "wolf1", "wolf2"))
+    folder = data / "tosca-off"
+    vertices, faces = read_off((folder / "wolf1.off").read_bytes())
+    with open(folder / "wolf1.off", "w") as fh:  # in centimetres: off its template's edge lengths
+        fh.write(f"OFF\n{len(vertices)} {len(faces)} 0\n")
+        np.savetxt(fh, vertices * 100.0, fmt="%.6f")
+        np.savetxt(fh, np.column_stack([np.full(len(faces), 3), faces]), fmt="%d")
+    reports = []
+    for processes in (1, 2):
+        with pytest.raises(DatasetCheckError) as info:
+            check_datasets(["tosca"], data, becos_code, config_dir=registry, processes=processes)
+        reports.append((info.value.report, info.value.problems))
+    assert reports[0] == reports[1]
+    mismatches = reports[0][0]["tosca"]["class_mismatches"]
+    assert [Path(m["path"]).name for m in mismatches] == ["wolf1.off"]
+    assert reports[0][0]["tosca"]["meshes_checked"] == 3

@@ -46,6 +46,13 @@ def check_arguments(parser: argparse.ArgumentParser) -> None:
         "plausibility (only for stand-in meshes; config key `check_geometry`)",
     )
     parser.add_argument(
+        "--processes",
+        type=int,
+        choices=(1, 2),
+        default=1,
+        help="2: check the mesh files and the class templates in two processes (the same report; default 1)",
+    )
+    parser.add_argument(
         "--full-parse",
         action="store_true",
         help="also parse every mesh completely with read_mesh and list the repairs remeshing "
@@ -78,6 +85,7 @@ def run_check(args: argparse.Namespace) -> int:
             full_parse=args.full_parse,
             template_table=args.template_table,
             compare_geometry=args.compare_geometry,
+            processes=args.processes,
         )
     except DatasetCheckError as exc:
         if args.out is not None:

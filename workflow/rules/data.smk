@@ -129,6 +129,7 @@ checkpoint check_datasets:
         "logs/check_datasets.log",
     conda:
         "../envs/becos.yaml"
+    threads: RESOURCES.threads("check_datasets")
     params:
         # a rerun trigger only: the content of every file the check reads (becos.workflow.digests), so a
         # mesh or annotation file replaced after a finished run is checked again, whatever its time
@@ -141,7 +142,7 @@ checkpoint check_datasets:
     shell:
         "becos check --datasets {params.datasets} --data-dir {params.data_dir:q}"
         " --annotations {params.annotations:q} --template-table {params.template_file:q} {params.geometry}"
-        " --out {output:q} > {log:q} 2>&1"
+        " --processes {threads} --out {output:q} > {log:q} 2>&1"
 
 
 rule catalog:

@@ -9,6 +9,7 @@ inspection), and the shapes that share their class template's triangulation agai
 
 from __future__ import annotations
 
+import contextlib
 from pathlib import Path
 
 from becos.core.formats import not_a_mesh_file, not_a_regular_file
@@ -121,6 +122,7 @@ def _check_one_dataset(
     full_parse: bool,
     config_dir,
     compare_geometry: bool = True,
+    processes: int = 1,
 ) -> tuple[dict, list[str], list]:
     """Report entry, problem texts and the listed ShapeEntry rows (empty unless the listing succeeded)."""
     from becos.sources.datasets import DatasetSpec
@@ -168,7 +170,7 @@ def _check_one_dataset(
     names = [n for n in names if n not in stray]
     counts_ok = _check_counts(spec, folder, names, not_files, annotations, entry, problems)
     if read_meshes:
-        _check_meshes(spec, folder, names, full_parse, entry, problems)
+        _check_meshes(spec, folder, names, full_parse, entry, problems, processes)
     shapes: list = []
     if counts_ok and not stray:
         try:
@@ -176,7 +178,7 @@ def _check_one_dataset(
         except BecosError as exc:
             problems.append(f"dataset '{name}': {exc}")
     if read_meshes and compare_geometry and shapes and annotations is not None:
-        _check_class_templates(spec, shapes, annotations, entry, problems)
+        _check_class_templates(spec, shapes, annotations, entry, problems, processes)
     entry["problems"] = problems
     entry["ok"] = not problems
     return entry, problems, shapes
@@ -272,20 +274,20 @@ def _listed(rows: list[dict], text) -> str:
     return listed + more
 
 
-def _check_meshes(spec, folder: Path, names: list[str], full_parse: bool, entry: dict, problems: list[str]) -> None:
+def _check_meshes(
+    spec, folder: Path, names: list[str], full_parse: bool, entry: dict, problems: list[str], processes: int = 1
+) -> None:
     """Check every listed mesh file (cheap check, or with ``full_parse`` the full inspection, whose repairs
-    go to ``entry["repairs"]``); bad files go to ``entry["bad_meshes"]`` and make one problem."""
-    for n in names:
-        path = folder / f"{n}.{spec.file_type}"
-        try:
-            if full_parse:
-                repair = inspect_mesh_file(path)
-                if repair.needs_attention:
-                    entry["repairs"].append({"path": str(path), "repair": repair.summary(), **repair.counts()})
-            else:
-                check_mesh_file(path)
-        except InputFileError as exc:
-            entry["bad_meshes"].append({"path": str(path), "problem": exc.problem, "fix": exc.fix})
+    go to ``entry["repairs"]``); bad files go to ``entry["bad_meshes"]`` and make one problem.
+    ``processes`` 2: half of the files in a second process (:func:`becos.process_split.map_over_processes`)."""
+    from becos.process_split import map_over_processes
+
+    paths = [folder / f"{n}.{spec.file_type}" for n in names]
+    for repair, bad in map_over_processes(_check_mesh, [(p, full_parse) for p in paths], processes):
+        if repair is not None:
+            entry["repairs"].append(repair)
+        if bad is not None:
+            entry["bad_meshes"].append(bad)
         entry["meshes_checked"] += 1
     bad = entry["bad_meshes"]
     if bad:
@@ -298,10 +300,26 @@ def _check_meshes(spec, folder: Path, names: list[str], full_parse: bool, entry:
         )
 
 
-def _check_class_templates(spec, shapes: list, annotations, entry: dict, problems: list[str]) -> None:
+def _check_mesh(path: Path, full_parse: bool) -> tuple[dict | None, dict | None]:
+    """(repair entry or None, bad-mesh entry or None) of one mesh file (:func:`_check_meshes`)."""
+    try:
+        if full_parse:
+            repair = inspect_mesh_file(path)
+            if repair.needs_attention:
+                return {"path": str(path), "repair": repair.summary(), **repair.counts()}, None
+        else:
+            check_mesh_file(path)
+    except InputFileError as exc:
+        return None, {"path": str(path), "problem": exc.problem, "fix": exc.fix}
+    return None, None
+
+
+def _check_class_templates(
+    spec, shapes: list, annotations, entry: dict, problems: list[str], processes: int = 1
+) -> None:
     """Compare the shapes with their class templates (:func:`becos.sources.check.templates.check_classes`; files
     already named bad are left out): ``entry["class_mismatches"]``, and one problem naming them."""
-    mismatched = check_classes(shapes, annotations, {b["path"] for b in entry["bad_meshes"]})
+    mismatched = check_classes(shapes, annotations, {b["path"] for b in entry["bad_meshes"]}, processes)
     entry["class_mismatches"] = mismatched
     if mismatched:
         listed = _listed(mismatched, lambda b: f"{b['path']}: {b['problem']}")
@@ -321,6 +339,7 @@ def check_datasets(
     template_table: str = "templates_all.csv",
     config_dir: str | Path | None = None,
     compare_geometry: bool = True,
+    processes: int = 1,
 ) -> dict:
     """Check the enabled datasets and the annotation folder; return the report (:mod:`becos.sources.check`).
 
@@ -339,6 +358,7 @@ def check_datasets(
             (:func:`becos.sources.check.templates.compare_with_class_template`) and check edge files for plausibility
             (:func:`becos.sources.check.edges.edge_plausibility`); False only for stand-in
             meshes without real geometry (config key ``check_geometry``).
+        processes: 2 checks the mesh files and class templates in two processes (the same report).
 
     Raises:
         DatasetCheckError (a ConfigError): one message listing every problem; ``.report`` holds the report.
@@ -362,14 +382,12 @@ def check_datasets(
     present: dict[str, list] = {}
     for name in enabled:
         entry, ds_problems, shapes = _check_one_dataset(
-            name, data_dir, source, read_meshes, full_parse, config_dir, compare_geometry
+            name, data_dir, source, read_meshes, full_parse, config_dir, compare_geometry, processes
         )
         report[name] = entry
         problems += ds_problems
-        try:
+        with contextlib.suppress(BecosError):  # a registry problem is in the dataset's own entry
             specs[name] = DatasetSpec.load(name, config_dir)
-        except BecosError:
-            pass
         if shapes:
             present[name] = shapes
     if root is None:

@@ -7,7 +7,7 @@ over a dataset's shapes for the dataset check.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import cached_property
+from functools import cached_property, lru_cache
 from pathlib import Path
 
 import numpy as np
@@ -107,17 +107,20 @@ CLASS_FIX = (
 """The fix named for a shape that does not fit its class template (:func:`check_classes`)."""
 
 
-def check_classes(shapes: list, annotations, skip: set[str]) -> list[dict]:
+def check_classes(shapes: list, annotations, skip: set[str], processes: int = 1) -> list[dict]:
     """``[{"path", "template", "problem", "fix"}]`` for shapes that differ from their class template.
 
     Only shapes the ground truth joins to their template by vertex identity are compared: the
     template is a shape of the same dataset (:meth:`becos.build.network.ShapeNetwork.hop`). Files in
-    ``skip`` (already reported) are left out."""
+    ``skip`` (already reported) are left out. ``processes`` 2: half of the comparisons in a second
+    process (:func:`becos.process_split.map_over_processes`), the same list."""
+    from becos.process_split import map_over_processes
+
     by_name = {e.name: e for e in shapes}
     groups: dict[str, list] = {}
     for e in shapes:
         groups.setdefault(e.template_key, []).append(e)
-    bad = []
+    pairs = []  # (shape file, template file), class by class
     for key, members in groups.items():
         try:
             dataset, template_name = annotations.node_template(annotations.node_of_key(key))
@@ -126,15 +129,25 @@ def check_classes(shapes: list, annotations, skip: set[str]) -> list[dict]:
         template = by_name.get(template_name)
         if template is None or template.dataset != members[0].dataset or str(template.path) in skip:
             continue
-        others = [e for e in members if e.name != template_name and str(e.path) not in skip]
-        if not others:
-            continue
-        template_arrays = ClassTemplate(*mesh_arrays(template.path))
-        for e in others:
-            try:
-                problem = compare_with_class_template(e.path, template.path, mesh_arrays(e.path), template_arrays)
-            except (BecosError, ValueError) as exc:
-                problem = f"could not be read to compare with its class template ({exc})"
-            if problem is not None:
-                bad.append({"path": str(e.path), "template": str(template.path), "problem": problem, "fix": CLASS_FIX})
-    return bad
+        pairs += [(e.path, template.path) for e in members if e.name != template_name and str(e.path) not in skip]
+    problems = map_over_processes(_compare_file, pairs, processes)
+    return [
+        {"path": str(path), "template": str(template), "problem": problem, "fix": CLASS_FIX}
+        for (path, template), problem in zip(pairs, problems)
+        if problem is not None
+    ]
+
+
+@lru_cache(maxsize=2)
+def _class_template(path: Path) -> ClassTemplate:
+    """The class template in ``path``, read once per process while its class's shapes are compared."""
+    return ClassTemplate(*mesh_arrays(path))
+
+
+def _compare_file(path: Path, template_path: Path) -> str | None:
+    """:func:`compare_with_class_template` of one shape file, an unreadable one's problem included."""
+    template = _class_template(template_path)
+    try:
+        return compare_with_class_template(path, template_path, mesh_arrays(path), template)
+    except (BecosError, ValueError) as exc:
+        return f"could not be read to compare with its class template ({exc})"
