@@ -146,6 +146,17 @@ def test_cli_reads_chunk_index_and_replaces_store(pair_record_files, tmp_path, m
     ]
 
 
+def _flip_a_byte(path: Path, info: zipfile.ZipInfo) -> None:
+    """Invert one byte in the middle of the zip member ``info``'s stored (compressed) bytes in ``path``."""
+    with open(path, "r+b") as fh:
+        fh.seek(info.header_offset + 26)
+        name_len, extra_len = struct.unpack("<HH", fh.read(4))
+        fh.seek(info.header_offset + 30 + name_len + extra_len + info.compress_size // 2)
+        byte = fh.read(1)
+        fh.seek(-1, os.SEEK_CUR)
+        fh.write(bytes([byte[0] ^ 0xFF]))
+
+
 def test_bad_inputs_name_the_file(pair_record_files, tmp_path, capsys):
     pp, ff = pair_record_files["partial_partial"], pair_record_files["full_full"]
     with pytest.raises(InputFileError, match=ff[0].name + ".*not partial_partial"):
@@ -163,13 +174,7 @@ def test_bad_inputs_name_the_file(pair_record_files, tmp_path, capsys):
     with zipfile.ZipFile(damaged) as z:
         info = z.getinfo("x_faces.npy")
     assert info.compress_type == zipfile.ZIP_DEFLATED
-    with open(damaged, "r+b") as fh:
-        fh.seek(info.header_offset + 26)
-        name_len, extra_len = struct.unpack("<HH", fh.read(4))
-        fh.seek(info.header_offset + 30 + name_len + extra_len + info.compress_size // 2)
-        byte = fh.read(1)
-        fh.seek(-1, os.SEEK_CUR)
-        fh.write(bytes([byte[0] ^ 0xFF]))
+    _flip_a_byte(damaged, info)
     with pytest.raises(InputFileError, match="damaged.npz.*not a readable pair record.*x_faces"):
         write_store([pp[0], damaged], tmp_path / "a.zarr", setting="partial_partial", progress=False)
     assert not (tmp_path / "a.zarr").exists()
@@ -449,13 +454,7 @@ def test_a_second_process_writes_the_same_store(pair_record_files, tmp_path, mon
         deflated = [i for i in z.infolist() if i.filename[:-4] in second and i.compress_type == zipfile.ZIP_DEFLATED]
     assert deflated, second
     info = deflated[0]
-    with open(damaged, "r+b") as fh:
-        fh.seek(info.header_offset + 26)
-        name_len, extra_len = struct.unpack("<HH", fh.read(4))
-        fh.seek(info.header_offset + 30 + name_len + extra_len + info.compress_size // 2)
-        byte = fh.read(1)
-        fh.seek(-1, os.SEEK_CUR)
-        fh.write(bytes([byte[0] ^ 0xFF]))
+    _flip_a_byte(damaged, info)
     with pytest.raises(InputFileError, match=f"damaged.npz.*not a readable pair record.*{info.filename}"):
         write_store(
             [records[0], damaged], tmp_path / "bad.zarr", setting="partial_partial", progress=False, processes=2

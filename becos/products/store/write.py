@@ -10,6 +10,7 @@ has one writer) while the first fills the rest and the pairs table; the store is
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import hashlib
 import json
@@ -630,6 +631,20 @@ def _shard_rows(array) -> int:
     return (array.shards or array.chunks)[0]
 
 
+@contextlib.contextmanager
+def _filling(sinks: dict, writer: _Writer):
+    """Around feeding ``sinks``: closes them and waits for ``writer``'s writes after the block; after an
+    error, drops the writes still queued."""
+    try:
+        yield
+        for sink in sinks.values():
+            sink.close()
+    except BaseException:
+        writer.finish(failed=True)
+        raise
+    writer.finish()
+
+
 def _second_process_keys(arrays: Mapping[str, object], processes: int) -> list[str]:
     """The keys a second process fills: about half of the bytes, the largest arrays dealt alternately
     to the lighter side (in a fixed order); none for one process or a small store."""
@@ -655,15 +670,9 @@ def _fill_keys(tmp: str, infos: list, keys: list[str], layout: dict) -> dict[str
     digests = ContentDigests({f"arrays/{key}": a.dtype for key, a in arrays.items()})
     writer = _Writer()
     sinks = {key: _Sink(a, _shard_rows(a), writer, digests, f"arrays/{key}") for key, a in arrays.items()}
-    try:
+    with _filling(sinks, writer):
         for info in infos:
             _add_arrays(info, _read_record(info, keys)[1], sinks, layout)
-        for sink in sinks.values():
-            sink.close()
-    except BaseException:
-        writer.finish(failed=True)
-        raise
-    writer.finish()
     return digests.hexdigests()
 
 
@@ -730,17 +739,11 @@ def _copy_records(
     n = len(infos)
     metas, rows = [], []
     step = max(1, math.ceil(n / 10))
-    try:
+    with _filling(sinks, writer):
         for i, info in enumerate(infos):
             _add_record(info, sinks, layout, metas, rows, i, keys)
             if progress and n >= 50 and ((i + 1) % step == 0 or i + 1 == n):
                 _progress(f"{i + 1}/{n} records read ({time.perf_counter() - started:.1f} s)")
-        for sink in sinks.values():
-            sink.close()
-    except BaseException:
-        writer.finish(failed=True)
-        raise
-    writer.finish()
     return metas, rows
 
 
