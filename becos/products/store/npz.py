@@ -100,11 +100,12 @@ def read_npz(
                 continue
             key = info.filename[:-4]
             special = key in ("__meta__", IDENTITY_MEMBER)
+            wanted = special or (load and (keys is None or key in keys))  # its data is read, not only its header
             stored = info.compress_type == zipfile.ZIP_STORED
             if stored:
                 fh.seek(_data_offset(fh, info))
                 src = fh
-            elif info.compress_type == zipfile.ZIP_DEFLATED and (special or (load and (keys is None or key in keys))):
+            elif info.compress_type == zipfile.ZIP_DEFLATED and wanted:
                 src = _inflate(fh, info)
             else:
                 src = z.open(info)
@@ -112,7 +113,7 @@ def read_npz(
                 shape, dtype, fortran = _npy_header(src)
                 if not special:
                     shapes[key] = (shape, dtype)
-                if not special and not (load and (keys is None or key in keys)):
+                if not wanted:
                     continue
                 count = math.prod(shape)
                 if stored:

@@ -10,6 +10,7 @@ inspection), and the shapes that share their class template's triangulation agai
 from __future__ import annotations
 
 import contextlib
+from functools import partial
 from pathlib import Path
 
 from becos.core.formats import not_a_mesh_file, not_a_regular_file
@@ -279,11 +280,11 @@ def _check_meshes(
 ) -> None:
     """Check every listed mesh file (cheap check, or with ``full_parse`` the full inspection, whose repairs
     go to ``entry["repairs"]``); bad files go to ``entry["bad_meshes"]`` and make one problem.
-    ``processes`` 2: half of the files in a second process (:func:`becos.process_split.map_over_processes`)."""
-    from becos.process_split import map_over_processes
+    ``processes`` 2: half of the files in a second process (:func:`becos.process_split.split_over_processes`)."""
+    from becos.process_split import split_over_processes
 
     paths = [folder / f"{n}.{spec.file_type}" for n in names]
-    for repair, bad in map_over_processes(_check_mesh, [(p, full_parse) for p in paths], processes):
+    for repair, bad in split_over_processes(partial(_check_mesh_files, full_parse=full_parse), paths, processes):
         if repair is not None:
             entry["repairs"].append(repair)
         if bad is not None:
@@ -298,6 +299,11 @@ def _check_meshes(
             f"dataset '{spec.name}': {len(bad)} of {len(names)} mesh files are empty, truncated or corrupt: "
             f"{listed}. Fix: re-download or re-extract them ({spec.download_help()})"
         )
+
+
+def _check_mesh_files(paths: list[Path], full_parse: bool) -> list[tuple[dict | None, dict | None]]:
+    """:func:`_check_mesh` of each file."""
+    return [_check_mesh(path, full_parse) for path in paths]
 
 
 def _check_mesh(path: Path, full_parse: bool) -> tuple[dict | None, dict | None]:

@@ -7,7 +7,7 @@ over a dataset's shapes for the dataset check.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import cached_property, lru_cache
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -113,8 +113,8 @@ def check_classes(shapes: list, annotations, skip: set[str], processes: int = 1)
     Only shapes the ground truth joins to their template by vertex identity are compared: the
     template is a shape of the same dataset (:meth:`becos.build.network.ShapeNetwork.hop`). Files in
     ``skip`` (already reported) are left out. ``processes`` 2: half of the comparisons in a second
-    process (:func:`becos.process_split.map_over_processes`), the same list."""
-    from becos.process_split import map_over_processes
+    process (:func:`becos.process_split.split_over_processes`), the same list."""
+    from becos.process_split import split_over_processes
 
     by_name = {e.name: e for e in shapes}
     groups: dict[str, list] = {}
@@ -130,7 +130,7 @@ def check_classes(shapes: list, annotations, skip: set[str], processes: int = 1)
         if template is None or template.dataset != members[0].dataset or str(template.path) in skip:
             continue
         pairs += [(e.path, template.path) for e in members if e.name != template_name and str(e.path) not in skip]
-    problems = map_over_processes(_compare_file, pairs, processes)
+    problems = split_over_processes(_compare_files, pairs, processes)
     return [
         {"path": str(path), "template": str(template), "problem": problem, "fix": CLASS_FIX}
         for (path, template), problem in zip(pairs, problems)
@@ -138,16 +138,15 @@ def check_classes(shapes: list, annotations, skip: set[str], processes: int = 1)
     ]
 
 
-@lru_cache(maxsize=2)
-def _class_template(path: Path) -> ClassTemplate:
-    """The class template in ``path``, read once per process while its class's shapes are compared."""
-    return ClassTemplate(*mesh_arrays(path))
-
-
-def _compare_file(path: Path, template_path: Path) -> str | None:
-    """:func:`compare_with_class_template` of one shape file, an unreadable one's problem included."""
-    template = _class_template(template_path)
-    try:
-        return compare_with_class_template(path, template_path, mesh_arrays(path), template)
-    except (BecosError, ValueError) as exc:
-        return f"could not be read to compare with its class template ({exc})"
+def _compare_files(pairs: list[tuple[Path, Path]]) -> list[str | None]:
+    """:func:`compare_with_class_template` of each (shape file, template file), an unreadable shape's
+    problem included; ``pairs`` come class by class, so each template is read once."""
+    template_path, template, out = None, None, []
+    for path, pair_template in pairs:
+        if pair_template != template_path:
+            template_path, template = pair_template, ClassTemplate(*mesh_arrays(pair_template))
+        try:
+            out.append(compare_with_class_template(path, template_path, mesh_arrays(path), template))
+        except (BecosError, ValueError) as exc:
+            out.append(f"could not be read to compare with its class template ({exc})")
+    return out
