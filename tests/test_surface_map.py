@@ -98,6 +98,23 @@ def test_rounding_distances_are_along_the_surface():
     assert m.to_nearest_vertices(fold.vertices, fold.faces)[0] == 2
 
 
+def test_rounding_without_the_face_table_gives_the_same_values_in_slices(tosca_dir, mesh_cache):
+    # the validator's way (candidates_once, points handled a slice at a time) against the builder's
+    # (a per-face table, one query): bit for bit, over more points than one slice on a real surface
+    from becos.core.surface_map import _POINTS_AT_ONCE
+
+    cat = mesh_cache.load(tosca_dir / "cat0.off")
+    rng = np.random.default_rng(3)
+    n = 2 * _POINTS_AT_ONCE + 123
+    face = rng.integers(0, len(cat.faces), n)
+    weights = rng.dirichlet(np.ones(3), n)
+    far = edge_neighbours(cat.faces)[1]
+    table = VertexRounding(cat.vertices, cat.faces).candidates(face, weights)
+    once = VertexRounding.candidates_once(cat.vertices, cat.faces, far, face, weights)
+    assert np.array_equal(once[0], table[0]) and np.array_equal(once[1], table[1])
+    assert np.isfinite(table[1][:, 3:]).mean() > 0.3  # the far corners were measured, not all inf
+
+
 def test_compose_with_identity_is_exact_and_needs_no_projection():
     mesh = grid()
     rng = np.random.default_rng(0)

@@ -197,9 +197,11 @@ class VertexRounding:
             self._row = np.full(len(self.faces), -1, dtype=np.int64)
             self._row[only] = np.arange(len(only))
             used, neighbour, far = used[only], neighbour[only], far[only]
-        unit, length, far_x, far_y = _edge_data(self.vertices, used, far)
-        # (F, 3, 6) per face and edge: unit direction (3), length, far corner x, y; one gather per query
-        self._edges = np.concatenate([unit, np.stack([length, far_x, far_y], axis=2)], axis=2)
+        # (6, F, 3) per row, face and edge: unit direction x, y, z, length, far corner x, y (component
+        # major: every quantity of the queries below is a contiguous (M, 3) array); one gather per query
+        self._by_component = np.ascontiguousarray(self.vertices.T)  # (3, V)
+        unit, length, far_x, far_y = _edge_data(self._by_component, used, far)
+        self._edges = np.concatenate([unit, np.stack([length, far_x, far_y])])
         self._indices = np.stack([used, far, neighbour], axis=2)  # (F, 3, 3)
 
     def candidates(
@@ -226,10 +228,8 @@ class VertexRounding:
         corners, across = indices[..., 0], indices[..., 1]
         if kept_faces is not None:
             across = np.where(kept_faces[np.maximum(indices[..., 2], 0)], across, -1)
-        edges = np.take(self._edges, row, axis=0)  # (M, 3, 6)
-        return _candidates(
-            self.vertices, corners, across, weights, edges[..., :3], edges[..., 3], edges[..., 4], edges[..., 5]
-        )
+        edges = np.take(self._edges, row, axis=1)  # (6, M, 3)
+        return _candidates(self._by_component, corners, across, weights, edges[:3], edges[3], edges[4], edges[5])
 
     @staticmethod
     def candidates_once(
@@ -242,10 +242,16 @@ class VertexRounding:
             vertices: (V, 3) float64; faces: (F, 3) int64; far: (F, 3) int64 the far corners of
                 ``edge_neighbours(faces)``; face: (M,) int64 >= 0 and weights: (M, 3) as :meth:`candidates`.
         """
-        vertices = np.asarray(vertices, dtype=np.float64)
-        corners, across = np.take(faces, face, axis=0), np.take(far, face, axis=0)
-        unit, length, far_x, far_y = _edge_data(vertices, corners, across)
-        return _candidates(vertices, corners, across, weights, unit, length, far_x, far_y)
+        by_component = np.ascontiguousarray(np.asarray(vertices, dtype=np.float64).T)
+        parts = []
+        for first in range(0, len(face), _POINTS_AT_ONCE):  # a few MB of temporaries at a time
+            rows = slice(first, first + _POINTS_AT_ONCE)
+            corners, across = np.take(faces, face[rows], axis=0), np.take(far, face[rows], axis=0)
+            unit, length, far_x, far_y = _edge_data(by_component, corners, across)
+            parts.append(_candidates(by_component, corners, across, weights[rows], unit, length, far_x, far_y))
+        if len(parts) == 1:
+            return parts[0]
+        return np.concatenate([c for c, _ in parts]), np.concatenate([d for _, d in parts])
 
     def nearest(self, face: np.ndarray, weights: np.ndarray, kept_faces: np.ndarray | None = None) -> np.ndarray:
         """(M,) int64 the candidate nearest each point along the surface (ties: the first candidate);
@@ -254,29 +260,41 @@ class VertexRounding:
         return candidates[np.arange(len(candidates)), distance.argmin(axis=1)]
 
 
+_POINTS_AT_ONCE = 16384
+"""Points :meth:`VertexRounding.candidates_once` handles at once: its temporaries stay small enough for
+the allocator to reuse (larger ones cost the validator more system time in page faults than the work)."""
+
+
+def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Dot products of (3, ...) component-major vectors, summed as ``np.einsum("...d,...d")`` sums
+    three contiguous components (x z pair first), so the values are those of the einsum form."""
+    return (a[0] * b[0] + a[2] * b[2]) + a[1] * b[1]
+
+
 def _edge_data(
-    vertices: np.ndarray, corners: np.ndarray, far: np.ndarray
+    by_component: np.ndarray, corners: np.ndarray, far: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Per face (rows of ``corners`` (F, 3) and ``far`` (F, 3) int64: its corners and the far corners of
-    its edge neighbours, -1 for none) and edge k (corners k, k + 1): (F, 3, 3) unit direction, (F, 3)
-    length, and the far corner unfolded into the face's plane, (F, 3) x along the edge from its start and
-    (F, 3) y < 0 (across it); :class:`VertexRounding`."""
-    start = vertices[corners]  # (F, 3, 3): edge k runs from corner k ...
-    edge = start[:, [1, 2, 0]] - start  # ... to corner k + 1
-    to_far = vertices[far] - start  # rows with far == -1 are never used
+    its edge neighbours, -1 for none) and edge k (corners k, k + 1), from the (3, V) float64 vertex
+    coordinates ``by_component``: (3, F, 3) unit direction (component first), (F, 3) length, and the far
+    corner unfolded into the face's plane, (F, 3) x along the edge from its start and (F, 3) y < 0 (across
+    it); :class:`VertexRounding`."""
+    start = np.take(by_component, corners, axis=1)  # (3, F, 3): edge k runs from corner k ...
+    edge = np.take(start, [1, 2, 0], axis=2) - start  # ... to corner k + 1
+    to_far = np.take(by_component, far, axis=1) - start  # columns with far == -1 are never used
     with np.errstate(divide="ignore", invalid="ignore"):
-        length2 = np.einsum("fkd,fkd->fk", edge, edge)
+        length2 = _dot(edge, edge)
         length = np.sqrt(length2)
-        far2 = np.einsum("fkd,fkd->fk", to_far, to_far)
+        far2 = _dot(to_far, to_far)
         beyond = to_far - edge
-        far_x = (far2 - np.einsum("fkd,fkd->fk", beyond, beyond) + length2) / (2 * length)
+        far_x = (far2 - _dot(beyond, beyond) + length2) / (2 * length)
         far_y = -np.sqrt(np.maximum(far2 - far_x**2, 0.0))
-        unit = edge / length[..., None]
+        unit = edge / length
     return unit, length, far_x, far_y
 
 
 def _candidates(
-    vertices: np.ndarray,
+    by_component: np.ndarray,
     corners: np.ndarray,
     across: np.ndarray,
     weights: np.ndarray,
@@ -286,12 +304,14 @@ def _candidates(
     qy: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray]:
     """:meth:`VertexRounding.candidates` from each point's (M, 3) corners, (M, 3) far corners (-1: none),
-    (M, 3) weights and its face's :func:`_edge_data` (M rows)."""
-    start = np.take(vertices, corners, axis=0)  # (M, 3, 3)
-    to_point = np.einsum("mk,mkd->md", weights, start)[:, None] - start
+    (M, 3) weights and its face's :func:`_edge_data` (M columns: unit (3, M, 3), the others (M, 3)), with
+    ``by_component`` the (3, V) float64 vertex coordinates."""
+    start = np.take(by_component, corners, axis=1)  # (3, M, 3)
+    w = np.asarray(weights, dtype=np.float64).T  # (3, M): the point is sum_k w_k corner_k, summed in k order
+    to_point = ((w[0] * start[..., 0] + w[1] * start[..., 1]) + w[2] * start[..., 2])[..., None] - start
     with np.errstate(divide="ignore", invalid="ignore"):
-        corner2 = np.einsum("mkd,mkd->mk", to_point, to_point)
-        px = np.einsum("mkd,mkd->mk", to_point, unit)
+        corner2 = _dot(to_point, to_point)
+        px = _dot(to_point, unit)
         py = np.sqrt(np.maximum(corner2 - px * px, 0.0))  # the point's distance from the edge's line
         crossing = px + py / (py - qy) * (qx - px)  # where the straight line meets the edge's line
         straight = np.hypot(px - qx, py - qy)
