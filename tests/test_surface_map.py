@@ -113,6 +113,8 @@ def test_rounding_without_the_face_table_gives_the_same_values_in_slices(tosca_d
     once = VertexRounding.candidates_once(cat.vertices, cat.faces, far, face, weights)
     assert np.array_equal(once[0], table[0]) and np.array_equal(once[1], table[1])
     assert np.isfinite(table[1][:, 3:]).mean() > 0.3  # the far corners were measured, not all inf
+    none = VertexRounding.candidates_once(cat.vertices, cat.faces, far, face[:0], weights[:0])
+    assert none[0].shape == (0, 6) and none[1].shape == (0, 6)
 
 
 def test_compose_with_identity_is_exact_and_needs_no_projection():

@@ -244,7 +244,7 @@ class VertexRounding:
         """
         by_component = np.ascontiguousarray(np.asarray(vertices, dtype=np.float64).T)
         parts = []
-        for first in range(0, len(face), _POINTS_AT_ONCE):  # a few MB of temporaries at a time
+        for first in range(0, max(len(face), 1), _POINTS_AT_ONCE):  # a few MB of temporaries at a time
             rows = slice(first, first + _POINTS_AT_ONCE)
             corners, across = np.take(faces, face[rows], axis=0), np.take(far, face[rows], axis=0)
             unit, length, far_x, far_y = _edge_data(by_component, corners, across)
