@@ -585,9 +585,13 @@ def _fill_store(
         for key, array in created.items()
         if key not in other
     }
-    with _SecondProcess(tmp, infos, other, layout) as second:
+    from becos.process_split import in_second_process
+
+    beside = in_second_process(_fill_keys, str(tmp), infos, other, layout) if other else contextlib.nullcontext()
+    with beside as theirs:
         metas, rows = _copy_records(infos, sinks, layout, writer, progress, started, None if not other else list(sinks))
-        digests.merge(second.result())
+        if theirs is not None:
+            digests.merge(theirs.result())
     write_pairs(root, metas, rows)
     splits: dict[str, int] = {}
     for m in metas:
@@ -674,61 +678,6 @@ def _fill_keys(tmp: str, infos: list, keys: list[str], layout: dict) -> dict[str
         for info in infos:
             _add_arrays(info, _read_record(info, keys)[1], sinks, layout)
     return digests.hexdigests()
-
-
-def _second_process_main(conn, tmp: str, infos: list, keys: list[str], layout: dict) -> None:
-    """Entry point of the second process: sends ``("ok", digests)`` or ``("error", exception)``."""
-    try:
-        conn.send(("ok", _fill_keys(tmp, infos, keys, layout)))
-    except BaseException as exc:
-        try:
-            conn.send(("error", exc))
-        except Exception:  # an exception that does not pickle: its text
-            conn.send(("error", RuntimeError(f"{type(exc).__name__}: {exc}")))
-    finally:
-        conn.close()
-
-
-class _SecondProcess:
-    """A second process filling the arrays ``keys`` (:func:`_fill_keys`) while this one fills the rest;
-    nothing when ``keys`` is empty. Leaving the block after an error stops it."""
-
-    def __init__(self, tmp: Path, infos: list, keys: list[str], layout: dict):
-        self.args = (str(tmp), infos, keys, layout)
-        self.process = None
-
-    def __enter__(self) -> _SecondProcess:
-        if self.args[2]:
-            import multiprocessing
-
-            ctx = multiprocessing.get_context("spawn")  # not fork: zarr's event loop thread does not survive it
-            self.conn, child = ctx.Pipe(duplex=False)
-            self.process = ctx.Process(target=_second_process_main, args=(child, *self.args), daemon=True)
-            self.process.start()
-            child.close()
-        return self
-
-    def result(self) -> dict[str, str]:
-        """The second process's digests (re-raising its error); {} without one."""
-        if self.process is None:
-            return {}
-        try:
-            status, value = self.conn.recv()
-        except EOFError:
-            raise RuntimeError(
-                f"the store writer's second process ended without a result (exit code {self.process.exitcode})"
-            ) from None
-        if status == "error":
-            raise value
-        return value
-
-    def __exit__(self, *exc_info) -> None:
-        if self.process is None:
-            return
-        if exc_info[0] is not None and self.process.is_alive():
-            self.process.terminate()
-        self.process.join()
-        self.conn.close()
 
 
 def _copy_records(
