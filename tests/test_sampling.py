@@ -211,8 +211,8 @@ def test_determinism_row_order_and_files(catalog, manifest_all, tmp_path):
     # ids and derived fields
     assert manifest_all["pair_id"].str.fullmatch(r"[0-9a-f]{16}").all()
     assert manifest_all["pair_id"].is_unique
-    least = config_default("pairs_per_chunk")  # sample_pairs' default n_chunks and pairs_per_chunk are the config's
-    jobs = chunk_jobs(len(manifest_all), n_chunks=config_default("n_chunks"), pairs_per_chunk=least)
+    least = config_default("pairs_per_chunk")  # sample_pairs' default chunk options are the config's
+    jobs = chunk_jobs(len(manifest_all), config_default("n_chunks"), least, config_default("min_chunks"))
     assert 1 < jobs < 64 and least <= len(manifest_all) / jobs < 2 * least
     assert manifest_all["x_variant"].between(0, 3).all() and manifest_all["chunk"].between(0, jobs - 1).all()
     assert manifest_all["x_variant"].nunique() == 4 and manifest_all["chunk"].nunique() == jobs
@@ -450,6 +450,11 @@ def test_chunk_jobs_follow_the_pair_count_and_growth_moves_no_pair_needlessly():
         64,
     ]
     assert chunk_jobs(10**6, n_chunks=100, pairs_per_chunk=100) == 100  # capped by n_chunks
+    # min_chunks: at least that many jobs (a power of two) while each keeps MIN_CHUNK_PAIRS pairs
+    two = [chunk_jobs(n, n_chunks=64, pairs_per_chunk=300, min_chunks=2) for n in (127, 128, 450, 599, 600, 1200)]
+    assert two == [1, 2, 2, 2, 2, 4]
+    assert [chunk_jobs(n, n_chunks=64, pairs_per_chunk=300, min_chunks=8) for n in (200, 300, 599)] == [2, 4, 8]
+    assert chunk_jobs(900, n_chunks=2, pairs_per_chunk=300, min_chunks=8) == 2  # n_chunks caps it too
     ids = [pair_id_of("full_full", f"d/x{i}", f"d/y{i}", 0) for i in range(1700)]
     small = assign_chunks(ids[:1000], n_chunks=64, pairs_per_chunk=100)
     grown = assign_chunks(ids[:1500], n_chunks=64, pairs_per_chunk=100)

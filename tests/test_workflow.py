@@ -189,7 +189,7 @@ def test_pairs_chunks_are_fixed_by_the_pair_id(tiny_tosca_run):
 
     config = json.loads((tiny_tosca_run / "results" / "config.json").read_text())
     manifest = read_manifest(tiny_tosca_run / "results" / "partial_partial" / "manifest.csv")
-    jobs = chunk_jobs(len(manifest), config["n_chunks"], config["pairs_per_chunk"])
+    jobs = chunk_jobs(len(manifest), config["n_chunks"], config["pairs_per_chunk"], config["min_chunks"])
     buckets = [stable_hash(p) % N_BUCKETS for p in manifest["pair_id"]]
     assert all(b * jobs // N_BUCKETS == c for b, c in zip(buckets, manifest["chunk"]))
     indices = sorted((tiny_tosca_run / "results" / "partial_partial" / "pairs").glob("chunk_*.json"))

@@ -288,6 +288,7 @@ def sample_pairs(
     n_variants: int = 4,
     n_chunks: int | None = None,
     pairs_per_chunk: int | None = None,
+    min_chunks: int | None = None,
     caps: dict | None = None,
     usage_scale: float = 1.0,
 ) -> pd.DataFrame:
@@ -303,8 +304,8 @@ def sample_pairs(
             (attributes) or a dict with ``partial_full_template`` / ``partial_full_dataset``, or an
             object with ``template_row(key)`` (``becos.sources.annotations.AnnotationSource``).
         n_variants: remesh variants per shape (K); ``x_variant``/``y_variant`` lie in ``[0, K)``.
-        n_chunks, pairs_per_chunk: the most chunk jobs, the fewest pairs per chunk job
-            (:func:`chunk_jobs`; None: the config keys' defaults, :mod:`becos.defaults`).
+        n_chunks, pairs_per_chunk, min_chunks: the most chunk jobs, the fewest pairs per chunk job, the
+            fewest chunk jobs (:func:`chunk_jobs`; None: the config keys' defaults, :mod:`becos.defaults`).
         caps: optional ``{split: max pairs}``.
         usage_scale: multiplies every dataset's usage count (0.5 ≈ the published pair counts).
 
@@ -316,11 +317,11 @@ def sample_pairs(
         raise ConfigError(f"setting must be one of {SETTINGS}, got {setting!r}")
     if combinations not in COMBINATIONS:
         raise ConfigError(f"combinations must be one of {sorted(COMBINATIONS)}, got {combinations!r}")
-    n_chunks, pairs_per_chunk = _chunk_options(n_chunks, pairs_per_chunk)
-    if n_variants < 1 or not 1 <= n_chunks <= N_BUCKETS or pairs_per_chunk < 1:
+    n_chunks, pairs_per_chunk, min_chunks = _chunk_options(n_chunks, pairs_per_chunk, min_chunks)
+    if n_variants < 1 or not 1 <= n_chunks <= N_BUCKETS or pairs_per_chunk < 1 or min_chunks < 1:
         raise ConfigError(
-            f"n_variants, n_chunks and pairs_per_chunk must be >= 1 (n_chunks <= {N_BUCKETS}), "
-            f"got {n_variants}, {n_chunks}, {pairs_per_chunk}"
+            f"n_variants, n_chunks, pairs_per_chunk and min_chunks must be >= 1 (n_chunks <= {N_BUCKETS}), "
+            f"got {n_variants}, {n_chunks}, {pairs_per_chunk}, {min_chunks}"
         )
     if usage_scale < 0:
         raise ConfigError(f"usage_scale must be >= 0, got {usage_scale}")
@@ -353,7 +354,9 @@ def sample_pairs(
         )
 
     df = _finish(rows, setting=setting, seed=seed, n_variants=n_variants, caps=caps, skipped=skipped)
-    df["chunk"] = assign_chunks(df["pair_id"], n_chunks=n_chunks, pairs_per_chunk=pairs_per_chunk)
+    df["chunk"] = assign_chunks(
+        df["pair_id"], n_chunks=n_chunks, pairs_per_chunk=pairs_per_chunk, min_chunks=min_chunks
+    )
     df.attrs["report"]["excluded_shapes"] = int((cat["split"] == "excluded").sum())
     return df
 
@@ -405,30 +408,44 @@ def _finish(rows: _Rows, *, setting, seed, n_variants, caps, skipped: Counter) -
     return df
 
 
-def _chunk_options(n_chunks: int | None, pairs_per_chunk: int | None) -> tuple[int, int]:
-    """``n_chunks`` and ``pairs_per_chunk``, the config's defaults for None (:mod:`becos.defaults`)."""
+def _chunk_options(n_chunks: int | None, pairs_per_chunk: int | None, min_chunks: int | None) -> tuple[int, int, int]:
+    """``n_chunks``, ``pairs_per_chunk`` and ``min_chunks``, the config's defaults for None (:mod:`becos.defaults`)."""
     from becos.defaults import config_default
 
-    return (
-        config_default("n_chunks") if n_chunks is None else n_chunks,
-        config_default("pairs_per_chunk") if pairs_per_chunk is None else pairs_per_chunk,
-    )
+    given = {"n_chunks": n_chunks, "pairs_per_chunk": pairs_per_chunk, "min_chunks": min_chunks}
+    return tuple(config_default(key) if value is None else value for key, value in given.items())
 
 
-def chunk_jobs(n_pairs: int, n_chunks: int, pairs_per_chunk: int) -> int:
+MIN_CHUNK_PAIRS = 64
+"""The fewest pairs per chunk job that ``min_chunks`` splits a run into (:func:`chunk_jobs`). Measured on
+TOSCA F2F with 2 cores, remeshing done: 150 pairs as 2 jobs per stage 28.6-29.5 s, as 1 job 34.1-34.9 s;
+450 pairs as 2 jobs 45.0 s, as 1 job 58.5 s (docs/measurements.md)."""
+
+
+def chunk_jobs(n_pairs: int, n_chunks: int, pairs_per_chunk: int, min_chunks: int = 1) -> int:
     """Chunk jobs per stage for ``n_pairs`` pairs: the largest power of two ``J`` with
     ``J * pairs_per_chunk <= n_pairs`` (so ``pairs_per_chunk`` to twice as many pairs per job), at
     least 1 and at most ``n_chunks``. Powers of two change rarely as a benchmark grows, and a doubling
-    splits each job's bucket range in two."""
-    jobs = 1 << max(0, (n_pairs // max(1, pairs_per_chunk)).bit_length() - 1)
-    return max(1, min(jobs, n_chunks, N_BUCKETS))
+    splits each job's bucket range in two.
+
+    ``min_chunks`` raises ``J`` to the largest power of two up to ``min_chunks`` that leaves each job
+    :data:`MIN_CHUNK_PAIRS` pairs: a run too small for two jobs of ``pairs_per_chunk`` still uses that
+    many cores in its chunk stages."""
+    jobs = _power_of_two_floor(n_pairs // max(1, pairs_per_chunk))
+    least = _power_of_two_floor(min(min_chunks, n_pairs // MIN_CHUNK_PAIRS))
+    return max(1, min(max(jobs, least), n_chunks, N_BUCKETS))
 
 
-def assign_chunks(pair_ids, *, n_chunks: int, pairs_per_chunk: int) -> np.ndarray:
+def _power_of_two_floor(n: int) -> int:
+    """The largest power of two up to ``n`` (1 for ``n`` < 2)."""
+    return 1 << max(0, n.bit_length() - 1)
+
+
+def assign_chunks(pair_ids, *, n_chunks: int, pairs_per_chunk: int, min_chunks: int = 1) -> np.ndarray:
     """``(N,) int64``: the chunk job of each pair id, ``bucket * J // N_BUCKETS`` with ``J``
     :func:`chunk_jobs` of the ``N`` pairs and ``bucket = stable_hash(pair_id) % N_BUCKETS``."""
     pair_ids = list(pair_ids)
-    jobs = chunk_jobs(len(pair_ids), n_chunks, pairs_per_chunk)
+    jobs = chunk_jobs(len(pair_ids), n_chunks, pairs_per_chunk, min_chunks)
     buckets = np.fromiter((stable_hash(p) % N_BUCKETS for p in pair_ids), dtype=np.int64, count=len(pair_ids))
     return buckets * jobs // N_BUCKETS
 

@@ -110,6 +110,7 @@ class ManifestOptions(CatalogOptions):
     remesh_variants: int
     n_chunks: int
     pairs_per_chunk: int
+    min_chunks: int
     original_settings: bool
 
 

@@ -85,6 +85,7 @@ def build_manifest(options, setting: str, catalog: pd.DataFrame, annotations=Non
         n_variants=o.remesh_variants,
         n_chunks=o.n_chunks,
         pairs_per_chunk=o.pairs_per_chunk,
+        min_chunks=o.min_chunks,
         caps=caps or None,
         usage_scale=o.usage_scale,
     )
@@ -108,7 +109,9 @@ def _published_manifest(o: ManifestOptions, setting: str, catalog: pd.DataFrame)
         manifest = pd.concat([manifest, pd.DataFrame(columns, index=manifest.index)], axis=1)
         manifest.attrs = imported.manifest.attrs
     manifest = _restrict_published(manifest, catalog, o, setting)
-    manifest["chunk"] = assign_chunks(manifest["pair_id"], n_chunks=o.n_chunks, pairs_per_chunk=o.pairs_per_chunk)
+    manifest["chunk"] = assign_chunks(
+        manifest["pair_id"], n_chunks=o.n_chunks, pairs_per_chunk=o.pairs_per_chunk, min_chunks=o.min_chunks
+    )
     return manifest
 
 
