@@ -318,11 +318,8 @@ def sample_pairs(
     if combinations not in COMBINATIONS:
         raise ConfigError(f"combinations must be one of {sorted(COMBINATIONS)}, got {combinations!r}")
     n_chunks, pairs_per_chunk, min_chunks = _chunk_options(n_chunks, pairs_per_chunk, min_chunks)
-    if n_variants < 1 or not 1 <= n_chunks <= N_BUCKETS or pairs_per_chunk < 1 or min_chunks < 1:
-        raise ConfigError(
-            f"n_variants, n_chunks, pairs_per_chunk and min_chunks must be >= 1 (n_chunks <= {N_BUCKETS}), "
-            f"got {n_variants}, {n_chunks}, {pairs_per_chunk}, {min_chunks}"
-        )
+    if n_variants < 1:
+        raise ConfigError(f"n_variants must be >= 1, got {n_variants}")
     if usage_scale < 0:
         raise ConfigError(f"usage_scale must be >= 0, got {usage_scale}")
     pools, centaurs = COMBINATIONS[combinations]
@@ -409,11 +406,18 @@ def _finish(rows: _Rows, *, setting, seed, n_variants, caps, skipped: Counter) -
 
 
 def _chunk_options(n_chunks: int | None, pairs_per_chunk: int | None, min_chunks: int | None) -> tuple[int, int, int]:
-    """``n_chunks``, ``pairs_per_chunk`` and ``min_chunks``, the config's defaults for None (:mod:`becos.defaults`)."""
+    """``n_chunks``, ``pairs_per_chunk`` and ``min_chunks``, the config's defaults for None (:mod:`becos.defaults`),
+    checked."""
     from becos.defaults import config_default
 
     given = {"n_chunks": n_chunks, "pairs_per_chunk": pairs_per_chunk, "min_chunks": min_chunks}
-    return tuple(config_default(key) if value is None else value for key, value in given.items())
+    n_chunks, pairs_per_chunk, min_chunks = (config_default(k) if v is None else v for k, v in given.items())
+    if not 1 <= n_chunks <= N_BUCKETS or pairs_per_chunk < 1 or min_chunks < 1:
+        raise ConfigError(
+            f"n_chunks, pairs_per_chunk and min_chunks must be >= 1 (n_chunks <= {N_BUCKETS}), "
+            f"got {n_chunks}, {pairs_per_chunk}, {min_chunks}"
+        )
+    return n_chunks, pairs_per_chunk, min_chunks
 
 
 MIN_CHUNK_PAIRS = 64
