@@ -460,3 +460,88 @@ def test_a_second_process_writes_the_same_store(pair_record_files, tmp_path, mon
             [records[0], damaged], tmp_path / "bad.zarr", setting="partial_partial", progress=False, processes=2
         )
     assert not (tmp_path / "bad.zarr").exists()
+
+
+def test_direct_writes_are_the_bytes_zarr_writes(pair_record_files, tmp_path, monkeypatch):
+    """The store writer writes its arrays' shards straight to the files (ChunkFiles.write); the store is the
+    one zarr writes, file for file but the root's creation time."""
+    from becos.products.store import write
+    from becos.products.store.chunk_files import ChunkFiles
+
+    records = pair_record_files["partial_partial"]
+    calls = []
+    monkeypatch.setattr(
+        ChunkFiles, "write", lambda self, start, data, _w=ChunkFiles.write: (calls.append(1), _w(self, start, data))
+    )
+    direct = write_store(records, tmp_path / "direct.zarr", setting="partial_partial", progress=False)
+    assert len(calls) > 40  # every array went the direct way
+
+    class ThroughZarr(ChunkFiles):
+        writable = property(lambda self: False, lambda self, value: None)
+
+    monkeypatch.setattr(write, "ChunkFiles", ThroughZarr)
+    direct_calls = len(calls)
+    through_zarr = write_store(records, tmp_path / "zarr.zarr", setting="partial_partial", progress=False)
+    assert len(calls) == direct_calls
+    a, b = _tree_bytes(direct), _tree_bytes(through_zarr)
+    assert a.keys() == b.keys() and len(a) > 40
+    assert {k for k in a if a[k] != b[k]} <= {"zarr.json"}
+    meta_a, meta_b = (json.loads(t["zarr.json"]) for t in (a, b))
+    meta_a["attributes"].pop("created"), meta_b["attributes"].pop("created")
+    assert meta_a == meta_b
+
+
+@pytest.mark.parametrize(
+    ("shape", "dtype"),
+    [((3 * 174720 + 1000, 3), "float64"), ((400_000,), "int32"), ((70_000,), "uint8"), ((5, 3, 3), "float64")],
+)
+def test_chunk_files_write_what_zarr_writes(tmp_path, shape, dtype):
+    """ChunkFiles.write of whole shards (the last one partial, its last inner chunk padded) gives zarr's
+    bytes for each chunk file of a store array (sharded or one chunk), read back equal through zarr; rows
+    that do not start a chunk file are refused."""
+    import zarr
+
+    from becos.products.store.chunk_files import ChunkFiles
+    from becos.products.store.layout import CHUNK_KEYS
+    from becos.products.store.write import ARRAY_CONFIG, CHUNK_BYTES, _chunking, _compressors
+
+    data = (
+        np.random.default_rng(7).normal(size=shape).astype(dtype)
+        if dtype != "uint8"
+        else (np.random.default_rng(7).integers(0, 4, size=shape).astype(dtype))
+    )
+    chunks, shards = _chunking(shape[0], shape[1:], data.dtype.itemsize, CHUNK_BYTES)
+    group = zarr.open_group(str(tmp_path / "g"), mode="w", zarr_format=3)
+    arrays = [
+        group.create_array(
+            name,
+            shape=shape,
+            dtype=dtype,
+            chunks=chunks,
+            shards=shards,
+            compressors=_compressors(),
+            fill_value=0,
+            chunk_key_encoding=CHUNK_KEYS,
+            config=ARRAY_CONFIG,
+        )
+        for name in ("zarr", "direct")
+    ]
+    files = ChunkFiles(tmp_path / "g" / "direct", arrays[1])
+    assert files.writable and files.usable
+    step = (shards or chunks)[0]
+    for start in range(0, shape[0], step):
+        arrays[0][start : start + step] = data[start : start + step]
+        files.write(start, data[start : start + step])
+    written = sorted(p.name for p in (tmp_path / "g" / "zarr").iterdir())
+    assert written == sorted(p.name for p in (tmp_path / "g" / "direct").iterdir())
+    assert (len(written) - 1 > 1) == (shards is not None and shape[0] > shards[0])
+    for name in written:
+        if name != "zarr.json":
+            assert (tmp_path / "g" / "direct" / name).read_bytes() == (tmp_path / "g" / "zarr" / name).read_bytes(), (
+                name
+            )
+    assert np.array_equal(zarr.open_array(str(tmp_path / "g" / "direct"), mode="r")[:], data)
+    assert np.array_equal(files.read(0, shape[0]), data)
+    if shape[0] > step:
+        with pytest.raises(ValueError, match="not whole chunk files"):
+            files.write(1, data[1:step])

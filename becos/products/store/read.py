@@ -2,7 +2,7 @@
 :class:`TrainingView`.
 
 :meth:`Benchmark.record`, :meth:`Benchmark.records` and :class:`TrainingView` read the chunk files
-directly (:class:`_ChunkFiles`: per key one ``pread`` and one Blosc decode per 64 KiB chunk touched);
+directly (:class:`~becos.products.store.chunk_files.ChunkFiles`: per key one ``pread`` and one Blosc decode per 64 KiB chunk touched);
 :meth:`Benchmark.read_block` (``becos validate``, ``compare``) reads through zarr, and any problem falls
 back to zarr, which reports it (:meth:`Benchmark.read_rows`). Why a hand-written reader (measured):
 docs/design/store.md.
@@ -25,6 +25,7 @@ from becos.build.record import (
     PairRecord,
 )
 from becos.errors import BecosError, InputFileError
+from becos.products.store.chunk_files import ChunkFiles
 from becos.products.store.layout import STORE_FORMAT, TABLE_DTYPES, store_order_key
 
 READ_BLOCK_BYTES = 64 << 20
@@ -73,103 +74,6 @@ class Block:
             wide = f is not None and f.stored is not None and value.dtype == np.dtype(f.stored)
             arrays[key] = value.astype(f.dtype) if wide else value.copy()
         return PairRecord(arrays, self.metas[i])
-
-
-class _ChunkFiles:
-    """Rows ``a:b`` of one store array read straight from its chunk files: one ``pread`` and one Blosc
-    decode per inner chunk touched, shard indexes read once and kept.
-
-    Zarr's own read path costs ~1.4 ms of CPU per array and read (its asyncio pipeline), ~65 ms for
-    the ~50 arrays of one record; this reads a record in a few ms (``benchmarks/store.py``). It reads
-    exactly what :func:`write_store` writes (chunks along axis 0, codecs bytes + Blosc, optionally
-    sharded with the index at the end); :attr:`usable` is False for anything else, and the caller then
-    reads through zarr. Any problem raises ``ValueError``/``OSError`` (the caller then re-reads through
-    zarr, which reports it as before)."""
-
-    def __init__(self, folder: Path, array):
-        from zarr.codecs import BloscCodec, BytesCodec, ShardingCodec
-
-        meta = array.metadata
-        self.folder = folder
-        self.dtype = np.dtype(array.dtype)
-        self.shape = tuple(meta.shape)
-        self.row_shape = self.shape[1:]
-        self.outer = int(meta.chunk_grid.chunk_shape[0])
-        self.sep = getattr(meta.chunk_key_encoding, "separator", "/")
-        codecs = list(meta.codecs)
-        self.inner, self.per_shard = self.outer, 0
-        if len(codecs) == 1 and isinstance(codecs[0], ShardingCodec):
-            shard = codecs[0]
-            end = str(getattr(shard.index_location, "value", shard.index_location)) == "end"
-            self.inner = int(shard.chunk_shape[0])
-            self.per_shard = self.outer // self.inner
-            codecs = list(shard.codecs) if end and tuple(shard.chunk_shape[1:]) == self.row_shape else []
-        self.usable = (
-            len(codecs) == 2
-            and isinstance(codecs[0], BytesCodec)
-            and isinstance(codecs[1], BloscCodec)
-            and tuple(meta.chunk_grid.chunk_shape[1:]) == self.row_shape
-            and self.dtype.isnative
-            and meta.dimension_names is None
-            and self.sep in (".", "/")
-        )
-        self.chunk_key = getattr(meta.chunk_key_encoding, "name", "")
-        self.usable = self.usable and self.chunk_key == "default"
-        self._index: dict[int, np.ndarray] = {}
-
-    def _file(self, k: int) -> Path:
-        return self.folder / self.sep.join(["c", str(k), *("0" * len(self.row_shape))])
-
-    def _shard_index(self, fd: int, shard: int) -> np.ndarray:
-        index = self._index.get(shard)
-        if index is None:
-            size = os.fstat(fd).st_size
-            n = 16 * self.per_shard + 4  # (offset, nbytes) uint64 per chunk + crc32c
-            raw = os.pread(fd, n, size - n)
-            if size < n or len(raw) != n:
-                raise ValueError("shard index truncated")
-            index = np.frombuffer(raw[:-4], dtype="<u8").reshape(self.per_shard, 2)
-            self._index[shard] = index
-        return index
-
-    def read(self, a: int, b: int) -> np.ndarray:
-        from numcodecs.blosc import decompress
-
-        out = np.empty((b - a, *self.row_shape), dtype=self.dtype)
-        if b <= a:
-            return out
-        row_items = math.prod(self.row_shape)
-        c = self.inner
-        fds: dict[int, int] = {}
-        try:
-            for k in range(a // c, (b - 1) // c + 1):
-                file_k = k // self.per_shard if self.per_shard else k
-                fd = fds.get(file_k)
-                if fd is None:
-                    fd = fds[file_k] = os.open(self._file(file_k), os.O_RDONLY)
-                if self.per_shard:
-                    offset, nbytes = (int(v) for v in self._shard_index(fd, file_k)[k % self.per_shard])
-                    if offset == 2**64 - 1:
-                        raise ValueError("inner chunk absent")
-                    raw = os.pread(fd, nbytes, offset)
-                    if len(raw) != nbytes:
-                        raise ValueError("inner chunk truncated")
-                else:
-                    raw = os.pread(fd, os.fstat(fd).st_size, 0)
-                lo, hi = max(a, k * c), min(b, (k + 1) * c, self.shape[0])
-                rows = min(c, self.shape[0] - k * c) if not self.per_shard else c
-                if lo == k * c and hi == (k + 1) * c:  # the whole chunk: decode in place
-                    decompress(raw, out[lo - a : hi - a])
-                    continue
-                data = np.frombuffer(decompress(raw), dtype=self.dtype)
-                if data.size < rows * row_items:
-                    raise ValueError("chunk decodes to too few bytes")
-                data = data[: c * row_items].reshape(-1, *self.row_shape)
-                out[lo - a : hi - a] = data[lo - k * c : hi - k * c]
-        finally:
-            for fd in fds.values():
-                os.close(fd)
-        return out
 
 
 DRAIN_ROUNDS = 20
@@ -283,7 +187,7 @@ class Benchmark:
             raise InputFileError(self.path, f"cannot be opened as a Zarr store ({exc})", fix) from exc
         info = _checked_store_info(self.path, attrs, fix)
         self._root = root
-        self._files: dict[str, _ChunkFiles] | None = None
+        self._files: dict[str, ChunkFiles] | None = None
         self._stamp = self._identity()
         self.metadata = {k: v for k, v in attrs.items() if k != "becos_store"}
         self.setting = attrs["setting"]
@@ -387,12 +291,12 @@ class Benchmark:
 
     def read_rows(self, start: int, stop: int) -> Block:
         """Pairs ``start:stop`` as one :class:`Block`, read straight from the chunk files
-        (:class:`_ChunkFiles`: a few ms per pair where zarr's pipeline takes ~65 ms); falls back to
+        (:class:`~becos.products.store.chunk_files.ChunkFiles`: a few ms per pair where zarr's pipeline takes ~65 ms); falls back to
         :meth:`read_block` (zarr) for a layout it does not read and for any problem, which zarr then
         reports as a :class:`DamagedStoreError`."""
         if self._files is None:
-            files = {key: _ChunkFiles(self.path / "arrays" / key, a) for key, a in self._arrays.items()}
-            files["pairs/meta_json"] = _ChunkFiles(self.path / "pairs" / "meta_json", self._meta_json)
+            files = {key: ChunkFiles(self.path / "arrays" / key, a) for key, a in self._arrays.items()}
+            files["pairs/meta_json"] = ChunkFiles(self.path / "pairs" / "meta_json", self._meta_json)
             self._files = files if all(f.usable for f in files.values()) else {}
         if not self._files:
             return self.read_block(start, stop)

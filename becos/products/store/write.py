@@ -3,8 +3,8 @@
 Streams: one pass over the .npz headers and metas (shapes, dtypes, order), then one pass over the
 records, buffering at most one shard per array (:data:`SHARD_BYTES`, inner chunks of
 :data:`CHUNK_BYTES` for ragged keys and :data:`STACKED_CHUNK_BYTES` for per-pair keys, Blosc LZ4HC
-with byte shuffle), into a hidden temporary folder beside ``out`` that replaces ``out`` when complete.
-With ``processes=2`` a second process fills about half of the arrays (whole arrays: every shard still
+with byte shuffle; the shards written straight to the files: :class:`ChunkFiles`), into a hidden
+temporary folder beside ``out`` that replaces ``out`` when complete. With ``processes=2`` a second process fills about half of the arrays (whole arrays: every shard still
 has one writer) while the first fills the rest and the pairs table; the store is the same.
 """
 
@@ -22,7 +22,7 @@ import sys
 import tempfile
 import time
 import zipfile
-from collections.abc import Collection, Iterable, Mapping
+from collections.abc import Callable, Collection, Iterable, Mapping
 from datetime import UTC, datetime
 from pathlib import Path
 
@@ -35,6 +35,7 @@ from becos.build.record import (
     SETTINGS,
 )
 from becos.errors import BecosError, DiskFullError, InputFileError
+from becos.products.store.chunk_files import ChunkFiles
 from becos.products.store.layout import CHUNK_KEYS, SCHEMA_GROUPS, STORE_FORMAT, TABLE_COLUMNS, store_order_key
 from becos.products.store.npz import RecordInfo, read_npz, scan_record
 
@@ -172,11 +173,9 @@ class _Writer:
         self.pending: list = []
         self.max_pending = max_pending
 
-    def submit(self, array, start: int, data: np.ndarray) -> None:
-        def job():
-            array[start : start + len(data)] = data
-
-        self.pending.append((self.pool.submit(job), data.nbytes))
+    def submit(self, write: Callable[[int, np.ndarray], None], start: int, data: np.ndarray) -> None:
+        """Run ``write(start, data)`` in the background thread."""
+        self.pending.append((self.pool.submit(write, start, data), data.nbytes))
         while sum(n for _, n in self.pending) > self.max_pending:
             self.pending.pop(0)[0].result()
         still = []
@@ -199,11 +198,15 @@ class _Writer:
 
 
 class _Sink:
-    """Buffers rows of one array and hands them to the writer a whole number of shards at a time."""
+    """Buffers rows of one array and hands them to the writer a whole number of shards at a time, written
+    straight to the array's files in ``folder`` (:class:`ChunkFiles`; through zarr for a layout it does
+    not write)."""
 
-    def __init__(self, array, shard_rows: int, writer: _Writer, digests: ContentDigests, node: str):
-        self.array, self.shard_rows, self.writer = array, max(1, shard_rows), writer
+    def __init__(self, array, folder: Path, writer: _Writer, digests: ContentDigests, node: str):
+        self.array, self.shard_rows, self.writer = array, max(1, _shard_rows(array)), writer
         self.digests, self.node = digests, node
+        files = ChunkFiles(folder, array)
+        self.write = files.write if files.writable else self._write_through_zarr
         self.parts: list[np.ndarray] = []
         self.buffered = 0
         self.pos = 0
@@ -221,11 +224,14 @@ class _Sink:
             return
         data = self.parts[0] if len(self.parts) == 1 else np.concatenate(self.parts)
         n = len(data) if final else (len(data) // self.shard_rows) * self.shard_rows
-        self.writer.submit(self.array, self.pos, data[:n])
+        self.writer.submit(self.write, self.pos, data[:n])
         self.pos += n
         rest = data[n:]
         self.parts = [rest] if len(rest) else []
         self.buffered = len(rest)
+
+    def _write_through_zarr(self, start: int, data: np.ndarray) -> None:
+        self.array[start : start + len(data)] = data
 
     def close(self) -> None:
         self._write(final=True)
@@ -581,7 +587,7 @@ def _fill_store(
     other = _second_process_keys(created, processes)
     writer = _Writer()
     sinks = {
-        key: _Sink(array, _shard_rows(array), writer, digests, f"arrays/{key}")
+        key: _Sink(array, tmp / "arrays" / key, writer, digests, f"arrays/{key}")
         for key, array in created.items()
         if key not in other
     }
@@ -673,7 +679,7 @@ def _fill_keys(tmp: str, infos: list, keys: list[str], layout: dict) -> dict[str
     arrays = {key: group[key].with_config(ARRAY_CONFIG) for key in keys}  # the config is not stored
     digests = ContentDigests({f"arrays/{key}": a.dtype for key, a in arrays.items()})
     writer = _Writer()
-    sinks = {key: _Sink(a, _shard_rows(a), writer, digests, f"arrays/{key}") for key, a in arrays.items()}
+    sinks = {key: _Sink(a, Path(tmp) / "arrays" / key, writer, digests, f"arrays/{key}") for key, a in arrays.items()}
     with _filling(sinks, writer):
         for info in infos:
             _add_arrays(info, _read_record(info, keys)[1], sinks, layout)
