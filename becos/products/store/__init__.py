@@ -4,9 +4,9 @@ Row ``i`` of every array is pair ``i`` in store order (split train, val, test, t
 ``pair_id`` inside a split): ``arrays/<key>`` per record key (ragged keys concatenated along axis 0 with
 ``offsets/<group>`` (N + 1,) row ranges; per-pair keys stacked (N, ...)), ``pairs/`` the metas and the
 pairs table; root attributes are the metadata. Any :class:`~becos.build.record.PairRecord` round-trips
-exactly. Modules: ``layout``, ``npz``, ``chunk_files``, ``write`` (:func:`write_store`), ``read`` (:func:`open_benchmark`,
-:class:`TrainingView`), ``geodesics`` (:class:`GeodesicView`); every name importable from here. The
-layout, offset groups, files and metadata in detail: docs/design/store.md.
+exactly. Modules: ``layout``, ``npz``, ``chunk_files``, ``write`` (:func:`write_store`), ``read``
+(:func:`open_benchmark`, :class:`TrainingView`), ``geodesics`` (:class:`GeodesicView`); every name
+importable from here. The layout, offset groups, files and metadata in detail: docs/design/store.md.
 """
 
 from __future__ import annotations

@@ -155,7 +155,7 @@ class ChunkFiles:
             if self.per_shard:
                 sizes = np.array([len(e) for e in encoded], dtype="<u8")
                 index = np.full((self.per_shard, 2), EMPTY_CHUNK, dtype="<u8")
-                index[: len(encoded), 0] = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+                index[: len(encoded), 0] = np.cumsum(sizes) - sizes  # each chunk's start in the file
                 index[: len(encoded), 1] = sizes
                 encoded.append(index.tobytes() + struct.pack("<I", _crc32c(index.tobytes())))
             self._file(first // self.outer).write_bytes(b"".join(encoded))

@@ -2,7 +2,8 @@
 :class:`TrainingView`.
 
 :meth:`Benchmark.record`, :meth:`Benchmark.records` and :class:`TrainingView` read the chunk files
-directly (:class:`~becos.products.store.chunk_files.ChunkFiles`: per key one ``pread`` and one Blosc decode per 64 KiB chunk touched);
+directly (:class:`~becos.products.store.chunk_files.ChunkFiles`: per key one ``pread`` and one Blosc
+decode per 64 KiB chunk touched);
 :meth:`Benchmark.read_block` (``becos validate``, ``compare``) reads through zarr, and any problem falls
 back to zarr, which reports it (:meth:`Benchmark.read_rows`). Why a hand-written reader (measured):
 docs/design/store.md.
@@ -291,9 +292,9 @@ class Benchmark:
 
     def read_rows(self, start: int, stop: int) -> Block:
         """Pairs ``start:stop`` as one :class:`Block`, read straight from the chunk files
-        (:class:`~becos.products.store.chunk_files.ChunkFiles`: a few ms per pair where zarr's pipeline takes ~65 ms); falls back to
-        :meth:`read_block` (zarr) for a layout it does not read and for any problem, which zarr then
-        reports as a :class:`DamagedStoreError`."""
+        (:class:`~becos.products.store.chunk_files.ChunkFiles`: a few ms per pair where zarr's pipeline
+        takes ~65 ms); falls back to :meth:`read_block` (zarr) for a layout it does not read and for any
+        problem, which zarr then reports as a :class:`DamagedStoreError`."""
         if self._files is None:
             files = {key: ChunkFiles(self.path / "arrays" / key, a) for key, a in self._arrays.items()}
             files["pairs/meta_json"] = ChunkFiles(self.path / "pairs" / "meta_json", self._meta_json)

@@ -4,8 +4,9 @@ Streams: one pass over the .npz headers and metas (shapes, dtypes, order), then 
 records, buffering at most one shard per array (:data:`SHARD_BYTES`, inner chunks of
 :data:`CHUNK_BYTES` for ragged keys and :data:`STACKED_CHUNK_BYTES` for per-pair keys, Blosc LZ4HC
 with byte shuffle; the shards written straight to the files: :class:`ChunkFiles`), into a hidden
-temporary folder beside ``out`` that replaces ``out`` when complete. With ``processes=2`` a second process fills about half of the arrays (whole arrays: every shard still
-has one writer) while the first fills the rest and the pairs table; the store is the same.
+temporary folder beside ``out`` that replaces ``out`` when complete. With ``processes=2`` a second
+process fills about half of the arrays (whole arrays: every shard still has one writer) while the
+first fills the rest and the pairs table; the store is the same.
 """
 
 from __future__ import annotations
