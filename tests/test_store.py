@@ -425,6 +425,17 @@ def _tree_bytes(folder: Path) -> dict[str, bytes]:
     return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
 
 
+def _same_store_but_created(one: Path, two: Path) -> dict:
+    """Asserts two stores are the same file for file but the root's creation time; gives one's root metadata."""
+    a, b = _tree_bytes(one), _tree_bytes(two)
+    assert a.keys() == b.keys() and len(a) > 40
+    assert {k for k in a if a[k] != b[k]} <= {"zarr.json"}
+    meta_a, meta_b = (json.loads(t["zarr.json"]) for t in (a, b))
+    meta_a["attributes"].pop("created"), meta_b["attributes"].pop("created")
+    assert meta_a == meta_b
+    return meta_a
+
+
 def test_a_second_process_writes_the_same_store(pair_record_files, tmp_path, monkeypatch):
     """processes=2 (a second process fills half of the arrays) gives the store processes=1 gives, file for
     file but the root's creation time; an error of a record in the second process's arrays ends in the
@@ -435,12 +446,7 @@ def test_a_second_process_writes_the_same_store(pair_record_files, tmp_path, mon
     records = pair_record_files["partial_partial"]
     one = write_store(records, tmp_path / "one.zarr", setting="partial_partial", progress=False)
     two = write_store(records, tmp_path / "two.zarr", setting="partial_partial", progress=False, processes=2)
-    a, b = _tree_bytes(one), _tree_bytes(two)
-    assert a.keys() == b.keys() and len(a) > 40
-    assert {k for k in a if a[k] != b[k]} <= {"zarr.json"}
-    meta_a, meta_b = (json.loads(t["zarr.json"]) for t in (a, b))
-    meta_a["attributes"].pop("created"), meta_b["attributes"].pop("created")
-    assert meta_a == meta_b
+    meta_a = _same_store_but_created(one, two)
 
     import zarr
 
@@ -483,12 +489,7 @@ def test_direct_writes_are_the_bytes_zarr_writes(pair_record_files, tmp_path, mo
     direct_calls = len(calls)
     through_zarr = write_store(records, tmp_path / "zarr.zarr", setting="partial_partial", progress=False)
     assert len(calls) == direct_calls
-    a, b = _tree_bytes(direct), _tree_bytes(through_zarr)
-    assert a.keys() == b.keys() and len(a) > 40
-    assert {k for k in a if a[k] != b[k]} <= {"zarr.json"}
-    meta_a, meta_b = (json.loads(t["zarr.json"]) for t in (a, b))
-    meta_a["attributes"].pop("created"), meta_b["attributes"].pop("created")
-    assert meta_a == meta_b
+    _same_store_but_created(direct, through_zarr)
 
 
 @pytest.mark.parametrize(
@@ -528,6 +529,7 @@ def test_chunk_files_write_what_zarr_writes(tmp_path, shape, dtype):
     ]
     files = ChunkFiles(tmp_path / "g" / "direct", arrays[1])
     assert files.writable and files.usable
+    assert not ChunkFiles(tmp_path / "g" / "direct", arrays[1].with_config({"write_empty_chunks": False})).writable
     step = (shards or chunks)[0]
     for start in range(0, shape[0], step):
         arrays[0][start : start + step] = data[start : start + step]

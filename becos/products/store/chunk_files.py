@@ -73,6 +73,8 @@ class ChunkFiles:
             and self.outer % self.inner == 0
             and (np.little_endian or self.dtype.itemsize == 1)
             and str(getattr(codecs[0].endian, "value", codecs[0].endian)) in ("little", "None")
+            and array.config.write_empty_chunks  # zarr would leave all-fill chunks out
+            and array.config.order == "C"
         )
         self._encoder = _blosc_encoder(codecs[1]) if self.writable else None
         self._index: dict[int, np.ndarray] = {}
