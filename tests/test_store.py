@@ -513,8 +513,9 @@ def test_chunk_files_write_what_zarr_writes(tmp_path, shape, dtype):
     )
     chunks, shards = _chunking(shape[0], shape[1:], data.dtype.itemsize, CHUNK_BYTES)
     group = zarr.open_group(str(tmp_path / "g"), mode="w", zarr_format=3)
-    arrays = [
-        group.create_array(
+
+    def array(name, separator="."):
+        return group.create_array(
             name,
             shape=shape,
             dtype=dtype,
@@ -522,14 +523,16 @@ def test_chunk_files_write_what_zarr_writes(tmp_path, shape, dtype):
             shards=shards,
             compressors=_compressors(),
             fill_value=0,
-            chunk_key_encoding=CHUNK_KEYS,
+            chunk_key_encoding={**CHUNK_KEYS, "separator": separator},
             config=ARRAY_CONFIG,
         )
-        for name in ("zarr", "direct")
-    ]
+
+    arrays = [array("zarr"), array("direct")]
     files = ChunkFiles(tmp_path / "g" / "direct", arrays[1])
     assert files.writable and files.usable
     assert not ChunkFiles(tmp_path / "g" / "direct", arrays[1].with_config({"write_empty_chunks": False})).writable
+    nested = ChunkFiles(tmp_path / "g" / "nested", array("nested", separator="/"))
+    assert nested.usable and not nested.writable  # read, but written through zarr (folders per dimension)
     step = (shards or chunks)[0]
     for start in range(0, shape[0], step):
         arrays[0][start : start + step] = data[start : start + step]

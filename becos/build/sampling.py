@@ -406,8 +406,8 @@ def _finish(rows: _Rows, *, setting, seed, n_variants, caps, skipped: Counter) -
 
 
 def _chunk_options(n_chunks: int | None, pairs_per_chunk: int | None, min_chunks: int | None) -> tuple[int, int, int]:
-    """``n_chunks``, ``pairs_per_chunk`` and ``min_chunks``, the config's defaults for None (:mod:`becos.defaults`),
-    checked."""
+    """``n_chunks``, ``pairs_per_chunk`` and ``min_chunks``, the config's defaults for None (:mod:`becos.defaults`);
+    raises ConfigError for a value out of range."""
     from becos.defaults import config_default
 
     given = {"n_chunks": n_chunks, "pairs_per_chunk": pairs_per_chunk, "min_chunks": min_chunks}

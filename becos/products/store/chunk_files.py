@@ -64,12 +64,12 @@ class ChunkFiles:
             and self.dtype.isnative
             and meta.dimension_names is None
             and self.sep in (".", "/")
+            and getattr(meta.chunk_key_encoding, "name", "") == "default"
         )
-        self.chunk_key = getattr(meta.chunk_key_encoding, "name", "")
-        self.usable = self.usable and self.chunk_key == "default"
         self.writable = (
             self.usable
             and index_ok
+            and self.sep == "."  # write_store's flat chunk files: no folders to make
             and self.outer % self.inner == 0
             and (np.little_endian or self.dtype.itemsize == 1)
             and str(getattr(codecs[0].endian, "value", codecs[0].endian)) in ("little", "None")
