@@ -152,6 +152,8 @@ rule catalog:
         LAYOUT.catalog,
     log:
         "logs/catalog.log",
+    # under a second, and every ground-truth job waits for it: run it before the remesh jobs, not after
+    priority: 1
     conda:
         "../envs/becos.yaml"
     params:

@@ -12,6 +12,8 @@ rule manifest:
         remesh_files=LAYOUT.remesh_files("{setting}"),
     log:
         "logs/manifest/{setting}.log",
+    # as the catalog: under a second, and the ground-truth jobs wait for it
+    priority: 1
     conda:
         "../envs/becos.yaml"
     params:
