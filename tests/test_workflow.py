@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import csv
 import json
+import os
 import re
 import sys
 from pathlib import Path
@@ -500,3 +501,20 @@ def test_each_job_opens_only_what_its_rule_declares(tiny_tosca_reference, becos_
     assert remesh_reads, "the audit sees the ground-truth jobs open their remesh files"
     problems = undeclared_opens(run, opened, [becos_code])
     assert not problems, f"{len(problems)} undeclared opens:\n" + "\n".join(problems[:60])
+
+
+def test_copies_of_a_pair_share_one_ground_truth_file(tiny_tosca_run):
+    """Copies of a pair in a chunk (same shapes, same order: the same input key) get one ground-truth
+    file, its other names hard links to it, so its bytes are on disk once; the index lists each name
+    with the same digest."""
+    shared = 0
+    for index in sorted((tiny_tosca_run / "results").glob("*/ground_truth/chunk_*.json")):
+        by_key: dict[str, list[dict]] = {}
+        for entry in json.loads(index.read_text())["pairs"]:
+            by_key.setdefault(entry["input_key"], []).append(entry)
+        for entries in by_key.values():
+            files = {(st.st_dev, st.st_ino) for st in (os.stat(tiny_tosca_run / e["path"]) for e in entries)}
+            assert len(files) == 1, [e["pair_id"] for e in entries]
+            assert len({e["digest"] for e in entries}) == 1
+            shared += len(entries) - 1
+    assert shared > 0  # the tiny run's partial_full pairs repeat their shapes (X is Y's class template)

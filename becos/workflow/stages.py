@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from becos.atomic import remove_stale_temporaries, write_text
+from becos.atomic import link_or_copy, remove_stale_temporaries, write_text
 from becos.errors import ConfigError
 from becos.workflow.layout import centre_file, pair_file, remesh_token, variant_file
 from becos.workflow.options import (
@@ -244,6 +244,10 @@ def ground_truth_stage(
     list file ``remesh_files`` names (:func:`becos.workflow.plan.chunk_remesh_files`; the paths its rule
     declares) and the original meshes the catalog names; writes ``<pair_id>.npz`` beside ``out_index``.
     ``options``: the ground-truth stage's (or a resolved config).
+
+    Copies of a pair (same two shapes in the same order) have the same file: the chunk writes it once
+    and the other copies' names are hard links to it (:func:`becos.atomic.link_or_copy`; a copy where
+    the file system has no hard links). Files are only ever replaced whole, never written in place.
     """
     from becos.sources.catalog import read_catalog
 
@@ -258,24 +262,12 @@ def ground_truth_stage(
     # the maps between the two shapes of the last computed pair, both ways: a chunk's pairs of the same
     # two shapes (copies, either order) come one after another (visit_order) and share them
     maps: dict[tuple[ShapeKey, ShapeKey], SurfaceMap] = {}
+    made: dict[str, Path] = {}  # input key -> this chunk's file holding it (written or found intact)
+    linked = 0
     ordered, last_used = visit_order(rows.to_dict("records"), remesh)
     for row, done in zip(ordered, last_used):
         tx, ty = remesh_token(row, "x", remesh), remesh_token(row, "y", remesh)
-        key = digest(
-            {
-                "version": GROUND_TRUTH_VERSION,
-                "x": [row["x_dataset"], row["x_name"], tx],
-                "y": [row["y_dataset"], row["y_name"], ty],
-                "sources": [
-                    shapes.source_digest(row["x_dataset"], row["x_name"], tx),
-                    shapes.source_digest(row["y_dataset"], row["y_name"], ty),
-                ],
-                "edges": shapes.edge_digests(
-                    shapes.entry(row["x_dataset"], row["x_name"]), shapes.entry(row["y_dataset"], row["y_name"])
-                ),
-                "options": options.key_options(),
-            }
-        )
+        key = _ground_truth_key(row, tx, ty, shapes, options)
         path = pair_file(folder, row["pair_id"])
         computed = stored_key(path, "input_key") != key
         if not computed and not ground_truth_intact(path):
@@ -284,7 +276,9 @@ def ground_truth_stage(
                 f"replaced by hand?); recomputing it"
             )
             computed = True
-        if computed:
+        if computed and key in made:  # a copy of a pair above (same shapes, same order): the same file
+            linked += link_or_copy(made[key], path)
+        elif computed:
             x, y = shapes.entry(row["x_dataset"], row["x_name"]), shapes.entry(row["y_dataset"], row["y_name"])
             kx, ky = (x.dataset, x.name, tx), (y.dataset, y.name, ty)
             if (kx, ky) not in maps:
@@ -294,6 +288,7 @@ def ground_truth_stage(
                 maps = {(kx, ky): gt_xy, (ky, kx): gt_yx}
             gt_xy, gt_yx = maps[(kx, ky)], maps[(ky, kx)]
             save_ground_truth(path, key, gt_xy, gt_yx)
+        made.setdefault(key, path)
         entries.append(
             {
                 "pair_id": row["pair_id"],
@@ -305,7 +300,30 @@ def ground_truth_stage(
         )
         shapes.release(done)
         _progress("ground truth", setting, chunk, entries, len(rows), started)
+    if linked:
+        _log(f"ground truth {setting} chunk {chunk}: {linked} file(s) hard-linked to a copy's identical file")
     return _write_index(Path(out_index), setting, chunk, entries, started)
+
+
+def _ground_truth_key(row: dict, tx: str, ty: str, shapes: ShapeStore, options: GroundTruthOptions) -> str:
+    """The input key of a pair's ground-truth file: the digest of its two shapes and remesh tokens
+    ``tx``, ``ty``, their files, the edge files between them and the stage's options. Not the pair id:
+    copies of a pair (same shapes, same order) have the same key and the same file."""
+    return digest(
+        {
+            "version": GROUND_TRUTH_VERSION,
+            "x": [row["x_dataset"], row["x_name"], tx],
+            "y": [row["y_dataset"], row["y_name"], ty],
+            "sources": [
+                shapes.source_digest(row["x_dataset"], row["x_name"], tx),
+                shapes.source_digest(row["y_dataset"], row["y_name"], ty),
+            ],
+            "edges": shapes.edge_digests(
+                shapes.entry(row["x_dataset"], row["x_name"]), shapes.entry(row["y_dataset"], row["y_name"])
+            ),
+            "options": options.key_options(),
+        }
+    )
 
 
 def save_ground_truth(path: Path, key: str, gt_xy: SurfaceMap, gt_yx: SurfaceMap) -> None:
