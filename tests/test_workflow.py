@@ -517,4 +517,4 @@ def test_copies_of_a_pair_share_one_ground_truth_file(tiny_tosca_run):
             assert len(files) == 1, [e["pair_id"] for e in entries]
             assert len({e["digest"] for e in entries}) == 1
             shared += len(entries) - 1
-    assert shared > 0  # the tiny run's partial_full pairs repeat their shapes (X is Y's class template)
+    assert shared > 0  # the tiny run draws its pairs from a few shapes: every setting has copies

@@ -245,7 +245,7 @@ def ground_truth_stage(
     declares) and the original meshes the catalog names; writes ``<pair_id>.npz`` beside ``out_index``.
     ``options``: the ground-truth stage's (or a resolved config).
 
-    Copies of a pair (same two shapes in the same order) have the same file: the chunk writes it once
+    Copies of a pair in the chunk (same two shapes in the same order) have the same file: it is written once
     and the other copies' names are hard links to it (:func:`becos.atomic.link_or_copy`; a copy where
     the file system has no hard links). Files are only ever replaced whole, never written in place.
     """
