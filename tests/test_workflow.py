@@ -518,3 +518,14 @@ def test_copies_of_a_pair_share_one_ground_truth_file(tiny_tosca_run):
             assert len({e["digest"] for e in entries}) == 1
             shared += len(entries) - 1
     assert shared > 0  # the tiny run draws its pairs from a few shapes: every setting has copies
+
+
+def test_catalog_and_manifests_start_before_the_last_remesh_job(tiny_tosca_run):
+    """The catalog and manifest jobs take under a second and every ground-truth job waits for them: with
+    ``priority: 1`` they start as soon as they can, not after the remesh jobs (in the order jobs start in
+    the run's Snakemake log)."""
+    log = sorted((tiny_tosca_run / ".snakemake" / "log").glob("*.snakemake.log"))[0].read_text()
+    started = re.findall(r"^(?:local)?rule (\w+):$", log, flags=re.M)
+    last_remesh = max(i for i, rule in enumerate(started) if rule == "remesh")
+    for rule in ("catalog", "manifest"):
+        assert rule in started and max(i for i, r in enumerate(started) if r == rule) < last_remesh, started
