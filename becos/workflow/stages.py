@@ -276,8 +276,9 @@ def ground_truth_stage(
                 f"replaced by hand?); recomputing it"
             )
             computed = True
-        if computed and key in made:  # a copy of a pair above (same shapes, same order): the same file
-            linked += link_or_copy(made[key], path)
+        same = made.get(key) if computed else None  # a copy's file above (same shapes, same order)
+        if same is not None:
+            linked += link_or_copy(same, path)
         elif computed:
             x, y = shapes.entry(row["x_dataset"], row["x_name"]), shapes.entry(row["y_dataset"], row["y_name"])
             kx, ky = (x.dataset, x.name, tx), (y.dataset, y.name, ty)
@@ -295,7 +296,7 @@ def ground_truth_stage(
                 "path": str(path),
                 "input_key": key,
                 "computed": computed,
-                "digest": shapes.file_digest(path),
+                "digest": shapes.file_digest(same or path),  # a link's bytes are its source's: hashed once
             }
         )
         shapes.release(done)
