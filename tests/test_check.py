@@ -268,6 +268,24 @@ def test_unsafe_archives_are_rejected(tmp_path, kind):
     assert os.listdir(tmp_path / "deep") == []
 
 
+def _process_ids(items: list) -> list[int]:
+    """The id of the process that handled each item (a module-level function: it pickles)."""
+    return [os.getpid() for _ in items]
+
+
+def test_one_second_process_serves_every_split():
+    """A :class:`ProcessSplit` starts its second process once: the dataset check's two splits (mesh files,
+    class templates) share it, so its start-up is paid once and overlaps the check's own work."""
+    from becos.process_split import ProcessSplit
+
+    with ProcessSplit(2, warm_up=("becos.sources.check.datasets",)) as split:
+        first, second = split.map(_process_ids, range(4)), split.map(_process_ids, range(5))
+    assert first[1::2] == second[1::2][:2] == [os.getpid()] * 2  # the caller takes every other item
+    assert len(set(first[0::2] + second[0::2])) == 1 and first[0] != os.getpid()  # one second process
+    with ProcessSplit(1) as split:
+        assert split.map(_process_ids, range(3)) == [os.getpid()] * 3
+
+
 def test_two_processes_give_the_same_report(becos_code, tosca_dir, tmp_path):
     """``processes=2`` (mesh files and class comparisons shared with a second process) reports what one
     process reports, a file off its class template included, in the same order."""

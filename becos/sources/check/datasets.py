@@ -16,6 +16,7 @@ from pathlib import Path
 from becos.core.formats import not_a_mesh_file, not_a_regular_file
 from becos.core.formats.problems import TRUNCATED_FIX
 from becos.errors import BecosError, ConfigError, InputFileError
+from becos.process_split import ProcessSplit
 from becos.sources.check.annotations import check_annotations
 from becos.sources.check.meshes import check_mesh_file, inspect_mesh_file
 from becos.sources.check.templates import CLASS_FIX, check_classes
@@ -123,9 +124,10 @@ def _check_one_dataset(
     full_parse: bool,
     config_dir,
     compare_geometry: bool = True,
-    processes: int = 1,
+    split: ProcessSplit | None = None,
 ) -> tuple[dict, list[str], list]:
-    """Report entry, problem texts and the listed ShapeEntry rows (empty unless the listing succeeded)."""
+    """Report entry, problem texts and the listed ShapeEntry rows (empty unless the listing succeeded).
+    ``split``: the check's second process (:class:`becos.process_split.ProcessSplit`; None: this one only)."""
     from becos.sources.datasets import DatasetSpec
 
     entry: dict = {
@@ -171,7 +173,7 @@ def _check_one_dataset(
     names = [n for n in names if n not in stray]
     counts_ok = _check_counts(spec, folder, names, not_files, annotations, entry, problems)
     if read_meshes:
-        _check_meshes(spec, folder, names, full_parse, entry, problems, processes)
+        _check_meshes(spec, folder, names, full_parse, entry, problems, split)
     shapes: list = []
     if counts_ok and not stray:
         try:
@@ -179,7 +181,7 @@ def _check_one_dataset(
         except BecosError as exc:
             problems.append(f"dataset '{name}': {exc}")
     if read_meshes and compare_geometry and shapes and annotations is not None:
-        _check_class_templates(spec, shapes, annotations, entry, problems, processes)
+        _check_class_templates(spec, shapes, annotations, entry, problems, split)
     entry["problems"] = problems
     entry["ok"] = not problems
     return entry, problems, shapes
@@ -276,15 +278,20 @@ def _listed(rows: list[dict], text) -> str:
 
 
 def _check_meshes(
-    spec, folder: Path, names: list[str], full_parse: bool, entry: dict, problems: list[str], processes: int = 1
+    spec,
+    folder: Path,
+    names: list[str],
+    full_parse: bool,
+    entry: dict,
+    problems: list[str],
+    split: ProcessSplit | None = None,
 ) -> None:
     """Check every listed mesh file (cheap check, or with ``full_parse`` the full inspection, whose repairs
     go to ``entry["repairs"]``); bad files go to ``entry["bad_meshes"]`` and make one problem.
-    ``processes`` 2: half of the files in a second process (:func:`becos.process_split.split_over_processes`)."""
-    from becos.process_split import split_over_processes
-
+    ``split``: half of the files go to its second process (:class:`becos.process_split.ProcessSplit`)."""
+    split = split or ProcessSplit()
     paths = [folder / f"{n}.{spec.file_type}" for n in names]
-    for repair, bad in split_over_processes(partial(_check_mesh_files, full_parse=full_parse), paths, processes):
+    for repair, bad in split.map(partial(_check_mesh_files, full_parse=full_parse), paths):
         if repair is not None:
             entry["repairs"].append(repair)
         if bad is not None:
@@ -321,11 +328,11 @@ def _check_mesh(path: Path, full_parse: bool) -> tuple[dict | None, dict | None]
 
 
 def _check_class_templates(
-    spec, shapes: list, annotations, entry: dict, problems: list[str], processes: int = 1
+    spec, shapes: list, annotations, entry: dict, problems: list[str], split: ProcessSplit | None = None
 ) -> None:
     """Compare the shapes with their class templates (:func:`becos.sources.check.templates.check_classes`; files
     already named bad are left out): ``entry["class_mismatches"]``, and one problem naming them."""
-    mismatched = check_classes(shapes, annotations, {b["path"] for b in entry["bad_meshes"]}, processes)
+    mismatched = check_classes(shapes, annotations, {b["path"] for b in entry["bad_meshes"]}, split)
     entry["class_mismatches"] = mismatched
     if mismatched:
         listed = _listed(mismatched, lambda b: f"{b['path']}: {b['problem']}")
@@ -369,6 +376,33 @@ def check_datasets(
     Raises:
         DatasetCheckError (a ConfigError): one message listing every problem; ``.report`` holds the report.
     """
+    # the second process starts now: its imports overlap the annotation folder's loading
+    with ProcessSplit(processes, warm_up=(__name__,)) as split:
+        return _check_datasets(
+            datasets,
+            data_dir,
+            annotations_dir,
+            split,
+            read_meshes,
+            full_parse,
+            template_table,
+            config_dir,
+            compare_geometry,
+        )
+
+
+def _check_datasets(
+    datasets: list[str],
+    data_dir: str | Path,
+    annotations_dir: str | Path | None,
+    split: ProcessSplit,
+    read_meshes: bool,
+    full_parse: bool,
+    template_table: str,
+    config_dir: str | Path | None,
+    compare_geometry: bool,
+) -> dict:
+    """:func:`check_datasets`, its second process (if any) in ``split``."""
     from becos.sources.annotations import AnnotationSource, user_cache_dir
     from becos.sources.datasets import DatasetSpec
 
@@ -388,7 +422,7 @@ def check_datasets(
     present: dict[str, list] = {}
     for name in enabled:
         entry, ds_problems, shapes = _check_one_dataset(
-            name, data_dir, source, read_meshes, full_parse, config_dir, compare_geometry, processes
+            name, data_dir, source, read_meshes, full_parse, config_dir, compare_geometry, split
         )
         report[name] = entry
         problems += ds_problems

@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from becos.errors import BecosError
+from becos.process_split import ProcessSplit
 from becos.sources.check.meshes import mesh_arrays
 
 CLASS_EDGE_RATIO = 1.5
@@ -107,14 +108,13 @@ CLASS_FIX = (
 """The fix named for a shape that does not fit its class template (:func:`check_classes`)."""
 
 
-def check_classes(shapes: list, annotations, skip: set[str], processes: int = 1) -> list[dict]:
+def check_classes(shapes: list, annotations, skip: set[str], split: ProcessSplit | None = None) -> list[dict]:
     """``[{"path", "template", "problem", "fix"}]`` for shapes that differ from their class template.
 
     Only shapes the ground truth joins to their template by vertex identity are compared: the
     template is a shape of the same dataset (:meth:`becos.build.network.ShapeNetwork.hop`). Files in
-    ``skip`` (already reported) are left out. ``processes`` 2: half of the comparisons in a second
-    process (:func:`becos.process_split.split_over_processes`), the same list."""
-    from becos.process_split import split_over_processes
+    ``skip`` (already reported) are left out. ``split``: half of the comparisons go to its second
+    process (:class:`becos.process_split.ProcessSplit`; None: this process only), the same list."""
 
     by_name = {e.name: e for e in shapes}
     groups: dict[str, list] = {}
@@ -130,7 +130,7 @@ def check_classes(shapes: list, annotations, skip: set[str], processes: int = 1)
         if template is None or template.dataset != members[0].dataset or str(template.path) in skip:
             continue
         pairs += [(e.path, template.path) for e in members if e.name != template_name and str(e.path) not in skip]
-    problems = split_over_processes(_compare_files, pairs, processes)
+    problems = (split or ProcessSplit()).map(_compare_files, pairs)
     return [
         {"path": str(path), "template": str(template), "problem": problem, "fix": CLASS_FIX}
         for (path, template), problem in zip(pairs, problems)
