@@ -110,6 +110,20 @@ def test_plain_off_reader_gives_trimeshs_arrays_and_other_files_fall_back(name, 
     assert n_vertices == mesh.n_vertices
 
 
+def test_text_lines_split_on_the_whitespace_python_splits_on():
+    """TextLines' data lines and token counts are those of ``bytes.split`` on every byte value: its
+    whitespace test (two comparisons on uint8, wrapping below 9) names exactly space and bytes 9-13."""
+    from becos.core.formats.text import TextLines
+
+    rng = np.random.default_rng(0)
+    alphabet = np.array([*range(256)] + [ord(" ")] * 200 + [ord("\n")] * 60 + [ord("#")] * 5, dtype=np.uint8)
+    data = rng.choice(alphabet, size=20_000).tobytes()
+    lines = TextLines(data)
+    expected = [line for line in data.split(b"\n") if line.split() and not line.startswith(b"#")]
+    assert [data[a:b] for a, b in zip(lines.starts, lines.ends)] == expected
+    assert lines.token_counts(0, len(lines)).tolist() == [len(line.split()) for line in expected]
+
+
 @pytest.mark.parametrize("word", [b"nan", b"NaN", b"-inf", b"INF", b"Infinity", b"+iNf"])
 def test_every_spelling_of_a_non_finite_coordinate_is_found(word):
     """check_finite_text skips its regex when the block holds no n/N: every spelling it must find holds one."""

@@ -10,7 +10,18 @@ import numpy as np
 
 from becos.core.formats.problems import NAN_FIX, FormatProblem
 
-_WHITESPACE = np.array([9, 10, 11, 12, 13, 32], dtype=np.uint8)
+
+def _solid(arr: np.ndarray) -> np.ndarray:
+    """(N,) bool: the bytes of the (N,) uint8 ``arr`` that are no ASCII whitespace (space, or 9-13: tab, line
+    feed, vertical tab, form feed, carriage return); two comparisons, ~10x faster than ``np.isin``."""
+    return (arr != 32) & ((arr - np.uint8(9)) > 4)  # uint8 wraps: bytes below 9 end up above 4 too
+
+
+def _count_dtype(n: int) -> type:
+    """The integer type of running counts over ``n`` bytes: int32 (half the memory traffic of int64)
+    while it holds ``n``."""
+    return np.int32 if n < 2**31 else np.int64
+
 
 _NON_FINITE = re.compile(rb"\b(?:nan|inf|infinity)\b", re.IGNORECASE)  # whole words: not "info" in a comment
 
@@ -44,7 +55,7 @@ class TextLines:
         newlines = np.flatnonzero(arr == 10)
         starts = np.concatenate(([start], newlines[newlines >= start] + 1))
         ends = np.concatenate((newlines[newlines >= start], [len(arr)]))
-        content = np.concatenate(([0], np.cumsum(~np.isin(arr, _WHITESPACE), dtype=np.int64)))
+        content = np.concatenate(([0], np.cumsum(_solid(arr), dtype=_count_dtype(len(arr)))))
         keep = (content[ends] - content[starts]) > 0
         first = np.where(starts < len(arr), arr[np.minimum(starts, len(arr) - 1)], 0) if len(arr) else starts
         keep &= first != ord("#")
@@ -59,9 +70,9 @@ class TextLines:
     def token_counts(self, lo: int, hi: int) -> np.ndarray:
         """(hi - lo,) number of whitespace-separated tokens of lines ``lo..hi-1``."""
         arr = self._arr[self.starts[lo] : self.ends[hi - 1]] if hi > lo else self._arr[:0]
-        solid = ~np.isin(arr, _WHITESPACE)
+        solid = _solid(arr)
         token_start = solid & np.concatenate(([True], ~solid[:-1])) if len(arr) else solid
-        cs = np.concatenate(([0], np.cumsum(token_start, dtype=np.int64)))
+        cs = np.concatenate(([0], np.cumsum(token_start, dtype=_count_dtype(len(arr)))))
         base = self.starts[lo]
         return cs[self.ends[lo:hi] - base] - cs[self.starts[lo:hi] - base]
 
@@ -70,12 +81,12 @@ class TextLines:
         arr = self._arr
         starts = self.starts[lo:hi].copy()
         # skip leading blanks (rare): advance each line start to its first non-blank byte
-        blank = np.isin(arr[np.minimum(starts, len(arr) - 1)], _WHITESPACE)
+        blank = ~_solid(arr[np.minimum(starts, len(arr) - 1)])
         while blank.any():
             starts[blank] += 1
-            blank = np.isin(arr[np.minimum(starts, len(arr) - 1)], _WHITESPACE)
+            blank = ~_solid(arr[np.minimum(starts, len(arr) - 1)])
         after = np.minimum(starts + len(word), len(arr) - 1)
-        return (arr[starts] == word[0]) & ((starts + len(word) >= len(arr)) | np.isin(arr[after], _WHITESPACE))
+        return (arr[starts] == word[0]) & ((starts + len(word) >= len(arr)) | ~_solid(arr[after]))
 
     def file_line(self, i: int) -> int:
         """1-based line number in the file of data line ``i``."""
