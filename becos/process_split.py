@@ -1,7 +1,7 @@
 """Work of one job split over two processes, for jobs the workflow gives two cores: their work is pure
 Python (or one event loop) per process, which threads would serialise on the GIL. :func:`in_second_process`
 runs one call beside the caller; :class:`ProcessSplit` shares lists of items out with one second process,
-started once for all of them; :func:`split_over_processes` shares out one list."""
+started once for all of them."""
 
 from __future__ import annotations
 
@@ -79,9 +79,3 @@ class ProcessSplit:
         out: list = [None] * len(items)
         out[0::2], out[1::2] = results, ours
         return out
-
-
-def split_over_processes(function: Callable[[list], list], items: Iterable, processes: int = 1) -> list[Any]:
-    """:meth:`ProcessSplit.map` of ``function`` over ``items`` in a :class:`ProcessSplit` of its own."""
-    with ProcessSplit(processes) as split:
-        return split.map(function, items)
