@@ -376,8 +376,9 @@ def check_datasets(
     Raises:
         DatasetCheckError (a ConfigError): one message listing every problem; ``.report`` holds the report.
     """
-    # the second process starts now: its imports overlap the annotation folder's loading
-    with ProcessSplit(processes, warm_up=(__name__,)) as split:
+    # the second process (only the mesh files and class templates use it) starts now: its imports
+    # overlap the annotation folder's loading
+    with ProcessSplit(processes if read_meshes else 1, warm_up=(__name__,)) as split:
         return _check_datasets(
             datasets,
             data_dir,
