@@ -123,11 +123,11 @@ def _check_one_dataset(
     read_meshes: bool,
     full_parse: bool,
     config_dir,
-    compare_geometry: bool = True,
-    split: ProcessSplit | None = None,
+    compare_geometry: bool,
+    split: ProcessSplit,
 ) -> tuple[dict, list[str], list]:
     """Report entry, problem texts and the listed ShapeEntry rows (empty unless the listing succeeded).
-    ``split``: the check's second process (:class:`becos.process_split.ProcessSplit`; None: this one only)."""
+    ``split``: the check's second process, if any (:class:`becos.process_split.ProcessSplit`)."""
     from becos.sources.datasets import DatasetSpec
 
     entry: dict = {
@@ -284,12 +284,11 @@ def _check_meshes(
     full_parse: bool,
     entry: dict,
     problems: list[str],
-    split: ProcessSplit | None = None,
+    split: ProcessSplit,
 ) -> None:
     """Check every listed mesh file (cheap check, or with ``full_parse`` the full inspection, whose repairs
     go to ``entry["repairs"]``); bad files go to ``entry["bad_meshes"]`` and make one problem.
     ``split``: half of the files go to its second process (:class:`becos.process_split.ProcessSplit`)."""
-    split = split or ProcessSplit()
     paths = [folder / f"{n}.{spec.file_type}" for n in names]
     for repair, bad in split.map(partial(_check_mesh_files, full_parse=full_parse), paths):
         if repair is not None:
@@ -328,7 +327,7 @@ def _check_mesh(path: Path, full_parse: bool) -> tuple[dict | None, dict | None]
 
 
 def _check_class_templates(
-    spec, shapes: list, annotations, entry: dict, problems: list[str], split: ProcessSplit | None = None
+    spec, shapes: list, annotations, entry: dict, problems: list[str], split: ProcessSplit
 ) -> None:
     """Compare the shapes with their class templates (:func:`becos.sources.check.templates.check_classes`; files
     already named bad are left out): ``entry["class_mismatches"]``, and one problem naming them."""
