@@ -337,6 +337,47 @@ def test_every_sub_command_is_one_arguments_and_handler_pair(monkeypatch, capsys
         assert set(importlib.import_module(module).COMMANDS) == names, module
 
 
+EXIT_HOOK = """
+import atexit, os
+MARK = os.environ["BECOS_TEST_EXIT_MARK"]
+atexit.register(lambda: open(MARK + ".atexit", "w").close())
+
+
+class _TornDown:
+    def __del__(self, _open=open, _path=MARK + ".teardown"):  # when the interpreter tears modules down
+        _open(_path, "w").close()
+
+
+torn_down = _TornDown()
+"""
+
+
+def test_the_becos_program_runs_exit_handlers_and_skips_the_module_teardown(becos_code, tmp_path):
+    """The ``becos`` program (its console script, as the workflow's jobs run it) ends without tearing its
+    modules down (0.05-0.08 CPU-s per job): an ``atexit`` handler still runs and the whole output arrives,
+    while an object that the teardown would finalise is not. The same command through :func:`becos.cli.main`
+    and the interpreter's own exit finalises it (the marker works)."""
+    import json
+    import sys
+
+    hook = tmp_path / "hook"
+    hook.mkdir()
+    (hook / "sitecustomize.py").write_text(EXIT_HOOK)
+    args = ["info", "--annotations", str(becos_code)]
+    runs = {
+        "program": [str(Path(sys.executable).with_name("becos")), *args],
+        "interpreter": [sys.executable, "-c", f"import sys; from becos.cli import main; sys.exit(main({args!r}))"],
+    }
+    for name, cmd in runs.items():
+        mark = tmp_path / name
+        env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(hook), os.environ.get("PYTHONPATH", "")]))
+        result = subprocess.run(cmd, capture_output=True, text=True, env={**env, "BECOS_TEST_EXIT_MARK": str(mark)})
+        assert result.returncode == 0, result.stderr[-2000:]
+        assert json.loads(result.stdout)["nodes"] == 70, name
+        assert Path(f"{mark}.atexit").exists(), name
+        assert Path(f"{mark}.teardown").exists() == (name == "interpreter"), name
+
+
 @pytest.mark.parametrize("profile", [None, "profiles/local", "profiles/slurm", "profiles/cluster-generic"])
 def test_every_run_selects_jobs_greedily(profile, monkeypatch):
     """Snakemake's ILP job selector, and its sizing of every ready job's inputs each round, made

@@ -12,8 +12,11 @@ handler ``run(args) -> int`` (exit status); the science modules they call know n
 from __future__ import annotations
 
 import argparse
+import atexit
 import importlib
+import os
 import sys
+import threading
 
 from becos.errors import BecosError
 
@@ -81,5 +84,27 @@ def main(argv: list[str] | None = None) -> int:
         return 2
 
 
+def run() -> None:
+    """The ``becos`` program (console script and ``python -m becos``): :func:`main`, then the exit.
+
+    A sub-command that returns ends the process without the interpreter's teardown of its modules
+    (unless a non-daemon thread still runs): the ``atexit`` handlers run (logging's flush,
+    multiprocessing's joins, ...), stdout and stderr are flushed, then :func:`os._exit`. Every file
+    becos writes is closed (and moved into place) before its function returns, so the teardown only
+    frees memory that the exit frees anyway: it took 0.05-0.08 CPU-s of each ~1.2 CPU-s remesh job
+    (numpy's, scipy's and pymeshlab's modules). An exception still ends the usual way, with its
+    traceback. :func:`main` returns its status, for callers in the same process."""
+    status = main()
+    if any(t.is_alive() and not t.daemon for t in threading.enumerate() if t is not threading.main_thread()):
+        sys.exit(status)  # the interpreter's exit waits for them
+    atexit._run_exitfuncs()  # what the interpreter's own exit runs next
+    try:
+        sys.stdout.flush()
+        sys.stderr.flush()
+    except (OSError, ValueError):  # a reader that left (``becos info | head -1``), a closed stream
+        status = status or 120  # the status Python's own exit gives a failed flush
+    os._exit(status)
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    run()
