@@ -1,5 +1,5 @@
 """``python -m becos``: the command line (see :mod:`becos.cli`)."""
 
-from becos.cli import run
+from becos.cli import program
 
-run()
+program()

@@ -5,11 +5,13 @@ workflow profile, profiles/default), in a pseudo-terminal where the terminal mat
 
 from __future__ import annotations
 
+import json
 import os
 import pty
 import re
 import select
 import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -357,9 +359,6 @@ def test_the_becos_program_runs_exit_handlers_and_skips_the_module_teardown(beco
     modules down (0.05-0.08 CPU-s per job): an ``atexit`` handler still runs and the whole output arrives,
     while an object that the teardown would finalise is not. The same command through :func:`becos.cli.main`
     and the interpreter's own exit finalises it (the marker works)."""
-    import json
-    import sys
-
     hook = tmp_path / "hook"
     hook.mkdir()
     (hook / "sitecustomize.py").write_text(EXIT_HOOK)

@@ -84,7 +84,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
 
 
-def run() -> None:
+def program() -> None:
     """The ``becos`` program (console script and ``python -m becos``): :func:`main`, then the exit.
 
     A sub-command that returns ends the process without the interpreter's teardown of its modules
@@ -107,4 +107,4 @@ def run() -> None:
 
 
 if __name__ == "__main__":
-    run()
+    program()
