@@ -108,13 +108,13 @@ CLASS_FIX = (
 """The fix named for a shape that does not fit its class template (:func:`check_classes`)."""
 
 
-def check_classes(shapes: list, annotations, skip: set[str], split: ProcessSplit | None = None) -> list[dict]:
+def check_classes(shapes: list, annotations, skip: set[str], split: ProcessSplit) -> list[dict]:
     """``[{"path", "template", "problem", "fix"}]`` for shapes that differ from their class template.
 
     Only shapes the ground truth joins to their template by vertex identity are compared: the
     template is a shape of the same dataset (:meth:`becos.build.network.ShapeNetwork.hop`). Files in
     ``skip`` (already reported) are left out. ``split``: half of the comparisons go to its second
-    process (:class:`becos.process_split.ProcessSplit`; None: this process only), the same list."""
+    process, if it has one (:class:`becos.process_split.ProcessSplit`), the same list."""
 
     by_name = {e.name: e for e in shapes}
     groups: dict[str, list] = {}
@@ -130,7 +130,7 @@ def check_classes(shapes: list, annotations, skip: set[str], split: ProcessSplit
         if template is None or template.dataset != members[0].dataset or str(template.path) in skip:
             continue
         pairs += [(e.path, template.path) for e in members if e.name != template_name and str(e.path) not in skip]
-    problems = (split or ProcessSplit()).map(_compare_files, pairs)
+    problems = split.map(_compare_files, pairs)
     return [
         {"path": str(path), "template": str(template), "problem": problem, "fix": CLASS_FIX}
         for (path, template), problem in zip(pairs, problems)
