@@ -11,6 +11,7 @@ work of the ``ground_truth``, ``pairs`` and ``zarr_store`` jobs) over 4 real TOS
 from __future__ import annotations
 
 import json
+import os
 import shutil
 from pathlib import Path
 
@@ -219,3 +220,80 @@ def test_an_edge_file_with_moved_rows_after_the_check_is_refused_by_the_ground_t
     finally:
         edge.write_text(original)
     bw.ground_truth_stage(config, "full_full", 0, layout.ground_truth_index("full_full", 0), **_inputs(config))
+
+
+def _rewrite_npz(path: Path, change) -> bytes:
+    """Rewrite the .npz at ``path`` with ``change(arrays)`` applied (its other members kept); returns its old bytes."""
+    original = path.read_bytes()
+    with np.load(path) as data:
+        arrays = {k: data[k] for k in data.files}
+    change(arrays)
+    np.savez(path, **arrays)
+    return original
+
+
+def test_records_leave_out_what_their_sources_give_and_a_changed_source_stops_the_store(built, capsys, tmp_path):
+    """Issue #31, disk: a workflow pair record leaves out the members its remesh and ground-truth files
+    give back byte for byte (``becos.build.record_sources``); its store is the store of whole records, byte
+    for byte; a source changed after the pairs job stops export-zarr, naming the record and the file."""
+    from becos.build.record import PairRecord
+    from becos.products.store import write_store
+
+    work, config = built
+    layout = bw.Layout.of(config)
+    gt_index, pairs_index = layout.ground_truth_index("full_full", 0), layout.pairs_index("full_full", 0)
+    bw.ground_truth_stage(config, "full_full", 0, gt_index, **_inputs(config))  # up to date after the other tests
+    bw.pairs_stage(config, "full_full", 0, gt_index, pairs_index, **_inputs(config))
+    entries = json.loads(pairs_index.read_text())["pairs"]
+    paths = [Path(e["path"]) for e in entries]
+    sides = {f"{s}_{k}" for s in "xy" for k in ("faces", "vertices")}
+    maps = {f"{m}_{k}" for m in ("corr_01", "corr_10") for k in ("face", "weights")}
+    for path in paths:
+        with np.load(path) as data:
+            members, derived = set(data.files), json.loads(str(data["__derived__"]))
+        assert set(derived["arrays"]) == sides | maps, path  # full_full: every copy of the sources
+        assert not {f"{k}.npy" for k in derived["arrays"]} & members
+        assert set(derived["sources"]) == {"x", "y", "ground_truth"}
+
+    whole = tmp_path / "whole"
+    whole.mkdir()
+    for path in paths:
+        PairRecord.load(path).save(whole / path.name)  # no sources: every member in the file
+    slim_bytes, whole_bytes = (sum(p.stat().st_size for p in ps) for ps in (paths, list(whole.glob("*.npz"))))
+    assert slim_bytes < 0.1 * whole_bytes, (slim_bytes, whole_bytes)
+    stores = [
+        write_store(ps, tmp_path / f"{name}.zarr", setting="full_full", progress=False)
+        for name, ps in (("slim", paths), ("whole", sorted(whole.glob("*.npz"))))
+    ]
+    trees = [
+        {
+            p.relative_to(s): p.read_bytes()
+            for p in s.rglob("*")
+            if p.is_file() and p.relative_to(s) != Path("zarr.json")
+        }
+        for s in stores
+    ]
+    assert trees[0] == trees[1]  # the root zarr.json differs by its creation time only
+
+    with np.load(paths[0]) as data:
+        sources = json.loads(str(data["__derived__"]))["sources"]
+    remesh = Path(os.path.normpath(paths[0].parent / sources["x"]["path"]))
+    gt = Path(os.path.normpath(paths[0].parent / sources["ground_truth"]["path"]))
+    out = ["--setting", "full_full", "--out", str(tmp_path / "s.zarr")]
+    for source, what, change in (
+        (remesh, "remesh file of shape x", lambda a: a.update(vertices=a["vertices"] + 1e-9)),
+        (gt, "ground-truth file", lambda a: a.update(xy_weights=a["xy_weights"][::-1].copy())),
+    ):
+        original = _rewrite_npz(source, change)
+        try:
+            capsys.readouterr()
+            assert becos_main(["export-zarr", str(pairs_index), *out]) == 2
+            err = capsys.readouterr().err
+            assert f"its {what} {source} has changed since the record was written" in err, err
+            assert "Fix: rebuild the pair records: snakemake --forcerun pairs" in err and "Traceback" not in err
+            assert any(f"{p}: its {what}" in err for p in paths), err
+            with pytest.raises(InputFileError, match="has changed since the record was written"):
+                [PairRecord.load(p) for p in paths]
+        finally:
+            source.write_bytes(original)
+    assert becos_main(["export-zarr", str(pairs_index), *out]) == 0  # restored: the records read again

@@ -18,6 +18,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from becos.build.partiality import Partial, Scanner, align_to, cast_p2f, cast_p2p, whole
+from becos.build.placement import place
 from becos.build.record import VERTEX_MAP_ROUNDING, PairRecord
 from becos.core.align import RigidTransform
 from becos.core.mesh import TriMesh
@@ -297,10 +298,10 @@ def _pair_arrays(x, y, views: _Views, rot_x: np.ndarray, rot_y: np.ndarray, area
     px, py, alignment = views.px, views.py, views.alignment
     norm_x = np.sqrt(area_x) if area_normalised else 1.0
     norm_y = np.sqrt(area_y) if area_normalised else 1.0
-    final_x = (px.mesh.vertices / norm_x) @ rot_x
-    final_y = (alignment.apply(py.mesh.vertices) / norm_y) @ rot_y
-    full_x = (x.mesh.vertices / norm_x) @ rot_x
-    full_y = (alignment.apply(y.mesh.vertices) / norm_y) @ rot_y
+    final_x = place(px.mesh.vertices, norm_x, rot_x)
+    final_y = place(py.mesh.vertices, norm_y, rot_y, alignment)
+    full_x = place(x.mesh.vertices, norm_x, rot_x)
+    full_y = place(y.mesh.vertices, norm_y, rot_y, alignment)
 
     arrays = {}
     shape_x = _shape_arrays(x, px, final_x, views.mask_x, np.eye(3), np.zeros(3), rot_x, views.camera_x, area_x, full_x)

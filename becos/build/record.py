@@ -12,7 +12,6 @@ area_normalised, vertex_rounding (:data:`VERTEX_MAP_ROUNDING`), options, per sha
 
 from __future__ import annotations
 
-import hashlib
 import json
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -20,6 +19,8 @@ from pathlib import Path
 import numpy as np
 
 from becos.atomic import save_npz
+from becos.build.record_sources import DERIVED_MEMBER, RecordSources, derive, leave_out, read_derived
+from becos.digests import content_digest  # noqa: F401 (re-exported: becos.build.record.content_digest)
 from becos.settings import SETTINGS  # noqa: F401 (re-exported: becos.build.record.SETTINGS)
 
 SCHEMA_VERSION = 1
@@ -238,41 +239,42 @@ class PairRecord:
     def pair_id(self) -> str:
         return self.meta["pair_id"]
 
-    def save(self, path: str | Path) -> None:
+    def save(self, path: str | Path, sources: RecordSources | None = None) -> None:
         """Write one .npz (arrays + ``meta`` as JSON), atomically. ``meta["content_digest"]`` is set to
         :func:`content_digest` of the record, so an edit of the file is noticed (:func:`is_intact`).
 
         The file is a .npz with deflated integer members (:func:`becos.atomic.save_npz`;
         :func:`encode_arrays`: int32 indices, no identity maps;
-        ``__identity__`` lists the maps left out), read back exactly by :meth:`load`."""
+        ``__identity__`` lists the maps left out), read back exactly by :meth:`load`. With ``sources``
+        (the files the record was made from) it also leaves out the members they give back byte for byte,
+        listed in ``__derived__`` (:mod:`becos.build.record_sources`)."""
         self.meta["content_digest"] = content_digest(self.arrays, self.meta)
-        stored, identity = encode_arrays(self.arrays)
+        derived = {} if sources is None else leave_out(self.arrays, self.meta, sources, Path(path).parent)
+        kept = {k: v for k, v in self.arrays.items() if k not in derived.get("arrays", {})}
+        stored, identity = encode_arrays(kept)
+        extra = {DERIVED_MEMBER: np.array(json.dumps(derived, sort_keys=True))} if derived else {}
         save_npz(
             path,
             compressed=True,
             __meta__=np.array(json.dumps(self.meta, sort_keys=True)),
             **{IDENTITY_MEMBER: np.array(json.dumps(identity, sort_keys=True))},
+            **extra,
             **stored,
         )
 
     @classmethod
     def load(cls, path: str | Path) -> PairRecord:
+        """The record of a file :meth:`save` wrote; members it left out are made again from their sources
+        (:func:`becos.build.record_sources.derive`, which raises when a source changed)."""
         with np.load(path, allow_pickle=False) as data:
             meta = json.loads(str(data["__meta__"]))
             identity = json.loads(str(data[IDENTITY_MEMBER])) if IDENTITY_MEMBER in data.files else {}
-            stored = {k: data[k] for k in data.files if k not in ("__meta__", IDENTITY_MEMBER)}
-        return cls(decode_arrays(stored, identity), meta)
-
-
-def content_digest(arrays: dict[str, np.ndarray], meta: dict) -> str:
-    """SHA-256 (hex, 16 digits) of a record's arrays (name, dtype, shape, bytes; sorted by name) and of
-    its meta without ``content_digest``."""
-    h = hashlib.sha256(json.dumps({k: v for k, v in meta.items() if k != "content_digest"}, sort_keys=True).encode())
-    for key in sorted(arrays):
-        a = np.ascontiguousarray(arrays[key])
-        h.update(f"|{key}|{a.dtype.str}|{a.shape}|".encode())
-        h.update(a.tobytes())
-    return h.hexdigest()[:16]
+            derived = read_derived(data[DERIVED_MEMBER]) if DERIVED_MEMBER in data.files else {}
+            stored = {k: data[k] for k in data.files if k not in ("__meta__", IDENTITY_MEMBER, DERIVED_MEMBER)}
+        arrays = decode_arrays(stored, identity)
+        if derived:
+            arrays.update(derive(Path(path), derived, arrays, meta))
+        return cls(arrays, meta)
 
 
 def is_intact(path: str | Path) -> bool:

@@ -10,6 +10,7 @@ importable from ``becos.workflow``. The files under ``results`` and incremental 
 docs/design/workflow.md.
 """
 
+from becos.build.ground_truth_file import ground_truth_intact, load_ground_truth, narrow_faces
 from becos.workflow.config import (
     CONFIG_DOCS,
     SCHEMA_PATH,
@@ -81,11 +82,8 @@ from becos.workflow.shapes import (
 )
 from becos.workflow.stages import (
     export_pairings_stage,
-    ground_truth_intact,
     ground_truth_stage,
-    load_ground_truth,
     missing_indexed_files,
-    narrow_faces,
     pair_published_rotations,
     pair_published_views,
     pairs_stage,

@@ -217,6 +217,10 @@ class Plan:
             self._chunk_inputs[key] = [str(self.layout.remeshed_folder(d, n)) for d, n in sorted(shapes)]
         return list(self._chunk_inputs[key])
 
+    def setting_inputs(self, setting: str) -> list[str]:
+        """The remesh folders every chunk of ``setting`` reads (:meth:`chunk_inputs`, united), sorted."""
+        return sorted({folder for chunk in self.chunks(setting) for folder in self.chunk_inputs(setting, chunk)})
+
     def chunk_original_files(self, setting: str, chunk: int) -> list[str]:
         """The original mesh files of the chunk's pairs' shapes (what a chunk job reads without remeshing)."""
         rows = self.chunk_rows(setting, chunk)

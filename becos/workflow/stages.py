@@ -12,6 +12,11 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from becos.atomic import link_or_copy, remove_stale_temporaries, write_text
+from becos.build.ground_truth_file import (
+    ground_truth_intact,
+    load_ground_truth,
+    save_ground_truth,
+)
 from becos.errors import ConfigError
 from becos.workflow.layout import centre_file, pair_file, remesh_token, variant_file
 from becos.workflow.options import (
@@ -327,60 +332,6 @@ def _ground_truth_key(row: dict, tx: str, ty: str, shapes: ShapeStore, options: 
     )
 
 
-def save_ground_truth(path: Path, key: str, gt_xy: SurfaceMap, gt_yx: SurfaceMap) -> None:
-    """Write a pair's ground-truth file (:func:`load_ground_truth`), with its ``content_digest``."""
-    from becos.atomic import save_npz
-
-    arrays = {
-        "input_key": np.array(key),
-        "xy_face": narrow_faces(gt_xy.face),
-        "xy_weights": gt_xy.weights,
-        "xy_distance": gt_xy.distance,
-        "yx_face": narrow_faces(gt_yx.face),
-        "yx_weights": gt_yx.weights,
-        "yx_distance": gt_yx.distance,
-    }
-    save_npz(path, compressed=True, content_digest=np.array(_ground_truth_digest(arrays)), **arrays)
-
-
-def _ground_truth_digest(arrays: dict[str, np.ndarray]) -> str:
-    from becos.build.record import content_digest
-
-    return content_digest({k: v for k, v in arrays.items() if k != "content_digest"}, {})
-
-
-def ground_truth_intact(path: Path) -> bool:
-    """True when the ground-truth file at ``path`` still holds what :func:`save_ground_truth` wrote (its
-    ``content_digest`` matches its arrays); False for an edited, unreadable or digest-less file."""
-    try:
-        with np.load(path, allow_pickle=False) as data:
-            arrays = {k: data[k] for k in data.files}
-    except Exception:
-        return False
-    stored = arrays.get("content_digest")
-    return stored is not None and str(stored) == _ground_truth_digest(arrays)
-
-
-def narrow_faces(face: np.ndarray) -> np.ndarray:
-    """Face indices as int32 on disk when they fit (:class:`SurfaceMap` widens them on load)."""
-    return face.astype(np.int32) if len(face) and face.max() <= np.iinfo(np.int32).max else face
-
-
-def load_ground_truth(path: Path):
-    """``(gt_xy, gt_yx)`` :class:`becos.core.surface_map.SurfaceMap` from a ground-truth file (a .npz,
-    :func:`becos.atomic.save_npz` compressed:
-    ``input_key``, ``xy_face`` (V_x,) int32, ``xy_weights`` (V_x, 3), ``xy_distance`` (V_x,), the same
-    for ``yx``, and ``content_digest`` (:func:`ground_truth_intact`); files of older becos hold int64
-    faces, uncompressed, and no digest, so the ground-truth stage recomputes them)."""
-    from becos.core.surface_map import SurfaceMap
-
-    with np.load(path, allow_pickle=False) as d:
-        return (
-            SurfaceMap(d["xy_face"], d["xy_weights"], d["xy_distance"]),
-            SurfaceMap(d["yx_face"], d["yx_weights"], d["yx_distance"]),
-        )
-
-
 def pairs_stage(
     options: PairsOptions | dict,
     setting: str,
@@ -430,7 +381,7 @@ def pairs_stage(
             )
             computed = True
         if computed:
-            build.record(row, gt, key).save(path)
+            build.record(row, gt, key).save(path, sources=build.sources(row, gt))
         entries.append(
             {
                 "pair_id": row["pair_id"],
@@ -472,6 +423,18 @@ class _RecordBuilder:
                     self.shapes.source_digest(row["y_dataset"], row["y_name"], ty),
                 ],
             }
+        )
+
+    def sources(self, row: dict, gt: dict):
+        """The files the pair's record is made from (:class:`becos.build.record_sources.RecordSources`): its
+        ground-truth file and each remeshed side's remesh file; the record file leaves out what they give."""
+        from becos.build.record_sources import RecordSources
+
+        (tx, ty), remesh = self.tokens(row), self.shapes.remesh_path
+        return RecordSources(
+            x=None if tx == "original" else remesh(row["x_dataset"], row["x_name"], tx),
+            y=None if ty == "original" else remesh(row["y_dataset"], row["y_name"], ty),
+            ground_truth=Path(gt["path"]),
         )
 
     def record(self, row: dict, gt: dict, key: str):

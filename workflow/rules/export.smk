@@ -19,10 +19,14 @@ rule store_metadata:
         "becos metadata --options {params.config:q} --setting {wildcards.setting} --out {output:q} > {log:q} 2>&1"
 
 
+# The pair records leave out what their ground-truth and remesh files give back exactly
+# (becos.build.record_sources): the store job reads those too, so they are its inputs.
 rule zarr_store:
     input:
         pairs=lambda w: chunk_files(w.setting, "pairs"),
         metadata=rules.store_metadata.output[0],
+        ground_truth=lambda w: chunk_files(w.setting, "ground_truth"),
+        remeshed=lambda w: plan().setting_inputs(w.setting),
     output:
         directory(str(LAYOUT.store("{setting}"))),
     log:

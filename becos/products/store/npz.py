@@ -26,6 +26,7 @@ from becos.build.record import (
     SCHEMA_VERSION,
     decode_arrays,
 )
+from becos.build.record_sources import DERIVED_MEMBER, derive, derived_shapes, needed_keys, read_derived
 from becos.errors import InputFileError
 
 
@@ -93,14 +94,17 @@ def read_npz(
     read straight from the file at their offset: no zip CRC pass, one copy. Deflated ones are inflated
     whole when loaded (:func:`_inflate`), else only their header is read through the zip stream.
     """
-    shapes, arrays, meta, identity = {}, {}, None, {}
+    shapes, arrays, meta, identity, derived = {}, {}, None, {}, {}
+    special_members = ("__meta__", IDENTITY_MEMBER, DERIVED_MEMBER)
+    reading = None if keys is None else set(keys)  # the keys whose data is read: ``keys`` and what they derive from
     with open(path, "rb") as fh, zipfile.ZipFile(fh) as z:
-        for info in z.infolist():
+        members = sorted(z.infolist(), key=lambda i: i.filename[:-4] not in special_members)  # the JSON ones first
+        for info in members:
             if not info.filename.endswith(".npy"):
                 continue
             key = info.filename[:-4]
-            special = key in ("__meta__", IDENTITY_MEMBER)
-            wanted = special or (load and (keys is None or key in keys))  # its data is read, not only its header
+            special = key in special_members
+            wanted = special or (load and (reading is None or key in reading))  # its data is read, not only its header
             stored = info.compress_type == zipfile.ZIP_STORED
             if stored:
                 fh.seek(_data_offset(fh, info))
@@ -130,6 +134,10 @@ def read_npz(
                 meta = json.loads(str(data))
             elif key == IDENTITY_MEMBER:
                 identity = json.loads(str(data))
+            elif key == DERIVED_MEMBER:
+                derived = read_derived(data)
+                if reading is not None:
+                    reading |= needed_keys(derived, reading)
             else:
                 arrays[key] = data
     for key, n in identity.items():  # the record's own dtypes and shapes (decode_arrays)
@@ -138,9 +146,15 @@ def read_npz(
         f = RECORD_SCHEMA.get(key)
         if f is not None and f.stored is not None and dtype == np.dtype(f.stored):
             shapes[key] = (shape, np.dtype(f.dtype))
-    if keys is not None:
-        identity = {key: n for key, n in identity.items() if key in keys}
-    return meta, shapes, decode_arrays(arrays, identity) if load else arrays
+    shapes.update(derived_shapes(derived))
+    if not load:
+        return meta, shapes, arrays
+    if reading is not None:
+        identity = {key: n for key, n in identity.items() if key in reading}
+    decoded = decode_arrays(arrays, identity)
+    if derived:
+        decoded.update(derive(path, derived, decoded, meta, keys))
+    return meta, shapes, decoded if keys is None else {key: v for key, v in decoded.items() if key in keys}
 
 
 def scan_record(path: Path) -> RecordInfo:

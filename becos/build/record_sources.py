@@ -1,0 +1,249 @@
+"""Record members a pair record file leaves out because the files it was made from give them back exactly.
+
+A file written with :class:`RecordSources` (the workflow's pairs stage) leaves out each member of
+:data:`DERIVATIONS` that its remesh files and ground-truth file give back byte for byte, and lists it in
+the member ``__derived__`` (JSON): ``sources`` ``{"x" | "y" | "ground_truth": {"path", "sha256"}}`` (paths
+relative to the record file's folder, SHA-256 of their bytes, 16 hex digits) and ``arrays`` ``{key:
+{"dtype", "shape", "sha256"}}``. Readers (:meth:`becos.build.record.PairRecord.load`, the store writer)
+make them again (:func:`derive`) and check both digests: a source changed after the pairs job stops
+with an error naming the record and the source, instead of reaching the store.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from collections import OrderedDict
+from collections.abc import Callable, Collection
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from becos.build.placement import place_side
+from becos.digests import array_digest
+
+DERIVED_MEMBER = "__derived__"
+"""Record-file member: JSON of the members left out and the files they come from."""
+SOURCE_CACHE_BYTES = 256 * 2**20
+"""Bytes of source arrays a process keeps between records (remesh files are shared by many pairs)."""
+_FIX = (
+    "rebuild the pair records: snakemake --forcerun pairs (becos rewrites exactly the records whose "
+    "inputs changed), then run snakemake again"
+)
+
+
+@dataclass(frozen=True)
+class RecordSources:
+    """The files a pair record was made from (None: a side not remeshed, or no ground-truth file)."""
+
+    x: Path | None = None
+    y: Path | None = None
+    ground_truth: Path | None = None
+
+    def items(self) -> list[tuple[str, Path]]:
+        return [(name, Path(p)) for name, p in (("x", self.x), ("y", self.y), ("ground_truth", self.ground_truth)) if p]
+
+
+@dataclass(frozen=True)
+class Derivation:
+    """How one record member is made from a source (``source``: x, y or ground_truth): ``make(source
+    arrays, record arrays, meta)``; ``needs``: the record keys it reads."""
+
+    source: str
+    needs: tuple[str, ...]
+    make: Callable[[dict, dict, dict], np.ndarray]
+
+
+def _side_derivations(s: str) -> dict[str, Derivation]:
+    placement = (f"{s}_full_area", f"{s}_align_rotation", f"{s}_align_translation", f"{s}_random_rotation")
+    return {
+        f"{s}_faces": Derivation(
+            s,
+            (f"{s}_full_to_partial", f"{s}_full_face_ids"),
+            lambda src, a, m: a[f"{s}_full_to_partial"][src["faces"][a[f"{s}_full_face_ids"]]],
+        ),
+        f"{s}_vertices": Derivation(
+            s,
+            (f"{s}_partial_to_full", *placement),
+            lambda src, a, m: place_side(src["vertices"][a[f"{s}_partial_to_full"]], a, m, s),
+        ),
+        f"{s}_full_faces": Derivation(s, (), lambda src, a, m: src["faces"]),
+        f"{s}_full_vertices": Derivation(s, placement, lambda src, a, m: place_side(src["vertices"], a, m, s)),
+    }
+
+
+def _map_derivations(name: str, direction: str) -> dict[str, Derivation]:
+    return {
+        f"{name}_face": Derivation("ground_truth", (), lambda src, a, m: src[f"{direction}_face"]),
+        f"{name}_weights": Derivation("ground_truth", (), lambda src, a, m: src[f"{direction}_weights"]),
+    }
+
+
+DERIVATIONS: dict[str, Derivation] = {
+    **_side_derivations("x"),
+    **_side_derivations("y"),
+    **_map_derivations("corr_01", "xy"),
+    **_map_derivations("corr_10", "yx"),
+}
+"""Record key -> :class:`Derivation`: the one definition of the members a record file may leave out
+(``s`` is x or y; ``R``: the side's remesh file, common frame at dataset scale; ``place``:
+:func:`becos.build.placement.place_side`, the pairs stage's own placement):
+
+==================  ==========================================================================
+``s_faces``         ``s_full_to_partial[R.faces[s_full_face_ids]]``
+``s_vertices``      ``place(R.vertices[s_partial_to_full])``
+``s_full_faces``    ``R.faces`` (a partial side; a full side's is empty and kept)
+``s_full_vertices`` ``place(R.vertices)`` (likewise)
+``corr_01_face``    the ground-truth file's ``xy_face`` (full-to-full; ``corr_10_face``: ``yx_face``)
+``corr_01_weights`` its ``xy_weights`` (``corr_10_weights``: ``yx_weights``)
+==================  ==========================================================================
+
+A member is left out only where the derivation gives the record's array byte for byte."""
+
+
+def _same(a: np.ndarray, b: np.ndarray) -> bool:
+    return (
+        a.dtype == b.dtype
+        and a.shape == b.shape
+        and np.ascontiguousarray(a).tobytes() == np.ascontiguousarray(b).tobytes()
+    )
+
+
+class _SourceCache:
+    """Source files' arrays and digests, the most recently used kept up to :data:`SOURCE_CACHE_BYTES`; an
+    entry is keyed by the file's path, size, mtime and inode, so a file replaced on disk is read again."""
+
+    def __init__(self, limit: int = SOURCE_CACHE_BYTES):
+        self.limit, self.used = limit, 0
+        self.entries: OrderedDict[tuple, tuple[str, dict[str, np.ndarray], int]] = OrderedDict()
+
+    def get(self, kind: str, path: Path) -> tuple[str, dict[str, np.ndarray]]:
+        st = path.stat()
+        key = (str(path.resolve()), st.st_size, st.st_mtime_ns, st.st_ino)
+        if key in self.entries:
+            self.entries.move_to_end(key)
+            sha, arrays, _ = self.entries[key]
+            return sha, arrays
+        data = path.read_bytes()
+        sha = hashlib.sha256(data).hexdigest()[:16]
+        arrays = _read_source(kind, path)
+        size = sum(a.nbytes for a in arrays.values())
+        self.entries[key] = (sha, arrays, size)
+        self.used += size
+        while self.used > self.limit and len(self.entries) > 1:
+            _, (_, _, dropped) = self.entries.popitem(last=False)
+            self.used -= dropped
+        return sha, arrays
+
+
+def _read_source(kind: str, path: Path) -> dict[str, np.ndarray]:
+    """The arrays of a source file as the pairs stage held them: a remesh file's mesh
+    (:func:`becos.build.remesh.files.load_remeshed`), a ground-truth file's maps
+    (:func:`becos.build.ground_truth_file.load_ground_truth`)."""
+    if kind == "ground_truth":
+        from becos.build.ground_truth_file import load_ground_truth
+
+        xy, yx = load_ground_truth(path)
+        return {"xy_face": xy.face, "xy_weights": xy.weights, "yx_face": yx.face, "yx_weights": yx.weights}
+    from becos.build.remesh.files import load_remeshed
+
+    mesh = load_remeshed(path).mesh
+    return {"vertices": mesh.vertices, "faces": mesh.faces}
+
+
+_CACHE = _SourceCache()
+
+
+def leave_out(arrays: dict[str, np.ndarray], meta: dict, sources: RecordSources, folder: Path) -> dict:
+    """The ``__derived__`` description of the members of ``arrays`` that ``sources`` give back byte for
+    byte (to be left out of the record file written into ``folder``); ``{}`` when none."""
+    loaded = {
+        name: (path, *_CACHE.get(name if name == "ground_truth" else "remesh", path)) for name, path in sources.items()
+    }
+    left_out = {}
+    for key, d in DERIVATIONS.items():
+        if d.source not in loaded or key not in arrays:
+            continue
+        try:
+            made = d.make(loaded[d.source][2], arrays, meta)
+        except (IndexError, KeyError, ValueError):  # a source that does not fit the record: keep the member
+            continue
+        if _same(made, arrays[key]):
+            value = arrays[key]
+            left_out[key] = {"dtype": value.dtype.str, "shape": list(value.shape), "sha256": array_digest(value)}
+    if not left_out:
+        return {}
+    used = {DERIVATIONS[key].source for key in left_out}
+    return {
+        "sources": {
+            name: {"path": os.path.relpath(os.path.abspath(path), os.path.abspath(folder)), "sha256": sha}
+            for name, (path, sha, _) in loaded.items()
+            if name in used
+        },
+        "arrays": left_out,
+    }
+
+
+def derived_shapes(derived: dict) -> dict[str, tuple[tuple[int, ...], np.dtype]]:
+    """``{key: (shape, dtype)}`` of the members a ``__derived__`` description lists."""
+    return {key: (tuple(spec["shape"]), np.dtype(spec["dtype"])) for key, spec in derived.get("arrays", {}).items()}
+
+
+def needed_keys(derived: dict, keys: Collection[str]) -> set[str]:
+    """The record keys the derivation of ``keys`` (those of them ``derived`` lists) reads."""
+    listed = derived.get("arrays", {})
+    return {need for key in keys if key in listed for need in DERIVATIONS[key].needs}
+
+
+def derive(record_path: Path, derived: dict, arrays: dict, meta: dict, keys: Collection[str] | None = None) -> dict:
+    """The left-out members (``keys`` of them; None: all) of the record file ``record_path``, from its
+    sources and its other members ``arrays`` (decoded) and ``meta``. Each source's digest and each made
+    array's digest must be what the pairs stage recorded.
+
+    Raises:
+        InputFileError: naming the record file, the source and what differs.
+    """
+    from becos.errors import InputFileError
+
+    listed = derived.get("arrays", {})
+    wanted = [key for key in listed if keys is None or key in keys]
+    folder = Path(record_path).parent
+    out, loaded = {}, {}
+    for key in wanted:
+        d = DERIVATIONS.get(key)
+        source = derived.get("sources", {}).get(d.source) if d is not None else None
+        if source is None:
+            raise InputFileError(record_path, f"lists the left-out member {key!r} without its source", _FIX)
+        if d.source not in loaded:
+            path = Path(os.path.normpath(folder / source["path"]))
+            what = "ground-truth file" if d.source == "ground_truth" else f"remesh file of shape {d.source}"
+            if not path.is_file():
+                raise InputFileError(
+                    record_path, f"its {what} {path} is missing (the record leaves out members it gives)", _FIX
+                )
+            sha, arrays_of_source = _CACHE.get("ground_truth" if d.source == "ground_truth" else "remesh", path)
+            if sha != source["sha256"]:
+                raise InputFileError(
+                    record_path,
+                    f"its {what} {path} has changed since the record was written (digest {sha}, the record was "
+                    f"made from {source['sha256']})",
+                    _FIX,
+                )
+            loaded[d.source] = arrays_of_source
+        value = d.make(loaded[d.source], arrays, meta)
+        spec = listed[key]
+        if array_digest(value) != spec["sha256"] or value.dtype != np.dtype(spec["dtype"]):
+            raise InputFileError(
+                record_path,
+                f"its member {key!r}, made again from its sources, is not the array the pairs job left out",
+                _FIX,
+            )
+        out[key] = value
+    return out
+
+
+def read_derived(member: np.ndarray) -> dict:
+    """The ``__derived__`` member's JSON."""
+    return json.loads(str(member))
