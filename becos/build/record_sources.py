@@ -23,11 +23,12 @@ import numpy as np
 
 from becos.build.placement import place_side
 from becos.digests import array_digest
+from becos.errors import InputFileError
 
 DERIVED_MEMBER = "__derived__"
 """Record-file member: JSON of the members left out and the files they come from."""
 SOURCE_CACHE_BYTES = 256 * 2**20
-"""Bytes of source arrays a process keeps between records (remesh files are shared by many pairs)."""
+"""Bytes of remesh arrays a process keeps between records (a remesh file serves many pairs)."""
 _FIX = (
     "rebuild the pair records: snakemake --forcerun pairs (becos rewrites exactly the records whose "
     "inputs changed), then run snakemake again"
@@ -112,14 +113,17 @@ def _same(a: np.ndarray, b: np.ndarray) -> bool:
 
 
 class _SourceCache:
-    """Source files' arrays and digests, the most recently used kept up to :data:`SOURCE_CACHE_BYTES`; an
-    entry is keyed by the file's path, size, mtime and inode, so a file replaced on disk is read again."""
+    """Remesh files' arrays and digests, the most recently used kept up to :data:`SOURCE_CACHE_BYTES` (a
+    ground-truth file serves one pair: read each time); an entry is keyed by the file's path, size, mtime
+    and inode, so a file replaced on disk is read again."""
 
     def __init__(self, limit: int = SOURCE_CACHE_BYTES):
         self.limit, self.used = limit, 0
         self.entries: OrderedDict[tuple, tuple[str, dict[str, np.ndarray], int]] = OrderedDict()
 
-    def get(self, kind: str, path: Path) -> tuple[str, dict[str, np.ndarray]]:
+    def get(self, source: str, path: Path, expected: str | None = None) -> tuple[str, dict[str, np.ndarray] | None]:
+        """``(digest, arrays)`` of the file of ``source`` (x, y or ground_truth) at ``path``; arrays None
+        when its digest is not ``expected`` (then the file is not parsed)."""
         st = path.stat()
         key = (str(path.resolve()), st.st_size, st.st_mtime_ns, st.st_ino)
         if key in self.entries:
@@ -128,7 +132,11 @@ class _SourceCache:
             return sha, arrays
         data = path.read_bytes()
         sha = hashlib.sha256(data).hexdigest()[:16]
-        arrays = _read_source(kind, path)
+        if expected is not None and sha != expected:
+            return sha, None
+        arrays = _read_source(source, path)
+        if source == "ground_truth":  # one pair's (and its copies'): not kept
+            return sha, arrays
         size = sum(a.nbytes for a in arrays.values())
         self.entries[key] = (sha, arrays, size)
         self.used += size
@@ -138,11 +146,11 @@ class _SourceCache:
         return sha, arrays
 
 
-def _read_source(kind: str, path: Path) -> dict[str, np.ndarray]:
+def _read_source(source: str, path: Path) -> dict[str, np.ndarray]:
     """The arrays of a source file as the pairs stage held them: a remesh file's mesh
     (:func:`becos.build.remesh.files.load_remeshed`), a ground-truth file's maps
     (:func:`becos.build.ground_truth_file.load_ground_truth`)."""
-    if kind == "ground_truth":
+    if source == "ground_truth":
         from becos.build.ground_truth_file import load_ground_truth
 
         xy, yx = load_ground_truth(path)
@@ -159,9 +167,7 @@ _CACHE = _SourceCache()
 def leave_out(arrays: dict[str, np.ndarray], meta: dict, sources: RecordSources, folder: Path) -> dict:
     """The ``__derived__`` description of the members of ``arrays`` that ``sources`` give back byte for
     byte (to be left out of the record file written into ``folder``); ``{}`` when none."""
-    loaded = {
-        name: (path, *_CACHE.get(name if name == "ground_truth" else "remesh", path)) for name, path in sources.items()
-    }
+    loaded = {name: (path, *_CACHE.get(name, path)) for name, path in sources.items()}
     left_out = {}
     for key, d in DERIVATIONS.items():
         if d.source not in loaded or key not in arrays:
@@ -205,8 +211,6 @@ def derive(record_path: Path, derived: dict, arrays: dict, meta: dict, keys: Col
     Raises:
         InputFileError: naming the record file, the source and what differs.
     """
-    from becos.errors import InputFileError
-
     listed = derived.get("arrays", {})
     wanted = [key for key in listed if keys is None or key in keys]
     folder = Path(record_path).parent
@@ -223,8 +227,8 @@ def derive(record_path: Path, derived: dict, arrays: dict, meta: dict, keys: Col
                 raise InputFileError(
                     record_path, f"its {what} {path} is missing (the record leaves out members it gives)", _FIX
                 )
-            sha, arrays_of_source = _CACHE.get("ground_truth" if d.source == "ground_truth" else "remesh", path)
-            if sha != source["sha256"]:
+            sha, arrays_of_source = _CACHE.get(d.source, path, expected=source["sha256"])  # same bytes: they parse
+            if arrays_of_source is None:
                 raise InputFileError(
                     record_path,
                     f"its {what} {path} has changed since the record was written (digest {sha}, the record was "
