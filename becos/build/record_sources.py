@@ -12,6 +12,7 @@ with an error naming the record and the source, instead of reaching the store.
 from __future__ import annotations
 
 import hashlib
+import io
 import json
 import os
 from collections import OrderedDict
@@ -134,7 +135,7 @@ class _SourceCache:
         sha = hashlib.sha256(data).hexdigest()[:16]
         if expected is not None and sha != expected:
             return sha, None
-        arrays = _read_source(source, path)
+        arrays = _read_source(source, data)
         if source == "ground_truth":  # one pair's (and its copies'): not kept
             return sha, arrays
         size = sum(a.nbytes for a in arrays.values())
@@ -146,19 +147,21 @@ class _SourceCache:
         return sha, arrays
 
 
-def _read_source(source: str, path: Path) -> dict[str, np.ndarray]:
-    """The arrays of a source file as the pairs stage held them: a remesh file's mesh
-    (:func:`becos.build.remesh.files.load_remeshed`), a ground-truth file's maps
-    (:func:`becos.build.ground_truth_file.load_ground_truth`)."""
-    if source == "ground_truth":
-        from becos.build.ground_truth_file import load_ground_truth
+_SOURCE_MEMBERS = {
+    "ground_truth": ("xy_face", "xy_weights", "yx_face", "yx_weights"),  # becos.build.ground_truth_file
+    "remesh": ("vertices", "faces"),  # becos.build.remesh.files
+}
 
-        xy, yx = load_ground_truth(path)
-        return {"xy_face": xy.face, "xy_weights": xy.weights, "yx_face": yx.face, "yx_weights": yx.weights}
-    from becos.build.remesh.files import load_remeshed
 
-    mesh = load_remeshed(path).mesh
-    return {"vertices": mesh.vertices, "faces": mesh.faces}
+def _read_source(source: str, data: bytes) -> dict[str, np.ndarray]:
+    """The arrays of a source file's bytes ``data`` that derivations read, as the pairs stage held them
+    (:class:`becos.core.surface_map.SurfaceMap` and :class:`becos.core.mesh.TriMesh`: contiguous int64
+    indices, float64 values); only these members are inflated."""
+    with np.load(io.BytesIO(data), allow_pickle=False) as d:
+        return {
+            key: np.ascontiguousarray(d[key], dtype=np.int64 if key.endswith(("face", "faces")) else np.float64)
+            for key in _SOURCE_MEMBERS["ground_truth" if source == "ground_truth" else "remesh"]
+        }
 
 
 _CACHE = _SourceCache()
