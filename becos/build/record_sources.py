@@ -28,8 +28,10 @@ from becos.errors import InputFileError
 
 DERIVED_MEMBER = "__derived__"
 """Record-file member: JSON of the members left out and the files they come from."""
-SOURCE_CACHE_BYTES = 256 * 2**20
-"""Bytes of remesh arrays a process keeps between records (a remesh file serves many pairs)."""
+SOURCE_CACHE_BYTES = 32 * 2**20
+"""Bytes of remesh arrays a process keeps between records: the pairs job visits a chunk shape by shape,
+so a few dozen files serve it; in the store's order (split, pair id) a cache this size is rarely hit at
+full size, where it would otherwise grow the job's memory by what it holds."""
 _FIX = (
     "rebuild the pair records: snakemake --forcerun pairs (becos rewrites exactly the records whose "
     "inputs changed), then run snakemake again"
@@ -114,36 +116,40 @@ def _same(a: np.ndarray, b: np.ndarray) -> bool:
 
 
 class _SourceCache:
-    """Remesh files' arrays and digests, the most recently used kept up to :data:`SOURCE_CACHE_BYTES` (a
-    ground-truth file serves one pair: read each time); an entry is keyed by the file's path, size, mtime
-    and inode, so a file replaced on disk is read again."""
+    """Source files' digests, and remesh files' arrays, the most recently used up to
+    :data:`SOURCE_CACHE_BYTES` (a ground-truth file serves one pair: parsed each time). Keyed by the file's
+    path, size, mtime and inode, so a file replaced on disk is read again; a file whose digest is known
+    is parsed without being hashed again."""
 
     def __init__(self, limit: int = SOURCE_CACHE_BYTES):
         self.limit, self.used = limit, 0
-        self.entries: OrderedDict[tuple, tuple[str, dict[str, np.ndarray], int]] = OrderedDict()
+        self.digests: dict[tuple, str] = {}
+        self.arrays: OrderedDict[tuple, tuple[dict[str, np.ndarray], int]] = OrderedDict()
 
     def get(self, source: str, path: Path, expected: str | None = None) -> tuple[str, dict[str, np.ndarray] | None]:
         """``(digest, arrays)`` of the file of ``source`` (x, y or ground_truth) at ``path``; arrays None
         when its digest is not ``expected`` (then the file is not parsed)."""
         st = path.stat()
         key = (str(path.resolve()), st.st_size, st.st_mtime_ns, st.st_ino)
-        if key in self.entries:
-            self.entries.move_to_end(key)
-            sha, arrays, _ = self.entries[key]
-            return sha, arrays
-        data = path.read_bytes()
-        sha = hashlib.sha256(data).hexdigest()[:16]
+        if key in self.arrays:
+            self.arrays.move_to_end(key)
+            return self.digests[key], self.arrays[key][0]
+        if key in self.digests:
+            sha, file = self.digests[key], path
+        else:
+            data = path.read_bytes()
+            sha, file = hashlib.sha256(data).hexdigest()[:16], io.BytesIO(data)
+            self.digests[key] = sha
         if expected is not None and sha != expected:
             return sha, None
-        arrays = _read_source(source, data)
-        if source == "ground_truth":  # one pair's (and its copies'): not kept
-            return sha, arrays
-        size = sum(a.nbytes for a in arrays.values())
-        self.entries[key] = (sha, arrays, size)
-        self.used += size
-        while self.used > self.limit and len(self.entries) > 1:
-            _, (_, _, dropped) = self.entries.popitem(last=False)
-            self.used -= dropped
+        arrays = _read_source(source, file)
+        if source != "ground_truth":
+            size = sum(a.nbytes for a in arrays.values())
+            self.arrays[key] = (arrays, size)
+            self.used += size
+            while self.used > self.limit and len(self.arrays) > 1:
+                _, (_, dropped) = self.arrays.popitem(last=False)
+                self.used -= dropped
         return sha, arrays
 
 
@@ -153,11 +159,11 @@ _SOURCE_MEMBERS = {
 }
 
 
-def _read_source(source: str, data: bytes) -> dict[str, np.ndarray]:
-    """The arrays of a source file's bytes ``data`` that derivations read, as the pairs stage held them
-    (:class:`becos.core.surface_map.SurfaceMap` and :class:`becos.core.mesh.TriMesh`: contiguous int64
-    indices, float64 values); only these members are inflated."""
-    with np.load(io.BytesIO(data), allow_pickle=False) as d:
+def _read_source(source: str, file: io.BytesIO | Path) -> dict[str, np.ndarray]:
+    """The arrays of a source file (its bytes or its path) that derivations read, as the pairs stage held
+    them (:class:`becos.core.surface_map.SurfaceMap` and :class:`becos.core.mesh.TriMesh`: contiguous int64
+    indices, float64 values); only these members are read."""
+    with np.load(file, allow_pickle=False) as d:
         return {
             key: np.ascontiguousarray(d[key], dtype=np.int64 if key.endswith(("face", "faces")) else np.float64)
             for key in _SOURCE_MEMBERS["ground_truth" if source == "ground_truth" else "remesh"]
