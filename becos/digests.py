@@ -1,5 +1,5 @@
-"""SHA-256 digests of arrays (16 hex digits) that becos records beside what it writes, so that a file
-edited or replaced afterwards is noticed."""
+"""SHA-256 digests (16 hex digits) of arrays and of files that becos records beside what it writes, so
+that a file edited or replaced afterwards is noticed."""
 
 from __future__ import annotations
 
@@ -20,9 +20,6 @@ def content_digest(arrays: dict[str, np.ndarray], meta: dict) -> str:
     return h.hexdigest()[:16]
 
 
-def array_digest(value: np.ndarray) -> str:
-    """SHA-256 (16 hex digits) of an array's dtype, shape and bytes."""
-    a = np.ascontiguousarray(value)
-    h = hashlib.sha256(f"{a.dtype.str}|{a.shape}|".encode())
-    h.update(a.tobytes())
-    return h.hexdigest()[:16]
+def bytes_digest(data: bytes) -> str:
+    """SHA-256 (16 hex digits) of a file's bytes, as becos records the files a result was made from."""
+    return hashlib.sha256(data).hexdigest()[:16]

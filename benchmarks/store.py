@@ -82,7 +82,7 @@ def _np_load(path: Path) -> dict:
 def _save_format_1(record: PairRecord, path: Path) -> None:
     """A record file as store format 1 wrote it: uncompressed np.savez, int64 indices, identity maps."""
     from becos.atomic import save_npz
-    from becos.build.record import content_digest
+    from becos.digests import content_digest
 
     meta = dict(record.meta, content_digest=content_digest(record.arrays, record.meta))
     save_npz(path, __meta__=np.array(json.dumps(meta, sort_keys=True)), **record.arrays)

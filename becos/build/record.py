@@ -20,7 +20,7 @@ import numpy as np
 
 from becos.atomic import save_npz
 from becos.build.record_sources import DERIVED_MEMBER, RecordSources, derive, leave_out, read_derived
-from becos.digests import content_digest  # noqa: F401 (re-exported: becos.build.record.content_digest)
+from becos.digests import content_digest
 from becos.settings import SETTINGS  # noqa: F401 (re-exported: becos.build.record.SETTINGS)
 
 SCHEMA_VERSION = 1

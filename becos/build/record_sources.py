@@ -11,19 +11,18 @@ with an error naming the record and the source, instead of reaching the store.
 
 from __future__ import annotations
 
-import hashlib
 import io
 import json
 import os
 from collections import OrderedDict
 from collections.abc import Callable, Collection
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from becos.build.placement import place_side
-from becos.digests import array_digest
+from becos.digests import bytes_digest, content_digest
 from becos.errors import InputFileError
 
 DERIVED_MEMBER = "__derived__"
@@ -40,11 +39,14 @@ _FIX = (
 
 @dataclass(frozen=True)
 class RecordSources:
-    """The files a pair record was made from (None: a side not remeshed, or no ground-truth file)."""
+    """The files a pair record was made from (None: a side not remeshed, or no ground-truth file), and
+    ``digests`` (:func:`becos.digests.bytes_digest`) of those the caller has already hashed (x, y,
+    ground_truth), which are then not hashed again."""
 
     x: Path | None = None
     y: Path | None = None
     ground_truth: Path | None = None
+    digests: dict[str, str] = field(default_factory=dict)
 
     def items(self) -> list[tuple[str, Path]]:
         return [(name, Path(p)) for name, p in (("x", self.x), ("y", self.y), ("ground_truth", self.ground_truth)) if p]
@@ -126,11 +128,16 @@ class _SourceCache:
         self.digests: dict[tuple, str] = {}
         self.arrays: OrderedDict[tuple, tuple[dict[str, np.ndarray], int]] = OrderedDict()
 
-    def get(self, source: str, path: Path, expected: str | None = None) -> tuple[str, dict[str, np.ndarray] | None]:
+    def get(
+        self, source: str, path: Path, expected: str | None = None, known: str | None = None
+    ) -> tuple[str, dict[str, np.ndarray] | None]:
         """``(digest, arrays)`` of the file of ``source`` (x, y or ground_truth) at ``path``; arrays None
-        when its digest is not ``expected`` (then the file is not parsed)."""
+        when its digest is not ``expected`` (then the file is not parsed). ``known``: its digest, already
+        taken by the caller."""
         st = path.stat()
         key = (str(path.resolve()), st.st_size, st.st_mtime_ns, st.st_ino)
+        if known is not None:
+            self.digests.setdefault(key, known)
         if key in self.arrays:
             self.arrays.move_to_end(key)
             return self.digests[key], self.arrays[key][0]
@@ -138,7 +145,7 @@ class _SourceCache:
             sha, file = self.digests[key], path
         else:
             data = path.read_bytes()
-            sha, file = hashlib.sha256(data).hexdigest()[:16], io.BytesIO(data)
+            sha, file = bytes_digest(data), io.BytesIO(data)
             self.digests[key] = sha
         if expected is not None and sha != expected:
             return sha, None
@@ -176,10 +183,10 @@ _CACHE = _SourceCache()
 def leave_out(arrays: dict[str, np.ndarray], meta: dict, sources: RecordSources, folder: Path) -> dict:
     """The ``__derived__`` description of the members of ``arrays`` that ``sources`` give back byte for
     byte (to be left out of the record file written into ``folder``); ``{}`` when none."""
-    loaded = {name: (path, *_CACHE.get(name, path)) for name, path in sources.items()}
+    loaded = {name: (path, *_CACHE.get(name, path, known=sources.digests.get(name))) for name, path in sources.items()}
     left_out = {}
     for key, d in DERIVATIONS.items():
-        if d.source not in loaded or key not in arrays:
+        if d.source not in loaded or key not in arrays or arrays[key].size == 0:  # an empty member costs nothing
             continue
         try:
             made = d.make(loaded[d.source][2], arrays, meta)
@@ -187,7 +194,11 @@ def leave_out(arrays: dict[str, np.ndarray], meta: dict, sources: RecordSources,
             continue
         if _same(made, arrays[key]):
             value = arrays[key]
-            left_out[key] = {"dtype": value.dtype.str, "shape": list(value.shape), "sha256": array_digest(value)}
+            left_out[key] = {
+                "dtype": value.dtype.str,
+                "shape": list(value.shape),
+                "sha256": content_digest({key: value}, {}),
+            }
     if not left_out:
         return {}
     used = {DERIVATIONS[key].source for key in left_out}
@@ -247,7 +258,7 @@ def derive(record_path: Path, derived: dict, arrays: dict, meta: dict, keys: Col
             loaded[d.source] = arrays_of_source
         value = d.make(loaded[d.source], arrays, meta)
         spec = listed[key]
-        if array_digest(value) != spec["sha256"] or value.dtype != np.dtype(spec["dtype"]):
+        if content_digest({key: value}, {}) != spec["sha256"] or value.dtype != np.dtype(spec["dtype"]):
             raise InputFileError(
                 record_path,
                 f"its member {key!r}, made again from its sources, is not the array the pairs job left out",

@@ -3,7 +3,6 @@ structures built on them, kept while the chunk's pairs still use them (:class:`S
 
 from __future__ import annotations
 
-import hashlib
 from collections import OrderedDict
 from dataclasses import dataclass
 from pathlib import Path
@@ -11,6 +10,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from becos.digests import bytes_digest
 from becos.errors import ConfigError
 from becos.workflow.layout import Layout, centre_file, remesh_token, remeshed_file
 from becos.workflow.plan import annotation_source
@@ -245,7 +245,7 @@ class ShapeStore:
     def file_digest(self, path: Path) -> str:
         path = Path(path)
         if path not in self._digests:
-            self._digests[path] = hashlib.sha256(path.read_bytes()).hexdigest()[:16]
+            self._digests[path] = bytes_digest(path.read_bytes())
         return self._digests[path]
 
     def source_digest(self, dataset: str, name: str, token: str) -> str:

@@ -430,11 +430,19 @@ class _RecordBuilder:
         ground-truth file and each remeshed side's remesh file; the record file leaves out what they give."""
         from becos.build.record_sources import RecordSources
 
-        (tx, ty), remesh = self.tokens(row), self.shapes.remesh_path
+        (tx, ty), shapes = self.tokens(row), self.shapes
+        sides = {
+            side: (row[f"{side}_dataset"], row[f"{side}_name"], token)
+            for side, token in (("x", tx), ("y", ty))
+            if token != "original"
+        }
         return RecordSources(
-            x=None if tx == "original" else remesh(row["x_dataset"], row["x_name"], tx),
-            y=None if ty == "original" else remesh(row["y_dataset"], row["y_name"], ty),
+            **{side: shapes.remesh_path(*shape) for side, shape in sides.items()},
             ground_truth=Path(gt["path"]),
+            digests={  # hashed already, for the input key
+                "ground_truth": gt["digest"],
+                **{side: shapes.source_digest(*shape) for side, shape in sides.items()},
+            },
         )
 
     def record(self, row: dict, gt: dict, key: str):
